@@ -1,0 +1,3 @@
+"""pmlsm-bench supervisor: drive control, sequences, logging, telemetry, reports."""
+
+__version__ = "0.1.0"

@@ -1,0 +1,380 @@
+/**
+ * @file fw_ctrl.h
+ * @brief Sensorless PMLSM drive core: FOC + square-wave HF injection on the
+ *        estimated d axis + HF current extraction (pseudo-filter, SOGI,
+ *        adaptive SOGI) + quadrature PLL + speed loop + CiA 402 + faults.
+ *
+ * Usage (one call per PWM period, from the ADC/PWM interrupt or a loop):
+ *
+ *     fw_config_t cfg; fw_config_default(&cfg);
+ *     fw_ctrl_t ctrl;  fw_init(&ctrl, &cfg);      // validates cfg
+ *     fw_controlword(&ctrl, FW_CW_SHUTDOWN);      // CiA 402 walk ...
+ *     fw_controlword(&ctrl, FW_CW_ENABLE_OPERATION);
+ *     fw_set_speed_ref(&ctrl, w_ref_radps_e);
+ *     for (;;) { fw_step(&ctrl, &in, &out); pwm(out.duty_abc); }
+ *
+ * The core sees only what a drive sees: sampled phase currents (or ADC
+ * counts) and the DC-link voltage. It has no path to any simulation truth.
+ *
+ * Units: SI; angles and speeds are *electrical* inside the core
+ * (theta_e = pi x / tau = p theta_m). Conversions to m, m/s, rad, r/min are
+ * in the snapshot and in fw_units_* helpers.
+ */
+#ifndef PMLSM_FW_CTRL_H
+#define PMLSM_FW_CTRL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "fw_cia402.h"
+#include "fw_math.h"
+#include "fw_pll.h"
+#include "fw_sogi.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define FW_VERSION_MAJOR 0
+#define FW_VERSION_MINOR 1
+#define FW_VERSION_PATCH 0
+/** Firmware version packed as 0x00MMmmpp. */
+#define FW_VERSION_U32                                                         \
+  ((uint32_t)((FW_VERSION_MAJOR << 16) | (FW_VERSION_MINOR << 8) |            \
+              FW_VERSION_PATCH))
+
+/** Largest supported number of PWM periods per injection period. */
+#define FW_INJ_MAX_SAMPLES 64u
+/** Depth of the fault history. */
+#define FW_FAULT_HISTORY_LEN 8u
+
+/** HF current extractor (switchable at run time). */
+typedef enum {
+  FW_EXTRACTOR_PSEUDO = 0,       /**< paper eq. 11 baseline: raw sample difference */
+  FW_EXTRACTOR_SOGI = 1,         /**< eq. 12, fixed k */
+  FW_EXTRACTOR_SOGI_ADAPTIVE = 2 /**< eq. 13 with an observable adaptation signal */
+} fw_extractor_t;
+
+/** Control mode (maps to CiA 402 CSV / CST). */
+typedef enum {
+  FW_MODE_SPEED = 0, /**< speed loop -> i_q reference */
+  FW_MODE_FORCE = 1  /**< i_q reference set directly (thrust / torque) */
+} fw_mode_t;
+
+/** Sensorless start-up phase inside OPERATION ENABLED. */
+typedef enum {
+  FW_START_IDLE = 0,     /**< power stage off */
+  FW_START_ALIGN = 1,    /**< injection + PLL, zero current: angle mod pi */
+  FW_START_POLARITY = 2, /**< +/- d-axis pulses: north/south decision */
+  FW_START_RUN = 3       /**< closed loop */
+} fw_start_phase_t;
+
+/**
+ * Fault codes. Values are the CiA 301/402 emergency error codes sent in
+ * EMCY and shown in 0x603F; 0xFFxx are manufacturer-specific.
+ */
+typedef enum {
+  FW_FAULT_NONE = 0x0000,
+  FW_FAULT_OVERCURRENT = 0x2310,        /**< |phase current| > i_trip_A */
+  FW_FAULT_DC_OVERVOLTAGE = 0x3210,     /**< u_dc > u_dc_max_V */
+  FW_FAULT_DC_UNDERVOLTAGE = 0x3220,    /**< u_dc < u_dc_min_V while enabled */
+  FW_FAULT_INPUT_INVALID = 0x5210,      /**< NaN/inf in a sampled input */
+  FW_FAULT_ADC_RANGE = 0x5220,          /**< ADC count outside [0, adc_max] */
+  FW_FAULT_CONFIG_INVALID = 0x6320,     /**< enable requested with a bad config */
+  FW_FAULT_HEARTBEAT_LOST = 0x8130,     /**< supervisor heartbeat lost (CANopen) */
+  FW_FAULT_EST_HF_LOW = 0xFF01,         /**< HF response too small: loss of lock */
+  FW_FAULT_EST_PLL_ERROR = 0xFF02,      /**< PLL error persistently large */
+  FW_FAULT_SALIENCY_TOO_LOW = 0xFF03,   /**< |Lq-Ld|/Ld < saliency_min: refused */
+  FW_FAULT_POLARITY_UNDETERMINED = 0xFF04 /**< +/- pulse responses too alike */
+} fw_fault_t;
+
+/** Result of configuration checks and setters. */
+typedef enum {
+  FW_OK = 0,
+  FW_ERR_NULL = 1,         /**< NULL pointer */
+  FW_ERR_RANGE = 2,        /**< a field outside its documented range */
+  FW_ERR_NOT_FINITE = 3,   /**< a field is NaN or inf */
+  FW_ERR_SALIENCY = 4,     /**< saliency below saliency_min: injection refused */
+  FW_ERR_INCONSISTENT = 5, /**< fields valid alone but not together */
+  FW_ERR_STATE = 6         /**< not allowed in the current drive state */
+} fw_status_t;
+
+/**
+ * Configuration. Every field is range-checked by fw_config_check() against
+ * the table returned by fw_config_field(); names below are those names.
+ */
+typedef struct {
+  /* timing */
+  float f_pwm_Hz; /**< PWM = sampling = control rate, default 24000 */
+  /* nominal machine parameters used by the controller */
+  float R_ohm;        /**< phase resistance */
+  float L_d_H;        /**< d-axis inductance (small-signal, i_d = 0) */
+  float L_q_H;        /**< q-axis inductance */
+  float psi_f_Wb;     /**< PM flux linkage */
+  float pole_pairs;   /**< rotary-equivalent pole pairs p (theta_e = p theta_m) */
+  float pole_pitch_m; /**< pole pitch tau (theta_e = pi x / tau) */
+  /* power stage and protection */
+  float u_dc_min_V;        /**< undervoltage trip (while enabled) */
+  float u_dc_max_V;        /**< overvoltage trip */
+  float i_trip_A;          /**< overcurrent trip, any phase */
+  float i_max_A;           /**< current reference limit (|i_q|, |i_d|) */
+  float speed_max_radps_e; /**< speed reference limit and PLL speed clamp */
+  /* current loop */
+  float cur_kp_V_per_A;  /**< paper: L_d * 1100 */
+  float cur_ki_V_per_As; /**< paper: R * 1100 */
+  /* speed loop (electrical rad/s in, A out) */
+  float spd_kp_A_per_radps; /**< paper 0.1 A/(r/min) = 0.1*60/(2 pi p) */
+  float spd_ki_A_per_rad;   /**< paper 0.6 A/(r/min s) */
+  float spd_filter_Hz;      /**< low-pass on the speed estimate fed to the loop */
+  /* injection */
+  float u_inj_V;  /**< square-wave amplitude on the estimated d axis */
+  float f_inj_Hz; /**< injection frequency; f_pwm / f_inj must be an even integer >= 4 */
+  /* extraction */
+  uint32_t extractor;       /**< fw_extractor_t */
+  float sogi_k;             /**< fixed-k SOGI gain (paper 0.5) */
+  float sogi_k_adapt_max;   /**< adaptive SOGI: k in transients (paper k = 0.8) */
+  float sogi_k_adapt_min;   /**< adaptive SOGI: k when locked */
+  float sogi_adapt_err_rad; /**< |filtered PLL error| at which k reaches k_max */
+  /* PLL */
+  float pll_kp; /**< paper 86.6 */
+  float pll_ki; /**< paper 5000 */
+  /* start-up */
+  float align_time_s;         /**< angle-mod-pi convergence time with injection only */
+  float pol_pulse_V;          /**< polarity pulse voltage on the estimated d axis */
+  uint32_t pol_pulse_samples; /**< samples per pulse half */
+  uint32_t pol_pulse_pairs;   /**< number of +/- pulse pairs averaged */
+  float pol_margin;           /**< min relative difference of +/- responses */
+  /* supervision */
+  float saliency_min;    /**< min |Lq-Ld|/Ld for injection (default 0.10) */
+  float hf_min_ratio;    /**< HF amplitude below ratio*Ts*u_inj/L_q -> fault */
+  float pll_err_max_rad; /**< |filtered PLL error| limit */
+  float pll_err_time_s;  /**< ... for longer than this -> fault */
+  float quick_stop_time_s; /**< max time in QUICK STOP ACTIVE before PWM off */
+  /* ADC scaling used by fw_step_adc() */
+  float adc_A_per_count;     /**< phase current per count */
+  float adc_offset_counts;   /**< zero-current count (mid-scale) */
+  float adc_V_per_count;     /**< DC-link volts per count */
+  uint32_t adc_max_count;    /**< full scale, e.g. 4095 for 12 bit */
+} fw_config_t;
+
+/** One configuration field, for validation messages, the OD and tools. */
+typedef struct {
+  const char *name; /**< field name as in fw_config_t */
+  const char *unit; /**< SI unit, "" for dimensionless */
+  size_t offset;    /**< offsetof(fw_config_t, name) */
+  uint8_t is_u32;   /**< 1: uint32_t field, 0: float field */
+  float min;        /**< inclusive */
+  float max;        /**< inclusive */
+} fw_config_field_t;
+
+/** Where a configuration check failed. */
+typedef struct {
+  fw_status_t status;
+  const char *field; /**< offending field (NULL if none) */
+  float value;       /**< its value */
+  float min, max;    /**< its allowed range */
+} fw_config_issue_t;
+
+/** Sampled inputs of one PWM period, physical units. */
+typedef struct {
+  float i_abc_A[3]; /**< phase currents */
+  float u_dc_V;     /**< DC-link voltage */
+} fw_inputs_t;
+
+/** Sampled inputs of one PWM period, raw ADC counts. */
+typedef struct {
+  uint16_t i_abc_counts[3];
+  uint16_t u_dc_counts;
+} fw_adc_inputs_t;
+
+/** Outputs of one step. */
+typedef struct {
+  float duty_abc[3];   /**< 0..1, to be latched at the next PWM period */
+  uint8_t pwm_enable;  /**< 0: all switches off */
+} fw_outputs_t;
+
+/** Read-only view of internal signals, for telemetry. */
+typedef struct {
+  uint32_t step_count;
+  uint16_t statusword;
+  uint8_t cia402_state;  /**< fw_cia402_state_t */
+  uint8_t start_phase;   /**< fw_start_phase_t */
+  uint8_t extractor;     /**< fw_extractor_t in use */
+  uint8_t mode;          /**< fw_mode_t */
+  uint8_t polarity_flipped; /**< 1 when start-up added pi to the estimate */
+  uint16_t fault_code;   /**< latched fw_fault_t, 0 if none */
+  /* estimator */
+  float theta_hat_rad;   /**< electrical angle estimate [-pi, pi) */
+  float omega_hat_radps; /**< electrical speed estimate (PLL integrator) */
+  float omega_f_radps;   /**< filtered speed used by the speed loop */
+  float pos_hat_m;       /**< unwrapped linear position estimate */
+  float speed_hat_mps;
+  float pos_hat_mech_rad;  /**< unwrapped rotary-equivalent position */
+  float speed_hat_rpm;     /**< rotary-equivalent speed */
+  float pll_err_rad;       /**< normalised PLL error (approx theta - theta_hat) */
+  float pll_err_f_rad;     /**< low-passed |PLL error| (adaptation, supervision) */
+  float hf_amp_A;          /**< demodulated HF amplitude on d-hat per sample */
+  float hf_q_A;            /**< demodulated HF q-hat component per sample */
+  float sogi_k_eff;        /**< SOGI gain in use */
+  float pol_dI_pos_A;      /**< polarity test: summed response to + pulses */
+  float pol_dI_neg_A;      /**< polarity test: summed response to - pulses */
+  /* current and voltage (estimated frame) */
+  float i_dq_A[2];       /**< fundamental current */
+  float i_dq_ref_A[2];
+  float u_dq_V[2];       /**< fundamental voltage command (without injection) */
+  float u_inj_V;         /**< signed injection voltage commanded this step */
+  float i_ab_A[2];       /**< measured alpha/beta current */
+  float i_h_ab_A[2];     /**< extracted HF current */
+  float speed_ref_radps_e;
+  float force_hat_N;     /**< thrust from i_q estimate, 1.5 (pi/tau) psi_f i_q */
+  float torque_hat_Nm;   /**< rotary equivalent, 1.5 p psi_f i_q */
+  float u_dc_V;
+  float duty_abc[3];
+} fw_snapshot_t;
+
+/**
+ * Drive core state. Allocate it yourself (static or on a stack); treat the
+ * members as private. No pointers inside, so it can be copied.
+ */
+typedef struct {
+  fw_config_t cfg;
+  uint8_t cfg_ok;        /**< cfg passed fw_config_check (saliency aside) */
+  uint8_t saliency_ok;
+  fw_cia402_t sm;
+  fw_mode_t mode;
+  uint32_t step_count;
+  float dt_s;
+  uint32_t n_inj;        /**< PWM periods per injection period */
+  uint32_t inj_idx;      /**< position inside the injection period */
+  /* references */
+  float speed_ref_radps_e;
+  float i_d_ref_A;
+  float i_q_ref_force_A;
+  /* blocks */
+  fw_pi_f32_t pi_d, pi_q, pi_spd;
+  fw_sogi_f32_t sogi_a, sogi_b;
+  fw_pll_f32_t pll;
+  /* extraction / demodulation state */
+  float h_prev_ab[2];     /**< previous extracted HF sample */
+  float sign_hist[4];     /**< injection signs commanded at k, k-1, k-2, k-3 */
+  float ring_ed[FW_INJ_MAX_SAMPLES]; /**< moving average over one injection period */
+  float ring_eq[FW_INJ_MAX_SAMPLES];
+  float ring_ia[FW_INJ_MAX_SAMPLES];
+  float ring_ib[FW_INJ_MAX_SAMPLES];
+  float sum_ed, sum_eq, sum_ia, sum_ib;
+  uint32_t ring_idx, ring_fill;
+  float err_f;            /**< low-passed |PLL error| */
+  float pll_err_time_s;
+  float omega_f;
+  float pos_unwrapped_e;  /**< unwrapped electrical angle estimate */
+  float theta_prev;
+  /* start-up */
+  fw_start_phase_t phase;
+  float phase_time_s;
+  uint32_t pol_k;
+  float pol_base, pol_ext, pol_sum_pos, pol_sum_neg;
+  uint8_t polarity_flipped;
+  /* quick stop */
+  float qs_time_s;
+  /* faults */
+  fw_fault_t fault;
+  uint16_t fault_hist[FW_FAULT_HISTORY_LEN];
+  uint32_t fault_hist_count;
+  /* last signals for the snapshot */
+  fw_snapshot_t snap;
+} fw_ctrl_t;
+
+/* ---- configuration ---------------------------------------------------- */
+
+/**
+ * Defaults: the paper's Table 1 machine and gains, with the salient variant
+ * L_q = 1.5 L_d (Table 1 itself has L_q = L_d, which cannot be tracked by
+ * injection; see docs/method-notes). 24 kHz PWM, 3 kHz injection.
+ */
+void fw_config_default(fw_config_t *cfg);
+
+/** Range and consistency check. Saliency below saliency_min -> FW_ERR_SALIENCY. */
+fw_status_t fw_config_check(const fw_config_t *cfg, fw_config_issue_t *issue);
+
+/** Number of entries in the configuration field table. */
+size_t fw_config_field_count(void);
+/** Field i of the table (NULL when out of range). */
+const fw_config_field_t *fw_config_field(size_t i);
+/** Look a field up by name (NULL when unknown). */
+const fw_config_field_t *fw_config_field_find(const char *name);
+
+/* ---- life cycle ------------------------------------------------------- */
+
+/**
+ * Initialise the core with a configuration. Returns the fw_config_check
+ * status. On FW_ERR_SALIENCY the config is stored but enabling operation
+ * raises FW_FAULT_SALIENCY_TOO_LOW. On other errors the defaults are used
+ * and enabling raises FW_FAULT_CONFIG_INVALID.
+ */
+fw_status_t fw_init(fw_ctrl_t *ctrl, const fw_config_t *cfg);
+
+/**
+ * Replace the configuration at run time (only outside OPERATION ENABLED).
+ * An invalid configuration is refused and the old one kept.
+ */
+fw_status_t fw_set_config(fw_ctrl_t *ctrl, const fw_config_t *cfg,
+                          fw_config_issue_t *issue);
+
+/** Current configuration (read only). */
+const fw_config_t *fw_get_config(const fw_ctrl_t *ctrl);
+
+/* ---- commands --------------------------------------------------------- */
+
+/** Apply a CiA 402 controlword; returns the new statusword. */
+uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw);
+/** Current statusword. */
+uint16_t fw_statusword(const fw_ctrl_t *ctrl);
+fw_cia402_state_t fw_state(const fw_ctrl_t *ctrl);
+
+fw_status_t fw_set_mode(fw_ctrl_t *ctrl, fw_mode_t mode);
+/** Speed reference, electrical rad/s (clamped to speed_max_radps_e). */
+fw_status_t fw_set_speed_ref(fw_ctrl_t *ctrl, float omega_ref_radps_e);
+/** q-axis current reference for FORCE mode (clamped to i_max_A). */
+fw_status_t fw_set_iq_ref(fw_ctrl_t *ctrl, float i_q_ref_A);
+/** d-axis current reference (clamped to i_max_A), default 0. */
+fw_status_t fw_set_id_ref(fw_ctrl_t *ctrl, float i_d_ref_A);
+/** Switch extractor at run time (state of the new path is reset). */
+fw_status_t fw_set_extractor(fw_ctrl_t *ctrl, fw_extractor_t ex);
+
+/** Raise an external fault (e.g. heartbeat lost). Latches like any other. */
+void fw_raise_fault(fw_ctrl_t *ctrl, fw_fault_t code);
+fw_fault_t fw_fault_code(const fw_ctrl_t *ctrl);
+/** Fault history, newest first; returns the number written (<= n). */
+uint32_t fw_fault_history(const fw_ctrl_t *ctrl, uint16_t *codes, uint32_t n);
+
+/* ---- real time -------------------------------------------------------- */
+
+/**
+ * One control period. Checks the inputs (NaN, overcurrent, DC-link range),
+ * runs the state machine, the estimator and the loops, and returns the
+ * duties to latch at the next PWM period (one-sample update delay).
+ */
+void fw_step(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out);
+
+/** Same, from raw ADC counts scaled by the adc_* configuration. */
+void fw_step_adc(fw_ctrl_t *ctrl, const fw_adc_inputs_t *in, fw_outputs_t *out);
+
+/** Copy of the internal signals after the last step. */
+void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap);
+
+/** sizeof(fw_ctrl_t), for bindings that allocate it. */
+size_t fw_ctrl_sizeof(void);
+
+/* ---- unit helpers ----------------------------------------------------- */
+
+/** Linear speed (m/s) -> electrical rad/s: w_e = pi v / tau. */
+float fw_units_mps_to_radps_e(const fw_config_t *cfg, float v_mps);
+float fw_units_radps_e_to_mps(const fw_config_t *cfg, float w_radps_e);
+/** Rotary-equivalent r/min -> electrical rad/s: w_e = p 2 pi n / 60. */
+float fw_units_rpm_to_radps_e(const fw_config_t *cfg, float n_rpm);
+float fw_units_radps_e_to_rpm(const fw_config_t *cfg, float w_radps_e);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* PMLSM_FW_CTRL_H */

@@ -1,0 +1,128 @@
+/**
+ * @file fw_math.h
+ * @brief Control primitives: Clarke/Park transforms, space-vector modulation,
+ *        PI regulator with anti-windup, angle wrap, fast sin/cos.
+ *
+ * All blocks are pure functions or caller-owned structs (CMSIS-DSP style).
+ * float32 only; no globals; no I/O.
+ *
+ * Conventions
+ *  - Clarke is amplitude invariant: a balanced set of peak I gives |i_ab| = I.
+ *  - Park rotates alpha/beta into a frame at angle theta (d axis at theta).
+ *  - Angles in radians; fw_wrap_pi_f32() maps to [-pi, pi).
+ */
+#ifndef PMLSM_FW_MATH_H
+#define PMLSM_FW_MATH_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define FW_PI_F32 3.14159265358979f
+#define FW_TWO_PI_F32 6.28318530717959f
+#define FW_SQRT3_F32 1.73205080756888f
+#define FW_INV_SQRT3_F32 0.577350269189626f
+
+/** Two-component vector (alpha/beta or d/q). */
+typedef struct {
+  float x; /**< alpha or d component */
+  float y; /**< beta or q component */
+} fw_vec2_f32_t;
+
+/** sin and cos of one angle. */
+typedef struct {
+  float s;
+  float c;
+} fw_sincos_f32_t;
+
+/**
+ * Fast sin/cos for an MCU: range reduction to [-pi/4, pi/4] plus odd/even
+ * minimax polynomials (degree 7 / 8). Valid for any finite angle; for
+ * |theta| < 1e4 rad the absolute error is below FW_SINCOS_MAX_ERR.
+ * Non-finite input returns s = 0, c = 1.
+ */
+fw_sincos_f32_t fw_sincos_f32(float theta_rad);
+
+/** Documented bound on |fw_sincos - libm| for |theta| < 1e4 rad (tested). */
+#define FW_SINCOS_MAX_ERR 2.0e-6f
+
+/** Wrap an angle into [-pi, pi). Non-finite input returns 0. */
+float fw_wrap_pi_f32(float theta_rad);
+
+/** Wrap an angle into [0, 2 pi). Non-finite input returns 0. */
+float fw_wrap_2pi_f32(float theta_rad);
+
+/** Amplitude-invariant Clarke transform from three phase quantities. */
+fw_vec2_f32_t fw_clarke_f32(float a, float b, float c);
+
+/** Inverse Clarke: alpha/beta to phase a, b, c (a + b + c = 0). */
+void fw_inv_clarke_f32(fw_vec2_f32_t ab, float abc[3]);
+
+/** Park: alpha/beta to d/q at angle with precomputed sin/cos. */
+fw_vec2_f32_t fw_park_f32(fw_vec2_f32_t ab, fw_sincos_f32_t sc);
+
+/** Inverse Park: d/q to alpha/beta. */
+fw_vec2_f32_t fw_inv_park_f32(fw_vec2_f32_t dq, fw_sincos_f32_t sc);
+
+/**
+ * Space-vector modulation (min/max zero-sequence injection, equivalent to
+ * symmetric SVPWM) of an alpha/beta voltage command.
+ *
+ * The command is first limited to the inscribed circle of the hexagon,
+ * |u_ab| <= u_dc / sqrt(3), keeping its direction. Duties are in [0, 1].
+ *
+ * @param u_ab_V     commanded voltage (V)
+ * @param u_dc_V     DC-link voltage (V), must be > 0
+ * @param duty_abc   output duties, 0..1
+ * @param u_ab_out_V the voltage actually realised after limiting (may be NULL)
+ * @return true when the command was limited
+ */
+bool fw_svpwm_f32(fw_vec2_f32_t u_ab_V, float u_dc_V, float duty_abc[3],
+                  fw_vec2_f32_t *u_ab_out_V);
+
+/**
+ * PI regulator, parallel form u = kp*e + ki*integral(e), with output limits
+ * and anti-windup by conditional integration plus back-calculation clamp:
+ * the integrator is held inside [out_min, out_max] and is not advanced in
+ * the direction that would deepen saturation.
+ */
+typedef struct {
+  float kp;       /**< proportional gain */
+  float ki;       /**< integral gain (per second) */
+  float out_min;  /**< lower output limit */
+  float out_max;  /**< upper output limit */
+  float integ;    /**< integrator state (output units) */
+  float out;      /**< last output */
+} fw_pi_f32_t;
+
+/** Initialise gains and limits, clear state. */
+void fw_pi_init_f32(fw_pi_f32_t *pi, float kp, float ki, float out_min,
+                    float out_max);
+
+/** Clear the integrator and the output. */
+void fw_pi_reset_f32(fw_pi_f32_t *pi);
+
+/**
+ * One PI step: returns the limited output for error e over time step dt_s,
+ * and advances the integrator (anti-windup as described above).
+ * @param ff feed-forward added before limiting
+ */
+float fw_pi_step_f32(fw_pi_f32_t *pi, float e, float ff, float dt_s);
+
+/** Clamp helper. */
+static inline float fw_clampf(float x, float lo, float hi) {
+  return x < lo ? lo : (x > hi ? hi : x);
+}
+
+/** True for a finite float (not NaN, not inf), without libm. */
+static inline bool fw_isfinite_f32(float x) {
+  return (x == x) && (x - x == 0.0f);
+}
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* PMLSM_FW_MATH_H */

@@ -1,0 +1,50 @@
+/**
+ * @file fw_port_blank.c
+ * @brief Blank port: every hardware function does nothing. It compiles for
+ *        any target and proves the core needs nothing but this header.
+ */
+#include "pmlsm/fw_port.h"
+
+struct fw_port {
+  uint32_t time_us;
+};
+
+void fw_port_pwm_write(fw_port_t *port, const float duty_abc[3], bool enable) {
+  (void)port;
+  (void)duty_abc;
+  (void)enable;
+}
+
+bool fw_port_adc_read(fw_port_t *port, fw_adc_inputs_t *adc) {
+  (void)port;
+  adc->i_abc_counts[0] = 2048u;
+  adc->i_abc_counts[1] = 2048u;
+  adc->i_abc_counts[2] = 2048u;
+  adc->u_dc_counts = 0u;
+  return false;
+}
+
+uint32_t fw_port_time_us(fw_port_t *port) { return port ? port->time_us : 0u; }
+
+bool fw_port_can_send(fw_port_t *port, const fw_can_frame_t *frame) {
+  (void)port;
+  (void)frame;
+  return false;
+}
+
+size_t fw_port_uart_write(fw_port_t *port, const uint8_t *data, size_t len) {
+  (void)port;
+  (void)data;
+  (void)len;
+  return 0u;
+}
+
+uint32_t fw_port_critical_enter(fw_port_t *port) {
+  (void)port;
+  return 0u;
+}
+
+void fw_port_critical_exit(fw_port_t *port, uint32_t key) {
+  (void)port;
+  (void)key;
+}

@@ -1,0 +1,49 @@
+/**
+ * @file tinytest.h
+ * @brief A tiny C test framework: checks with tolerances, a summary line,
+ *        non-zero exit on failure. One executable per test file; ctest runs them.
+ */
+#ifndef TINYTEST_H
+#define TINYTEST_H
+
+#include <math.h>
+#include <stdio.h>
+
+static int tt_pass_ = 0;
+static int tt_fail_ = 0;
+static const char *tt_current_ = "";
+
+#define TT_CHECK(cond)                                                          \
+  do {                                                                          \
+    if (cond) {                                                                 \
+      tt_pass_++;                                                               \
+    } else {                                                                    \
+      tt_fail_++;                                                               \
+      printf("FAIL %s:%d [%s] %s\n", __FILE__, __LINE__, tt_current_, #cond);   \
+    }                                                                           \
+  } while (0)
+
+#define TT_CHECK_NEAR(a, b, tol)                                                \
+  do {                                                                          \
+    double tt_a_ = (double)(a), tt_b_ = (double)(b), tt_t_ = (double)(tol);      \
+    if (fabs(tt_a_ - tt_b_) <= tt_t_) {                                         \
+      tt_pass_++;                                                               \
+    } else {                                                                    \
+      tt_fail_++;                                                               \
+      printf("FAIL %s:%d [%s] %s = %.9g, expected %s = %.9g (tol %.3g)\n",      \
+             __FILE__, __LINE__, tt_current_, #a, tt_a_, #b, tt_b_, tt_t_);      \
+    }                                                                           \
+  } while (0)
+
+#define TT_RUN(fn)                                                              \
+  do {                                                                          \
+    tt_current_ = #fn;                                                          \
+    int tt_f0_ = tt_fail_;                                                      \
+    fn();                                                                       \
+    printf("%s %s\n", tt_fail_ == tt_f0_ ? "ok  " : "FAIL", #fn);               \
+  } while (0)
+
+#define TT_SUMMARY()                                                            \
+  (printf("%d passed, %d failed\n", tt_pass_, tt_fail_), tt_fail_ == 0 && tt_pass_ > 0 ? 0 : 1)
+
+#endif
