@@ -9,6 +9,10 @@
 #include <math.h>
 #include <stdio.h>
 
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
 static int tt_pass_ = 0;
 static int tt_fail_ = 0;
 static const char *tt_current_ = "";

@@ -255,7 +255,9 @@ typedef struct {
   fw_sogi_f32_t sogi_a, sogi_b;
   fw_pll_f32_t pll;
   /* extraction / demodulation state */
-  float h_prev_ab[2];     /**< previous extracted HF sample */
+  float h_prev_raw[2];    /**< previous raw alpha/beta current (pseudo-filter) */
+  float h_prev_sogi[2];   /**< previous SOGI output */
+  float h_sogi[2];        /**< SOGI output this step */
   float sign_hist[4];     /**< injection signs commanded at k, k-1, k-2, k-3 */
   float ring_ed[FW_INJ_MAX_SAMPLES]; /**< moving average over one injection period */
   float ring_eq[FW_INJ_MAX_SAMPLES];
@@ -266,6 +268,10 @@ typedef struct {
   float err_f;            /**< low-passed |PLL error| */
   float pll_err_time_s;
   float omega_f;
+  float spd_alpha;        /**< speed filter coefficient */
+  float err_alpha;        /**< |PLL error| filter coefficient */
+  float inj_sign;         /**< injection sign commanded this step */
+  float qs_still_s;       /**< time at standstill during quick stop */
   float pos_unwrapped_e;  /**< unwrapped electrical angle estimate */
   float theta_prev;
   /* start-up */

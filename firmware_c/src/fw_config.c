@@ -1,0 +1,196 @@
+/**
+ * @file fw_config.c
+ * @brief Default configuration, the configuration field table (names,
+ *        units, ranges) and its validation, including the saliency check.
+ */
+#include <stddef.h>
+#include <string.h>
+
+#include "pmlsm/fw_ctrl.h"
+
+#define F32(name, unit, lo, hi) {#name, unit, offsetof(fw_config_t, name), 0u, lo, hi}
+#define U32(name, unit, lo, hi) {#name, unit, offsetof(fw_config_t, name), 1u, lo, hi}
+
+/*
+ * Ranges are engineering limits for this drive class, not tuning advice.
+ * The table is the firmware side of the object dictionary's limits
+ * (protocols/od.yaml); a test keeps the two in agreement.
+ */
+static const fw_config_field_t k_fields[] = {
+    F32(f_pwm_Hz, "Hz", 4000.0f, 100000.0f),
+    F32(R_ohm, "ohm", 1e-3f, 100.0f),
+    F32(L_d_H, "H", 1e-5f, 1.0f),
+    F32(L_q_H, "H", 1e-5f, 1.0f),
+    F32(psi_f_Wb, "Wb", 1e-4f, 10.0f),
+    F32(pole_pairs, "", 1.0f, 500.0f),
+    F32(pole_pitch_m, "m", 1e-3f, 1.0f),
+    F32(u_dc_min_V, "V", 1.0f, 1000.0f),
+    F32(u_dc_max_V, "V", 5.0f, 1200.0f),
+    F32(i_trip_A, "A", 0.1f, 500.0f),
+    F32(i_max_A, "A", 0.05f, 400.0f),
+    F32(speed_max_radps_e, "rad/s", 1.0f, 20000.0f),
+    F32(cur_kp_V_per_A, "V/A", 0.0f, 1000.0f),
+    F32(cur_ki_V_per_As, "V/(A s)", 0.0f, 1e6f),
+    F32(spd_kp_A_per_radps, "A s/rad", 0.0f, 100.0f),
+    F32(spd_ki_A_per_rad, "A/rad", 0.0f, 1e4f),
+    F32(spd_filter_Hz, "Hz", 1.0f, 2000.0f),
+    F32(u_inj_V, "V", 0.0f, 400.0f),
+    F32(f_inj_Hz, "Hz", 100.0f, 20000.0f),
+    U32(extractor, "", 0.0f, 2.0f),
+    F32(sogi_k, "", FW_SOGI_K_MIN, FW_SOGI_K_MAX),
+    F32(sogi_k_adapt_max, "", FW_SOGI_K_MIN, FW_SOGI_K_MAX),
+    F32(sogi_k_adapt_min, "", FW_SOGI_K_MIN, FW_SOGI_K_MAX),
+    F32(sogi_adapt_err_rad, "rad", 1e-3f, 1.0f),
+    F32(pll_kp, "1/s", 0.0f, 1e4f),
+    F32(pll_ki, "1/s^2", 0.0f, 1e7f),
+    F32(align_time_s, "s", 0.0f, 5.0f),
+    F32(pol_pulse_V, "V", 0.0f, 600.0f),
+    U32(pol_pulse_samples, "", 1.0f, 1000.0f),
+    U32(pol_pulse_pairs, "", 1.0f, 64.0f),
+    F32(pol_margin, "", 0.0f, 1.0f),
+    F32(saliency_min, "", 0.0f, 1.0f),
+    F32(hf_min_ratio, "", 0.0f, 1.0f),
+    F32(pll_err_max_rad, "rad", 0.01f, 1.6f),
+    F32(pll_err_time_s, "s", 0.0f, 10.0f),
+    F32(quick_stop_time_s, "s", 0.0f, 10.0f),
+    F32(adc_A_per_count, "A", 1e-6f, 10.0f),
+    F32(adc_offset_counts, "", 0.0f, 65535.0f),
+    F32(adc_V_per_count, "V", 1e-6f, 100.0f),
+    U32(adc_max_count, "", 255.0f, 65535.0f),
+};
+
+#define K_NFIELDS (sizeof(k_fields) / sizeof(k_fields[0]))
+
+void fw_config_default(fw_config_t *cfg) {
+  if (cfg == NULL) {
+    return;
+  }
+  memset(cfg, 0, sizeof(*cfg));
+  cfg->f_pwm_Hz = 24000.0f; /* 8 samples per 3 kHz injection period */
+  /* Paper Table 1, salient variant L_q = 1.5 L_d (Table 1 has L_q = L_d). */
+  cfg->R_ohm = 0.958f;
+  cfg->L_d_H = 0.012f;
+  cfg->L_q_H = 0.018f;
+  cfg->psi_f_Wb = 0.1827f;
+  cfg->pole_pairs = 4.0f;
+  cfg->pole_pitch_m = 0.024f; /* rotary-equivalent choice, see docs */
+  cfg->u_dc_min_V = 150.0f;
+  cfg->u_dc_max_V = 420.0f;
+  cfg->i_trip_A = 24.0f;
+  cfg->i_max_A = 20.0f;
+  cfg->speed_max_radps_e = 1500.0f;
+  cfg->cur_kp_V_per_A = cfg->L_d_H * 1100.0f;
+  cfg->cur_ki_V_per_As = cfg->R_ohm * 1100.0f;
+  /* 0.1 A/(r/min) and 0.6 A/(r/min s): 1 r/min = 2 pi p / 60 rad/s (el.) */
+  cfg->spd_kp_A_per_radps = 0.1f * 60.0f / (FW_TWO_PI_F32 * cfg->pole_pairs);
+  cfg->spd_ki_A_per_rad = 0.6f * 60.0f / (FW_TWO_PI_F32 * cfg->pole_pairs);
+  cfg->spd_filter_Hz = 100.0f;
+  cfg->u_inj_V = 30.0f;
+  cfg->f_inj_Hz = 3000.0f;
+  cfg->extractor = (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE;
+  cfg->sogi_k = 0.5f;
+  cfg->sogi_k_adapt_max = 0.8f;
+  cfg->sogi_k_adapt_min = 0.2f;
+  cfg->sogi_adapt_err_rad = 0.05f;
+  cfg->pll_kp = 86.6f;
+  cfg->pll_ki = 5000.0f;
+  cfg->align_time_s = 0.08f;
+  cfg->pol_pulse_V = 60.0f;
+  cfg->pol_pulse_samples = 12u;
+  cfg->pol_pulse_pairs = 4u;
+  cfg->pol_margin = 0.02f;
+  cfg->saliency_min = 0.10f;
+  cfg->hf_min_ratio = 0.3f;
+  cfg->pll_err_max_rad = 0.5f;
+  cfg->pll_err_time_s = 0.05f;
+  cfg->quick_stop_time_s = 0.5f;
+  cfg->adc_A_per_count = 50.0f / 4096.0f; /* +/-25 A over 12 bits */
+  cfg->adc_offset_counts = 2048.0f;
+  cfg->adc_V_per_count = 500.0f / 4095.0f;
+  cfg->adc_max_count = 4095u;
+}
+
+size_t fw_config_field_count(void) { return K_NFIELDS; }
+
+const fw_config_field_t *fw_config_field(size_t i) { return i < K_NFIELDS ? &k_fields[i] : NULL; }
+
+const fw_config_field_t *fw_config_field_find(const char *name) {
+  if (name == NULL) {
+    return NULL;
+  }
+  for (size_t i = 0; i < K_NFIELDS; i++) {
+    if (strcmp(k_fields[i].name, name) == 0) {
+      return &k_fields[i];
+    }
+  }
+  return NULL;
+}
+
+static float field_value(const fw_config_t *cfg, const fw_config_field_t *f) {
+  const uint8_t *base = (const uint8_t *)cfg + f->offset;
+  if (f->is_u32) {
+    uint32_t u;
+    memcpy(&u, base, sizeof(u));
+    return (float)u;
+  }
+  float x;
+  memcpy(&x, base, sizeof(x));
+  return x;
+}
+
+static fw_status_t report(fw_config_issue_t *issue, fw_status_t st, const char *field, float v,
+                          float lo, float hi) {
+  if (issue != NULL) {
+    issue->status = st;
+    issue->field = field;
+    issue->value = v;
+    issue->min = lo;
+    issue->max = hi;
+  }
+  return st;
+}
+
+fw_status_t fw_config_check(const fw_config_t *cfg, fw_config_issue_t *issue) {
+  if (cfg == NULL) {
+    return report(issue, FW_ERR_NULL, NULL, 0.0f, 0.0f, 0.0f);
+  }
+  for (size_t i = 0; i < K_NFIELDS; i++) {
+    const fw_config_field_t *f = &k_fields[i];
+    float v = field_value(cfg, f);
+    if (!fw_isfinite_f32(v)) {
+      return report(issue, FW_ERR_NOT_FINITE, f->name, v, f->min, f->max);
+    }
+    if (v < f->min || v > f->max) {
+      return report(issue, FW_ERR_RANGE, f->name, v, f->min, f->max);
+    }
+  }
+  /* Cross-field consistency. */
+  float ratio = cfg->f_pwm_Hz / cfg->f_inj_Hz;
+  uint32_t n = (uint32_t)(ratio + 0.5f);
+  float rerr = ratio - (float)n;
+  if (rerr > 1e-3f || rerr < -1e-3f || (n % 2u) != 0u || n < 4u || n > FW_INJ_MAX_SAMPLES) {
+    return report(issue, FW_ERR_INCONSISTENT, "f_inj_Hz", cfg->f_inj_Hz,
+                  cfg->f_pwm_Hz / (float)FW_INJ_MAX_SAMPLES, cfg->f_pwm_Hz / 4.0f);
+  }
+  if (cfg->u_dc_min_V >= cfg->u_dc_max_V) {
+    return report(issue, FW_ERR_INCONSISTENT, "u_dc_min_V", cfg->u_dc_min_V, 1.0f,
+                  cfg->u_dc_max_V);
+  }
+  if (cfg->i_max_A >= cfg->i_trip_A) {
+    return report(issue, FW_ERR_INCONSISTENT, "i_max_A", cfg->i_max_A, 0.05f, cfg->i_trip_A);
+  }
+  if (cfg->sogi_k_adapt_min > cfg->sogi_k_adapt_max) {
+    return report(issue, FW_ERR_INCONSISTENT, "sogi_k_adapt_min", cfg->sogi_k_adapt_min,
+                  FW_SOGI_K_MIN, cfg->sogi_k_adapt_max);
+  }
+  /* Saliency: injection needs |Lq - Ld| / Ld >= saliency_min (method.md 3.1). */
+  float sal = (cfg->L_q_H - cfg->L_d_H) / cfg->L_d_H;
+  if (sal < 0.0f) {
+    sal = -sal;
+  }
+  if (sal < cfg->saliency_min) {
+    return report(issue, FW_ERR_SALIENCY, "L_q_H", cfg->L_q_H,
+                  cfg->L_d_H * (1.0f + cfg->saliency_min), cfg->L_d_H * 10.0f);
+  }
+  return report(issue, FW_OK, NULL, 0.0f, 0.0f, 0.0f);
+}

@@ -1,0 +1,705 @@
+/**
+ * @file fw_ctrl.c
+ * @brief Sensorless drive core: input checks, CiA 402 supervision, start-up
+ *        (angle mod pi, then magnet polarity), square-wave injection,
+ *        HF extraction + demodulation, PLL, current and speed loops.
+ *
+ * Signal chain per PWM period k (see docs/firmware.md):
+ *
+ *   i_abc --Clarke--> i_ab --+--> pseudo:  h = i_ab          (eq. 11 baseline)
+ *                            +--> SOGI:    h = D(z) i_ab     (eq. 12/13)
+ *   dh = h(k) - h(k-1), rotated into the estimated frame at theta_hat
+ *   e_d = s(k-2) dh_d,  e_q = s(k-2) dh_q      (s = injection sign; the
+ *        difference over [k-1, k] saw the voltage commanded at k-2 because
+ *        of the one-period PWM update delay)
+ *   E_d, E_q = moving averages of e_d, e_q over one injection period
+ *   With injection along d-hat and dtheta = theta - theta_hat:
+ *        E_d ~ Ts u (1/Ld cos^2 + 1/Lq sin^2),  E_q ~ Ts u (1/Ld - 1/Lq) sin(2 dtheta) / 2
+ *   PLL error  eps = (E_q / E_d) * Lq / (Lq - Ld)  ~ dtheta  for small dtheta
+ *   This is eq. 8-9 (i_sin cos theta_hat - i_cos sin theta_hat is the
+ *   q-hat component of the scaled HF difference) with the scale L_d/(T u)
+ *   replaced by the measured d-hat response, so the loop gain does not
+ *   depend on u_inj, the extractor's gain or errors in L_d.
+ */
+#include <math.h>
+#include <stddef.h>
+#include <string.h>
+
+#include "pmlsm/fw_ctrl.h"
+
+/* Corner of the |PLL error| filter used for adaptation and supervision. */
+#define FW_ERR_FILTER_HZ 50.0f
+/* Speed below which quick stop counts the drive as stopped (el. rad/s). */
+#define FW_QS_STILL_RADPS 2.0f
+#define FW_QS_STILL_TIME_S 0.02f
+/* HF supervision starts after this time in a phase (filters settled). */
+#define FW_HF_SUPERVISION_DELAY_S 0.005f
+/* Voltage headroom kept for injection when limiting the current PIs. */
+#define FW_PI_VOLTAGE_SHARE 0.9f
+
+/* ---- helpers ------------------------------------------------------------ */
+
+static void hist_push(fw_ctrl_t *c, fw_fault_t code) {
+  for (uint32_t i = FW_FAULT_HISTORY_LEN - 1u; i > 0u; i--) {
+    c->fault_hist[i] = c->fault_hist[i - 1u];
+  }
+  c->fault_hist[0] = (uint16_t)code;
+  if (c->fault_hist_count < FW_FAULT_HISTORY_LEN) {
+    c->fault_hist_count++;
+  }
+}
+
+static void latch_fault(fw_ctrl_t *c, fw_fault_t code) {
+  if (code == FW_FAULT_NONE) {
+    return;
+  }
+  if (c->fault == FW_FAULT_NONE) {
+    c->fault = code; /* the first cause is the one reported */
+    hist_push(c, code);
+  }
+  if (c->sm.state != FW_CIA402_FAULT) {
+    fw_cia402_fault(&c->sm);
+  }
+}
+
+static float lp_alpha(float f_Hz, float dt_s) {
+  return 1.0f - expf(-FW_TWO_PI_F32 * f_Hz * dt_s);
+}
+
+/** Reset everything that carries history across an enable. */
+static void reset_dynamics(fw_ctrl_t *c) {
+  const fw_config_t *cfg = &c->cfg;
+  float u_lim = 1.0f; /* real limits are set every step from u_dc */
+  fw_pi_init_f32(&c->pi_d, cfg->cur_kp_V_per_A, cfg->cur_ki_V_per_As, -u_lim, u_lim);
+  fw_pi_init_f32(&c->pi_q, cfg->cur_kp_V_per_A, cfg->cur_ki_V_per_As, -u_lim, u_lim);
+  fw_pi_init_f32(&c->pi_spd, cfg->spd_kp_A_per_radps, cfg->spd_ki_A_per_rad, -cfg->i_max_A,
+                 cfg->i_max_A);
+  float k = cfg->extractor == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE ? cfg->sogi_k_adapt_max
+                                                                     : cfg->sogi_k;
+  (void)fw_sogi_init_f32(&c->sogi_a, cfg->f_inj_Hz, k, c->dt_s);
+  (void)fw_sogi_init_f32(&c->sogi_b, cfg->f_inj_Hz, k, c->dt_s);
+  fw_pll_init_f32(&c->pll, cfg->pll_kp, cfg->pll_ki, cfg->speed_max_radps_e);
+  memset(c->h_prev_raw, 0, sizeof(c->h_prev_raw));
+  memset(c->h_prev_sogi, 0, sizeof(c->h_prev_sogi));
+  memset(c->h_sogi, 0, sizeof(c->h_sogi));
+  memset(c->sign_hist, 0, sizeof(c->sign_hist));
+  c->ring_idx = 0u;
+  c->ring_fill = 0u;
+  c->sum_ed = c->sum_eq = c->sum_ia = c->sum_ib = 0.0f;
+  memset(c->ring_ed, 0, sizeof(c->ring_ed));
+  memset(c->ring_eq, 0, sizeof(c->ring_eq));
+  memset(c->ring_ia, 0, sizeof(c->ring_ia));
+  memset(c->ring_ib, 0, sizeof(c->ring_ib));
+  c->inj_idx = 0u;
+  c->inj_sign = 0.0f;
+  c->err_f = 0.0f;
+  c->pll_err_time_s = 0.0f;
+  c->omega_f = 0.0f;
+  c->theta_prev = c->pll.theta_rad;
+  c->phase = FW_START_IDLE;
+  c->phase_time_s = 0.0f;
+  c->pol_k = 0u;
+  c->pol_base = c->pol_ext = c->pol_sum_pos = c->pol_sum_neg = 0.0f;
+  c->qs_time_s = 0.0f;
+  c->qs_still_s = 0.0f;
+}
+
+static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
+  c->cfg = *cfg;
+  c->cfg_ok = (uint8_t)(st == FW_OK || st == FW_ERR_SALIENCY);
+  c->saliency_ok = (uint8_t)(st == FW_OK);
+  c->dt_s = 1.0f / cfg->f_pwm_Hz;
+  c->n_inj = (uint32_t)(cfg->f_pwm_Hz / cfg->f_inj_Hz + 0.5f);
+  c->spd_alpha = lp_alpha(cfg->spd_filter_Hz, c->dt_s);
+  c->err_alpha = lp_alpha(FW_ERR_FILTER_HZ, c->dt_s);
+  reset_dynamics(c);
+}
+
+/* ---- configuration and commands ----------------------------------------- */
+
+fw_status_t fw_init(fw_ctrl_t *ctrl, const fw_config_t *cfg) {
+  if (ctrl == NULL) {
+    return FW_ERR_NULL;
+  }
+  memset(ctrl, 0, sizeof(*ctrl));
+  fw_cia402_init(&ctrl->sm);
+  fw_config_issue_t issue;
+  fw_status_t st = fw_config_check(cfg, &issue);
+  if (st == FW_OK || st == FW_ERR_SALIENCY) {
+    apply_config(ctrl, cfg, st);
+  } else {
+    fw_config_t def;
+    fw_config_default(&def);
+    apply_config(ctrl, &def, FW_OK);
+    ctrl->cfg_ok = 0u; /* enabling must fail: the requested config was bad */
+  }
+  ctrl->mode = FW_MODE_SPEED;
+  fw_cia402_init_done(&ctrl->sm);
+  return st;
+}
+
+fw_status_t fw_set_config(fw_ctrl_t *ctrl, const fw_config_t *cfg, fw_config_issue_t *issue) {
+  if (ctrl == NULL || cfg == NULL) {
+    return FW_ERR_NULL;
+  }
+  if (fw_cia402_power_enabled(ctrl->sm.state)) {
+    return FW_ERR_STATE;
+  }
+  fw_status_t st = fw_config_check(cfg, issue);
+  if (st == FW_OK || st == FW_ERR_SALIENCY) {
+    apply_config(ctrl, cfg, st);
+  }
+  return st;
+}
+
+const fw_config_t *fw_get_config(const fw_ctrl_t *ctrl) { return ctrl ? &ctrl->cfg : NULL; }
+
+fw_cia402_state_t fw_state(const fw_ctrl_t *ctrl) { return ctrl->sm.state; }
+
+uint16_t fw_statusword(const fw_ctrl_t *ctrl) {
+  bool warning = ctrl->snap.u_dc_V < ctrl->cfg.u_dc_min_V;
+  bool reached = false;
+  if (ctrl->sm.state == FW_CIA402_OPERATION_ENABLED && ctrl->phase == FW_START_RUN) {
+    if (ctrl->mode == FW_MODE_SPEED) {
+      float e = ctrl->speed_ref_radps_e - ctrl->omega_f;
+      float tol = 0.02f * fabsf(ctrl->speed_ref_radps_e) + 1.0f;
+      reached = fabsf(e) < tol;
+    } else {
+      reached = true;
+    }
+  }
+  return fw_cia402_statusword(&ctrl->sm, warning, true, reached);
+}
+
+uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
+  fw_cia402_state_t before = ctrl->sm.state;
+  fw_cia402_state_t after = fw_cia402_controlword(&ctrl->sm, cw);
+  if (before == FW_CIA402_FAULT && after != FW_CIA402_FAULT) {
+    ctrl->fault = FW_FAULT_NONE; /* fault reset: history is kept */
+  }
+  if (after == FW_CIA402_OPERATION_ENABLED && before != FW_CIA402_OPERATION_ENABLED &&
+      before != FW_CIA402_QUICK_STOP_ACTIVE) {
+    if (!ctrl->cfg_ok) {
+      latch_fault(ctrl, FW_FAULT_CONFIG_INVALID);
+    } else if (!ctrl->saliency_ok) {
+      latch_fault(ctrl, FW_FAULT_SALIENCY_TOO_LOW); /* injection refused */
+    } else {
+      reset_dynamics(ctrl);
+      ctrl->phase = FW_START_ALIGN;
+    }
+  }
+  if (after == FW_CIA402_QUICK_STOP_ACTIVE && before != FW_CIA402_QUICK_STOP_ACTIVE) {
+    ctrl->qs_time_s = 0.0f;
+    ctrl->qs_still_s = 0.0f;
+  }
+  return fw_statusword(ctrl);
+}
+
+fw_status_t fw_set_mode(fw_ctrl_t *ctrl, fw_mode_t mode) {
+  if (ctrl == NULL) {
+    return FW_ERR_NULL;
+  }
+  if (mode != FW_MODE_SPEED && mode != FW_MODE_FORCE) {
+    return FW_ERR_RANGE;
+  }
+  if (mode != ctrl->mode && mode == FW_MODE_SPEED) {
+    /* bumpless: the speed integrator starts from the present i_q reference */
+    ctrl->pi_spd.integ = fw_clampf(ctrl->snap.i_dq_ref_A[1], -ctrl->cfg.i_max_A,
+                                   ctrl->cfg.i_max_A);
+  }
+  ctrl->mode = mode;
+  return FW_OK;
+}
+
+static fw_status_t set_clamped(float *dst, float v, float lim) {
+  if (!fw_isfinite_f32(v)) {
+    return FW_ERR_NOT_FINITE;
+  }
+  *dst = fw_clampf(v, -lim, lim);
+  return (v > lim || v < -lim) ? FW_ERR_RANGE : FW_OK;
+}
+
+fw_status_t fw_set_speed_ref(fw_ctrl_t *ctrl, float w) {
+  return ctrl ? set_clamped(&ctrl->speed_ref_radps_e, w, ctrl->cfg.speed_max_radps_e)
+              : FW_ERR_NULL;
+}
+
+fw_status_t fw_set_iq_ref(fw_ctrl_t *ctrl, float i) {
+  return ctrl ? set_clamped(&ctrl->i_q_ref_force_A, i, ctrl->cfg.i_max_A) : FW_ERR_NULL;
+}
+
+fw_status_t fw_set_id_ref(fw_ctrl_t *ctrl, float i) {
+  return ctrl ? set_clamped(&ctrl->i_d_ref_A, i, ctrl->cfg.i_max_A) : FW_ERR_NULL;
+}
+
+fw_status_t fw_set_extractor(fw_ctrl_t *ctrl, fw_extractor_t ex) {
+  if (ctrl == NULL) {
+    return FW_ERR_NULL;
+  }
+  if (ex != FW_EXTRACTOR_PSEUDO && ex != FW_EXTRACTOR_SOGI && ex != FW_EXTRACTOR_SOGI_ADAPTIVE) {
+    return FW_ERR_RANGE;
+  }
+  ctrl->cfg.extractor = (uint32_t)ex;
+  float k = ex == FW_EXTRACTOR_SOGI_ADAPTIVE ? ctrl->cfg.sogi_k_adapt_max : ctrl->cfg.sogi_k;
+  fw_sogi_set_k_f32(&ctrl->sogi_a, k);
+  fw_sogi_set_k_f32(&ctrl->sogi_b, k);
+  /* demodulated history belongs to the old path: restart the averages */
+  ctrl->ring_fill = 0u;
+  ctrl->ring_idx = 0u;
+  ctrl->sum_ed = ctrl->sum_eq = ctrl->sum_ia = ctrl->sum_ib = 0.0f;
+  return FW_OK;
+}
+
+void fw_raise_fault(fw_ctrl_t *ctrl, fw_fault_t code) {
+  if (ctrl != NULL) {
+    latch_fault(ctrl, code);
+  }
+}
+
+fw_fault_t fw_fault_code(const fw_ctrl_t *ctrl) { return ctrl->fault; }
+
+uint32_t fw_fault_history(const fw_ctrl_t *ctrl, uint16_t *codes, uint32_t n) {
+  uint32_t m = ctrl->fault_hist_count < n ? ctrl->fault_hist_count : n;
+  for (uint32_t i = 0; i < m; i++) {
+    codes[i] = ctrl->fault_hist[i];
+  }
+  return m;
+}
+
+size_t fw_ctrl_sizeof(void) { return sizeof(fw_ctrl_t); }
+
+/* ---- estimator ---------------------------------------------------------- */
+
+/** Moving average over one injection period (ring of n_inj samples). */
+static void ring_push(fw_ctrl_t *c, float ed, float eq, float ia, float ib) {
+  uint32_t i = c->ring_idx;
+  if (c->ring_fill == c->n_inj) {
+    c->sum_ed -= c->ring_ed[i];
+    c->sum_eq -= c->ring_eq[i];
+    c->sum_ia -= c->ring_ia[i];
+    c->sum_ib -= c->ring_ib[i];
+  } else {
+    c->ring_fill++;
+  }
+  c->ring_ed[i] = ed;
+  c->ring_eq[i] = eq;
+  c->ring_ia[i] = ia;
+  c->ring_ib[i] = ib;
+  c->sum_ed += ed;
+  c->sum_eq += eq;
+  c->sum_ia += ia;
+  c->sum_ib += ib;
+  c->ring_idx = (i + 1u == c->n_inj) ? 0u : i + 1u;
+}
+
+/**
+ * Extraction, demodulation and PLL for one sample. Returns the fundamental
+ * alpha/beta current (HF removed) for the current loop.
+ */
+static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, bool run_pll) {
+  const fw_config_t *cfg = &c->cfg;
+  fw_extractor_t ex = (fw_extractor_t)cfg->extractor;
+
+  /* Both SOGIs always run so that switching extractor is seamless. */
+  float h_a = fw_sogi_step_f32(&c->sogi_a, i_ab.x, NULL);
+  float h_b = fw_sogi_step_f32(&c->sogi_b, i_ab.y, NULL);
+  c->h_sogi[0] = h_a;
+  c->h_sogi[1] = h_b;
+
+  fw_vec2_f32_t dh;
+  if (ex == FW_EXTRACTOR_PSEUDO) {
+    dh.x = i_ab.x - c->h_prev_raw[0];
+    dh.y = i_ab.y - c->h_prev_raw[1];
+  } else {
+    dh.x = h_a - c->h_prev_sogi[0];
+    dh.y = h_b - c->h_prev_sogi[1];
+  }
+  c->h_prev_raw[0] = i_ab.x;
+  c->h_prev_raw[1] = i_ab.y;
+  c->h_prev_sogi[0] = h_a;
+  c->h_prev_sogi[1] = h_b;
+
+  fw_sincos_f32_t sc = fw_sincos_f32(c->pll.theta_rad);
+  fw_vec2_f32_t dh_dq = fw_park_f32(dh, sc);
+  float s = c->sign_hist[2]; /* voltage applied over [k-1, k] */
+  ring_push(c, s * dh_dq.x, s * dh_dq.y, i_ab.x, i_ab.y);
+  float inv_n = 1.0f / (float)c->ring_fill;
+  float E_d = c->sum_ed * inv_n;
+  float E_q = c->sum_eq * inv_n;
+
+  float eps = 0.0f;
+  float floor_A = 1e-6f;
+  if (E_d > floor_A) {
+    eps = (E_q / E_d) * cfg->L_q_H / (cfg->L_q_H - cfg->L_d_H);
+    eps = fw_clampf(eps, -1.0f, 1.0f);
+  }
+  float ae = fabsf(eps);
+  c->err_f += c->err_alpha * (ae - c->err_f);
+
+  if (ex == FW_EXTRACTOR_SOGI_ADAPTIVE) {
+    /* Observable adaptation (replaces eq. 13's theta - theta_hat): a wide
+     * band while the PLL error is large, a narrow one when locked. */
+    float r = fw_clampf(c->err_f / cfg->sogi_adapt_err_rad, 0.0f, 1.0f);
+    float k = cfg->sogi_k_adapt_min + (cfg->sogi_k_adapt_max - cfg->sogi_k_adapt_min) * r;
+    fw_sogi_set_k_f32(&c->sogi_a, k);
+    fw_sogi_set_k_f32(&c->sogi_b, k);
+  }
+
+  if (run_pll) {
+    fw_pll_step_f32(&c->pll, eps, c->dt_s);
+  }
+  float dth = fw_wrap_pi_f32(c->pll.theta_rad - c->theta_prev);
+  c->pos_unwrapped_e += dth;
+  c->theta_prev = c->pll.theta_rad;
+  c->omega_f += c->spd_alpha * (c->pll.w_i_radps - c->omega_f);
+
+  c->snap.pll_err_rad = eps;
+  c->snap.hf_amp_A = E_d;
+  c->snap.hf_q_A = E_q;
+  c->snap.i_h_ab_A[0] = ex == FW_EXTRACTOR_PSEUDO ? dh.x : h_a;
+  c->snap.i_h_ab_A[1] = ex == FW_EXTRACTOR_PSEUDO ? dh.y : h_b;
+
+  fw_vec2_f32_t i_f;
+  if (ex == FW_EXTRACTOR_PSEUDO) {
+    i_f.x = c->sum_ia * inv_n; /* one-period average removes the square-wave response */
+    i_f.y = c->sum_ib * inv_n;
+  } else {
+    i_f.x = i_ab.x - h_a; /* eq. 10: fundamental = measured - extracted HF */
+    i_f.y = i_ab.y - h_b;
+  }
+  return i_f;
+}
+
+/** HF-response and PLL-error supervision (loss of lock). */
+static void supervise_estimator(fw_ctrl_t *c) {
+  const fw_config_t *cfg = &c->cfg;
+  if (c->phase_time_s < FW_HF_SUPERVISION_DELAY_S || c->ring_fill < c->n_inj) {
+    return;
+  }
+  float e_min = cfg->hf_min_ratio * c->dt_s * cfg->u_inj_V / cfg->L_q_H;
+  if (cfg->u_inj_V > 0.0f && c->snap.hf_amp_A < e_min) {
+    latch_fault(c, FW_FAULT_EST_HF_LOW);
+    return;
+  }
+  if (c->phase == FW_START_RUN) {
+    if (c->err_f > cfg->pll_err_max_rad) {
+      c->pll_err_time_s += c->dt_s;
+      if (c->pll_err_time_s > cfg->pll_err_time_s) {
+        latch_fault(c, FW_FAULT_EST_PLL_ERROR);
+      }
+    } else {
+      c->pll_err_time_s = 0.0f;
+    }
+  }
+}
+
+/* ---- start-up: magnet polarity ------------------------------------------ */
+
+/**
+ * Polarity test: per pair, +V for N samples and -V for N (positive current
+ * excursion and return), N at zero, then -V / +V (negative excursion and
+ * return), N at zero. With d-axis saturation the excursion along the magnet
+ * (+d) is larger. Returns the d-hat voltage to apply this sample.
+ */
+static float polarity_step(fw_ctrl_t *c, float i_d) {
+  const fw_config_t *cfg = &c->cfg;
+  uint32_t n = cfg->pol_pulse_samples;
+  uint32_t per_pair = 6u * n;
+  uint32_t pair = c->pol_k / per_pair;
+  uint32_t j = c->pol_k % per_pair;
+  uint32_t seg = j / n;
+  uint32_t in_seg = j % n;
+  float v = cfg->pol_pulse_V;
+
+  if (pair >= cfg->pol_pulse_pairs) {
+    /* decision */
+    float p = c->pol_sum_pos, m = c->pol_sum_neg;
+    c->snap.pol_dI_pos_A = p;
+    c->snap.pol_dI_neg_A = m;
+    if (p > m * (1.0f + cfg->pol_margin)) {
+      c->polarity_flipped = 0u;
+    } else if (m > p * (1.0f + cfg->pol_margin)) {
+      c->polarity_flipped = 1u;
+      fw_pll_reset_f32(&c->pll, c->pll.theta_rad + FW_PI_F32, 0.0f);
+      c->theta_prev = c->pll.theta_rad;
+      c->pos_unwrapped_e += FW_PI_F32;
+    } else {
+      latch_fault(c, FW_FAULT_POLARITY_UNDETERMINED);
+      return 0.0f;
+    }
+    /* hand over to closed loop with clean filters */
+    float th = c->pll.theta_rad;
+    reset_dynamics(c);
+    fw_pll_reset_f32(&c->pll, th, 0.0f);
+    c->theta_prev = th;
+    c->phase = FW_START_RUN;
+    c->phase_time_s = 0.0f;
+    return 0.0f;
+  }
+
+  if (in_seg == 0u && (seg == 0u || seg == 3u)) {
+    c->pol_base = i_d;
+    c->pol_ext = i_d;
+  }
+  if (seg == 0u || seg == 1u) {
+    c->pol_ext = i_d > c->pol_ext ? i_d : c->pol_ext;
+  } else if (seg == 3u || seg == 4u) {
+    c->pol_ext = i_d < c->pol_ext ? i_d : c->pol_ext;
+  }
+  if (in_seg == n - 1u && seg == 1u) {
+    c->pol_sum_pos += c->pol_ext - c->pol_base;
+  } else if (in_seg == n - 1u && seg == 4u) {
+    c->pol_sum_neg += c->pol_base - c->pol_ext;
+  }
+  c->pol_k++;
+  c->snap.pol_dI_pos_A = c->pol_sum_pos;
+  c->snap.pol_dI_neg_A = c->pol_sum_neg;
+  switch (seg) {
+  case 0u:
+  case 4u:
+    return v;
+  case 1u:
+  case 3u:
+    return -v;
+  default:
+    return 0.0f;
+  }
+}
+
+/* ---- the step ----------------------------------------------------------- */
+
+static fw_fault_t check_inputs(const fw_ctrl_t *c, const fw_inputs_t *in) {
+  for (int i = 0; i < 3; i++) {
+    if (!fw_isfinite_f32(in->i_abc_A[i])) {
+      return FW_FAULT_INPUT_INVALID;
+    }
+  }
+  if (!fw_isfinite_f32(in->u_dc_V)) {
+    return FW_FAULT_INPUT_INVALID;
+  }
+  for (int i = 0; i < 3; i++) {
+    if (fabsf(in->i_abc_A[i]) > c->cfg.i_trip_A) {
+      return FW_FAULT_OVERCURRENT;
+    }
+  }
+  if (in->u_dc_V > c->cfg.u_dc_max_V) {
+    return FW_FAULT_DC_OVERVOLTAGE;
+  }
+  if (fw_cia402_power_enabled(c->sm.state) && in->u_dc_V < c->cfg.u_dc_min_V) {
+    return FW_FAULT_DC_UNDERVOLTAGE;
+  }
+  return FW_FAULT_NONE;
+}
+
+static void outputs_off(fw_outputs_t *out) {
+  out->duty_abc[0] = out->duty_abc[1] = out->duty_abc[2] = 0.5f;
+  out->pwm_enable = 0u;
+}
+
+static void fill_snapshot_common(fw_ctrl_t *c, const fw_inputs_t *in, fw_vec2_f32_t i_ab,
+                                 const fw_outputs_t *out) {
+  const fw_config_t *cfg = &c->cfg;
+  fw_snapshot_t *s = &c->snap;
+  s->step_count = c->step_count;
+  s->cia402_state = (uint8_t)c->sm.state;
+  s->start_phase = (uint8_t)c->phase;
+  s->extractor = (uint8_t)cfg->extractor;
+  s->mode = (uint8_t)c->mode;
+  s->polarity_flipped = c->polarity_flipped;
+  s->fault_code = (uint16_t)c->fault;
+  s->theta_hat_rad = c->pll.theta_rad;
+  s->omega_hat_radps = c->pll.w_i_radps;
+  s->omega_f_radps = c->omega_f;
+  s->pos_hat_m = c->pos_unwrapped_e * cfg->pole_pitch_m / FW_PI_F32;
+  s->speed_hat_mps = fw_units_radps_e_to_mps(cfg, c->pll.w_i_radps);
+  s->pos_hat_mech_rad = c->pos_unwrapped_e / cfg->pole_pairs;
+  s->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, c->pll.w_i_radps);
+  s->pll_err_f_rad = c->err_f;
+  s->sogi_k_eff = c->sogi_a.k;
+  s->i_ab_A[0] = i_ab.x;
+  s->i_ab_A[1] = i_ab.y;
+  s->speed_ref_radps_e = c->speed_ref_radps_e;
+  s->force_hat_N = 1.5f * (FW_PI_F32 / cfg->pole_pitch_m) * cfg->psi_f_Wb * s->i_dq_A[1];
+  s->torque_hat_Nm = 1.5f * cfg->pole_pairs * cfg->psi_f_Wb * s->i_dq_A[1];
+  s->u_dc_V = in->u_dc_V;
+  s->duty_abc[0] = out->duty_abc[0];
+  s->duty_abc[1] = out->duty_abc[1];
+  s->duty_abc[2] = out->duty_abc[2];
+  s->statusword = fw_statusword(c);
+}
+
+void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
+  if (c == NULL || out == NULL) {
+    return;
+  }
+  outputs_off(out);
+  c->step_count++;
+  if (in == NULL) {
+    latch_fault(c, FW_FAULT_INPUT_INVALID);
+    return;
+  }
+  const fw_config_t *cfg = &c->cfg;
+  const float dt = c->dt_s;
+
+  fw_fault_t f = check_inputs(c, in);
+  fw_inputs_t safe = *in;
+  if (f != FW_FAULT_NONE) {
+    latch_fault(c, f);
+    if (f == FW_FAULT_INPUT_INVALID) {
+      memset(&safe, 0, sizeof(safe)); /* never propagate NaN into the state */
+    }
+  }
+  fw_vec2_f32_t i_ab = fw_clarke_f32(safe.i_abc_A[0], safe.i_abc_A[1], safe.i_abc_A[2]);
+
+  if (c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE) {
+    /* reaction: switches off now (a sensorless drive cannot brake safely
+     * once the estimate is in doubt), then FAULT */
+    fw_cia402_fault_reaction_done(&c->sm);
+  }
+  if (!fw_cia402_power_enabled(c->sm.state) || c->phase == FW_START_IDLE) {
+    c->phase = FW_START_IDLE;
+    memset(c->snap.i_dq_A, 0, sizeof(c->snap.i_dq_A));
+    memset(c->snap.u_dq_V, 0, sizeof(c->snap.u_dq_V));
+    c->snap.u_inj_V = 0.0f;
+    fill_snapshot_common(c, &safe, i_ab, out);
+    return;
+  }
+
+  c->phase_time_s += dt;
+  bool quick_stop = c->sm.state == FW_CIA402_QUICK_STOP_ACTIVE;
+
+  /* ---- estimator and start-up ---- */
+  fw_vec2_f32_t i_f_ab = i_ab;
+  float u_d_pulse = 0.0f;
+  bool pulses = c->phase == FW_START_POLARITY;
+  if (!pulses) {
+    i_f_ab = estimator_step(c, i_ab, true);
+  }
+  fw_sincos_f32_t sc = fw_sincos_f32(c->pll.theta_rad);
+  fw_vec2_f32_t i_dq = fw_park_f32(pulses ? i_ab : i_f_ab, sc);
+  if (pulses) {
+    u_d_pulse = polarity_step(c, i_dq.x);
+  } else {
+    supervise_estimator(c);
+  }
+  if (c->phase == FW_START_ALIGN && c->phase_time_s >= cfg->align_time_s) {
+    c->phase = FW_START_POLARITY;
+    c->phase_time_s = 0.0f;
+    c->pol_k = 0u;
+    c->pol_sum_pos = c->pol_sum_neg = 0.0f;
+  }
+  if (!fw_cia402_power_enabled(c->sm.state)) { /* a fault was latched above */
+    fill_snapshot_common(c, &safe, i_ab, out);
+    return;
+  }
+
+  /* ---- references ---- */
+  float i_d_ref = 0.0f, i_q_ref = 0.0f;
+  if (c->phase == FW_START_RUN) {
+    float w_ref = quick_stop ? 0.0f : c->speed_ref_radps_e;
+    i_d_ref = c->i_d_ref_A;
+    if (c->mode == FW_MODE_SPEED) {
+      i_q_ref = fw_pi_step_f32(&c->pi_spd, w_ref - c->omega_f, 0.0f, dt);
+    } else {
+      i_q_ref = quick_stop ? 0.0f : c->i_q_ref_force_A;
+    }
+  }
+  if (quick_stop) {
+    c->qs_time_s += dt;
+    bool still = c->mode == FW_MODE_FORCE || fabsf(c->omega_f) < FW_QS_STILL_RADPS ||
+                 c->phase != FW_START_RUN;
+    c->qs_still_s = still ? c->qs_still_s + dt : 0.0f;
+    if (c->qs_still_s >= FW_QS_STILL_TIME_S || c->qs_time_s >= cfg->quick_stop_time_s) {
+      fw_cia402_quick_stop_done(&c->sm);
+      c->phase = FW_START_IDLE;
+      fill_snapshot_common(c, &safe, i_ab, out);
+      return;
+    }
+  }
+
+  /* ---- current loop (estimated frame) ---- */
+  float u_lim = FW_PI_VOLTAGE_SHARE * safe.u_dc_V * FW_INV_SQRT3_F32;
+  c->pi_d.out_min = c->pi_q.out_min = -u_lim;
+  c->pi_d.out_max = c->pi_q.out_max = u_lim;
+  float w = c->omega_f;
+  fw_vec2_f32_t u_dq;
+  if (pulses) {
+    u_dq.x = u_d_pulse;
+    u_dq.y = 0.0f;
+  } else {
+    float ff_d = -w * cfg->L_q_H * i_dq.y;
+    float ff_q = w * (cfg->L_d_H * i_dq.x + cfg->psi_f_Wb);
+    u_dq.x = fw_pi_step_f32(&c->pi_d, i_d_ref - i_dq.x, ff_d, dt);
+    u_dq.y = fw_pi_step_f32(&c->pi_q, i_q_ref - i_dq.y, ff_q, dt);
+  }
+
+  /* ---- square-wave injection on the estimated d axis ---- */
+  float s = 0.0f;
+  if (!pulses && cfg->u_inj_V > 0.0f) {
+    s = (c->inj_idx < c->n_inj / 2u) ? 1.0f : -1.0f;
+    c->inj_idx = (c->inj_idx + 1u == c->n_inj) ? 0u : c->inj_idx + 1u;
+  }
+  c->sign_hist[3] = c->sign_hist[2];
+  c->sign_hist[2] = c->sign_hist[1];
+  c->sign_hist[1] = c->sign_hist[0];
+  c->sign_hist[0] = s;
+  fw_vec2_f32_t u_cmd = {u_dq.x + s * cfg->u_inj_V, u_dq.y};
+
+  /* ---- modulation, with the angle advanced over the update delay ---- */
+  fw_sincos_f32_t sc_out = fw_sincos_f32(c->pll.theta_rad + 1.5f * c->pll.w_hat_radps * dt);
+  fw_vec2_f32_t u_ab = fw_inv_park_f32(u_cmd, sc_out);
+  (void)fw_svpwm_f32(u_ab, safe.u_dc_V, out->duty_abc, NULL);
+  out->pwm_enable = 1u;
+
+  c->snap.i_dq_A[0] = i_dq.x;
+  c->snap.i_dq_A[1] = i_dq.y;
+  c->snap.i_dq_ref_A[0] = i_d_ref;
+  c->snap.i_dq_ref_A[1] = i_q_ref;
+  c->snap.u_dq_V[0] = u_dq.x;
+  c->snap.u_dq_V[1] = u_dq.y;
+  c->snap.u_inj_V = s * cfg->u_inj_V;
+  fill_snapshot_common(c, &safe, i_ab, out);
+}
+
+void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
+  if (c == NULL || out == NULL) {
+    return;
+  }
+  if (in == NULL) {
+    fw_step(c, NULL, out);
+    return;
+  }
+  fw_inputs_t x;
+  const fw_config_t *cfg = &c->cfg;
+  bool bad = in->u_dc_counts > cfg->adc_max_count;
+  for (int i = 0; i < 3; i++) {
+    bad = bad || in->i_abc_counts[i] > cfg->adc_max_count;
+    x.i_abc_A[i] = ((float)in->i_abc_counts[i] - cfg->adc_offset_counts) * cfg->adc_A_per_count;
+  }
+  x.u_dc_V = (float)in->u_dc_counts * cfg->adc_V_per_count;
+  if (bad) {
+    latch_fault(c, FW_FAULT_ADC_RANGE);
+  }
+  fw_step(c, &x, out);
+}
+
+void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
+  if (ctrl != NULL && snap != NULL) {
+    *snap = ctrl->snap;
+  }
+}
+
+/* ---- units ---------------------------------------------------------------- */
+
+float fw_units_mps_to_radps_e(const fw_config_t *cfg, float v) {
+  return FW_PI_F32 * v / cfg->pole_pitch_m;
+}
+float fw_units_radps_e_to_mps(const fw_config_t *cfg, float w) {
+  return w * cfg->pole_pitch_m / FW_PI_F32;
+}
+float fw_units_rpm_to_radps_e(const fw_config_t *cfg, float n) {
+  return n * FW_TWO_PI_F32 * cfg->pole_pairs / 60.0f;
+}
+float fw_units_radps_e_to_rpm(const fw_config_t *cfg, float w) {
+  return w * 60.0f / (FW_TWO_PI_F32 * cfg->pole_pairs);
+}

@@ -1,0 +1,492 @@
+/**
+ * @file test_ctrl.c
+ * @brief Drive core tests against an analytic standstill model:
+ *        injection + demodulation (sign and sin 2 dtheta law), start-up with
+ *        polarity detection, configuration checks and every fault path.
+ *
+ * The reference plant here is independent of the simulator: a locked mover
+ * (omega = 0) at a fixed true angle, dq currents with L_d(i_d) saturation,
+ * integrated in double precision with 20 Euler sub-steps, the inverter an
+ * average model with the one-period update delay.
+ */
+#include <math.h>
+#include <string.h>
+
+#include "pmlsm/fw_ctrl.h"
+#include "tinytest.h"
+
+typedef struct {
+  double theta;    /* true electrical angle */
+  double R, Ld0, Lq, dL, Isat;
+  double id, iq;   /* true dq currents */
+  double duty[3];  /* latched duties (applied this period) */
+  int enabled;
+  double udc;
+} plant_t;
+
+static void plant_init(plant_t *p, double theta, double dL) {
+  memset(p, 0, sizeof(*p));
+  p->theta = theta;
+  p->R = 0.958;
+  p->Ld0 = 0.012;
+  p->Lq = 0.018;
+  p->dL = dL;
+  p->Isat = 5.0;
+  p->udc = 300.0;
+  p->duty[0] = p->duty[1] = p->duty[2] = 0.5;
+}
+
+static void plant_sample(const plant_t *p, fw_inputs_t *in) {
+  double c = cos(p->theta), s = sin(p->theta);
+  double ia = p->id * c - p->iq * s, ib = p->id * s + p->iq * c;
+  in->i_abc_A[0] = (float)ia;
+  in->i_abc_A[1] = (float)(-0.5 * ia + sqrt(3.0) / 2.0 * ib);
+  in->i_abc_A[2] = (float)(-0.5 * ia - sqrt(3.0) / 2.0 * ib);
+  in->u_dc_V = (float)p->udc;
+}
+
+static void plant_period(plant_t *p, double dt) {
+  double ua = 0.0, ub = 0.0;
+  if (p->enabled) {
+    double va = p->duty[0] * p->udc, vb = p->duty[1] * p->udc, vc = p->duty[2] * p->udc;
+    ua = (2.0 * va - vb - vc) / 3.0;
+    ub = (vb - vc) / sqrt(3.0);
+  } else {
+    p->id = p->iq = 0.0; /* diodes: the small test currents decay at once */
+    return;
+  }
+  double c = cos(p->theta), s = sin(p->theta);
+  double ud = ua * c + ub * s, uq = -ua * s + ub * c;
+  const int n = 20;
+  double h = dt / n;
+  for (int k = 0; k < n; k++) {
+    double Ldd = p->Ld0 - p->dL * tanh(p->id / p->Isat);
+    p->id += h * (ud - p->R * p->id) / Ldd;
+    p->iq += h * (uq - p->R * p->iq) / p->Lq;
+  }
+}
+
+/* One closed-loop period: sample, step, latch duties for the next period. */
+static void loop_step(fw_ctrl_t *c, plant_t *p, fw_outputs_t *out) {
+  fw_inputs_t in;
+  plant_sample(p, &in);
+  fw_step(c, &in, out);
+  plant_period(p, 1.0 / 24000.0); /* applies the previously latched duties */
+  for (int i = 0; i < 3; i++) {
+    p->duty[i] = out->duty_abc[i];
+  }
+  p->enabled = out->pwm_enable;
+}
+
+static void enable(fw_ctrl_t *c) {
+  fw_controlword(c, FW_CW_SHUTDOWN);
+  fw_controlword(c, FW_CW_SWITCH_ON);
+  fw_controlword(c, FW_CW_ENABLE_OPERATION);
+}
+
+static double wrap(double x) { return atan2(sin(x), cos(x)); }
+
+/* Predicted normalised PLL error for injection along theta_hat = 0. */
+static double eps_model(double dth, double Ld, double Lq) {
+  double gs = 0.5 * (1.0 / Ld + 1.0 / Lq), gd = 0.5 * (1.0 / Ld - 1.0 / Lq);
+  double r = gd * sin(2.0 * dth) / (gs + gd * cos(2.0 * dth));
+  return r * Lq / (Lq - Ld);
+}
+
+static void check_demod(fw_extractor_t ex, double tol) {
+  const double dths[] = {-1.2, -0.6, -0.2, -0.05, 0.05, 0.2, 0.6, 1.2};
+  for (size_t i = 0; i < sizeof(dths) / sizeof(dths[0]); i++) {
+    fw_config_t cfg;
+    fw_config_default(&cfg);
+    cfg.pll_kp = 0.0f; /* freeze theta_hat at 0 to read the open-loop error */
+    cfg.pll_ki = 0.0f;
+    cfg.align_time_s = 1.0f;
+    cfg.extractor = (uint32_t)ex;
+    fw_ctrl_t c;
+    fw_init(&c, &cfg);
+    plant_t p;
+    plant_init(&p, dths[i], 0.0); /* unsaturated: the analytic law is exact */
+    fw_outputs_t out;
+    enable(&c);
+    double acc = 0.0;
+    int n = 0;
+    for (int k = 0; k < 2400; k++) { /* 0.1 s */
+      loop_step(&c, &p, &out);
+      if (k >= 1200) {
+        acc += c.snap.pll_err_rad;
+        n++;
+      }
+    }
+    double eps = acc / n;
+    double ref = eps_model(dths[i], p.Ld0, p.Lq);
+    TT_CHECK(eps * dths[i] > 0.0); /* sign: positive error means theta > theta_hat */
+    TT_CHECK_NEAR(eps, ref, tol);
+  }
+}
+
+static void test_demod_pseudo(void) { check_demod(FW_EXTRACTOR_PSEUDO, 0.02); }
+static void test_demod_sogi(void) { check_demod(FW_EXTRACTOR_SOGI, 0.03); }
+static void test_demod_sogi_adaptive(void) { check_demod(FW_EXTRACTOR_SOGI_ADAPTIVE, 0.03); }
+
+/* The error law has period pi: dtheta and dtheta + pi read the same. */
+static void test_demod_pi_ambiguity(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  cfg.pll_kp = cfg.pll_ki = 0.0f;
+  cfg.align_time_s = 1.0f;
+  double e[2];
+  for (int j = 0; j < 2; j++) {
+    fw_ctrl_t c;
+    fw_init(&c, &cfg);
+    plant_t p;
+    plant_init(&p, 0.3 + j * M_PI, 0.0);
+    fw_outputs_t out;
+    enable(&c);
+    for (int k = 0; k < 2400; k++) {
+      loop_step(&c, &p, &out);
+    }
+    e[j] = c.snap.pll_err_rad;
+  }
+  TT_CHECK_NEAR(e[0], e[1], 0.02);
+  TT_CHECK(e[0] > 0.2);
+}
+
+/* Start-up at unknown positions: angle mod pi, then polarity. */
+static void test_startup_polarity(void) {
+  int flips = 0;
+  for (int i = 0; i < 12; i++) {
+    double th = -M_PI + (i + 0.37) * (2.0 * M_PI / 12.0);
+    fw_config_t cfg;
+    fw_config_default(&cfg);
+    fw_ctrl_t c;
+    fw_init(&c, &cfg);
+    fw_set_mode(&c, FW_MODE_FORCE);
+    fw_set_iq_ref(&c, 0.0f);
+    plant_t p;
+    plant_init(&p, th, 0.1 * 0.012);
+    fw_outputs_t out;
+    enable(&c);
+    for (int k = 0; k < (int)(0.25 * 24000); k++) {
+      loop_step(&c, &p, &out);
+    }
+    TT_CHECK(c.phase == FW_START_RUN);
+    TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
+    TT_CHECK_NEAR(wrap(c.pll.theta_rad - th), 0.0, 0.03);
+    /* pulses were measured in the pre-decision frame: the larger response
+     * (along the magnet) was on + unless the estimate had to be flipped */
+    if (c.polarity_flipped) {
+      TT_CHECK(c.snap.pol_dI_neg_A > 1.02f * c.snap.pol_dI_pos_A);
+    } else {
+      TT_CHECK(c.snap.pol_dI_pos_A > 1.02f * c.snap.pol_dI_neg_A);
+    }
+    flips += c.polarity_flipped;
+  }
+  /* from a zero initial estimate about half the positions lock to theta+pi first */
+  TT_CHECK(flips >= 3 && flips <= 9);
+}
+
+static void test_polarity_undetermined(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  fw_ctrl_t c;
+  fw_init(&c, &cfg);
+  plant_t p;
+  plant_init(&p, 1.0, 0.0); /* no saturation: +/- responses identical */
+  fw_outputs_t out;
+  enable(&c);
+  for (int k = 0; k < (int)(0.2 * 24000); k++) {
+    loop_step(&c, &p, &out);
+  }
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_POLARITY_UNDETERMINED);
+  TT_CHECK(fw_state(&c) == FW_CIA402_FAULT);
+  TT_CHECK(out.pwm_enable == 0u);
+}
+
+static void test_config_checks(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  fw_config_issue_t iss;
+  TT_CHECK(fw_config_check(&cfg, &iss) == FW_OK);
+  TT_CHECK(fw_config_field_count() >= 30u);
+  TT_CHECK(fw_config_field_find("pll_ki") != NULL);
+  TT_CHECK(fw_config_field_find("nope") == NULL);
+
+  fw_config_t bad = cfg;
+  bad.f_pwm_Hz = 1000.0f;
+  TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_RANGE);
+  TT_CHECK(iss.field != NULL && strcmp(iss.field, "f_pwm_Hz") == 0);
+  TT_CHECK_NEAR(iss.min, 4000.0, 1e-3);
+
+  bad = cfg;
+  bad.pll_kp = NAN;
+  TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_NOT_FINITE);
+  TT_CHECK(strcmp(iss.field, "pll_kp") == 0);
+
+  bad = cfg;
+  bad.f_inj_Hz = 3500.0f; /* 24000/3500 is not an even integer */
+  TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_INCONSISTENT);
+  TT_CHECK(strcmp(iss.field, "f_inj_Hz") == 0);
+
+  bad = cfg;
+  bad.f_inj_Hz = 12000.0f; /* 2 samples per period: SOGI at Nyquist, refused */
+  TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_INCONSISTENT);
+
+  bad = cfg;
+  bad.extractor = 3u;
+  TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_RANGE);
+
+  bad = cfg;
+  bad.i_max_A = 30.0f; /* above the trip level */
+  TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_INCONSISTENT);
+
+  /* Saliency: Table 1 (Lq = Ld) and 5 % are refused, 10 % accepted. */
+  bad = cfg;
+  bad.L_q_H = bad.L_d_H;
+  TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_SALIENCY);
+  bad.L_q_H = 1.05f * bad.L_d_H;
+  TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_SALIENCY);
+  bad.L_q_H = 1.11f * bad.L_d_H;
+  TT_CHECK(fw_config_check(&bad, &iss) == FW_OK);
+  bad.L_q_H = 0.85f * bad.L_d_H; /* Lq < Ld is saliency too */
+  TT_CHECK(fw_config_check(&bad, &iss) == FW_OK);
+}
+
+static void test_saliency_refused_on_enable(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  cfg.L_q_H = cfg.L_d_H; /* paper Table 1 */
+  fw_ctrl_t c;
+  TT_CHECK(fw_init(&c, &cfg) == FW_ERR_SALIENCY);
+  TT_CHECK(fw_state(&c) == FW_CIA402_SWITCH_ON_DISABLED);
+  enable(&c);
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_SALIENCY_TOO_LOW);
+  plant_t p;
+  plant_init(&p, 0.5, 0.0);
+  fw_outputs_t out;
+  loop_step(&c, &p, &out);
+  TT_CHECK(out.pwm_enable == 0u);
+  TT_CHECK(fw_state(&c) == FW_CIA402_FAULT);
+  TT_CHECK((fw_statusword(&c) & 0x004Fu) == 0x0008u);
+}
+
+static void test_invalid_config_refused(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  cfg.R_ohm = -1.0f;
+  fw_ctrl_t c;
+  TT_CHECK(fw_init(&c, &cfg) == FW_ERR_RANGE);
+  enable(&c);
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_CONFIG_INVALID);
+  /* a good config after fault reset is accepted; a bad one keeps the old */
+  fw_controlword(&c, FW_CW_FAULT_RESET);
+  fw_config_t good;
+  fw_config_default(&good);
+  fw_config_issue_t iss;
+  TT_CHECK(fw_set_config(&c, &good, &iss) == FW_OK);
+  fw_config_t worse = good;
+  worse.pll_ki = -5.0f;
+  TT_CHECK(fw_set_config(&c, &worse, &iss) == FW_ERR_RANGE);
+  TT_CHECK_NEAR(fw_get_config(&c)->pll_ki, 5000.0, 1e-3);
+}
+
+/* Drive to RUN at a known angle, then apply a bad input and check the fault. */
+static void run_to_operation(fw_ctrl_t *c, plant_t *p, fw_outputs_t *out) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  fw_init(c, &cfg);
+  fw_set_mode(c, FW_MODE_FORCE);
+  plant_init(p, 0.4, 0.1 * 0.012);
+  enable(c);
+  for (int k = 0; k < (int)(0.2 * 24000); k++) {
+    loop_step(c, p, out);
+  }
+}
+
+static void expect_fault_from_input(void (*poison)(fw_inputs_t *), fw_fault_t code) {
+  fw_ctrl_t c;
+  plant_t p;
+  fw_outputs_t out;
+  run_to_operation(&c, &p, &out);
+  TT_CHECK(out.pwm_enable == 1u);
+  fw_inputs_t in;
+  plant_sample(&p, &in);
+  poison(&in);
+  fw_step(&c, &in, &out);
+  TT_CHECK(fw_fault_code(&c) == code);
+  TT_CHECK(out.pwm_enable == 0u);
+  TT_CHECK(fw_state(&c) == FW_CIA402_FAULT);
+  TT_CHECK(c.snap.fault_code == (uint16_t)code);
+  /* latched: a clean sample does not clear it; reset with the cause gone does */
+  plant_sample(&p, &in);
+  fw_step(&c, &in, &out);
+  TT_CHECK(fw_fault_code(&c) == code);
+  fw_controlword(&c, 0x0000u);
+  fw_controlword(&c, FW_CW_FAULT_RESET);
+  TT_CHECK(fw_state(&c) == FW_CIA402_SWITCH_ON_DISABLED);
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
+  uint16_t hist[FW_FAULT_HISTORY_LEN];
+  TT_CHECK(fw_fault_history(&c, hist, FW_FAULT_HISTORY_LEN) == 1u);
+  TT_CHECK(hist[0] == (uint16_t)code);
+}
+
+static void poison_overcurrent(fw_inputs_t *in) { in->i_abc_A[1] = 30.0f; }
+static void poison_nan(fw_inputs_t *in) { in->i_abc_A[2] = NAN; }
+static void poison_inf_udc(fw_inputs_t *in) { in->u_dc_V = INFINITY; }
+static void poison_overvoltage(fw_inputs_t *in) { in->u_dc_V = 450.0f; }
+static void poison_undervoltage(fw_inputs_t *in) { in->u_dc_V = 100.0f; }
+
+static void test_fault_overcurrent(void) {
+  expect_fault_from_input(poison_overcurrent, FW_FAULT_OVERCURRENT);
+}
+static void test_fault_nan(void) { expect_fault_from_input(poison_nan, FW_FAULT_INPUT_INVALID); }
+static void test_fault_inf(void) {
+  expect_fault_from_input(poison_inf_udc, FW_FAULT_INPUT_INVALID);
+}
+static void test_fault_overvoltage(void) {
+  expect_fault_from_input(poison_overvoltage, FW_FAULT_DC_OVERVOLTAGE);
+}
+static void test_fault_undervoltage(void) {
+  expect_fault_from_input(poison_undervoltage, FW_FAULT_DC_UNDERVOLTAGE);
+}
+
+static void test_undervoltage_only_when_enabled(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  fw_ctrl_t c;
+  fw_init(&c, &cfg);
+  fw_inputs_t in = {{0.0f, 0.0f, 0.0f}, 20.0f};
+  fw_outputs_t out;
+  fw_step(&c, &in, &out);
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
+  TT_CHECK((fw_statusword(&c) & 0x0080u) != 0u); /* warning bit */
+}
+
+static void test_fault_adc_range(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  fw_ctrl_t c;
+  fw_init(&c, &cfg);
+  fw_adc_inputs_t adc = {{2048u, 2048u, 2048u}, 2457u};
+  fw_outputs_t out;
+  fw_step_adc(&c, &adc, &out);
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
+  TT_CHECK_NEAR(c.snap.u_dc_V, 2457.0 * 500.0 / 4095.0, 1e-3);
+  adc.i_abc_counts[0] = 5000u; /* beyond 12 bits */
+  fw_step_adc(&c, &adc, &out);
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_ADC_RANGE);
+}
+
+static void test_fault_hf_low(void) {
+  /* Motor disconnected: currents stay zero while injecting. */
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  fw_ctrl_t c;
+  fw_init(&c, &cfg);
+  enable(&c);
+  fw_inputs_t in = {{0.0f, 0.0f, 0.0f}, 300.0f};
+  fw_outputs_t out;
+  for (int k = 0; k < 480 && fw_fault_code(&c) == FW_FAULT_NONE; k++) {
+    fw_step(&c, &in, &out);
+  }
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_EST_HF_LOW);
+  TT_CHECK(out.pwm_enable == 0u);
+}
+
+static void test_fault_pll_error(void) {
+  /* PLL too weak to follow: after start-up at the right angle, the true
+   * angle jumps by 0.7 rad and the error stays large. */
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  cfg.pll_kp = 0.0f;
+  cfg.pll_ki = 0.0f;
+  fw_ctrl_t c;
+  fw_init(&c, &cfg);
+  fw_set_mode(&c, FW_MODE_FORCE);
+  plant_t p;
+  plant_init(&p, 0.0, 0.1 * 0.012);
+  fw_outputs_t out;
+  enable(&c);
+  for (int k = 0; k < (int)(0.12 * 24000); k++) {
+    loop_step(&c, &p, &out);
+  }
+  TT_CHECK(c.phase == FW_START_RUN);
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
+  p.theta = 0.7;
+  int k_fault = -1;
+  for (int k = 0; k < (int)(0.3 * 24000); k++) {
+    loop_step(&c, &p, &out);
+    if (fw_fault_code(&c) != FW_FAULT_NONE) {
+      k_fault = k;
+      break;
+    }
+  }
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_EST_PLL_ERROR);
+  /* not before pll_err_time_s (0.05 s) has elapsed */
+  TT_CHECK(k_fault > (int)(0.05 * 24000));
+}
+
+static void test_external_fault_and_quick_stop(void) {
+  fw_ctrl_t c;
+  plant_t p;
+  fw_outputs_t out;
+  run_to_operation(&c, &p, &out);
+  fw_controlword(&c, FW_CW_QUICK_STOP);
+  TT_CHECK(fw_state(&c) == FW_CIA402_QUICK_STOP_ACTIVE);
+  for (int k = 0; k < 24000 && fw_state(&c) == FW_CIA402_QUICK_STOP_ACTIVE; k++) {
+    loop_step(&c, &p, &out);
+  }
+  TT_CHECK(fw_state(&c) == FW_CIA402_SWITCH_ON_DISABLED);
+  TT_CHECK(out.pwm_enable == 0u);
+
+  run_to_operation(&c, &p, &out);
+  fw_raise_fault(&c, FW_FAULT_HEARTBEAT_LOST);
+  loop_step(&c, &p, &out);
+  TT_CHECK(fw_state(&c) == FW_CIA402_FAULT);
+  TT_CHECK(out.pwm_enable == 0u);
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_HEARTBEAT_LOST);
+}
+
+static void test_units_and_refs(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  /* 100 r/min, p = 4: 41.8879 rad/s electrical */
+  TT_CHECK_NEAR(fw_units_rpm_to_radps_e(&cfg, 100.0f), 41.8879, 1e-3);
+  TT_CHECK_NEAR(fw_units_radps_e_to_rpm(&cfg, 41.8879f), 100.0, 1e-3);
+  /* 1 m/s over tau = 24 mm: pi / 0.024 rad/s */
+  TT_CHECK_NEAR(fw_units_mps_to_radps_e(&cfg, 1.0f), M_PI / 0.024, 1e-2);
+  TT_CHECK_NEAR(fw_units_radps_e_to_mps(&cfg, (float)(M_PI / 0.024)), 1.0, 1e-5);
+  fw_ctrl_t c;
+  fw_init(&c, &cfg);
+  TT_CHECK(fw_set_speed_ref(&c, 1e6f) == FW_ERR_RANGE);
+  TT_CHECK_NEAR(c.speed_ref_radps_e, cfg.speed_max_radps_e, 1e-3);
+  TT_CHECK(fw_set_speed_ref(&c, NAN) == FW_ERR_NOT_FINITE);
+  TT_CHECK_NEAR(c.speed_ref_radps_e, cfg.speed_max_radps_e, 1e-3);
+  TT_CHECK(fw_set_extractor(&c, (fw_extractor_t)7) == FW_ERR_RANGE);
+  TT_CHECK(fw_set_extractor(&c, FW_EXTRACTOR_PSEUDO) == FW_OK);
+  TT_CHECK(c.cfg.extractor == 0u);
+  TT_CHECK(fw_ctrl_sizeof() == sizeof(fw_ctrl_t));
+}
+
+int main(void) {
+  TT_RUN(test_demod_pseudo);
+  TT_RUN(test_demod_sogi);
+  TT_RUN(test_demod_sogi_adaptive);
+  TT_RUN(test_demod_pi_ambiguity);
+  TT_RUN(test_startup_polarity);
+  TT_RUN(test_polarity_undetermined);
+  TT_RUN(test_config_checks);
+  TT_RUN(test_saliency_refused_on_enable);
+  TT_RUN(test_invalid_config_refused);
+  TT_RUN(test_fault_overcurrent);
+  TT_RUN(test_fault_nan);
+  TT_RUN(test_fault_inf);
+  TT_RUN(test_fault_overvoltage);
+  TT_RUN(test_fault_undervoltage);
+  TT_RUN(test_undervoltage_only_when_enabled);
+  TT_RUN(test_fault_adc_range);
+  TT_RUN(test_fault_hf_low);
+  TT_RUN(test_fault_pll_error);
+  TT_RUN(test_external_fault_and_quick_stop);
+  TT_RUN(test_units_and_refs);
+  return TT_SUMMARY();
+}

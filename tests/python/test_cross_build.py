@@ -1,0 +1,66 @@
+"""The firmware core cross-compiles for a Cortex-M4F and stays float32.
+
+Builds the Cortex-M4F image with arm-none-eabi-gcc (hard float, fpv4-sp-d16),
+checks the size report, and disassembles the core objects to prove that no
+double-precision helper (__aeabi_d*, soft double) is ever called: the M4F FPU
+is single precision only, so a stray double would cost ~100x.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+pytestmark = pytest.mark.skipif(
+    shutil.which("arm-none-eabi-gcc") is None and os.environ.get("CI") != "true",
+    reason="arm-none-eabi-gcc not installed (apt-get install gcc-arm-none-eabi); CI installs it",
+)
+
+
+@pytest.fixture(scope="module")
+def cm4_build(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    build = tmp_path_factory.mktemp("cm4")
+    subprocess.run(
+        [
+            "cmake", "-S", str(ROOT), "-B", str(build), "-G", "Ninja",
+            "-DPMLSM_TARGET_CM4=ON", "-DCMAKE_BUILD_TYPE=MinSizeRel",
+            f"-DCMAKE_TOOLCHAIN_FILE={ROOT / 'firmware_c/cmake/arm-none-eabi.cmake'}",
+        ],
+        check=True, capture_output=True, text=True,
+    )
+    res = subprocess.run(
+        ["cmake", "--build", str(build)], check=True, capture_output=True, text=True
+    )
+    return build, res.stdout
+
+
+def test_cm4_image_links_and_fits(cm4_build: tuple[Path, str]) -> None:
+    _, log = cm4_build
+    m = re.search(r"^\s*(\d+)\s+(\d+)\s+(\d+)\s+\d+\s+[0-9a-f]+\s+\S*pmlsm_fw_cm4\.elf", log, re.M)
+    assert m, f"no Berkeley size line in build output:\n{log}"
+    text, data, bss = (int(g) for g in m.groups())
+    print(f"cortex-m4f: text={text} data={data} bss={bss}")
+    # A 128 KiB-flash / 32 KiB-RAM part (e.g. STM32G431) must hold it with room to spare.
+    assert 4_000 < text < 48 * 1024
+    assert data + bss < 8 * 1024
+
+
+def test_core_uses_no_double_precision(cm4_build: tuple[Path, str]) -> None:
+    build, _ = cm4_build
+    objdump = shutil.which("arm-none-eabi-objdump")
+    assert objdump
+    objs = sorted(p for p in (build / "firmware_c").rglob("*") if p.suffix in (".o", ".obj"))
+    core = [o for o in objs if o.name.startswith("fw_")]
+    assert len(core) >= 6, objs
+    for obj in core:
+        dis = subprocess.run([objdump, "-dr", str(obj)], capture_output=True, text=True,
+                             check=True).stdout
+        bad = re.findall(r"__aeabi_d\w+|__(?:add|sub|mul|div)df3|\bvmov\.f64|\bvadd\.f64", dis)
+        assert not bad, f"{obj.name} uses double precision: {sorted(set(bad))}"
