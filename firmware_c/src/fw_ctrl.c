@@ -115,6 +115,22 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   reset_dynamics(c);
 }
 
+/** Smallest change of the adaptive k worth recomputing coefficients for. */
+#define FW_SOGI_K_STEP 0.002f
+
+/** Same k on both SOGIs: compute the coefficients once, copy them. */
+static void sogi_set_k_both(fw_ctrl_t *c, float k) {
+  fw_sogi_set_k_f32(&c->sogi_a, k);
+  fw_sogi_f32_t *b = &c->sogi_b;
+  const fw_sogi_f32_t *a = &c->sogi_a;
+  b->k = a->k;
+  b->bd0 = a->bd0;
+  b->bq0 = a->bq0;
+  b->bq1 = a->bq1;
+  b->a1 = a->a1;
+  b->a2 = a->a2;
+}
+
 /* ---- configuration and commands ----------------------------------------- */
 
 fw_status_t fw_init(fw_ctrl_t *ctrl, const fw_config_t *cfg) {
@@ -240,9 +256,8 @@ fw_status_t fw_set_extractor(fw_ctrl_t *ctrl, fw_extractor_t ex) {
     return FW_ERR_RANGE;
   }
   ctrl->cfg.extractor = (uint32_t)ex;
-  float k = ex == FW_EXTRACTOR_SOGI_ADAPTIVE ? ctrl->cfg.sogi_k_adapt_max : ctrl->cfg.sogi_k;
-  fw_sogi_set_k_f32(&ctrl->sogi_a, k);
-  fw_sogi_set_k_f32(&ctrl->sogi_b, k);
+  sogi_set_k_both(ctrl, ex == FW_EXTRACTOR_SOGI_ADAPTIVE ? ctrl->cfg.sogi_k_adapt_max
+                                                         : ctrl->cfg.sogi_k);
   /* demodulated history belongs to the old path: restart the averages */
   ctrl->ring_fill = 0u;
   ctrl->ring_idx = 0u;
@@ -296,7 +311,7 @@ static void ring_push(fw_ctrl_t *c, float ed, float eq, float ia, float ib) {
  * Extraction, demodulation and PLL for one sample. Returns the fundamental
  * alpha/beta current (HF removed) for the current loop.
  */
-static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, bool run_pll) {
+static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_f32_t sc) {
   const fw_config_t *cfg = &c->cfg;
   fw_extractor_t ex = (fw_extractor_t)cfg->extractor;
 
@@ -319,7 +334,6 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, bool run_p
   c->h_prev_sogi[0] = h_a;
   c->h_prev_sogi[1] = h_b;
 
-  fw_sincos_f32_t sc = fw_sincos_f32(c->pll.theta_rad);
   fw_vec2_f32_t dh_dq = fw_park_f32(dh, sc);
   float s = c->sign_hist[2]; /* voltage applied over [k-1, k] */
   ring_push(c, s * dh_dq.x, s * dh_dq.y, i_ab.x, i_ab.y);
@@ -341,13 +355,12 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, bool run_p
      * band while the PLL error is large, a narrow one when locked. */
     float r = fw_clampf(c->err_f / cfg->sogi_adapt_err_rad, 0.0f, 1.0f);
     float k = cfg->sogi_k_adapt_min + (cfg->sogi_k_adapt_max - cfg->sogi_k_adapt_min) * r;
-    fw_sogi_set_k_f32(&c->sogi_a, k);
-    fw_sogi_set_k_f32(&c->sogi_b, k);
+    if (fabsf(k - c->sogi_a.k) > FW_SOGI_K_STEP) {
+      sogi_set_k_both(c, k);
+    }
   }
 
-  if (run_pll) {
-    fw_pll_step_f32(&c->pll, eps, c->dt_s);
-  }
+  fw_pll_step_f32(&c->pll, eps, c->dt_s);
   float dth = fw_wrap_pi_f32(c->pll.theta_rad - c->theta_prev);
   c->pos_unwrapped_e += dth;
   c->theta_prev = c->pll.theta_rad;
@@ -496,36 +509,25 @@ static void outputs_off(fw_outputs_t *out) {
   out->pwm_enable = 0u;
 }
 
+/** Raw signals of this step into the snapshot; unit conversions and the
+ *  statusword are derived on demand in fw_get_snapshot (off the hot path). */
 static void fill_snapshot_common(fw_ctrl_t *c, const fw_inputs_t *in, fw_vec2_f32_t i_ab,
                                  const fw_outputs_t *out) {
-  const fw_config_t *cfg = &c->cfg;
   fw_snapshot_t *s = &c->snap;
   s->step_count = c->step_count;
   s->cia402_state = (uint8_t)c->sm.state;
   s->start_phase = (uint8_t)c->phase;
-  s->extractor = (uint8_t)cfg->extractor;
-  s->mode = (uint8_t)c->mode;
-  s->polarity_flipped = c->polarity_flipped;
   s->fault_code = (uint16_t)c->fault;
   s->theta_hat_rad = c->pll.theta_rad;
   s->omega_hat_radps = c->pll.w_i_radps;
   s->omega_f_radps = c->omega_f;
-  s->pos_hat_m = c->pos_unwrapped_e * cfg->pole_pitch_m / FW_PI_F32;
-  s->speed_hat_mps = fw_units_radps_e_to_mps(cfg, c->pll.w_i_radps);
-  s->pos_hat_mech_rad = c->pos_unwrapped_e / cfg->pole_pairs;
-  s->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, c->pll.w_i_radps);
   s->pll_err_f_rad = c->err_f;
-  s->sogi_k_eff = c->sogi_a.k;
   s->i_ab_A[0] = i_ab.x;
   s->i_ab_A[1] = i_ab.y;
-  s->speed_ref_radps_e = c->speed_ref_radps_e;
-  s->force_hat_N = 1.5f * (FW_PI_F32 / cfg->pole_pitch_m) * cfg->psi_f_Wb * s->i_dq_A[1];
-  s->torque_hat_Nm = 1.5f * cfg->pole_pairs * cfg->psi_f_Wb * s->i_dq_A[1];
   s->u_dc_V = in->u_dc_V;
   s->duty_abc[0] = out->duty_abc[0];
   s->duty_abc[1] = out->duty_abc[1];
   s->duty_abc[2] = out->duty_abc[2];
-  s->statusword = fw_statusword(c);
 }
 
 void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
@@ -572,10 +574,13 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   fw_vec2_f32_t i_f_ab = i_ab;
   float u_d_pulse = 0.0f;
   bool pulses = c->phase == FW_START_POLARITY;
+  /* theta_hat at the sampling instant: for demodulation, the current Park
+   * and (advanced) the output transform */
+  const float theta_k = c->pll.theta_rad;
+  const fw_sincos_f32_t sc = fw_sincos_f32(theta_k);
   if (!pulses) {
-    i_f_ab = estimator_step(c, i_ab, true);
+    i_f_ab = estimator_step(c, i_ab, sc);
   }
-  fw_sincos_f32_t sc = fw_sincos_f32(c->pll.theta_rad);
   fw_vec2_f32_t i_dq = fw_park_f32(pulses ? i_ab : i_f_ab, sc);
   if (pulses) {
     u_d_pulse = polarity_step(c, i_dq.x);
@@ -645,8 +650,9 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   c->sign_hist[0] = s;
   fw_vec2_f32_t u_cmd = {u_dq.x + s * cfg->u_inj_V, u_dq.y};
 
-  /* ---- modulation, with the angle advanced over the update delay ---- */
-  fw_sincos_f32_t sc_out = fw_sincos_f32(c->pll.theta_rad + 1.5f * c->pll.w_hat_radps * dt);
+  /* ---- modulation: the voltage acts over [k+1, k+2] (update delay), so the
+   * transform uses the angle 1.5 periods after sampling ---- */
+  fw_sincos_f32_t sc_out = fw_sincos_f32(theta_k + 1.5f * c->pll.w_hat_radps * dt);
   fw_vec2_f32_t u_ab = fw_inv_park_f32(u_cmd, sc_out);
   (void)fw_svpwm_f32(u_ab, safe.u_dc_V, out->duty_abc, NULL);
   out->pwm_enable = 1u;
@@ -684,9 +690,23 @@ void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
 }
 
 void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
-  if (ctrl != NULL && snap != NULL) {
-    *snap = ctrl->snap;
+  if (ctrl == NULL || snap == NULL) {
+    return;
   }
+  const fw_config_t *cfg = &ctrl->cfg;
+  *snap = ctrl->snap;
+  snap->extractor = (uint8_t)cfg->extractor;
+  snap->mode = (uint8_t)ctrl->mode;
+  snap->polarity_flipped = ctrl->polarity_flipped;
+  snap->pos_hat_m = ctrl->pos_unwrapped_e * cfg->pole_pitch_m / FW_PI_F32;
+  snap->speed_hat_mps = fw_units_radps_e_to_mps(cfg, ctrl->pll.w_i_radps);
+  snap->pos_hat_mech_rad = ctrl->pos_unwrapped_e / cfg->pole_pairs;
+  snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, ctrl->pll.w_i_radps);
+  snap->sogi_k_eff = ctrl->sogi_a.k;
+  snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
+  snap->force_hat_N = 1.5f * (FW_PI_F32 / cfg->pole_pitch_m) * cfg->psi_f_Wb * snap->i_dq_A[1];
+  snap->torque_hat_Nm = 1.5f * cfg->pole_pairs * cfg->psi_f_Wb * snap->i_dq_A[1];
+  snap->statusword = fw_statusword(ctrl);
 }
 
 /* ---- units ---------------------------------------------------------------- */

@@ -1,0 +1,351 @@
+/* Tests for fw_math: sin/cos accuracy, wrap, Clarke/Park, SVPWM, PI.
+ * References: tests/c/ref_vectors.h (numpy, gen_ref_vectors.py). */
+#include <float.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#include "pmlsm/fw_math.h"
+#include "ref_vectors.h"
+#include "tinytest.h"
+
+static const double PI_D = 3.14159265358979323846;
+
+static fw_vec2_f32_t v2(float x, float y) {
+  fw_vec2_f32_t v;
+  v.x = x;
+  v.y = y;
+  return v;
+}
+
+/* |fw_sincos - libm double| for one angle, max over s and c */
+static double sincos_err(float th) {
+  const fw_sincos_f32_t sc = fw_sincos_f32(th);
+  const double es = fabs((double)sc.s - sin((double)th));
+  const double ec = fabs((double)sc.c - cos((double)th));
+  return es > ec ? es : ec;
+}
+
+/* Dense sweep over |theta| < 1e4 rad: 2e7 uniform points (step 1e-3 rad),
+ * every float in [-1, 1] with step 2^-16, and +-8 ulp around every
+ * quadrant boundary k*pi/4 (where reduction and quadrant choice are
+ * hardest). Bound: FW_SINCOS_MAX_ERR. */
+static void test_sincos_sweep(void) {
+  double max_err = 0.0, worst_th = 0.0;
+  for (int32_t i = -10000000; i < 10000000; i++) {
+    const float th = (float)((double)i * 1.0e-3 + 3.3e-4);
+    const double e = sincos_err(th);
+    if (e > max_err) {
+      max_err = e;
+      worst_th = (double)th;
+    }
+  }
+  for (int32_t i = -65536; i <= 65536; i++) {
+    const double e = sincos_err((float)i * (1.0f / 65536.0f));
+    if (e > max_err) {
+      max_err = e;
+      worst_th = (double)i / 65536.0;
+    }
+  }
+  for (int32_t k = -12733; k <= 12733; k++) {
+    float th = (float)((double)k * PI_D / 4.0);
+    for (int j = 0; j < 8; j++) {
+      th = nextafterf(th, -FLT_MAX);
+    }
+    for (int j = 0; j < 17; j++) {
+      if (fabsf(th) < 1.0e4f) {
+        const double e = sincos_err(th);
+        if (e > max_err) {
+          max_err = e;
+          worst_th = (double)th;
+        }
+      }
+      th = nextafterf(th, FLT_MAX);
+    }
+  }
+  printf("  sincos max abs error |theta|<1e4: %.3e at theta = %.9g (bound %.1e)\n",
+         max_err, worst_th, (double)FW_SINCOS_MAX_ERR);
+  TT_CHECK(max_err <= (double)FW_SINCOS_MAX_ERR);
+  /* sanity: the sweep must be sensitive -- a 1e-5 error would be caught */
+  TT_CHECK(max_err > 0.0 && max_err < 1.0e-5);
+}
+
+static void test_sincos_special(void) {
+  fw_sincos_f32_t sc = fw_sincos_f32(NAN);
+  TT_CHECK(sc.s == 0.0f && sc.c == 1.0f);
+  sc = fw_sincos_f32(INFINITY);
+  TT_CHECK(sc.s == 0.0f && sc.c == 1.0f);
+  sc = fw_sincos_f32(-INFINITY);
+  TT_CHECK(sc.s == 0.0f && sc.c == 1.0f);
+  sc = fw_sincos_f32(0.0f);
+  TT_CHECK(sc.s == 0.0f && sc.c == 1.0f);
+  /* outside the accuracy domain: still bounded, and still close to 1e5 */
+  const float big[] = {1.0e5f, -3.0e5f, 1.0e7f, 1.0e12f, -1.0e30f, FLT_MAX, -FLT_MAX};
+  for (unsigned i = 0; i < sizeof big / sizeof big[0]; i++) {
+    sc = fw_sincos_f32(big[i]);
+    TT_CHECK(fabsf(sc.s) <= 1.0f + 1e-6f && fabsf(sc.c) <= 1.0f + 1e-6f);
+  }
+  TT_CHECK(sincos_err(1.0e5f) < 1.0e-4);
+  /* identities */
+  for (int i = 0; i < 1000; i++) {
+    const float th = -50.0f + 0.1f * (float)i;
+    sc = fw_sincos_f32(th);
+    TT_CHECK_NEAR((double)(sc.s * sc.s + sc.c * sc.c), 1.0, 4e-6);
+  }
+}
+
+/* wrapped difference in double, for comparisons modulo 2 pi */
+static double wrapd(double x) { return x - 2.0 * PI_D * floor((x + PI_D) / (2.0 * PI_D)); }
+
+static void test_wrap(void) {
+  int bad_range = 0, bad_val = 0;
+  for (int32_t i = -200000; i <= 200000; i++) {
+    const float th = (float)i * 0.0500123f; /* up to ~1e4 rad */
+    const float w = fw_wrap_pi_f32(th);
+    const float w2 = fw_wrap_2pi_f32(th);
+    if (!(w >= -FW_PI_F32 && w < FW_PI_F32) || !(w2 >= 0.0f && w2 < FW_TWO_PI_F32)) {
+      bad_range++;
+    }
+    if (fabs(wrapd((double)w - (double)th)) > 1.0e-6 ||
+        fabs(wrapd((double)w2 - (double)th)) > 1.0e-6) {
+      bad_val++;
+    }
+  }
+  TT_CHECK(bad_range == 0);
+  TT_CHECK(bad_val == 0);
+  /* edges */
+  TT_CHECK(fw_wrap_pi_f32(FW_PI_F32) < 0.0f);
+  TT_CHECK(fw_wrap_pi_f32(-FW_PI_F32) == -FW_PI_F32);
+  TT_CHECK(fw_wrap_pi_f32(-1e-9f) == -1e-9f);
+  TT_CHECK(fw_wrap_2pi_f32(-1e-9f) >= 0.0f && fw_wrap_2pi_f32(-1e-9f) < FW_TWO_PI_F32);
+  TT_CHECK(fw_wrap_2pi_f32(FW_TWO_PI_F32) < FW_TWO_PI_F32);
+  TT_CHECK_NEAR(fw_wrap_pi_f32(3.5f), 3.5 - 2.0 * PI_D, 1e-6);
+  TT_CHECK_NEAR(fw_wrap_2pi_f32(-0.5f), 2.0 * PI_D - 0.5, 1e-6);
+  TT_CHECK(fw_wrap_pi_f32(NAN) == 0.0f && fw_wrap_2pi_f32(INFINITY) == 0.0f);
+  /* huge angles (fold path): still inside the documented ranges */
+  const float huge[] = {4.1e5f, -7.7e6f, 1e30f, -FLT_MAX, FLT_MAX};
+  for (unsigned i = 0; i < sizeof huge / sizeof huge[0]; i++) {
+    const float w = fw_wrap_pi_f32(huge[i]), w2 = fw_wrap_2pi_f32(huge[i]);
+    TT_CHECK(w >= -FW_PI_F32 && w < FW_PI_F32 && w2 >= 0.0f && w2 < FW_TWO_PI_F32);
+  }
+}
+
+/* Transforms vs numpy. Tolerances: Clarke 1e-5 (|x| <= 10, float rounding),
+ * Park 5e-5 (adds the sin/cos error 2e-6 times |ab| <= 14). */
+static void test_transforms_ref(void) {
+  for (int i = 0; i < REF_N_XFORM; i++) {
+    const float *abc = &ref_xf_abc[3 * i];
+    const fw_vec2_f32_t ab = fw_clarke_f32(abc[0], abc[1], abc[2]);
+    TT_CHECK_NEAR(ab.x, ref_xf_clarke_ab[2 * i], 1e-5);
+    TT_CHECK_NEAR(ab.y, ref_xf_clarke_ab[2 * i + 1], 1e-5);
+
+    const fw_vec2_f32_t in = v2(ref_xf_ab[2 * i], ref_xf_ab[2 * i + 1]);
+    float out[3];
+    fw_inv_clarke_f32(in, out);
+    for (int j = 0; j < 3; j++) {
+      TT_CHECK_NEAR(out[j], ref_xf_invclarke_abc[3 * i + j], 1e-5);
+    }
+    const fw_sincos_f32_t sc = fw_sincos_f32(ref_xf_theta[i]);
+    const fw_vec2_f32_t dq = fw_park_f32(in, sc);
+    TT_CHECK_NEAR(dq.x, ref_xf_park_dq[2 * i], 5e-5);
+    TT_CHECK_NEAR(dq.y, ref_xf_park_dq[2 * i + 1], 5e-5);
+    const fw_vec2_f32_t ab2 = fw_inv_park_f32(in, sc);
+    TT_CHECK_NEAR(ab2.x, ref_xf_invpark_ab[2 * i], 5e-5);
+    TT_CHECK_NEAR(ab2.y, ref_xf_invpark_ab[2 * i + 1], 5e-5);
+  }
+}
+
+static void test_transforms_props(void) {
+  /* amplitude invariance: balanced peak I -> |i_ab| = I, angle preserved */
+  for (int i = 0; i < 36; i++) {
+    const float th = 0.1745329f * (float)i, amp = 7.5f;
+    const fw_sincos_f32_t sa = fw_sincos_f32(th);
+    const fw_sincos_f32_t sb = fw_sincos_f32(th - 2.0943951f);
+    const fw_sincos_f32_t scc = fw_sincos_f32(th + 2.0943951f);
+    const fw_vec2_f32_t ab = fw_clarke_f32(amp * sa.c, amp * sb.c, amp * scc.c);
+    TT_CHECK_NEAR(ab.x, (double)amp * cos((double)th), 1e-4);
+    TT_CHECK_NEAR(ab.y, (double)amp * sin((double)th), 1e-4);
+    /* Park at the same angle: pure d axis */
+    const fw_vec2_f32_t dq = fw_park_f32(ab, sa);
+    TT_CHECK_NEAR(dq.x, amp, 1e-4);
+    TT_CHECK_NEAR(dq.y, 0.0, 1e-4);
+    /* round trips */
+    const fw_vec2_f32_t ab2 = fw_inv_park_f32(dq, sa);
+    TT_CHECK_NEAR(ab2.x, ab.x, 1e-5);
+    TT_CHECK_NEAR(ab2.y, ab.y, 1e-5);
+    float abc[3];
+    fw_inv_clarke_f32(ab, abc);
+    TT_CHECK_NEAR((double)abc[0] + (double)abc[1] + (double)abc[2], 0.0, 1e-5);
+    TT_CHECK_NEAR(abc[1], (double)amp * cos((double)th - 2.0 * PI_D / 3.0), 1e-4);
+  }
+  /* zero sequence is removed */
+  const fw_vec2_f32_t z = fw_clarke_f32(3.0f, 3.0f, 3.0f);
+  TT_CHECK_NEAR(z.x, 0.0, 1e-6);
+  TT_CHECK_NEAR(z.y, 0.0, 1e-6);
+}
+
+/* SVPWM vs the numpy sector/dwell-time reference. Tolerance 1e-5 on duties
+ * (float rounding of u/u_dc), 1e-5 * u_dc on the realised voltage. The
+ * limited flag is checked except within 1e-5 of the circle. */
+static void test_svpwm_ref(void) {
+  for (int i = 0; i < REF_N_SVPWM; i++) {
+    const fw_vec2_f32_t u = v2(ref_sv_u_ab[2 * i], ref_sv_u_ab[2 * i + 1]);
+    const float udc = ref_sv_udc[i];
+    float d[3];
+    fw_vec2_f32_t ur;
+    const bool lim = fw_svpwm_f32(u, udc, d, &ur);
+    for (int j = 0; j < 3; j++) {
+      TT_CHECK_NEAR(d[j], ref_sv_duty[3 * i + j], 1e-5);
+    }
+    TT_CHECK_NEAR(ur.x, ref_sv_u_real[2 * i], 1e-5 * (double)udc);
+    TT_CHECK_NEAR(ur.y, ref_sv_u_real[2 * i + 1], 1e-5 * (double)udc);
+    const double m = hypot((double)u.x, (double)u.y) / ((double)udc / sqrt(3.0));
+    if (fabs(m - 1.0) > 1e-5) {
+      TT_CHECK(lim == (ref_sv_limited[i] != 0));
+    }
+  }
+}
+
+/* Properties over a dense sweep: duties in [0,1]; the voltage realised by
+ * the duties, u_x = (d_x - mean(d)) u_dc through Clarke, equals the command
+ * inside the circle, and outside has the command's direction and magnitude
+ * u_dc/sqrt(3). Tolerance 2e-5 * u_dc. */
+static void test_svpwm_props(void) {
+  int out_of_range = 0, bad_inside = 0, bad_outside = 0, bad_flag = 0;
+  const float udc = 48.0f;
+  const double umax = (double)udc / sqrt(3.0);
+  for (int im = 0; im <= 60; im++) {
+    const double m = 0.05 * im; /* 0 .. 3 x circle radius */
+    for (int ia = 0; ia < 720; ia++) {
+      const double a = 2.0 * PI_D * ia / 720.0;
+      const fw_vec2_f32_t u = v2((float)(m * umax * cos(a)), (float)(m * umax * sin(a)));
+      float d[3];
+      fw_vec2_f32_t ur;
+      const bool lim = fw_svpwm_f32(u, udc, d, &ur);
+      const double mean = ((double)d[0] + (double)d[1] + (double)d[2]) / 3.0;
+      const double ua = ((double)d[0] - mean) * (double)udc;
+      const double ub = ((double)d[1] - mean) * (double)udc;
+      const double uc = ((double)d[2] - mean) * (double)udc;
+      const double rx = (2.0 * ua - ub - uc) / 3.0, ry = (ub - uc) / sqrt(3.0);
+      for (int j = 0; j < 3; j++) {
+        if (!(d[j] >= 0.0f && d[j] <= 1.0f)) {
+          out_of_range++;
+        }
+      }
+      if (m < 0.9999) {
+        if (fabs(rx - (double)u.x) > 2e-5 * (double)udc ||
+            fabs(ry - (double)u.y) > 2e-5 * (double)udc || lim) {
+          bad_inside++;
+        }
+      } else if (m > 1.0001) {
+        const double cross = rx * (double)u.y - ry * (double)u.x;
+        const double dot = rx * (double)u.x + ry * (double)u.y;
+        if (fabs(hypot(rx, ry) - umax) > 2e-5 * (double)udc ||
+            fabs(cross) > 2e-5 * (double)udc * hypot((double)u.x, (double)u.y) ||
+            dot <= 0.0 || fabs((double)ur.x - rx) > 2e-5 * (double)udc) {
+          bad_outside++;
+        }
+        if (!lim) {
+          bad_flag++;
+        }
+      }
+    }
+  }
+  TT_CHECK(out_of_range == 0);
+  TT_CHECK(bad_inside == 0);
+  TT_CHECK(bad_outside == 0);
+  TT_CHECK(bad_flag == 0);
+  /* zero command: 50 % on all phases */
+  float d[3];
+  TT_CHECK(!fw_svpwm_f32(v2(0.0f, 0.0f), udc, d, NULL));
+  TT_CHECK(d[0] == 0.5f && d[1] == 0.5f && d[2] == 0.5f);
+  /* invalid inputs: zero vector, flagged */
+  fw_vec2_f32_t ur = v2(9.0f, 9.0f);
+  TT_CHECK(fw_svpwm_f32(v2(10.0f, 0.0f), 0.0f, d, &ur));
+  TT_CHECK(d[0] == 0.5f && d[1] == 0.5f && d[2] == 0.5f && ur.x == 0.0f && ur.y == 0.0f);
+  TT_CHECK(fw_svpwm_f32(v2(NAN, 0.0f), udc, d, NULL));
+  TT_CHECK(d[0] == 0.5f && d[1] == 0.5f && d[2] == 0.5f);
+  TT_CHECK(fw_svpwm_f32(v2(1.0f, 0.0f), -48.0f, d, NULL));
+  TT_CHECK(fw_svpwm_f32(v2(1.0f, 0.0f), INFINITY, d, NULL));
+}
+
+/* PI vs the numpy re-implementation, tolerance 1e-5 (240 float steps). */
+static void test_pi_ref(void) {
+  fw_pi_f32_t pi;
+  fw_pi_init_f32(&pi, REF_PI_KP, REF_PI_KI, REF_PI_MIN, REF_PI_MAX);
+  double max_dev = 0.0;
+  for (int k = 0; k < REF_N_PI; k++) {
+    const float o = fw_pi_step_f32(&pi, ref_pi_e[k], ref_pi_ff[k], REF_PI_DT);
+    TT_CHECK(o == pi.out);
+    const double d1 = fabs((double)o - ref_pi_out[k]);
+    const double d2 = fabs((double)pi.integ - ref_pi_integ[k]);
+    max_dev = fmax(max_dev, fmax(d1, d2));
+  }
+  TT_CHECK_NEAR(max_dev, 0.0, 1e-5);
+}
+
+/* Anti-windup properties: integrator bounded in [min, max]; after a long
+ * + saturation, the first step with a negative error leaves saturation. */
+static void test_pi_antiwindup(void) {
+  fw_pi_f32_t pi;
+  fw_pi_init_f32(&pi, 2.0f, 50.0f, -1.0f, 1.5f);
+  for (int k = 0; k < 10000; k++) {
+    (void)fw_pi_step_f32(&pi, 5.0f, 0.0f, 1e-3f);
+    TT_CHECK(pi.integ <= 1.5f && pi.integ >= -1.0f);
+  }
+  TT_CHECK(pi.out == 1.5f);
+  /* back-calculation: integrator parked where kp e + integ = out_max would
+   * hold, never beyond the limit; with e = 5, kp e = 10 > max, so the
+   * integrator may not have run away above out_max */
+  TT_CHECK(pi.integ <= 1.5f);
+  const float o = fw_pi_step_f32(&pi, -0.1f, 0.0f, 1e-3f);
+  TT_CHECK(o < 1.5f);                      /* recovered in one step */
+  TT_CHECK_NEAR(o, (double)pi.integ - 0.2, 1e-6); /* = kp e + integ */
+  /* symmetric on the low side, with feed-forward */
+  fw_pi_reset_f32(&pi);
+  TT_CHECK(pi.integ == 0.0f && pi.out == 0.0f);
+  for (int k = 0; k < 5000; k++) {
+    (void)fw_pi_step_f32(&pi, -3.0f, 0.3f, 1e-3f);
+  }
+  TT_CHECK(pi.out == -1.0f && pi.integ >= -1.0f);
+  TT_CHECK(fw_pi_step_f32(&pi, 0.05f, 0.3f, 1e-3f) > -1.0f);
+  /* the integrator is held in [out_min, out_max] even when a large
+   * feed-forward keeps the output unsaturated (only the final clamp acts) */
+  fw_pi_init_f32(&pi, 2.0f, 50.0f, -1.0f, 1.5f);
+  for (int k = 0; k < 2000; k++) {
+    (void)fw_pi_step_f32(&pi, 1.0f, -10.0f, 1e-3f);
+  }
+  TT_CHECK(pi.integ == 1.5f);
+  TT_CHECK(pi.out == -1.0f); /* 2 + 1.5 - 10 -> clamped */
+  fw_pi_init_f32(&pi, 2.0f, 50.0f, -1.0f, 1.5f);
+  for (int k = 0; k < 2000; k++) {
+    (void)fw_pi_step_f32(&pi, -1.0f, 10.0f, 1e-3f);
+  }
+  TT_CHECK(pi.integ == -1.0f);
+  /* linear region: pure PI, exact */
+  fw_pi_init_f32(&pi, 0.5f, 10.0f, -100.0f, 100.0f);
+  float acc = 0.0f;
+  for (int k = 0; k < 100; k++) {
+    const float e = 0.01f * (float)(k % 7) - 0.03f;
+    acc += 10.0f * e * 1e-3f;
+    TT_CHECK_NEAR(fw_pi_step_f32(&pi, e, 0.25f, 1e-3f), (double)(0.5f * e + acc + 0.25f), 1e-6);
+  }
+  /* invalid input holds state and output */
+  const fw_pi_f32_t before = pi;
+  TT_CHECK(fw_pi_step_f32(&pi, NAN, 0.0f, 1e-3f) == before.out);
+  TT_CHECK(fw_pi_step_f32(&pi, 1.0f, 0.0f, -1e-3f) == before.out);
+  TT_CHECK(memcmp(&pi, &before, sizeof pi) == 0);
+}
+
+int main(void) {
+  TT_RUN(test_sincos_sweep);
+  TT_RUN(test_sincos_special);
+  TT_RUN(test_wrap);
+  TT_RUN(test_transforms_ref);
+  TT_RUN(test_transforms_props);
+  TT_RUN(test_svpwm_ref);
+  TT_RUN(test_svpwm_props);
+  TT_RUN(test_pi_ref);
+  TT_RUN(test_pi_antiwindup);
+  return TT_SUMMARY();
+}
