@@ -43,6 +43,8 @@ static const fw_config_field_t k_fields[] = {
     F32(sogi_adapt_err_rad, "rad", 1e-3f, 1.0f),
     F32(pll_kp, "1/s", 0.0f, 1e4f),
     F32(pll_ki, "1/s^2", 0.0f, 1e7f),
+    F32(pll_accel_per_A, "rad/(s^2 A)", 0.0f, 1e7f),
+    F32(pll_kd, "1/s^3", 0.0f, 1e9f),
     F32(align_time_s, "s", 0.0f, 5.0f),
     F32(pol_pulse_V, "V", 0.0f, 600.0f),
     U32(pol_pulse_samples, "", 1.0f, 1000.0f),
@@ -94,6 +96,9 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->sogi_adapt_err_rad = 0.05f;
   cfg->pll_kp = 86.6f;
   cfg->pll_ki = 5000.0f;
+  /* p K_t / J = p * 1.5 p psi_f / J (electrical rad/s^2 per A) */
+  cfg->pll_accel_per_A = cfg->pole_pairs * 1.5f * cfg->pole_pairs * cfg->psi_f_Wb / 0.03f;
+  cfg->pll_kd = 1.0e5f; /* poles -28 +/- 50j, -30 rad/s with the paper's kp, ki */
   cfg->align_time_s = 0.08f;
   cfg->pol_pulse_V = 60.0f;
   cfg->pol_pulse_samples = 12u;
@@ -182,6 +187,10 @@ fw_status_t fw_config_check(const fw_config_t *cfg, fw_config_issue_t *issue) {
   if (cfg->sogi_k_adapt_min > cfg->sogi_k_adapt_max) {
     return report(issue, FW_ERR_INCONSISTENT, "sogi_k_adapt_min", cfg->sogi_k_adapt_min,
                   FW_SOGI_K_MIN, cfg->sogi_k_adapt_max);
+  }
+  if (cfg->pll_kd > 0.0f && cfg->pll_kd >= cfg->pll_kp * cfg->pll_ki) {
+    return report(issue, FW_ERR_INCONSISTENT, "pll_kd", cfg->pll_kd, 0.0f,
+                  cfg->pll_kp * cfg->pll_ki);
   }
   /* Saliency: injection needs |Lq - Ld| / Ld >= saliency_min (method.md 3.1). */
   float sal = (cfg->L_q_H - cfg->L_d_H) / cfg->L_d_H;

@@ -28,12 +28,15 @@
 #include "pmlsm/fw_ctrl.h"
 
 /* Corner of the |PLL error| filter used for adaptation and supervision. */
-#define FW_ERR_FILTER_HZ 50.0f
+#define FW_ERR_FILTER_HZ 5.0f
 /* Speed below which quick stop counts the drive as stopped (el. rad/s). */
 #define FW_QS_STILL_RADPS 2.0f
 #define FW_QS_STILL_TIME_S 0.02f
 /* HF supervision starts after this time in a phase (filters settled). */
 #define FW_HF_SUPERVISION_DELAY_S 0.005f
+/* After the estimator (re)starts, the SOGI and the one-period averages need
+ * this long before their output means anything; the PLL holds meanwhile. */
+#define FW_EST_SETTLE_S 0.001f
 /* Voltage headroom kept for injection when limiting the current PIs. */
 #define FW_PI_VOLTAGE_SHARE 0.9f
 
@@ -93,6 +96,7 @@ static void reset_dynamics(fw_ctrl_t *c) {
   c->inj_idx = 0u;
   c->inj_sign = 0.0f;
   c->err_f = 0.0f;
+  c->accel_dist = 0.0f;
   c->pll_err_time_s = 0.0f;
   c->omega_f = 0.0f;
   c->theta_prev = c->pll.theta_rad;
@@ -112,6 +116,14 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   c->n_inj = (uint32_t)(cfg->f_pwm_Hz / cfg->f_inj_Hz + 0.5f);
   c->spd_alpha = lp_alpha(cfg->spd_filter_Hz, c->dt_s);
   c->err_alpha = lp_alpha(FW_ERR_FILTER_HZ, c->dt_s);
+  /* Group delay of the pre-warped discrete SOGI at its centre: the analog
+   * 2/(k w0) times the warping slope dW/dw = (w0 T/2) sec^2(w0 T/2) / tan(w0 T/2). */
+  {
+    float w0 = FW_TWO_PI_F32 * cfg->f_inj_Hz;
+    float h = 0.5f * w0 * c->dt_s;
+    float t = tanf(h);
+    c->sogi_gd_s_k = (2.0f / w0) * h * (1.0f + t * t) / t;
+  }
   reset_dynamics(c);
 }
 
@@ -121,14 +133,7 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
 /** Same k on both SOGIs: compute the coefficients once, copy them. */
 static void sogi_set_k_both(fw_ctrl_t *c, float k) {
   fw_sogi_set_k_f32(&c->sogi_a, k);
-  fw_sogi_f32_t *b = &c->sogi_b;
-  const fw_sogi_f32_t *a = &c->sogi_a;
-  b->k = a->k;
-  b->bd0 = a->bd0;
-  b->bq0 = a->bq0;
-  b->bq1 = a->bq1;
-  b->a1 = a->a1;
-  b->a2 = a->a2;
+  fw_sogi_copy_gain_f32(&c->sogi_b, &c->sogi_a);
 }
 
 /* ---- configuration and commands ----------------------------------------- */
@@ -334,8 +339,21 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_
   c->h_prev_sogi[0] = h_a;
   c->h_prev_sogi[1] = h_b;
 
-  fw_vec2_f32_t dh_dq = fw_park_f32(dh, sc);
-  float s = c->sign_hist[2]; /* voltage applied over [k-1, k] */
+  /* Demodulate in the frame the estimate had when this HF response was
+   * produced: half a period back for the difference, plus the SOGI's group
+   * delay at the carrier. Rotating by the present estimate instead mixes the
+   * delay into the saliency term and locks at a lag of about
+   * (1 + G_sum/G_diff) w tau / 2 (3 w tau for Lq = 1.5 Ld). */
+  float tau_s = 0.5f * c->dt_s;
+  if (ex != FW_EXTRACTOR_PSEUDO) {
+    tau_s += c->sogi_gd_s_k / c->sogi_a.k;
+  }
+  (void)sc;
+  fw_sincos_f32_t sc_d = fw_sincos_f32(c->pll.theta_rad - c->pll.w_i_radps * tau_s);
+  fw_vec2_f32_t dh_dq = fw_park_f32(dh, sc_d);
+  /* Voltage applied over [k-1, k] was commanded at k-2. sign_hist is shifted
+   * later in this step, so here sign_hist[0] = s(k-1), sign_hist[1] = s(k-2). */
+  float s = c->sign_hist[1];
   ring_push(c, s * dh_dq.x, s * dh_dq.y, i_ab.x, i_ab.y);
   float inv_n = 1.0f / (float)c->ring_fill;
   float E_d = c->sum_ed * inv_n;
@@ -360,7 +378,19 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_
     }
   }
 
+  if (c->ring_fill < c->n_inj || c->phase_time_s < FW_EST_SETTLE_S) {
+    eps = 0.0f; /* filters still settling: extrapolate, do not correct */
+  }
   fw_pll_step_f32(&c->pll, eps, c->dt_s);
+  /* Mechanical observer extension of the PLL: the speed state also
+   * integrates the acceleration the measured thrust current predicts, plus
+   * an estimated disturbance (load, friction) driven by the same error.
+   * Error dynamics: e''' + kp e'' + ki e' + kd e = (disturbance changes). */
+  if (c->phase == FW_START_RUN) {
+    c->pll.w_i_radps += c->dt_s * (cfg->pll_accel_per_A * c->snap.i_dq_A[1] + c->accel_dist);
+    c->pll.w_i_radps = fw_clampf(c->pll.w_i_radps, -cfg->speed_max_radps_e, cfg->speed_max_radps_e);
+    c->accel_dist += c->dt_s * cfg->pll_kd * eps;
+  }
   float dth = fw_wrap_pi_f32(c->pll.theta_rad - c->theta_prev);
   c->pos_unwrapped_e += dth;
   c->theta_prev = c->pll.theta_rad;
@@ -518,10 +548,11 @@ static void fill_snapshot_common(fw_ctrl_t *c, const fw_inputs_t *in, fw_vec2_f3
   s->cia402_state = (uint8_t)c->sm.state;
   s->start_phase = (uint8_t)c->phase;
   s->fault_code = (uint16_t)c->fault;
-  s->theta_hat_rad = c->pll.theta_rad;
+  s->theta_hat_rad = c->theta_k;
   s->omega_hat_radps = c->pll.w_i_radps;
   s->omega_f_radps = c->omega_f;
   s->pll_err_f_rad = c->err_f;
+  s->accel_dist_radps2 = c->accel_dist;
   s->i_ab_A[0] = i_ab.x;
   s->i_ab_A[1] = i_ab.y;
   s->u_dc_V = in->u_dc_V;
@@ -542,6 +573,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   }
   const fw_config_t *cfg = &c->cfg;
   const float dt = c->dt_s;
+  c->theta_k = c->pll.theta_rad; /* the estimate belonging to this sample */
 
   fw_fault_t f = check_inputs(c, in);
   fw_inputs_t safe = *in;
@@ -576,7 +608,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   bool pulses = c->phase == FW_START_POLARITY;
   /* theta_hat at the sampling instant: for demodulation, the current Park
    * and (advanced) the output transform */
-  const float theta_k = c->pll.theta_rad;
+  const float theta_k = c->theta_k;
   const fw_sincos_f32_t sc = fw_sincos_f32(theta_k);
   if (!pulses) {
     i_f_ab = estimator_step(c, i_ab, sc);

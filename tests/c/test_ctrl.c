@@ -100,6 +100,7 @@ static void check_demod(fw_extractor_t ex, double tol) {
     fw_config_default(&cfg);
     cfg.pll_kp = 0.0f; /* freeze theta_hat at 0 to read the open-loop error */
     cfg.pll_ki = 0.0f;
+    cfg.pll_kd = 0.0f; /* the observer extension needs kd < kp ki */
     cfg.align_time_s = 1.0f;
     cfg.extractor = (uint32_t)ex;
     fw_ctrl_t c;
@@ -132,7 +133,7 @@ static void test_demod_sogi_adaptive(void) { check_demod(FW_EXTRACTOR_SOGI_ADAPT
 static void test_demod_pi_ambiguity(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  cfg.pll_kp = cfg.pll_ki = 0.0f;
+  cfg.pll_kp = cfg.pll_ki = cfg.pll_kd = 0.0f;
   cfg.align_time_s = 1.0f;
   double e[2];
   for (int j = 0; j < 2; j++) {
@@ -230,6 +231,11 @@ static void test_config_checks(void) {
   bad = cfg;
   bad.f_inj_Hz = 12000.0f; /* 2 samples per period: SOGI at Nyquist, refused */
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_INCONSISTENT);
+
+  bad = cfg;
+  bad.pll_kd = 2.0f * bad.pll_kp * bad.pll_ki; /* observer unstable: refused */
+  TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_INCONSISTENT);
+  TT_CHECK(strcmp(iss.field, "pll_kd") == 0);
 
   bad = cfg;
   bad.extractor = 3u;
@@ -399,6 +405,7 @@ static void test_fault_pll_error(void) {
   fw_config_default(&cfg);
   cfg.pll_kp = 0.0f;
   cfg.pll_ki = 0.0f;
+  cfg.pll_kd = 0.0f;
   fw_ctrl_t c;
   fw_init(&c, &cfg);
   fw_set_mode(&c, FW_MODE_FORCE);

@@ -138,6 +138,10 @@ typedef struct {
   /* PLL */
   float pll_kp; /**< paper 86.6 */
   float pll_ki; /**< paper 5000 */
+  float pll_accel_per_A; /**< torque feed-forward: el. rad/s^2 per A of i_q
+                              (p K_t / J or (pi/tau) K_F / m); 0 = paper's pure PI PLL */
+  float pll_kd;          /**< disturbance (load/friction) integrator gain, 1/s^3;
+                              0 = none. Stable for pll_kd < pll_kp * pll_ki */
   /* start-up */
   float align_time_s;         /**< angle-mod-pi convergence time with injection only */
   float pol_pulse_V;          /**< polarity pulse voltage on the estimated d axis */
@@ -204,7 +208,7 @@ typedef struct {
   uint8_t polarity_flipped; /**< 1 when start-up added pi to the estimate */
   uint16_t fault_code;   /**< latched fw_fault_t, 0 if none */
   /* estimator */
-  float theta_hat_rad;   /**< electrical angle estimate [-pi, pi) */
+  float theta_hat_rad;   /**< electrical angle estimate at the sampling instant of this step, [-pi, pi) */
   float omega_hat_radps; /**< electrical speed estimate (PLL integrator) */
   float omega_f_radps;   /**< filtered speed used by the speed loop */
   float pos_hat_m;       /**< unwrapped linear position estimate */
@@ -213,6 +217,7 @@ typedef struct {
   float speed_hat_rpm;     /**< rotary-equivalent speed */
   float pll_err_rad;       /**< normalised PLL error (approx theta - theta_hat) */
   float pll_err_f_rad;     /**< low-passed |PLL error| (adaptation, supervision) */
+  float accel_dist_radps2; /**< observer's disturbance acceleration (load, friction) */
   float hf_amp_A;          /**< demodulated HF amplitude on d-hat per sample */
   float hf_q_A;            /**< demodulated HF q-hat component per sample */
   float sogi_k_eff;        /**< SOGI gain in use */
@@ -258,7 +263,7 @@ typedef struct {
   float h_prev_raw[2];    /**< previous raw alpha/beta current (pseudo-filter) */
   float h_prev_sogi[2];   /**< previous SOGI output */
   float h_sogi[2];        /**< SOGI output this step */
-  float sign_hist[4];     /**< injection signs commanded at k, k-1, k-2, k-3 */
+  float sign_hist[4];     /**< injection signs; [0] = newest commanded */
   float ring_ed[FW_INJ_MAX_SAMPLES]; /**< moving average over one injection period */
   float ring_eq[FW_INJ_MAX_SAMPLES];
   float ring_ia[FW_INJ_MAX_SAMPLES];
@@ -266,14 +271,17 @@ typedef struct {
   float sum_ed, sum_eq, sum_ia, sum_ib;
   uint32_t ring_idx, ring_fill;
   float err_f;            /**< low-passed |PLL error| */
+  float accel_dist;       /**< estimated disturbance acceleration (el. rad/s^2) */
   float pll_err_time_s;
   float omega_f;
   float spd_alpha;        /**< speed filter coefficient */
+  float sogi_gd_s_k;      /**< SOGI group delay at the carrier times k (s) */
   float err_alpha;        /**< |PLL error| filter coefficient */
   float inj_sign;         /**< injection sign commanded this step */
   float qs_still_s;       /**< time at standstill during quick stop */
   float pos_unwrapped_e;  /**< unwrapped electrical angle estimate */
   float theta_prev;
+  float theta_k;          /**< estimate at this step's sampling instant */
   /* start-up */
   fw_start_phase_t phase;
   float phase_time_s;

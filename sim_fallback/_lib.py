@@ -1,0 +1,288 @@
+"""ctypes binding of ``libpmlsm_sim`` (plant + batch loop + firmware core).
+
+The structures below mirror ``fw_ctrl.h`` and ``pmlsm_sim.h`` field by field;
+``tests/python/test_sim_layout.py`` proves every offset and size against the
+C compiler's answer (``sim_layout_offsetof`` / ``sim_layout_sizeof``).
+
+Library search order: ``$PMLSM_SIM_LIB``, the package directory (wheel
+install), ``build/sim/sim_fallback``, then any ``build/*/sim_fallback``.
+"""
+
+from __future__ import annotations
+
+import ctypes as C
+import os
+from pathlib import Path
+
+_f = C.c_float
+_d = C.c_double
+_u8 = C.c_uint8
+_u16 = C.c_uint16
+_u32 = C.c_uint32
+
+# ---- firmware structures (fw_ctrl.h) -------------------------------------
+
+FW_CONFIG_FIELDS: list[tuple[str, type]] = [
+    ("f_pwm_Hz", _f), ("R_ohm", _f), ("L_d_H", _f), ("L_q_H", _f), ("psi_f_Wb", _f),
+    ("pole_pairs", _f), ("pole_pitch_m", _f), ("u_dc_min_V", _f), ("u_dc_max_V", _f),
+    ("i_trip_A", _f), ("i_max_A", _f), ("speed_max_radps_e", _f),
+    ("cur_kp_V_per_A", _f), ("cur_ki_V_per_As", _f),
+    ("spd_kp_A_per_radps", _f), ("spd_ki_A_per_rad", _f), ("spd_filter_Hz", _f),
+    ("u_inj_V", _f), ("f_inj_Hz", _f), ("extractor", _u32), ("sogi_k", _f),
+    ("sogi_k_adapt_max", _f), ("sogi_k_adapt_min", _f), ("sogi_adapt_err_rad", _f),
+    ("pll_kp", _f), ("pll_ki", _f), ("pll_accel_per_A", _f), ("pll_kd", _f),
+    ("align_time_s", _f), ("pol_pulse_V", _f),
+    ("pol_pulse_samples", _u32), ("pol_pulse_pairs", _u32), ("pol_margin", _f),
+    ("saliency_min", _f), ("hf_min_ratio", _f), ("pll_err_max_rad", _f),
+    ("pll_err_time_s", _f), ("quick_stop_time_s", _f), ("adc_A_per_count", _f),
+    ("adc_offset_counts", _f), ("adc_V_per_count", _f), ("adc_max_count", _u32),
+]
+
+
+class FwConfig(C.Structure):
+    """Mirror of ``fw_config_t``."""
+
+    _fields_ = FW_CONFIG_FIELDS
+
+    def as_dict(self) -> dict[str, float | int]:
+        return {name: getattr(self, name) for name, _ in self._fields_}
+
+
+class FwInputs(C.Structure):
+    """Mirror of ``fw_inputs_t`` (phase currents A, DC link V)."""
+
+    _fields_ = [("i_abc_A", _f * 3), ("u_dc_V", _f)]
+
+
+class FwAdcInputs(C.Structure):
+    """Mirror of ``fw_adc_inputs_t`` (raw counts)."""
+
+    _fields_ = [("i_abc_counts", _u16 * 3), ("u_dc_counts", _u16)]
+
+
+class FwOutputs(C.Structure):
+    """Mirror of ``fw_outputs_t`` (duties 0..1, latched next period)."""
+
+    _fields_ = [("duty_abc", _f * 3), ("pwm_enable", _u8)]
+
+
+class FwSnapshot(C.Structure):
+    """Mirror of ``fw_snapshot_t``."""
+
+    _fields_ = [
+        ("step_count", _u32), ("statusword", _u16), ("cia402_state", _u8),
+        ("start_phase", _u8), ("extractor", _u8), ("mode", _u8),
+        ("polarity_flipped", _u8), ("fault_code", _u16),
+        ("theta_hat_rad", _f), ("omega_hat_radps", _f), ("omega_f_radps", _f),
+        ("pos_hat_m", _f), ("speed_hat_mps", _f), ("pos_hat_mech_rad", _f),
+        ("speed_hat_rpm", _f), ("pll_err_rad", _f), ("pll_err_f_rad", _f),
+        ("accel_dist_radps2", _f),
+        ("hf_amp_A", _f), ("hf_q_A", _f), ("sogi_k_eff", _f), ("pol_dI_pos_A", _f),
+        ("pol_dI_neg_A", _f), ("i_dq_A", _f * 2), ("i_dq_ref_A", _f * 2),
+        ("u_dq_V", _f * 2), ("u_inj_V", _f), ("i_ab_A", _f * 2), ("i_h_ab_A", _f * 2),
+        ("speed_ref_radps_e", _f), ("force_hat_N", _f), ("torque_hat_Nm", _f),
+        ("u_dc_V", _f), ("duty_abc", _f * 3),
+    ]
+
+    def as_dict(self) -> dict:
+        out = {}
+        for name, _ in self._fields_:
+            v = getattr(self, name)
+            out[name] = list(v) if isinstance(v, C.Array) else v
+        return out
+
+
+# ---- simulator structures (pmlsm_sim.h) ----------------------------------
+
+
+class SimPlantParams(C.Structure):
+    """Mirror of ``sim_plant_params_t`` (linear units)."""
+
+    _fields_ = [
+        ("R_ohm", _d), ("L_d0_H", _d), ("L_q_H", _d), ("psi_f_Wb", _d),
+        ("dL_sat_H", _d), ("I_sat_A", _d), ("tau_m", _d), ("mass_kg", _d),
+        ("b_visc_Ns_per_m", _d), ("F_coulomb_N", _d), ("F_static_N", _d),
+        ("v_stick_mps", _d), ("cog_amp_N", _d), ("cog_period_m", _d),
+        ("cog_phase_rad", _d), ("locked", C.c_int32), ("u_dc_V", _d), ("f_pwm_Hz", _d),
+        ("dead_time_s", _d), ("dead_band_A", _d), ("n_sub", _u32), ("adc_bits", _u32),
+        ("adc_i_fullscale_A", _d), ("adc_noise_counts", _d),
+        ("adc_offset_counts", _d * 3), ("adc_gain_err", _d * 3),
+        ("udc_fullscale_V", _d), ("udc_noise_V", _d), ("seed", C.c_uint64),
+    ]
+
+
+class SimPlantState(C.Structure):
+    """Mirror of ``sim_plant_state_t`` (truth)."""
+
+    _fields_ = [("i_d_A", _d), ("i_q_A", _d), ("x_m", _d), ("v_mps", _d),
+                ("stuck", C.c_int32), ("pad_", C.c_int32)]
+
+
+class SimSched(C.Structure):
+    """Mirror of ``sim_sched_t``."""
+
+    _fields_ = [("t_s", C.POINTER(_d)), ("value", C.POINTER(_d)), ("n", _u32),
+                ("ramp", _u32)]
+
+
+STEP_FN = C.CFUNCTYPE(None, C.c_void_p, C.POINTER(FwInputs), C.POINTER(FwOutputs))
+STEP_ADC_FN = C.CFUNCTYPE(None, C.c_void_p, C.POINTER(FwAdcInputs), C.POINTER(FwOutputs))
+SNAP_FN = C.CFUNCTYPE(None, C.c_void_p, C.POINTER(FwSnapshot))
+SETREF_FN = C.CFUNCTYPE(None, C.c_void_p, C.c_int, _d)
+
+
+class SimController(C.Structure):
+    """Mirror of ``sim_controller_t`` (function pointers kept opaque)."""
+
+    _fields_ = [("ctx", C.c_void_p), ("step", C.c_void_p), ("step_adc", C.c_void_p),
+                ("snapshot", C.c_void_p), ("set_ref", C.c_void_p)]
+
+
+_PD = C.POINTER(_d)
+# (name, ctypes pointer type, numpy dtype, columns)
+RECORD_CHANNELS: list[tuple[str, type, str, int]] = [
+    ("t_s", _PD, "f8", 1), ("theta_e_rad", _PD, "f8", 1), ("omega_e_radps", _PD, "f8", 1),
+    ("x_m", _PD, "f8", 1), ("v_mps", _PD, "f8", 1), ("force_N", _PD, "f8", 1),
+    ("load_N", _PD, "f8", 1), ("i_d_A", _PD, "f8", 1), ("i_q_A", _PD, "f8", 1),
+    ("i_abc_meas_A", _PD, "f8", 3), ("u_dc_meas_V", _PD, "f8", 1),
+    ("theta_hat_rad", _PD, "f8", 1), ("omega_hat_radps", _PD, "f8", 1),
+    ("omega_f_radps", _PD, "f8", 1),
+    ("pll_err_rad", _PD, "f8", 1), ("hf_amp_A", _PD, "f8", 1), ("sogi_k_eff", _PD, "f8", 1),
+    ("i_dq_hat_A", _PD, "f8", 2), ("duty_abc", _PD, "f8", 3),
+    ("speed_ref_radps_e", _PD, "f8", 1), ("cia402_state", C.POINTER(_u8), "u1", 1),
+    ("start_phase", C.POINTER(_u8), "u1", 1), ("fault_code", C.POINTER(_u16), "u2", 1),
+]
+
+
+class SimRecord(C.Structure):
+    """Mirror of ``sim_record_t`` (NULL pointer = channel not recorded)."""
+
+    _fields_ = [(n, t) for n, t, _, _ in RECORD_CHANNELS] + [("capacity", _u32),
+                                                             ("pad_", _u32)]
+
+
+class SimCtrlConst(C.Structure):
+    """Mirror of ``sim_ctrl_const_t`` (fixed-duty test controller)."""
+
+    _fields_ = [("duty_abc", _f * 3), ("pwm_enable", _u8), ("calls", _u32)]
+
+
+MIRRORS: dict[str, type[C.Structure]] = {
+    "fw_config_t": FwConfig, "fw_inputs_t": FwInputs, "fw_adc_inputs_t": FwAdcInputs,
+    "fw_outputs_t": FwOutputs, "fw_snapshot_t": FwSnapshot,
+    "sim_plant_params_t": SimPlantParams, "sim_plant_state_t": SimPlantState,
+    "sim_sched_t": SimSched, "sim_controller_t": SimController,
+    "sim_record_t": SimRecord, "sim_ctrl_const_t": SimCtrlConst,
+}
+
+
+class FwConfigIssue(C.Structure):
+    """Mirror of ``fw_config_issue_t``."""
+
+    _fields_ = [("status", C.c_int), ("field", C.c_char_p), ("value", _f),
+                ("min", _f), ("max", _f)]
+
+
+class FwConfigField(C.Structure):
+    """Mirror of ``fw_config_field_t``."""
+
+    _fields_ = [("name", C.c_char_p), ("unit", C.c_char_p), ("offset", C.c_size_t),
+                ("is_u32", _u8), ("min", _f), ("max", _f)]
+
+
+# ---- loading -------------------------------------------------------------
+
+_LIBNAME = "libpmlsm_sim.so"
+
+
+def _candidates() -> list[Path]:
+    here = Path(__file__).resolve().parent
+    out: list[Path] = []
+    env = os.environ.get("PMLSM_SIM_LIB")
+    if env:
+        out.append(Path(env))
+    out.append(here / _LIBNAME)
+    root = here.parent
+    out.append(root / "build" / "sim" / "sim_fallback" / _LIBNAME)
+    out += sorted((root / "build").glob(f"*/sim_fallback/{_LIBNAME}"),
+                  key=lambda p: -p.stat().st_mtime)
+    return out
+
+
+def _declare(lib: C.CDLL) -> None:
+    P, V = C.POINTER, C.c_void_p
+    sig = {
+        "sim_params_check": (C.c_int, [P(SimPlantParams), P(C.c_char_p)]),
+        "sim_new": (V, [P(SimPlantParams)]),
+        "sim_free": (None, [V]),
+        "sim_set_controller": (None, [V, P(SimController)]),
+        "sim_set_use_adc_counts": (None, [V, C.c_int]),
+        "sim_set_schedule": (C.c_int, [V, C.c_int, P(_d), P(_d), _u32, _u32]),
+        "sim_set_state": (None, [V, P(SimPlantState)]),
+        "sim_get_state": (None, [V, P(SimPlantState)]),
+        "sim_set_latched_duty": (None, [V, P(_d), C.c_int]),
+        "sim_time_s": (_d, [V]),
+        "sim_step_count": (C.c_uint64, [V]),
+        "sim_sched_value": (_d, [V, C.c_int]),
+        "sim_run": (C.c_int64, [V, C.c_uint64, _u32, P(SimRecord)]),
+        "sim_plant_advance": (None, [V, P(_d), C.c_int, _d, _u32]),
+        "sim_sample": (None, [V, P(FwInputs), P(FwAdcInputs)]),
+        "sim_force_N": (_d, [V]),
+        "sim_ctrl_const_port": (None, [P(SimCtrlConst), P(SimController)]),
+        "sim_fw_port": (None, [V, P(SimController)]),
+        "sim_fw_new": (V, []),
+        "sim_fw_free": (None, [V]),
+        "sim_layout_sizeof": (C.c_size_t, [C.c_char_p]),
+        "sim_layout_offsetof": (C.c_int64, [C.c_char_p, C.c_char_p]),
+        # firmware core (whole archive linked into the sim library)
+        "fw_config_default": (None, [P(FwConfig)]),
+        "fw_config_check": (C.c_int, [P(FwConfig), P(FwConfigIssue)]),
+        "fw_config_field_count": (C.c_size_t, []),
+        "fw_config_field": (P(FwConfigField), [C.c_size_t]),
+        "fw_init": (C.c_int, [V, P(FwConfig)]),
+        "fw_set_config": (C.c_int, [V, P(FwConfig), P(FwConfigIssue)]),
+        "fw_controlword": (_u16, [V, _u16]),
+        "fw_statusword": (_u16, [V]),
+        "fw_state": (C.c_int, [V]),
+        "fw_set_mode": (C.c_int, [V, C.c_int]),
+        "fw_set_speed_ref": (C.c_int, [V, _f]),
+        "fw_set_iq_ref": (C.c_int, [V, _f]),
+        "fw_set_id_ref": (C.c_int, [V, _f]),
+        "fw_set_extractor": (C.c_int, [V, C.c_int]),
+        "fw_fault_code": (C.c_int, [V]),
+        "fw_step": (None, [V, P(FwInputs), P(FwOutputs)]),
+        "fw_step_adc": (None, [V, P(FwAdcInputs), P(FwOutputs)]),
+        "fw_get_snapshot": (None, [V, P(FwSnapshot)]),
+        "fw_ctrl_sizeof": (C.c_size_t, []),
+    }
+    for name, (res, args) in sig.items():
+        fn = getattr(lib, name)
+        fn.restype = res
+        fn.argtypes = args
+
+
+_LIB: C.CDLL | None = None
+
+
+def lib() -> C.CDLL:
+    """Load (once) and return the simulator library."""
+    global _LIB
+    if _LIB is None:
+        tried = []
+        for path in _candidates():
+            if path.is_file():
+                _LIB = C.CDLL(str(path))
+                _declare(_LIB)
+                break
+            tried.append(str(path))
+        else:
+            raise OSError(
+                "libpmlsm_sim.so not found; build it with `cmake -S . -B build/sim -G Ninja "
+                "&& cmake --build build/sim --target pmlsm_sim` or set PMLSM_SIM_LIB. Tried: "
+                + ", ".join(tried))
+    return _LIB
+
+
+def lib_path() -> str:
+    """Path of the loaded library."""
+    return lib()._name  # type: ignore[attr-defined]

@@ -1,0 +1,338 @@
+"""Motor files (TOML): loading, validation, linear conversion, fw_config_t.
+
+A motor file has the sections ``[motor]``, ``[electrical]``,
+``[mechanical]`` and optional ``[inverter]``, ``[sensing]``, ``[controller]``.
+``[mechanical]`` is either rotary-equivalent (``parameterization =
+"rotary"``: pole_pairs, pole_pitch_m, inertia_kgm2, N·m friction) or linear
+(mass_kg, N friction). Rotary sets are converted on load with the
+equivalent radius r = p tau / pi (theta_e = p theta_m = pi x / tau):
+m = J / r^2, F = T / r, b_lin = b_rot / r^2.
+
+Every error names the file, the field and the allowed range.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+try:
+    import tomllib
+except ImportError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+from . import _lib
+
+MOTOR_DIR = Path(__file__).resolve().parent / "motors"
+
+
+class MotorFileError(ValueError):
+    """A motor file is missing a field, has an unknown one or a value out of range."""
+
+
+# (section, key) -> (required, lo, hi, unit, default); lists are checked per element.
+_SCHEMA: dict[tuple[str, str], tuple[bool, float, float, str, Any]] = {
+    ("electrical", "R_ohm"): (True, 1e-3, 100.0, "ohm", None),
+    ("electrical", "L_d_H"): (True, 1e-5, 1.0, "H", None),
+    ("electrical", "L_q_H"): (True, 1e-5, 1.0, "H", None),
+    ("electrical", "psi_f_Wb"): (True, 1e-4, 10.0, "Wb", None),
+    ("electrical", "dL_sat_H"): (False, 0.0, 0.5, "H (< L_d_H)", 0.0),
+    ("electrical", "I_sat_A"): (False, 0.01, 1000.0, "A", 5.0),
+    # mechanical, both parameterizations
+    ("mechanical", "pole_pitch_m"): (True, 1e-3, 1.0, "m", None),
+    ("mechanical", "pole_pairs"): (False, 1, 500, "", None),
+    # rotary
+    ("mechanical", "inertia_kgm2"): (False, 1e-7, 1e3, "kg m^2", None),
+    ("mechanical", "viscous_Nms_per_rad"): (False, 0.0, 1e3, "N m s/rad", 0.0),
+    ("mechanical", "static_friction_Nm"): (False, 0.0, 1e4, "N m", 0.0),
+    ("mechanical", "coulomb_friction_Nm"): (False, 0.0, 1e4, "N m", None),
+    ("mechanical", "cogging_Nm"): (False, 0.0, 1e4, "N m", 0.0),
+    # linear
+    ("mechanical", "mass_kg"): (False, 1e-3, 1e5, "kg", None),
+    ("mechanical", "viscous_Ns_per_m"): (False, 0.0, 1e6, "N s/m", 0.0),
+    ("mechanical", "static_friction_N"): (False, 0.0, 1e6, "N", 0.0),
+    ("mechanical", "coulomb_friction_N"): (False, 0.0, 1e6, "N", None),
+    ("mechanical", "cogging_N"): (False, 0.0, 1e6, "N", 0.0),
+    # both
+    ("mechanical", "cogging_period_m"): (False, 1e-5, 1.0, "m", None),
+    ("mechanical", "cogging_phase_rad"): (False, -10.0, 10.0, "rad", 0.0),
+    # inverter
+    ("inverter", "u_dc_V"): (False, 10.0, 1000.0, "V", 300.0),
+    ("inverter", "f_pwm_Hz"): (False, 4000.0, 100000.0, "Hz", 24000.0),
+    ("inverter", "dead_time_s"): (False, 0.0, 5e-6, "s", 0.0),
+    ("inverter", "dead_band_A"): (False, 0.0, 10.0, "A", 0.05),
+    ("inverter", "n_sub"): (False, 1, 1024, "", 4),
+    # sensing
+    ("sensing", "adc_bits"): (False, 8, 16, "bit", 12),
+    ("sensing", "adc_i_fullscale_A"): (False, 0.1, 1000.0, "A", 25.0),
+    ("sensing", "adc_noise_counts"): (False, 0.0, 100.0, "counts", 1.0),
+    ("sensing", "adc_offset_counts"): (False, -200.0, 200.0, "counts", [1.0, -1.0, 0.5]),
+    ("sensing", "adc_gain_err"): (False, -0.2, 0.2, "", [0.0, 0.0, 0.0]),
+    ("sensing", "udc_fullscale_V"): (False, 10.0, 2000.0, "V", 500.0),
+    ("sensing", "udc_noise_V"): (False, 0.0, 50.0, "V", 0.5),
+    # controller (gains are derived; these tune the derivation and limits)
+    ("controller", "speed_bw_radps"): (False, 1.0, 1000.0, "rad/s", 35.0),
+    ("controller", "i_max_A"): (False, 0.05, 400.0, "A", 20.0),
+    ("controller", "i_trip_A"): (False, 0.1, 500.0, "A", 24.0),
+    ("controller", "u_inj_V"): (False, 0.0, 400.0, "V", 30.0),
+    ("controller", "f_inj_Hz"): (False, 100.0, 20000.0, "Hz", 3000.0),
+}
+_TEXT_FIELDS = {("motor", "name"), ("motor", "description"), ("motor", "parameterization")}
+
+
+@dataclass
+class Motor:
+    """A validated motor: plant parameters in linear SI units plus rotary equivalents.
+
+    Attributes
+    ----------
+    plant : dict
+        ``sim_plant_params_t`` fields (linear units: m, kg, N).
+    pole_pairs : float
+        Rotary-equivalent pole pairs p (theta_e = p theta_m), used for r/min.
+    radius_m : float
+        Equivalent radius r = p tau / pi (m per mechanical rad).
+    controller : dict
+        ``[controller]`` section values (with defaults).
+    """
+
+    name: str
+    path: Path
+    description: str
+    parameterization: str
+    plant: dict[str, Any]
+    pole_pairs: float
+    radius_m: float
+    controller: dict[str, float]
+    raw: dict[str, Any] = field(repr=False, default_factory=dict)
+
+    @property
+    def tau_m(self) -> float:
+        return float(self.plant["tau_m"])
+
+    @property
+    def force_const_N_per_A(self) -> float:
+        """K_f = 1.5 (pi / tau) psi_f."""
+        return 1.5 * math.pi / self.tau_m * float(self.plant["psi_f_Wb"])
+
+    # unit helpers (rotary equivalent: n[r/min] = 60 w_e / (2 pi p))
+    def rpm_to_radps_e(self, n_rpm: float) -> float:
+        return n_rpm * 2.0 * math.pi * self.pole_pairs / 60.0
+
+    def radps_e_to_rpm(self, w: float):
+        return w * 60.0 / (2.0 * math.pi * self.pole_pairs)
+
+    def mps_to_radps_e(self, v_mps: float):
+        return v_mps * math.pi / self.tau_m
+
+    def nm_to_N(self, torque_Nm: float) -> float:
+        return torque_Nm / self.radius_m
+
+
+def _err(path: Path, key: str, msg: str) -> MotorFileError:
+    return MotorFileError(f"{path}: field '{key}': {msg}")
+
+
+def _get(path: Path, doc: dict, sec: str, key: str) -> Any:
+    req, lo, hi, unit, default = _SCHEMA[(sec, key)]
+    name = f"{sec}.{key}"
+    if key not in doc.get(sec, {}):
+        if req:
+            raise _err(path, name, f"missing; required, allowed range [{lo}, {hi}] {unit}")
+        return default
+    val = doc[sec][key]
+    vals = val if isinstance(val, list) else [val]
+    if isinstance(default, list) and (not isinstance(val, list) or len(val) != len(default)):
+        raise _err(path, name, f"must be a list of {len(default)} numbers in [{lo}, {hi}] {unit}")
+    for v in vals:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise _err(path, name,
+                       f"{v!r} is not a finite number; allowed range [{lo}, {hi}] {unit}")
+        if not lo <= v <= hi:
+            raise _err(path, name, f"{v!r} outside allowed range [{lo}, {hi}] {unit}")
+    return [float(v) for v in vals] if isinstance(val, list) else val
+
+
+def resolve_motor_path(motor: str | Path) -> Path:
+    """A motor name from ``sim_fallback/motors`` or a path to a TOML file."""
+    p = Path(motor)
+    if p.suffix == ".toml" or p.exists():
+        return p
+    cand = MOTOR_DIR / f"{motor}.toml"
+    if not cand.exists():
+        known = ", ".join(sorted(q.stem for q in MOTOR_DIR.glob("*.toml")))
+        raise FileNotFoundError(f"motor '{motor}' not found (known: {known})")
+    return cand
+
+
+def load_motor(motor: str | Path) -> Motor:
+    """Load and validate a motor file; raises :class:`MotorFileError`."""
+    path = resolve_motor_path(motor)
+    try:
+        doc = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise MotorFileError(f"{path}: not valid TOML: {e}") from e
+    # unknown sections / fields (typos) are errors
+    known_secs = {s for s, _ in _SCHEMA} | {"motor"}
+    for sec, body in doc.items():
+        if sec not in known_secs or not isinstance(body, dict):
+            raise _err(path, sec, f"unknown section; allowed: {sorted(known_secs)}")
+        for key in body:
+            if (sec, key) not in _SCHEMA and (sec, key) not in _TEXT_FIELDS:
+                allowed = sorted(k for s, k in list(_SCHEMA) + list(_TEXT_FIELDS) if s == sec)
+                raise _err(path, f"{sec}.{key}", f"unknown field; allowed: {allowed}")
+    m = doc.get("motor", {})
+    param = m.get("parameterization", "linear")
+    if param not in ("linear", "rotary"):
+        raise _err(path, "motor.parameterization", f"{param!r}; allowed: 'linear', 'rotary'")
+    g = {k: _get(path, doc, s, k) for (s, k) in _SCHEMA}
+
+    tau = float(g["pole_pitch_m"])
+    L_d, L_q = float(g["L_d_H"]), float(g["L_q_H"])
+    if g["dL_sat_H"] >= L_d:
+        raise _err(path, "electrical.dL_sat_H", f"{g['dL_sat_H']} must be < L_d_H = {L_d}")
+    if param == "rotary":
+        for k in ("pole_pairs", "inertia_kgm2"):
+            if k not in doc["mechanical"]:
+                lo, hi, unit = _SCHEMA[("mechanical", k)][1:4]
+                raise _err(path, f"mechanical.{k}",
+                           f"missing; required for rotary files, allowed range [{lo}, {hi}] {unit}")
+        for k in ("mass_kg", "viscous_Ns_per_m", "static_friction_N", "coulomb_friction_N",
+                  "cogging_N"):
+            if k in doc["mechanical"]:
+                raise _err(path, f"mechanical.{k}", "linear field in a rotary file")
+        p = float(g["pole_pairs"])
+        r = p * tau / math.pi
+        mass = float(g["inertia_kgm2"]) / r**2
+        b = float(g["viscous_Nms_per_rad"]) / r**2
+        F_s = float(g["static_friction_Nm"]) / r
+        tc = g["coulomb_friction_Nm"]
+        F_c = F_s if tc is None else float(tc) / r
+        cog = float(g["cogging_Nm"]) / r
+    else:
+        if "mass_kg" not in doc["mechanical"]:
+            lo, hi, unit = _SCHEMA[("mechanical", "mass_kg")][1:4]
+            raise _err(path, "mechanical.mass_kg",
+                       f"missing; required for linear files, allowed range [{lo}, {hi}] {unit}")
+        for k in ("inertia_kgm2", "viscous_Nms_per_rad", "static_friction_Nm",
+                  "coulomb_friction_Nm", "cogging_Nm"):
+            if k in doc["mechanical"]:
+                raise _err(path, f"mechanical.{k}", "rotary field in a linear file")
+        p = float(g["pole_pairs"] or 1.0)
+        r = p * tau / math.pi
+        mass = float(g["mass_kg"])
+        b = float(g["viscous_Ns_per_m"])
+        F_s = float(g["static_friction_N"])
+        F_c = F_s if g["coulomb_friction_N"] is None else float(g["coulomb_friction_N"])
+        cog = float(g["cogging_N"])
+    if F_c > F_s:
+        raise _err(path, "mechanical.coulomb_friction", f"{F_c} N must be <= static {F_s} N")
+    if g["udc_fullscale_V"] <= g["u_dc_V"]:
+        raise _err(path, "sensing.udc_fullscale_V",
+                   f"{g['udc_fullscale_V']} must exceed inverter.u_dc_V = {g['u_dc_V']}")
+    plant = dict(
+        R_ohm=float(g["R_ohm"]), L_d0_H=L_d, L_q_H=L_q, psi_f_Wb=float(g["psi_f_Wb"]),
+        dL_sat_H=float(g["dL_sat_H"]), I_sat_A=float(g["I_sat_A"]), tau_m=tau,
+        mass_kg=mass, b_visc_Ns_per_m=b, F_coulomb_N=F_c, F_static_N=F_s,
+        v_stick_mps=1e-6, cog_amp_N=cog,
+        cog_period_m=float(g["cogging_period_m"] or tau / 3.0),
+        cog_phase_rad=float(g["cogging_phase_rad"]), locked=0,
+        u_dc_V=float(g["u_dc_V"]), f_pwm_Hz=float(g["f_pwm_Hz"]),
+        dead_time_s=float(g["dead_time_s"]), dead_band_A=float(g["dead_band_A"]),
+        n_sub=int(g["n_sub"]), adc_bits=int(g["adc_bits"]),
+        adc_i_fullscale_A=float(g["adc_i_fullscale_A"]),
+        adc_noise_counts=float(g["adc_noise_counts"]),
+        adc_offset_counts=list(g["adc_offset_counts"]), adc_gain_err=list(g["adc_gain_err"]),
+        udc_fullscale_V=float(g["udc_fullscale_V"]), udc_noise_V=float(g["udc_noise_V"]),
+        seed=0,
+    )
+    ctrl = {k: float(g[k]) for (s, k) in _SCHEMA if s == "controller"}
+    return Motor(name=str(m.get("name", path.stem)), path=path,
+                 description=str(m.get("description", "")), parameterization=param,
+                 plant=plant, pole_pairs=p, radius_m=r, controller=ctrl, raw=doc)
+
+
+def plant_params(motor: Motor, **overrides: Any) -> _lib.SimPlantParams:
+    """``sim_plant_params_t`` for a motor, with field overrides."""
+    vals = dict(motor.plant)
+    for k, v in overrides.items():
+        if k not in vals:
+            raise KeyError(f"unknown plant parameter '{k}'")
+        vals[k] = v
+    p = _lib.SimPlantParams()
+    for k, v in vals.items():
+        if isinstance(v, list):
+            getattr(p, k)[:] = v
+        else:
+            setattr(p, k, v)
+    return p
+
+
+def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
+              **overrides: float) -> _lib.FwConfig:
+    """``fw_config_t`` for a motor: nominal parameters and the paper's gain rules.
+
+    Current PI: kp = L_d 1100 V/A, ki = R 1100 V/(A s). Speed PI (rotary files):
+    the paper's 0.1 A/(r/min) and 0.6 A/(r/min s), converted to electrical rad/s
+    with 1 r/min = 2 pi p / 60 rad/s; linear files: kp = m w_bw / K_f (A per m/s),
+    ki = kp w_bw / 6, converted with v = w_e tau / pi. PLL 86.6 / 5000. ADC
+    scaling matches the plant's ADC (the drive knows its nominal scaling, not
+    the offset or gain errors).
+    """
+    L = _lib.lib()
+    cfg = _lib.FwConfig()
+    L.fw_config_default(cfg)
+    pl = motor.plant
+    p = motor.pole_pairs
+    cfg.f_pwm_Hz = pl["f_pwm_Hz"]
+    cfg.R_ohm = pl["R_ohm"]
+    cfg.L_d_H = pl["L_d0_H"]
+    cfg.L_q_H = pl["L_q_H"]
+    cfg.psi_f_Wb = pl["psi_f_Wb"]
+    cfg.pole_pairs = p
+    cfg.pole_pitch_m = pl["tau_m"]
+    cfg.cur_kp_V_per_A = pl["L_d0_H"] * 1100.0
+    cfg.cur_ki_V_per_As = pl["R_ohm"] * 1100.0
+    if motor.parameterization == "rotary":
+        cfg.spd_kp_A_per_radps = 0.1 * 60.0 / (2.0 * math.pi * p)
+        cfg.spd_ki_A_per_rad = 0.6 * 60.0 / (2.0 * math.pi * p)
+    else:
+        w_bw = motor.controller["speed_bw_radps"]
+        kp_lin = pl["mass_kg"] * w_bw / motor.force_const_N_per_A  # A per m/s
+        cfg.spd_kp_A_per_radps = kp_lin * pl["tau_m"] / math.pi
+        cfg.spd_ki_A_per_rad = cfg.spd_kp_A_per_radps * w_bw / 6.0
+    cfg.pll_kp = 86.6
+    cfg.pll_ki = 5000.0
+    # PLL torque feed-forward: electrical rad/s^2 per A of i_q = (pi/tau) K_F / m
+    cfg.pll_accel_per_A = math.pi / pl["tau_m"] * motor.force_const_N_per_A / pl["mass_kg"]
+    c = motor.controller
+    cfg.i_max_A = c["i_max_A"]
+    cfg.i_trip_A = c["i_trip_A"]
+    cfg.u_inj_V = c["u_inj_V"]
+    cfg.f_inj_Hz = c["f_inj_Hz"]
+    full = 2.0 ** pl["adc_bits"]
+    cfg.adc_A_per_count = 2.0 * pl["adc_i_fullscale_A"] / full
+    cfg.adc_offset_counts = full / 2.0
+    cfg.adc_V_per_count = pl["udc_fullscale_V"] / full
+    cfg.adc_max_count = int(full - 1)
+    cfg.extractor = extractor_id(extractor)
+    for k, v in overrides.items():
+        if not hasattr(cfg, k):
+            raise KeyError(f"unknown fw_config_t field '{k}'")
+        setattr(cfg, k, v)
+    return cfg
+
+
+EXTRACTORS = {"pseudo": 0, "sogi": 1, "sogi_adaptive": 2}
+
+
+def extractor_id(ex: int | str) -> int:
+    if isinstance(ex, str):
+        if ex not in EXTRACTORS:
+            raise ValueError(f"extractor '{ex}' unknown; choose from {list(EXTRACTORS)}")
+        return EXTRACTORS[ex]
+    if int(ex) not in EXTRACTORS.values():
+        raise ValueError(f"extractor {ex} unknown")
+    return int(ex)

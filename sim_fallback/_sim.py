@@ -1,0 +1,407 @@
+"""Closed-loop simulation: the C plant + the firmware core, stepped in C.
+
+``Sim`` owns one ``sim_t`` and one ``fw_ctrl_t``; ``Sim.advance(n)`` runs n
+PWM periods in one C call (so a protocol bridge can exchange frames between
+chunks); ``run_scenario`` builds a Sim from a motor file, runs a reference
+schedule and returns a :class:`Result` with numpy arrays and metrics.
+"""
+
+from __future__ import annotations
+
+import ctypes as C
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import _lib
+from ._firmware import Firmware
+from ._motors import Motor, extractor_id, fw_config, load_motor, plant_params
+
+SIM_REF_SPEED, SIM_REF_FORCE, SIM_REF_LOAD = 0, 1, 2
+CHANNELS = [name for name, *_ in _lib.RECORD_CHANNELS]
+METRIC_NAMES = ("position_error_rms_rad", "position_error_max_rad", "position_error_rms_mm",
+                "speed_error_max_rpm", "speed_error_max_mps", "settling_time_s")
+
+
+def wrap_pi(x: np.ndarray) -> np.ndarray:
+    """Wrap angles (rad) into [-pi, pi)."""
+    return (np.asarray(x) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+ScheduleLike = float | Sequence[tuple[float, float]] | dict[str, Any] | None
+
+
+def _schedule(spec: ScheduleLike, scale: float) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """Normalise a schedule: constant, [(t_s, value), ...] or {"t_s", "value", "ramp"}."""
+    if spec is None:
+        return None
+    ramp = 0
+    if isinstance(spec, (int, float)):
+        t, v = [0.0], [float(spec)]
+    elif isinstance(spec, dict):
+        t, v, ramp = list(spec["t_s"]), list(spec["value"]), int(bool(spec.get("ramp", False)))
+    else:
+        t = [float(a) for a, _ in spec]
+        v = [float(b) for _, b in spec]
+    ta = np.ascontiguousarray(t, dtype=np.float64)
+    va = np.ascontiguousarray(v, dtype=np.float64) * scale
+    if ta.size == 0 or ta.shape != va.shape or np.any(np.diff(ta) < 0):
+        raise ValueError(f"bad schedule {spec!r}: need ascending t_s and matching values")
+    return ta, va, ramp
+
+
+def _dptr(a: np.ndarray) -> Any:
+    return a.ctypes.data_as(C.POINTER(C.c_double))
+
+
+class Sim:
+    """One simulated drive: plant (truth) + firmware core, stepped in C.
+
+    Parameters
+    ----------
+    motor : str | Path | Motor
+        Motor name in ``sim_fallback/motors`` or a TOML path.
+    extractor : {"pseudo", "sogi", "sogi_adaptive"}
+    seed : int
+        Seeds the ADC noise RNG (and nothing else).
+    noise : float
+        Scale of the motor file's ADC noise and offsets (1 = default, 0 = ideal).
+    x0_m : float
+        Initial mover position (true; the firmware does not know it).
+    plant : dict
+        ``sim_plant_params_t`` overrides (linear units).
+    fw : dict
+        ``fw_config_t`` overrides.
+    """
+
+    def __init__(self, motor: str | Path | Motor = "paper_salient",
+                 extractor: int | str = "sogi_adaptive", seed: int = 0, noise: float = 1.0,
+                 x0_m: float = 0.0, plant: dict[str, Any] | None = None,
+                 fw: dict[str, float] | None = None) -> None:
+        self._L = _lib.lib()
+        self.motor = motor if isinstance(motor, Motor) else load_motor(motor)
+        ov = dict(plant or {})
+        mp = self.motor.plant
+        ov.setdefault("adc_noise_counts", mp["adc_noise_counts"] * noise)
+        ov.setdefault("udc_noise_V", mp["udc_noise_V"] * noise)
+        ov.setdefault("adc_offset_counts", [o * noise for o in mp["adc_offset_counts"]])
+        ov.setdefault("seed", int(seed) & 0xFFFFFFFFFFFFFFFF)
+        self.params = plant_params(self.motor, **ov)
+        bad = C.c_char_p()
+        if self._L.sim_params_check(self.params, C.byref(bad)) != 0:
+            raise ValueError(f"plant parameter '{bad.value.decode()}' invalid")
+        self._h = self._L.sim_new(self.params)
+        if not self._h:
+            raise MemoryError("sim_new failed")
+        self.dt_s = 1.0 / self.params.f_pwm_Hz
+        self.cfg = fw_config(self.motor, extractor, **(fw or {}))
+        self.firmware = Firmware(self.cfg)
+        self._port = _lib.SimController()
+        self._L.sim_fw_port(self.firmware.handle, C.byref(self._port))
+        self._L.sim_set_controller(self._h, C.byref(self._port))
+        self.set_state(x0_m=x0_m)
+        self._keep: list[np.ndarray] = []
+
+    # ---- life cycle ------------------------------------------------------
+    def close(self) -> None:
+        if getattr(self, "_h", None):
+            self._L.sim_free(self._h)
+            self._h = None
+        if getattr(self, "firmware", None) is not None:
+            self.firmware.close()
+
+    def __del__(self) -> None:  # pragma: no cover - GC order
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    def __enter__(self) -> Sim:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---- configuration ---------------------------------------------------
+    def set_state(self, x0_m: float = 0.0, v0_mps: float = 0.0, i_d_A: float = 0.0,
+                  i_q_A: float = 0.0) -> None:
+        """Set the true plant state (truth only: the firmware never sees it)."""
+        st = _lib.SimPlantState(i_d_A, i_q_A, x0_m, v0_mps, 1 if v0_mps == 0.0 else 0, 0)
+        self._L.sim_set_state(self._h, C.byref(st))
+
+    def state(self) -> dict[str, float]:
+        st = _lib.SimPlantState()
+        self._L.sim_get_state(self._h, C.byref(st))
+        return {k: getattr(st, k) for k, _ in st._fields_ if k != "pad_"}
+
+    def set_schedule(self, kind: int, spec: ScheduleLike, scale: float = 1.0) -> None:
+        """Schedule SIM_REF_SPEED (rad/s el.), SIM_REF_FORCE (N) or SIM_REF_LOAD (N)."""
+        s = _schedule(spec, scale)
+        if s is None:
+            rc = self._L.sim_set_schedule(self._h, kind, None, None, 0, 0)
+        else:
+            t, v, ramp = s
+            rc = self._L.sim_set_schedule(self._h, kind, _dptr(t), _dptr(v), t.size, ramp)
+        if rc != 0:
+            raise ValueError(f"sim_set_schedule rejected {spec!r}")
+
+    def enable(self, mode: str = "speed") -> int:
+        """CiA 402 walk to OPERATION ENABLED; returns the statusword."""
+        return self.firmware.enable(mode)
+
+    @property
+    def t_s(self) -> float:
+        return float(self._L.sim_time_s(self._h))
+
+    @property
+    def step_count(self) -> int:
+        return int(self._L.sim_step_count(self._h))
+
+    # ---- stepping --------------------------------------------------------
+    def advance(self, n_steps: int, decimation: int = 1,
+                channels: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+        """Run n_steps PWM periods in one C call; return the recorded channels.
+
+        Entries are recorded every ``decimation`` periods counted from t = 0,
+        so consecutive chunks join without gaps or duplicates.
+        """
+        if n_steps < 0 or decimation < 1:
+            raise ValueError("n_steps >= 0 and decimation >= 1 required")
+        k0 = self.step_count
+        first = -(-k0 // decimation) * decimation
+        n_rec = 0 if first >= k0 + n_steps else (k0 + n_steps - 1 - first) // decimation + 1
+        if n_rec >= 2**32:
+            raise ValueError("too many records for one call; use chunks")
+        want = CHANNELS if channels is None else list(channels)
+        rec = _lib.SimRecord()
+        rec.capacity = n_rec
+        out: dict[str, np.ndarray] = {}
+        for name, ptype, dtype, cols in _lib.RECORD_CHANNELS:
+            if name not in want:
+                continue
+            a = np.empty((n_rec, cols) if cols > 1 else n_rec, dtype=dtype)
+            setattr(rec, name, a.ctypes.data_as(ptype))
+            out[name] = a
+        got = self._L.sim_run(self._h, n_steps, decimation, C.byref(rec))
+        if got < 0:
+            raise RuntimeError("sim_run failed")
+        assert got == n_rec, (got, n_rec)
+        return out
+
+    def snapshot(self) -> dict[str, Any]:
+        return self.firmware.snapshot()
+
+    def set_controller_port(self, port: _lib.SimController, keep: Any = None) -> None:
+        """Plug another controller with the fw_step signature (e.g. a CANopen
+        application wrapping fw_ctrl_t): ``port`` holds ctx and C function pointers
+        (``sim_controller_t``); ``keep`` is held to keep ctx / callbacks alive."""
+        self._port = port
+        self._port_keep = keep
+        self._L.sim_set_controller(self._h, C.byref(self._port))
+
+    # ---- test equipment -----------------------------------------------------
+    def use_fixed_duties(self, duty_abc: Sequence[float], pwm_enable: bool = True) -> None:
+        """Replace the firmware by the fixed-duty controller (plant tests)."""
+        self._const = _lib.SimCtrlConst()
+        self._const.duty_abc[:] = [float(d) for d in duty_abc]
+        self._const.pwm_enable = int(bool(pwm_enable))
+        port = _lib.SimController()
+        self._L.sim_ctrl_const_port(C.byref(self._const), C.byref(port))
+        self._port = port
+        self._L.sim_set_controller(self._h, C.byref(self._port))
+
+    def plant_advance(self, duty_abc: Sequence[float], pwm_enable: bool, dt_s: float,
+                      n_sub: int) -> None:
+        """Integrate the plant alone for dt_s with fixed duties (n_sub RK4 steps)."""
+        d = (C.c_double * 3)(*[float(x) for x in duty_abc])
+        self._L.sim_plant_advance(self._h, d, int(bool(pwm_enable)), dt_s, n_sub)
+
+    def sample(self) -> tuple[np.ndarray, float, np.ndarray, int]:
+        """Sample the ADC now: (i_abc_A, u_dc_V, i_abc_counts, u_dc_counts)."""
+        i, a = _lib.FwInputs(), _lib.FwAdcInputs()
+        self._L.sim_sample(self._h, C.byref(i), C.byref(a))
+        return (np.array(i.i_abc_A[:]), float(i.u_dc_V), np.array(a.i_abc_counts[:]),
+                int(a.u_dc_counts))
+
+    def force_N(self) -> float:
+        """True electromagnetic thrust at the present state."""
+        return float(self._L.sim_force_N(self._h))
+
+
+# ---- results ---------------------------------------------------------------
+
+
+@dataclass
+class Result:
+    """Time series (numpy arrays keyed by channel name) and metrics."""
+
+    data: dict[str, np.ndarray]
+    metrics: dict[str, float]
+    motor: Motor
+    extractor: str
+    seed: int
+    settle_s: float
+    fault_code: int
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def valid(self) -> bool:
+        """False when the drive refused, faulted or never closed the loop (metrics NaN)."""
+        return self.info.get("invalid_reason") is None
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        data = self.__dict__.get("data", {})
+        if name in data:
+            return data[name]
+        raise AttributeError(name)
+
+    @property
+    def position_error_rad(self) -> np.ndarray:
+        """Wrapped electrical angle error theta - theta_hat (rad)."""
+        return wrap_pi(self.data["theta_e_rad"] - self.data["theta_hat_rad"])
+
+
+def compute_metrics(data: dict[str, np.ndarray], motor: Motor, settle_s: float = 0.15,
+                    settle_band_rad: float = 0.05, settle_avg_s: float = 1e-3,
+                    settle_hold_s: float = 0.05) -> dict[str, float]:
+    """Metrics with the project-wide names (electrical rad after ``settle_s``).
+
+    position error: wrapped theta_e - theta_hat; speed error: estimated minus
+    true speed (estimate vs truth, like the paper's figures), using the
+    filtered estimate ``omega_f_radps`` the drive reports and regulates on
+    (``omega_hat_radps``, the raw PLL integrator, if omega_f was not recorded);
+    settling_time_s: first time
+    after which the position error, averaged over ``settle_avg_s``, stays within
+    ``settle_band_rad`` until the end, for at least ``settle_hold_s`` (NaN if never).
+    """
+    t = data["t_s"]
+    e = wrap_pi(data["theta_e_rad"] - data["theta_hat_rad"])
+    w_est = data["omega_f_radps"] if "omega_f_radps" in data else data["omega_hat_radps"]
+    w_err = w_est - data["omega_e_radps"]
+    m = t >= settle_s
+    tau = motor.tau_m
+    nan = float("nan")
+    if not np.any(m):
+        rms = mx = sp = nan
+    else:
+        rms = float(np.sqrt(np.mean(e[m] ** 2)))
+        mx = float(np.max(np.abs(e[m])))
+        sp = float(np.max(np.abs(w_err[m])))
+    # settling: moving average of |e|, last exceedance
+    n_avg = max(1, int(round(settle_avg_s / max(t[1] - t[0], 1e-12)))) if t.size > 1 else 1
+    ea = np.convolve(np.abs(e), np.ones(n_avg) / n_avg, mode="same") if t.size else e
+    bad = np.nonzero(ea > settle_band_rad)[0]
+    if t.size == 0:
+        ts = nan
+    elif bad.size == 0:
+        ts = float(t[0])
+    elif bad[-1] + 1 >= t.size or t[-1] - t[bad[-1] + 1] < settle_hold_s:
+        ts = nan  # not (long enough) inside the band at the end of the run
+    else:
+        ts = float(t[bad[-1] + 1])
+    return {
+        "position_error_rms_rad": rms,
+        "position_error_max_rad": mx,
+        "position_error_rms_mm": rms * tau / math.pi * 1e3,
+        "speed_error_max_rpm": float(motor.radps_e_to_rpm(sp)),
+        "speed_error_max_mps": sp * tau / math.pi,
+        "settling_time_s": ts,
+    }
+
+
+def run_scenario(motor: str | Path | Motor = "paper_salient",
+                 extractor: int | str = "sogi_adaptive",
+                 speed_ref: ScheduleLike = 100.0, load: ScheduleLike = None,
+                 force_ref: ScheduleLike = None, t_end: float = 1.0, seed: int = 0,
+                 noise: float = 1.0, record_decimation: int = 1,
+                 x0_m: float | str = 0.0, settle_s: float = 0.15,
+                 speed_unit: str = "rpm", load_unit: str = "Nm",
+                 plant: dict[str, Any] | None = None, fw: dict[str, float] | None = None,
+                 channels: Sequence[str] | None = None) -> Result:
+    """Run one closed-loop scenario and return time series and metrics.
+
+    Schedules are a constant, a list of ``(t_s, value)`` breakpoints
+    (piecewise constant) or ``{"t_s": [...], "value": [...], "ramp": True}``.
+
+    Parameters
+    ----------
+    speed_ref : schedule in ``speed_unit`` ("rpm" rotary-equivalent, "mps",
+        "radps_e"). Ignored when ``force_ref`` is given (force mode).
+    load : external load schedule in ``load_unit`` ("Nm" rotary-equivalent, "N");
+        positive opposes positive motion.
+    force_ref : thrust schedule in N (force mode, the firmware converts to i_q).
+    x0_m : initial true position in m, or "random" (uniform over one electrical
+        period 2 tau, drawn from ``seed``).
+    """
+    mot = motor if isinstance(motor, Motor) else load_motor(motor)
+    if x0_m == "random":
+        x0 = float(np.random.default_rng([int(seed), 0x5EED]).uniform(0.0, 2.0 * mot.tau_m))
+    else:
+        x0 = float(x0_m)
+    ex_name = {v: k for k, v in {"pseudo": 0, "sogi": 1, "sogi_adaptive": 2}.items()}[
+        extractor_id(extractor)]
+    sim = Sim(mot, extractor=extractor, seed=seed, noise=noise, x0_m=x0, plant=plant, fw=fw)
+    try:
+        sp_scale = {"rpm": mot.rpm_to_radps_e(1.0), "mps": mot.mps_to_radps_e(1.0),
+                    "radps_e": 1.0}[speed_unit]
+        ld_scale = {"Nm": 1.0 / mot.radius_m, "N": 1.0}[load_unit]
+        if force_ref is not None:
+            sim.set_schedule(SIM_REF_FORCE, force_ref)
+            mode = "force"
+        else:
+            sim.set_schedule(SIM_REF_SPEED, speed_ref, sp_scale)
+            mode = "speed"
+        sim.set_schedule(SIM_REF_LOAD, load, ld_scale)
+        status = sim.enable(mode)
+        n = int(round(t_end / sim.dt_s))
+        need = {"t_s", "theta_e_rad", "theta_hat_rad", "omega_hat_radps", "omega_f_radps",
+                "omega_e_radps", "fault_code", "start_phase"}
+        ch = None if channels is None else sorted(set(channels) | need)
+        data = sim.advance(n, record_decimation, ch)
+        fault = int(sim.firmware.fault_code())
+        info = {"statusword_after_enable": status, "x0_m": x0, "dt_s": sim.dt_s,
+                "n_steps": n, "snapshot": sim.snapshot(), "mode": mode,
+                "fw_init_status": sim.firmware.init_status}
+        # No fake tracking: a run in which the drive refused or faulted, or
+        # never reached closed loop, has no accuracy figures.
+        fc = data["fault_code"]
+        reason = None
+        if fault or (fc.size and np.any(fc != 0)):
+            reason = f"fault 0x{(fault or int(fc[fc != 0][0])):04X}"
+        elif "start_phase" in data and not np.any(data["start_phase"] == 3):
+            reason = "never reached closed loop (start_phase RUN)"
+        if reason is None:
+            metrics = compute_metrics(data, mot, settle_s)
+        else:
+            metrics = {k: float("nan") for k in METRIC_NAMES}
+        info["invalid_reason"] = reason
+        return Result(data=data, metrics=metrics, motor=mot, extractor=ex_name, seed=seed,
+                      settle_s=settle_s, fault_code=fault, info=info)
+    finally:
+        sim.close()
+
+
+# ---- the paper's scenarios (method.md section 2) -----------------------------
+
+PAPER_SCENARIOS = ("load_step", "speed_reversal", "startup")
+
+
+def paper_scenario(name: str, extractor: int | str = "sogi_adaptive",
+                   motor: str | Path | Motor = "paper_salient", seed: int = 0,
+                   **kw: Any) -> Result:
+    """load_step: 100 r/min, 2 N m at 0.5 s; speed_reversal: 100 -> -100 r/min at
+    0.5 s; startup: 100 r/min from a random initial position (from ``seed``)."""
+    if name == "load_step":
+        args = dict(speed_ref=100.0, load=[(0.0, 0.0), (0.5, 2.0)], t_end=1.0)
+    elif name == "speed_reversal":
+        args = dict(speed_ref=[(0.0, 100.0), (0.5, -100.0)], t_end=1.0)
+    elif name == "startup":
+        args = dict(speed_ref=100.0, t_end=0.5, x0_m="random")
+    else:
+        raise ValueError(f"unknown scenario '{name}'; choose from {PAPER_SCENARIOS}")
+    args.update(kw)
+    return run_scenario(motor=motor, extractor=extractor, seed=seed, **args)

@@ -1,0 +1,223 @@
+/**
+ * @file pmlsm_sim.h
+ * @brief Simulated PMLSM drive: float64 plant (dq model with d-axis
+ *        saturation, stick-slip friction, cogging, average inverter with
+ *        one-sample update delay, 12-bit current ADC) and a batch closed
+ *        loop that runs any controller with the fw_step() signature.
+ *
+ * Truth (position, speed, thrust, true currents) stays inside sim_t and
+ * flows only into the recording. The controller receives nothing but the
+ * ADC-sampled phase currents and the sampled DC-link voltage.
+ *
+ * Units: SI, linear mechanics (m, m/s, N, kg). Angles and speeds electrical
+ * unless named otherwise: theta_e = pi x / tau.
+ */
+#ifndef PMLSM_SIM_H
+#define PMLSM_SIM_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "pmlsm/fw_ctrl.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define SIM_VERSION_U32 0x00000100u
+
+/** Plant parameters, linear units (rotary sets are converted by the loader). */
+typedef struct {
+  /* electrical */
+  double R_ohm;      /**< phase resistance */
+  double L_d0_H;     /**< unsaturated d-axis incremental inductance */
+  double L_q_H;      /**< q-axis inductance (linear) */
+  double psi_f_Wb;   /**< PM flux linkage */
+  double dL_sat_H;   /**< d-axis saturation depth: L_dd = L_d0 - dL tanh(i_d/I_sat) */
+  double I_sat_A;    /**< d-axis saturation current scale (> 0) */
+  /* mechanical */
+  double tau_m;         /**< pole pitch; theta_e = pi x / tau */
+  double mass_kg;       /**< mover (+ load) mass */
+  double b_visc_Ns_per_m; /**< viscous friction */
+  double F_coulomb_N;   /**< kinetic (Coulomb) friction magnitude */
+  double F_static_N;    /**< break-away (static) friction, >= F_coulomb_N */
+  double v_stick_mps;   /**< |v| below this at a sign change -> stick */
+  double cog_amp_N;     /**< cogging amplitude */
+  double cog_period_m;  /**< cogging period in position */
+  double cog_phase_rad; /**< cogging phase */
+  int32_t locked;       /**< 1: mover clamped (x, v frozen), for RL tests */
+  /* inverter */
+  double u_dc_V;        /**< DC-link voltage (constant) */
+  double f_pwm_Hz;      /**< PWM = sampling = control rate */
+  double dead_time_s;   /**< 0: ideal; else pole-voltage error -sgn(i) u_dc t_d f_pwm */
+  double dead_band_A;   /**< current band over which the dead-time sign is linearised */
+  uint32_t n_sub;       /**< RK4 sub-steps per PWM period (>= 1) */
+  /* sensing */
+  uint32_t adc_bits;         /**< current ADC resolution, e.g. 12 */
+  double adc_i_fullscale_A;  /**< current ADC range +-fullscale */
+  double adc_noise_counts;   /**< Gaussian noise std per current sample (counts) */
+  double adc_offset_counts[3]; /**< per-phase offset error (counts, hidden from the controller) */
+  double adc_gain_err[3];    /**< per-phase relative gain error (0 = ideal) */
+  double udc_fullscale_V;    /**< DC-link ADC full scale (same resolution) */
+  double udc_noise_V;        /**< Gaussian noise std on the DC-link measurement */
+  uint64_t seed;             /**< RNG seed (xoshiro256** via splitmix64) */
+} sim_plant_params_t;
+
+/** Plant state (truth). */
+typedef struct {
+  double i_d_A, i_q_A; /**< currents in the true rotor frame */
+  double x_m;          /**< position (unwrapped), theta_e = pi x / tau */
+  double v_mps;        /**< velocity */
+  int32_t stuck;       /**< 1: static friction holds the mover */
+  int32_t pad_;
+} sim_plant_state_t;
+
+/** Schedule kinds, also the argument of sim_controller_t.set_ref. */
+typedef enum {
+  SIM_REF_SPEED = 0, /**< speed reference, electrical rad/s */
+  SIM_REF_FORCE = 1, /**< thrust reference, N (controller converts to i_q) */
+  SIM_REF_LOAD = 2,  /**< external load force on the plant, N (opposes +x) */
+  SIM_REF_COUNT = 3
+} sim_ref_kind_t;
+
+/** Breakpoint schedule: value(t) = v[i] for t in [t[i], t[i+1]) (step) or linear (ramp). */
+typedef struct {
+  const double *t_s;   /**< ascending breakpoint times (NULL/n=0: unused) */
+  const double *value; /**< values at the breakpoints */
+  uint32_t n;
+  uint32_t ramp; /**< 0: piecewise constant, 1: linear between breakpoints */
+} sim_sched_t;
+
+/**
+ * Controller port. step() receives physical units after quantisation;
+ * step_adc (optional, used instead of step when non-NULL and use_adc_counts
+ * is set in sim_t) receives the raw counts. set_ref may be NULL.
+ */
+typedef struct {
+  void *ctx;
+  void (*step)(void *ctx, const fw_inputs_t *in, fw_outputs_t *out);
+  void (*step_adc)(void *ctx, const fw_adc_inputs_t *in, fw_outputs_t *out);
+  void (*snapshot)(const void *ctx, fw_snapshot_t *snap);
+  void (*set_ref)(void *ctx, sim_ref_kind_t kind, double value);
+} sim_controller_t;
+
+/**
+ * Recording buffers, one entry per recorded period (every `decimation`
+ * periods). Any pointer may be NULL (= not recorded). Vectors are
+ * interleaved (n x 2 or n x 3, C order).
+ */
+typedef struct {
+  double *t_s;
+  /* truth */
+  double *theta_e_rad;  /**< true electrical angle, unwrapped */
+  double *omega_e_radps;/**< true electrical speed */
+  double *x_m;
+  double *v_mps;
+  double *force_N;      /**< electromagnetic thrust */
+  double *load_N;       /**< external load force */
+  double *i_d_A;        /**< true frame currents */
+  double *i_q_A;
+  /* what the controller saw */
+  double *i_abc_meas_A; /**< n x 3, phase currents handed to the controller */
+  double *u_dc_meas_V;
+  /* controller snapshot */
+  double *theta_hat_rad;
+  double *omega_hat_radps; /**< PLL speed (integrator) */
+  double *omega_f_radps;   /**< filtered speed estimate used by the speed loop */
+  double *pll_err_rad;
+  double *hf_amp_A;
+  double *sogi_k_eff;
+  double *i_dq_hat_A;   /**< n x 2, fundamental current, estimated frame */
+  double *duty_abc;     /**< n x 3 */
+  double *speed_ref_radps_e;
+  uint8_t *cia402_state;
+  uint8_t *start_phase;
+  uint16_t *fault_code;
+  uint32_t capacity;    /**< entries available in every non-NULL buffer */
+  uint32_t pad_;
+} sim_record_t;
+
+/** Opaque simulation. */
+typedef struct sim_s sim_t;
+
+/* ---- life cycle ------------------------------------------------------- */
+
+/** Validate parameters; returns 0 or a negative index naming the bad field. */
+int sim_params_check(const sim_plant_params_t *p, const char **bad_field);
+/** Create (malloc) a simulation; NULL on bad params. Initial state zero. */
+sim_t *sim_new(const sim_plant_params_t *p);
+void sim_free(sim_t *s);
+/** Attach a controller (copied). */
+void sim_set_controller(sim_t *s, const sim_controller_t *c);
+/** Feed raw counts to step_adc instead of physical units to step (0/1). */
+void sim_set_use_adc_counts(sim_t *s, int on);
+/** Set the schedule of one kind (arrays are copied). Returns 0 or -1. */
+int sim_set_schedule(sim_t *s, sim_ref_kind_t kind, const double *t_s,
+                     const double *value, uint32_t n, uint32_t ramp);
+/** Overwrite the plant state (e.g. random initial position). */
+void sim_set_state(sim_t *s, const sim_plant_state_t *st);
+void sim_get_state(const sim_t *s, sim_plant_state_t *st);
+/** Duties latched for the current period (initial: 0.5, PWM off). */
+void sim_set_latched_duty(sim_t *s, const double duty_abc[3], int pwm_enable);
+double sim_time_s(const sim_t *s);
+uint64_t sim_step_count(const sim_t *s);
+/** Current value of a schedule at the present time. */
+double sim_sched_value(const sim_t *s, sim_ref_kind_t kind);
+
+/* ---- stepping --------------------------------------------------------- */
+
+/**
+ * Run n_steps control periods: sample -> controller -> integrate one
+ * period with the duties returned one period earlier. Records every
+ * `decimation`-th period (counted from the start of the simulation, so
+ * chunks join seamlessly). Returns the number of entries written to rec
+ * (never more than rec->capacity), or -1 on bad arguments.
+ */
+int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation,
+                sim_record_t *rec);
+
+/* ---- plant alone (for tests and bring-your-own-controller) ------------ */
+
+/** Integrate the plant for dt_s with fixed duties (n_sub RK4 steps), no sampling. */
+void sim_plant_advance(sim_t *s, const double duty_abc[3], int pwm_enable,
+                       double dt_s, uint32_t n_sub);
+/** Sample the ADC now (advances the RNG). */
+void sim_sample(sim_t *s, fw_inputs_t *in, fw_adc_inputs_t *adc);
+/** Truth: electromagnetic thrust at the present state. */
+double sim_force_N(const sim_t *s);
+
+/* ---- controllers ------------------------------------------------------ */
+
+/** Fixed-duty controller (test equipment: RL step, free acceleration). */
+typedef struct {
+  float duty_abc[3];
+  uint8_t pwm_enable;
+  uint32_t calls;
+} sim_ctrl_const_t;
+void sim_ctrl_const_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out);
+void sim_ctrl_const_snapshot(const void *ctx, fw_snapshot_t *snap);
+/** Fill a sim_controller_t for a sim_ctrl_const_t. */
+void sim_ctrl_const_port(sim_ctrl_const_t *c, sim_controller_t *port);
+
+/** fw_ctrl_t adapters (the firmware core, same sources). */
+void sim_fw_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out);
+void sim_fw_step_adc(void *ctx, const fw_adc_inputs_t *in, fw_outputs_t *out);
+void sim_fw_snapshot(const void *ctx, fw_snapshot_t *snap);
+void sim_fw_set_ref(void *ctx, sim_ref_kind_t kind, double value);
+/** Fill a sim_controller_t for an fw_ctrl_t. */
+void sim_fw_port(fw_ctrl_t *ctrl, sim_controller_t *port);
+/** Heap fw_ctrl_t (zeroed) for bindings; free with sim_fw_free. */
+fw_ctrl_t *sim_fw_new(void);
+void sim_fw_free(fw_ctrl_t *ctrl);
+
+/* ---- layout checks for bindings -------------------------------------- */
+
+/** sizeof of a named struct ("fw_config_t", "sim_plant_params_t", ...); 0 if unknown. */
+size_t sim_layout_sizeof(const char *type_name);
+/** offsetof of a named field; -1 if unknown. */
+int64_t sim_layout_offsetof(const char *type_name, const char *field);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* PMLSM_SIM_H */

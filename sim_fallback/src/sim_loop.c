@@ -1,0 +1,315 @@
+/*
+ * Batch closed loop: ADC sampling -> controller step (function pointer)
+ * -> plant integration over one PWM period with the duties latched one
+ * period earlier. Schedules and recording are handled here so a whole
+ * scenario runs in one C call.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "sim_internal.h"
+
+/* ---- parameters -------------------------------------------------------- */
+
+#define CHECK(cond, name)                                                      \
+  do {                                                                         \
+    if (!(cond)) {                                                             \
+      if (bad_field) *bad_field = name;                                        \
+      return -(++idx);                                                         \
+    }                                                                          \
+    ++idx;                                                                     \
+  } while (0)
+
+#define POS(f) CHECK(isfinite(p->f) && p->f > 0.0, #f)
+#define NONNEG(f) CHECK(isfinite(p->f) && p->f >= 0.0, #f)
+
+int sim_params_check(const sim_plant_params_t *p, const char **bad_field) {
+  int idx = 0;
+  if (bad_field) *bad_field = NULL;
+  if (!p) return -1;
+  POS(R_ohm);
+  POS(L_d0_H);
+  POS(L_q_H);
+  NONNEG(psi_f_Wb);
+  NONNEG(dL_sat_H);
+  CHECK(p->dL_sat_H < p->L_d0_H, "dL_sat_H");
+  POS(I_sat_A);
+  POS(tau_m);
+  POS(mass_kg);
+  NONNEG(b_visc_Ns_per_m);
+  NONNEG(F_coulomb_N);
+  CHECK(isfinite(p->F_static_N) && p->F_static_N >= p->F_coulomb_N, "F_static_N");
+  NONNEG(v_stick_mps);
+  NONNEG(cog_amp_N);
+  POS(cog_period_m);
+  CHECK(isfinite(p->cog_phase_rad), "cog_phase_rad");
+  POS(u_dc_V);
+  POS(f_pwm_Hz);
+  NONNEG(dead_time_s);
+  CHECK(p->dead_time_s * p->f_pwm_Hz < 0.2, "dead_time_s");
+  NONNEG(dead_band_A);
+  CHECK(p->n_sub >= 1u && p->n_sub <= 1024u, "n_sub");
+  CHECK(p->adc_bits >= 8u && p->adc_bits <= 16u, "adc_bits");
+  POS(adc_i_fullscale_A);
+  NONNEG(adc_noise_counts);
+  for (int j = 0; j < 3; ++j) {
+    CHECK(isfinite(p->adc_offset_counts[j]), "adc_offset_counts");
+    CHECK(isfinite(p->adc_gain_err[j]) && fabs(p->adc_gain_err[j]) < 0.5, "adc_gain_err");
+  }
+  CHECK(isfinite(p->udc_fullscale_V) && p->udc_fullscale_V > p->u_dc_V, "udc_fullscale_V");
+  NONNEG(udc_noise_V);
+  return 0;
+}
+
+/* ---- life cycle -------------------------------------------------------- */
+
+sim_t *sim_new(const sim_plant_params_t *p) {
+  if (sim_params_check(p, NULL) != 0) return NULL;
+  sim_t *s = (sim_t *)calloc(1, sizeof(sim_t));
+  if (!s) return NULL;
+  s->p = *p;
+  sim_plant_derive(s);
+  sim_rng_seed(s, p->seed);
+  s->duty[0] = s->duty[1] = s->duty[2] = 0.5;
+  for (int k = 0; k < SIM_REF_COUNT; ++k) s->sched[k].last_sent = NAN;
+  return s;
+}
+
+void sim_free(sim_t *s) {
+  if (!s) return;
+  for (int k = 0; k < SIM_REF_COUNT; ++k) {
+    free(s->sched[k].t_s);
+    free(s->sched[k].value);
+  }
+  free(s);
+}
+
+void sim_set_controller(sim_t *s, const sim_controller_t *c) {
+  if (s && c) s->ctrl = *c;
+}
+
+void sim_set_use_adc_counts(sim_t *s, int on) {
+  if (s) s->use_adc = on ? 1 : 0;
+}
+
+int sim_set_schedule(sim_t *s, sim_ref_kind_t kind, const double *t_s,
+                     const double *value, uint32_t n, uint32_t ramp) {
+  if (!s || (unsigned)kind >= (unsigned)SIM_REF_COUNT) return -1;
+  if (n > 0u && (!t_s || !value)) return -1;
+  for (uint32_t i = 0; i < n; ++i) {
+    if (!isfinite(t_s[i]) || !isfinite(value[i])) return -1;
+    if (i > 0u && t_s[i] < t_s[i - 1u]) return -1;
+  }
+  sim_sched_store_t *sc = &s->sched[kind];
+  free(sc->t_s);
+  free(sc->value);
+  sc->t_s = sc->value = NULL;
+  sc->n = 0u;
+  sc->cursor = 0u;
+  sc->ramp = ramp ? 1u : 0u;
+  sc->last_sent = NAN;
+  if (n == 0u) return 0;
+  sc->t_s = (double *)malloc(n * sizeof(double));
+  sc->value = (double *)malloc(n * sizeof(double));
+  if (!sc->t_s || !sc->value) return -1;
+  memcpy(sc->t_s, t_s, n * sizeof(double));
+  memcpy(sc->value, value, n * sizeof(double));
+  sc->n = n;
+  return 0;
+}
+
+void sim_set_state(sim_t *s, const sim_plant_state_t *st) {
+  if (!s || !st) return;
+  s->st = *st;
+  s->basis_valid = 0; /* expansion point of sim_plant.c must be recomputed */
+}
+void sim_get_state(const sim_t *s, sim_plant_state_t *st) {
+  if (s && st) *st = s->st;
+}
+void sim_set_latched_duty(sim_t *s, const double duty_abc[3], int pwm_enable) {
+  if (!s || !duty_abc) return;
+  for (int j = 0; j < 3; ++j) s->duty[j] = duty_abc[j];
+  s->pwm_on = pwm_enable ? 1 : 0;
+}
+double sim_time_s(const sim_t *s) { return s ? s->t_s : 0.0; }
+uint64_t sim_step_count(const sim_t *s) { return s ? s->k : 0u; }
+
+/** Schedule value at time t (NaN when the schedule is empty). */
+static double sched_eval(sim_sched_store_t *sc, double t) {
+  if (sc->n == 0u) return NAN;
+  if (t < sc->t_s[0]) return sc->value[0];
+  /* cursor only moves forward; time is monotonic */
+  while (sc->cursor + 1u < sc->n && sc->t_s[sc->cursor + 1u] <= t) ++sc->cursor;
+  const uint32_t i = sc->cursor;
+  if (!sc->ramp || i + 1u >= sc->n) return sc->value[i];
+  const double t0 = sc->t_s[i], t1 = sc->t_s[i + 1u];
+  if (t1 <= t0) return sc->value[i + 1u];
+  const double a = (t - t0) / (t1 - t0);
+  return sc->value[i] + a * (sc->value[i + 1u] - sc->value[i]);
+}
+
+double sim_sched_value(const sim_t *s, sim_ref_kind_t kind) {
+  if (!s || (unsigned)kind >= (unsigned)SIM_REF_COUNT) return NAN;
+  sim_sched_store_t tmp = s->sched[kind];
+  tmp.cursor = 0u;
+  return sched_eval(&tmp, s->t_s);
+}
+
+/* ---- sensing ----------------------------------------------------------- */
+
+static inline double clampd(double x, double lo, double hi) {
+  return x < lo ? lo : (x > hi ? hi : x);
+}
+
+void sim_sample(sim_t *s, fw_inputs_t *in, fw_adc_inputs_t *adc) {
+  const sim_plant_params_t *p = &s->p;
+  double c, sn;
+  sim_plant_sincos(s, s->st.x_m, &c, &sn);
+  const double i_al = c * s->st.i_d_A - sn * s->st.i_q_A;
+  const double i_be = sn * s->st.i_d_A + c * s->st.i_q_A;
+  const double i_abc[3] = {i_al, -0.5 * i_al + 0.5 * SIM_SQRT3 * i_be,
+                           -0.5 * i_al - 0.5 * SIM_SQRT3 * i_be};
+  for (int j = 0; j < 3; ++j) {
+    double cnt = s->adc_mid + p->adc_offset_counts[j] +
+                 i_abc[j] * (1.0 + p->adc_gain_err[j]) / s->adc_lsb_A;
+    if (p->adc_noise_counts > 0.0) cnt += p->adc_noise_counts * sim_rng_gauss(s);
+    cnt = clampd(nearbyint(cnt), 0.0, s->adc_max);
+    if (adc) adc->i_abc_counts[j] = (uint16_t)cnt;
+    /* what the drive computes with its nominal scaling */
+    if (in) in->i_abc_A[j] = (float)((cnt - s->adc_mid) * s->adc_lsb_A);
+  }
+  double u = p->u_dc_V;
+  if (p->udc_noise_V > 0.0) u += p->udc_noise_V * sim_rng_gauss(s);
+  const double ucnt = clampd(nearbyint(u / s->udc_lsb_V), 0.0, s->adc_max);
+  if (adc) adc->u_dc_counts = (uint16_t)ucnt;
+  if (in) in->u_dc_V = (float)(ucnt * s->udc_lsb_V);
+}
+
+double sim_force_N(const sim_t *s) { return s ? sim_plant_force(s, &s->st) : (double)NAN; }
+
+void sim_plant_advance(sim_t *s, const double duty_abc[3], int pwm_enable, double dt_s,
+                       uint32_t n_sub) {
+  if (!s || !duty_abc || !(dt_s > 0.0)) return;
+  sim_plant_period(s, duty_abc, pwm_enable, dt_s, n_sub);
+  s->t_s += dt_s;
+}
+
+/* ---- batch loop -------------------------------------------------------- */
+
+static inline double sanitize_duty(float d) {
+  const double x = (double)d;
+  if (!isfinite(x)) return 0.5;
+  return clampd(x, 0.0, 1.0);
+}
+
+int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *rec) {
+  if (!s || !s->ctrl.step || decimation == 0u) return -1;
+  const uint32_t cap = rec ? rec->capacity : 0u;
+  const int want_snap =
+      rec && (rec->theta_hat_rad || rec->omega_hat_radps || rec->omega_f_radps || rec->pll_err_rad ||
+              rec->hf_amp_A || rec->sogi_k_eff || rec->i_dq_hat_A || rec->speed_ref_radps_e ||
+              rec->cia402_state || rec->start_phase || rec->fault_code);
+  uint32_t n_rec = 0u;
+  fw_inputs_t in;
+  fw_adc_inputs_t adc;
+  fw_outputs_t out;
+  fw_snapshot_t snap;
+  memset(&snap, 0, sizeof snap);
+  const int adc_mode = s->use_adc && s->ctrl.step_adc;
+
+  for (uint64_t n = 0; n < n_steps; ++n) {
+    /* 1. references for this period */
+    for (int kd = 0; kd < SIM_REF_COUNT; ++kd) {
+      sim_sched_store_t *sc = &s->sched[kd];
+      if (sc->n == 0u) continue;
+      const double v = sched_eval(sc, s->t_s);
+      if (kd == SIM_REF_LOAD) {
+        s->F_load_N = v;
+      } else if (v != sc->last_sent && s->ctrl.set_ref) {
+        s->ctrl.set_ref(s->ctrl.ctx, (sim_ref_kind_t)kd, v);
+        sc->last_sent = v;
+      }
+    }
+    /* 2. sample, 3. controller */
+    sim_sample(s, &in, &adc);
+    memset(&out, 0, sizeof out);
+    if (adc_mode)
+      s->ctrl.step_adc(s->ctrl.ctx, &adc, &out);
+    else
+      s->ctrl.step(s->ctrl.ctx, &in, &out);
+
+    /* 4. record (truth at t_k, controller view at t_k) */
+    if (rec && (s->k % decimation) == 0u && n_rec < cap) {
+      const uint32_t r = n_rec++;
+      if (want_snap && s->ctrl.snapshot) s->ctrl.snapshot(s->ctrl.ctx, &snap);
+      const double th = s->k_theta * s->st.x_m;
+      if (rec->t_s) rec->t_s[r] = s->t_s;
+      if (rec->theta_e_rad) rec->theta_e_rad[r] = th;
+      if (rec->omega_e_radps) rec->omega_e_radps[r] = s->k_theta * s->st.v_mps;
+      if (rec->x_m) rec->x_m[r] = s->st.x_m;
+      if (rec->v_mps) rec->v_mps[r] = s->st.v_mps;
+      if (rec->force_N) rec->force_N[r] = sim_plant_force(s, &s->st);
+      if (rec->load_N) rec->load_N[r] = s->F_load_N;
+      if (rec->i_d_A) rec->i_d_A[r] = s->st.i_d_A;
+      if (rec->i_q_A) rec->i_q_A[r] = s->st.i_q_A;
+      if (rec->i_abc_meas_A)
+        for (int j = 0; j < 3; ++j)
+          rec->i_abc_meas_A[3u * r + (uint32_t)j] =
+              adc_mode ? ((double)adc.i_abc_counts[j] - s->adc_mid) * s->adc_lsb_A
+                       : (double)in.i_abc_A[j];
+      if (rec->u_dc_meas_V)
+        rec->u_dc_meas_V[r] = adc_mode ? (double)adc.u_dc_counts * s->udc_lsb_V : (double)in.u_dc_V;
+      if (rec->theta_hat_rad) rec->theta_hat_rad[r] = (double)snap.theta_hat_rad;
+      if (rec->omega_hat_radps) rec->omega_hat_radps[r] = (double)snap.omega_hat_radps;
+      if (rec->omega_f_radps) rec->omega_f_radps[r] = (double)snap.omega_f_radps;
+      if (rec->pll_err_rad) rec->pll_err_rad[r] = (double)snap.pll_err_rad;
+      if (rec->hf_amp_A) rec->hf_amp_A[r] = (double)snap.hf_amp_A;
+      if (rec->sogi_k_eff) rec->sogi_k_eff[r] = (double)snap.sogi_k_eff;
+      if (rec->i_dq_hat_A) {
+        rec->i_dq_hat_A[2u * r] = (double)snap.i_dq_A[0];
+        rec->i_dq_hat_A[2u * r + 1u] = (double)snap.i_dq_A[1];
+      }
+      if (rec->speed_ref_radps_e) rec->speed_ref_radps_e[r] = (double)snap.speed_ref_radps_e;
+      if (rec->duty_abc)
+        for (int j = 0; j < 3; ++j)
+          rec->duty_abc[3u * r + (uint32_t)j] = out.pwm_enable ? (double)out.duty_abc[j] : (double)NAN;
+      if (rec->cia402_state) rec->cia402_state[r] = snap.cia402_state;
+      if (rec->start_phase) rec->start_phase[r] = snap.start_phase;
+      if (rec->fault_code) rec->fault_code[r] = snap.fault_code;
+    }
+
+    /* 5. plant over [t_k, t_k+1) with the duties from step k-1 */
+    sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
+    /* 6. latch the new duties for the next period */
+    s->pwm_on = out.pwm_enable ? 1 : 0;
+    for (int j = 0; j < 3; ++j) s->duty[j] = sanitize_duty(out.duty_abc[j]);
+    s->k++;
+    s->t_s = (double)s->k * s->dt_s;
+  }
+  return (int64_t)n_rec;
+}
+
+/* ---- fixed-duty controller (test equipment) --------------------------- */
+
+void sim_ctrl_const_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
+  sim_ctrl_const_t *c = (sim_ctrl_const_t *)ctx;
+  (void)in;
+  for (int j = 0; j < 3; ++j) out->duty_abc[j] = c->duty_abc[j];
+  out->pwm_enable = c->pwm_enable;
+  c->calls++;
+}
+
+void sim_ctrl_const_snapshot(const void *ctx, fw_snapshot_t *snap) {
+  const sim_ctrl_const_t *c = (const sim_ctrl_const_t *)ctx;
+  memset(snap, 0, sizeof *snap);
+  snap->step_count = c->calls;
+  for (int j = 0; j < 3; ++j) snap->duty_abc[j] = c->duty_abc[j];
+}
+
+void sim_ctrl_const_port(sim_ctrl_const_t *c, sim_controller_t *port) {
+  memset(port, 0, sizeof *port);
+  port->ctx = c;
+  port->step = sim_ctrl_const_step;
+  port->snapshot = sim_ctrl_const_snapshot;
+}

@@ -1,0 +1,125 @@
+"""Closed loop: refusal of the non-salient machine, chunking, determinism, the
+paper's scenarios for all extractors, and the accuracy targets of issue 3 item 7.
+
+The accuracy tests use the issue's tolerances (not tuned to a seed); their
+measured values are printed (pytest -s) for the reports.
+"""
+
+import numpy as np
+import pytest
+
+from sim_fallback import (
+    METRIC_NAMES,
+    PAPER_SCENARIOS,
+    SIM_REF_SPEED,
+    Sim,
+    paper_scenario,
+    run_scenario,
+    wrap_pi,
+)
+
+EXTRACTORS = ("pseudo", "sogi", "sogi_adaptive")
+
+
+def test_paper_table1_refuses_no_fake_tracking():
+    r = paper_scenario("load_step", motor="paper_table1")
+    assert r.fault_code == 0xFF03  # FW_FAULT_SALIENCY_TOO_LOW
+    assert not r.valid and all(np.isnan(r.metrics[k]) for k in METRIC_NAMES)
+    assert np.all(np.isnan(r.duty_abc))          # PWM never enabled
+    assert np.all(r.i_d_A == 0) and np.all(r.i_q_A == 0)
+    assert np.all(r.start_phase != 3)            # never claimed closed loop
+
+
+def test_metric_names_exact():
+    r = run_scenario(t_end=0.3)
+    assert tuple(r.metrics) == METRIC_NAMES
+    assert r.valid
+
+
+def test_chunked_advance_equals_one_call():
+    def make():
+        s = Sim("paper_salient", seed=5)
+        s.set_schedule(SIM_REF_SPEED, 40.0)
+        s.enable()
+        return s
+
+    a = make().advance(4800, decimation=3)
+    s = make()
+    parts = [s.advance(n, decimation=3) for n in (1000, 7, 1393, 2400)]
+    for k, v in a.items():
+        np.testing.assert_array_equal(np.concatenate([p[k] for p in parts]), v, err_msg=k)
+
+
+def test_seed_reproducible():
+    a = run_scenario(t_end=0.2, seed=11)
+    b = run_scenario(t_end=0.2, seed=11)
+    c = run_scenario(t_end=0.2, seed=12)
+    assert np.array_equal(a.theta_hat_rad, b.theta_hat_rad)
+    assert not np.array_equal(a.theta_hat_rad, c.theta_hat_rad)
+
+
+def test_force_mode_runs():
+    r = run_scenario(force_ref=[(0.0, 0.0), (0.2, 100.0)], t_end=0.4)
+    assert r.fault_code == 0 and r.info["mode"] == "force"
+    assert r.v_mps[-1] > 0.0  # 100 N > 49 N static friction: it moves forward
+
+
+@pytest.mark.parametrize("scenario", PAPER_SCENARIOS)
+@pytest.mark.parametrize("extractor", EXTRACTORS)
+def test_paper_scenarios_run(scenario, extractor):
+    r = paper_scenario(scenario, extractor, seed=1)
+    print(f"\n{scenario:15s} {extractor:14s} " +
+          " ".join(f"{k}={v:.4g}" for k, v in r.metrics.items()))
+    assert r.valid, r.info["invalid_reason"]
+    # loose sanity bound (locked on the right angle); the targets are below
+    assert r.metrics["position_error_rms_rad"] < 0.2
+
+
+# ---- issue 3 item 7 accuracy targets --------------------------------------------
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_target_adaptive_sogi_accuracy(seed):
+    """paper_salient, 12-bit ADC, default noise, 100 r/min, after 0.15 s:
+    position error <= 0.01 rad el. RMS, speed error within +-1 r/min."""
+    r = run_scenario("paper_salient", "sogi_adaptive", speed_ref=100.0, t_end=1.0,
+                     seed=seed, x0_m="random")
+    m = r.metrics
+    print(f"\nseed {seed}: rms {m['position_error_rms_rad']:.4f} rad, "
+          f"speed err max {m['speed_error_max_rpm']:.2f} r/min")
+    assert r.valid
+    assert m["position_error_rms_rad"] <= 0.01
+    assert m["speed_error_max_rpm"] <= 1.0
+
+
+def test_target_startup_16_random_positions_converge_not_pi_shifted():
+    """From 16 random initial positions the estimate converges to the true angle
+    (never theta + pi) within 0.2 s."""
+    bad = []
+    for seed in range(16):
+        r = paper_scenario("startup", "sogi_adaptive", seed=seed, t_end=0.4)
+        e = wrap_pi(r.theta_e_rad - r.theta_hat_rad)
+        late = r.t_s >= 0.2
+        pi_shift = np.mean(np.abs(e[late]) > np.pi / 2)
+        ts = r.metrics["settling_time_s"]
+        print(f"\nseed {seed:2d} x0 {r.info['x0_m'] * 1e3:6.2f} mm settle {ts:.3f} s "
+              f"pi-shifted fraction {pi_shift:.3f}")
+        if not r.valid or pi_shift > 0 or not ts <= 0.2:
+            bad.append((seed, ts, pi_shift, r.info["invalid_reason"]))
+    assert not bad, bad
+
+
+def test_ramp_schedule_applied_in_c():
+    r = run_scenario(speed_ref={"t_s": [0.0, 0.2, 0.4], "value": [0.0, 100.0, 100.0],
+                                "ramp": True}, t_end=0.4, record_decimation=24)
+    w100 = r.motor.rpm_to_radps_e(100.0)
+    expect = np.interp(r.t_s, [0.0, 0.2, 0.4], [0.0, w100, w100])
+    np.testing.assert_allclose(r.speed_ref_radps_e, expect, atol=1e-4 * w100)
+
+
+def test_iron_core_linear_closed_loop():
+    r = run_scenario("iron_core_linear", speed_ref=0.3, speed_unit="mps",
+                     load=[(0.0, 0.0), (0.5, 30.0)], load_unit="N", t_end=1.2, seed=2)
+    print("\niron_core_linear " + " ".join(f"{k}={v:.4g}" for k, v in r.metrics.items()))
+    assert r.valid, r.info["invalid_reason"]
+    assert r.metrics["position_error_rms_rad"] < 0.2
+    assert abs(np.mean(r.v_mps[r.t_s > 1.0]) - 0.3) < 0.05

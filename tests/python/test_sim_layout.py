@@ -1,0 +1,50 @@
+"""The ctypes mirrors in sim_fallback/_lib.py match the C layout exactly."""
+
+import ctypes as C
+
+import pytest
+
+from sim_fallback import _lib
+
+
+@pytest.mark.parametrize("type_name", sorted(_lib.MIRRORS))
+def test_mirror_matches_c_layout(type_name):
+    L = _lib.lib()
+    mirror = _lib.MIRRORS[type_name]
+    assert L.sim_layout_sizeof(type_name.encode()) == C.sizeof(mirror), "sizeof differs"
+    for name, _ in mirror._fields_:
+        off_c = L.sim_layout_offsetof(type_name.encode(), name.encode())
+        assert off_c >= 0, f"{type_name}.{name} unknown to C (mirror has an extra field)"
+        assert off_c == getattr(mirror, name).offset, f"{type_name}.{name} offset"
+
+
+def test_fw_config_field_table_matches_mirror():
+    """fw_config_field() (the firmware's own table) agrees with the mirror."""
+    L = _lib.lib()
+    n = L.fw_config_field_count()
+    names = {}
+    for i in range(n):
+        f = L.fw_config_field(i).contents
+        names[f.name.decode()] = (f.offset, f.is_u32)
+    mirror = {name: (getattr(_lib.FwConfig, name).offset, int(t is C.c_uint32))
+              for name, t in _lib.FwConfig._fields_}
+    assert names == mirror
+
+
+def test_fw_ctrl_sizeof_consistent():
+    L = _lib.lib()
+    assert L.fw_ctrl_sizeof() == L.sim_layout_sizeof(b"fw_ctrl_t") > 0
+
+
+def test_config_roundtrip_through_c():
+    """A config written from Python is what the firmware stores."""
+    from sim_fallback import Firmware, fw_config, load_motor
+
+    cfg = fw_config(load_motor("iron_core_linear"), "sogi", u_inj_V=25.0)
+    fw = Firmware(cfg)
+    assert fw.init_status == 0
+    L = _lib.lib()
+    L.fw_get_config.restype = C.POINTER(_lib.FwConfig)
+    L.fw_get_config.argtypes = [C.c_void_p]
+    stored = L.fw_get_config(fw.handle).contents
+    assert stored.as_dict() == cfg.as_dict()

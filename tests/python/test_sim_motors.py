@@ -1,0 +1,123 @@
+"""Motor files: loading, rotary -> linear conversion, validation errors, fw_config."""
+
+import math
+
+import pytest
+
+from sim_fallback import MotorFileError, _lib, fw_config, load_motor
+
+GOOD = """
+[motor]
+name = "t"
+parameterization = "linear"
+[electrical]
+R_ohm = 1.0
+L_d_H = 0.01
+L_q_H = 0.015
+psi_f_Wb = 0.1
+[mechanical]
+pole_pitch_m = 0.02
+mass_kg = 5.0
+"""
+
+
+@pytest.mark.parametrize("name", ["paper_table1", "paper_salient", "iron_core_linear"])
+def test_shipped_motors_load(name):
+    m = load_motor(name)
+    assert m.name == name
+    assert m.plant["L_d0_H"] > 0 and m.plant["mass_kg"] > 0
+
+
+def test_paper_table1_is_exactly_table1():
+    m = load_motor("paper_table1")
+    doc = m.raw
+    assert doc["electrical"] == {"R_ohm": 0.958, "L_d_H": 0.012, "L_q_H": 0.012,
+                                 "psi_f_Wb": 0.1827, "dL_sat_H": 0.0, "I_sat_A": 5.0}
+    mech = doc["mechanical"]
+    assert (mech["pole_pairs"], mech["inertia_kgm2"], mech["viscous_Nms_per_rad"],
+            mech["static_friction_Nm"]) == (4, 0.03, 0.008, 1.5)
+
+
+def test_rotary_conversion():
+    m = load_motor("paper_salient")
+    r = 4 * 0.024 / math.pi
+    assert m.radius_m == pytest.approx(r)
+    assert m.plant["mass_kg"] == pytest.approx(0.03 / r**2)          # 32.1 kg
+    assert m.plant["F_static_N"] == pytest.approx(1.5 / r)            # 49.1 N
+    assert m.plant["b_visc_Ns_per_m"] == pytest.approx(0.008 / r**2)
+    # thrust constant and torque constant agree through r
+    assert m.force_const_N_per_A * r == pytest.approx(1.5 * 4 * 0.1827)
+    assert m.plant["L_q_H"] == pytest.approx(1.5 * m.plant["L_d0_H"])
+    assert m.plant["dL_sat_H"] == pytest.approx(0.1 * m.plant["L_d0_H"])
+
+
+def test_iron_core_is_commercial_like():
+    m = load_motor("iron_core_linear")
+    assert 0.016 <= m.tau_m <= 0.032
+    assert 50 <= m.force_const_N_per_A <= 100
+    assert 1.2 <= m.plant["L_q_H"] / m.plant["L_d0_H"] <= 1.5
+    assert 0.005 <= m.plant["L_d0_H"] <= 0.015
+
+
+def _write(tmp_path, text, name="bad.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize("edit, field, needle", [
+    (("R_ohm = 1.0", "R_ohm = -1.0"), "electrical.R_ohm", "[0.001, 100.0]"),
+    (("L_d_H = 0.01", "L_d_H = 5.0"), "electrical.L_d_H", "[1e-05, 1.0]"),
+    (("mass_kg = 5.0", "mass_kg = 0.0"), "mechanical.mass_kg", "[0.001, 100000.0]"),
+    (("mass_kg = 5.0", 'mass_kg = "heavy"'), "mechanical.mass_kg", "not a finite number"),
+    (("psi_f_Wb = 0.1\n", ""), "electrical.psi_f_Wb", "missing"),
+    (("mass_kg = 5.0", ""), "mechanical.mass_kg", "missing"),
+    (("R_ohm = 1.0", "R_ohm = 1.0\nR_ohms = 2.0"), "electrical.R_ohms", "unknown field"),
+    (("mass_kg = 5.0", "mass_kg = 5.0\ninertia_kgm2 = 0.1"), "mechanical.inertia_kgm2",
+     "rotary field"),
+])
+def test_bad_file_names_file_field_range(tmp_path, edit, field, needle):
+    p = _write(tmp_path, GOOD.replace(*edit))
+    with pytest.raises(MotorFileError) as ei:
+        load_motor(p)
+    msg = str(ei.value)
+    assert str(p) in msg and f"'{field}'" in msg and needle in msg, msg
+
+
+def test_good_file_loads(tmp_path):
+    m = load_motor(_write(tmp_path, GOOD, "good.toml"))
+    assert m.plant["tau_m"] == 0.02
+
+
+def test_bad_toml_syntax(tmp_path):
+    p = _write(tmp_path, "[motor\nname=")
+    with pytest.raises(MotorFileError, match="not valid TOML"):
+        load_motor(p)
+
+
+def test_fw_config_paper_gains():
+    m = load_motor("paper_salient")
+    cfg = fw_config(m)
+    assert cfg.cur_kp_V_per_A == pytest.approx(0.012 * 1100, rel=1e-6)
+    assert cfg.cur_ki_V_per_As == pytest.approx(0.958 * 1100, rel=1e-6)
+    # 0.1 A/(r/min): 1 r/min = 2 pi p / 60 rad/s electrical
+    assert cfg.spd_kp_A_per_radps == pytest.approx(0.1 * 60 / (2 * math.pi * 4), rel=1e-6)
+    assert cfg.spd_ki_A_per_rad == pytest.approx(0.6 * 60 / (2 * math.pi * 4), rel=1e-6)
+    assert (cfg.pll_kp, cfg.pll_ki) == (pytest.approx(86.6), 5000.0)
+    assert cfg.adc_max_count == 4095
+    issue = _lib.FwConfigIssue()
+    assert _lib.lib().fw_config_check(cfg, issue) == 0
+
+
+def test_fw_config_table1_saliency_refused():
+    cfg = fw_config(load_motor("paper_table1"))
+    issue = _lib.FwConfigIssue()
+    assert _lib.lib().fw_config_check(cfg, issue) == 4  # FW_ERR_SALIENCY
+    assert issue.field == b"L_q_H"
+
+
+def test_fw_config_all_motors_valid_except_table1():
+    for name in ("paper_salient", "iron_core_linear"):
+        issue = _lib.FwConfigIssue()
+        assert _lib.lib().fw_config_check(fw_config(load_motor(name)), issue) == 0, (
+            name, issue.field)
