@@ -76,7 +76,7 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float, float, str, Any]] = {
     ("controller", "speed_bw_radps"): (False, 1.0, 1000.0, "rad/s", 35.0),
     ("controller", "i_max_A"): (False, 0.05, 400.0, "A", 20.0),
     ("controller", "i_trip_A"): (False, 0.1, 500.0, "A", 24.0),
-    ("controller", "u_inj_V"): (False, 0.0, 400.0, "V", 30.0),
+    ("controller", "u_inj_V"): (False, 0.0, 400.0, "V", 50.0),
     ("controller", "f_inj_Hz"): (False, 100.0, 20000.0, "Hz", 3000.0),
 }
 _TEXT_FIELDS = {("motor", "name"), ("motor", "description"), ("motor", "parameterization")}

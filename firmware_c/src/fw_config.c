@@ -87,7 +87,7 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->spd_kp_A_per_radps = 0.1f * 60.0f / (FW_TWO_PI_F32 * cfg->pole_pairs);
   cfg->spd_ki_A_per_rad = 0.6f * 60.0f / (FW_TWO_PI_F32 * cfg->pole_pairs);
   cfg->spd_filter_Hz = 100.0f;
-  cfg->u_inj_V = 30.0f;
+  cfg->u_inj_V = 50.0f; /* 17 % of a 300 V link; see docs/tuning.md */
   cfg->f_inj_Hz = 3000.0f;
   cfg->extractor = (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE;
   cfg->sogi_k = 0.5f;
