@@ -439,9 +439,9 @@ static void supervise_estimator(fw_ctrl_t *c) {
 /* ---- start-up: magnet polarity ------------------------------------------ */
 
 /**
- * Polarity test: per pair, +V for N samples and -V for N (positive current
- * excursion and return), N at zero, then -V / +V (negative excursion and
- * return), N at zero. With d-axis saturation the excursion along the magnet
+ * Polarity test: per pair, N samples at zero, +V for N and -V for N
+ * (positive current excursion and return), N at zero, then -V / +V
+ * (negative excursion and return). With d-axis saturation the excursion along the magnet
  * (+d) is larger. Returns the d-hat voltage to apply this sample.
  */
 static float polarity_step(fw_ctrl_t *c, float i_d) {
@@ -480,29 +480,33 @@ static float polarity_step(fw_ctrl_t *c, float i_d) {
     return 0.0f;
   }
 
-  if (in_seg == 0u && (seg == 0u || seg == 3u)) {
+  /* Per pair: 0 (settle, lets the last command take effect), +V, -V, 0, -V, +V.
+   * The baseline is sampled at the start of each excursion, the extreme over
+   * the pulse and the return (the one-period delay puts the peak one sample
+   * into the return segment). */
+  if (in_seg == 0u && (seg == 1u || seg == 4u)) {
     c->pol_base = i_d;
     c->pol_ext = i_d;
   }
-  if (seg == 0u || seg == 1u) {
+  if (seg == 1u || seg == 2u) {
     c->pol_ext = i_d > c->pol_ext ? i_d : c->pol_ext;
-  } else if (seg == 3u || seg == 4u) {
+  } else if (seg == 4u || seg == 5u) {
     c->pol_ext = i_d < c->pol_ext ? i_d : c->pol_ext;
   }
-  if (in_seg == n - 1u && seg == 1u) {
+  if (in_seg == n - 1u && seg == 2u) {
     c->pol_sum_pos += c->pol_ext - c->pol_base;
-  } else if (in_seg == n - 1u && seg == 4u) {
+  } else if (in_seg == n - 1u && seg == 5u) {
     c->pol_sum_neg += c->pol_base - c->pol_ext;
   }
   c->pol_k++;
   c->snap.pol_dI_pos_A = c->pol_sum_pos;
   c->snap.pol_dI_neg_A = c->pol_sum_neg;
   switch (seg) {
-  case 0u:
-  case 4u:
-    return v;
   case 1u:
-  case 3u:
+  case 5u:
+    return v;
+  case 2u:
+  case 4u:
     return -v;
   default:
     return 0.0f;
@@ -619,7 +623,13 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   } else {
     supervise_estimator(c);
   }
-  if (c->phase == FW_START_ALIGN && c->phase_time_s >= cfg->align_time_s) {
+  /* End ALIGN where the HF current triangle crosses its mean (the middle of
+   * the positive half period): no residual HF current biases the pulses.
+   * This step commands injection index inj_idx; the last + command before
+   * the mean is index n/4 - 1. */
+  uint32_t last_idx = c->n_inj / 4u > 0u ? c->n_inj / 4u - 1u : 0u;
+  if (c->phase == FW_START_ALIGN && c->phase_time_s >= cfg->align_time_s &&
+      c->inj_idx == last_idx) {
     c->phase = FW_START_POLARITY;
     c->phase_time_s = 0.0f;
     c->pol_k = 0u;

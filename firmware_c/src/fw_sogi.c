@@ -1,7 +1,7 @@
 /**
  * @file fw_sogi.c
- * @brief Pre-warped Tustin SOGI, two DF2T biquads sharing one denominator
- *        (see fw_sogi.h for the transfer functions and coefficients).
+ * @brief Pre-warped trapezoidal state-space SOGI whose states are the
+ *        outputs v', qv' (see fw_sogi.h for the equations and why).
  */
 #include "pmlsm/fw_sogi.h"
 
@@ -10,21 +10,24 @@
 
 #include "pmlsm/fw_math.h"
 
-/* Coefficients from the header formulas divided through by c^2, with
- * t = w / c = tan(w dt / 2) (dimensionless). Same values, but no c^2 ~ 1e9
- * (rad/s)^2 intermediates and less cancellation in a1 when w dt is small:
- *   a0 = 1 + k t + t^2, a1 = 2 (t^2 - 1), a2 = 1 - k t + t^2,
- *   bd0 = k t / a0, bq0 = k t^2 / a0, bq1 = 2 bq0. */
-static void fw_sogi_coeffs(fw_sogi_f32_t *s) {
-  const float t = s->w_rad_s / s->c;
-  const float t2 = t * t;
+/* Gains from the trapezoid (I - A/c) x[n+1] = (I + A/c) x[n] + (B/c) u,
+ * u = v[n+1] + v[n], divided through by c (t = w / c = tan(w dt / 2)):
+ *   I - A/c = [[1 + k t, t], [-t, 1]],  det = 1 + k t + t^2,
+ *   inv     = [[1, -t], [t, 1 + k t]] / det,
+ *   x[n+1] - x[n] = inv ((A/c) 2 x[n] + (B/c) u)
+ *                 = [[-2 t (k + t), -2 t], [2 t, -2 t^2]] x[n] / det
+ *                   + [k t; k t^2] u / det.
+ * Row 1 gives x1 += p u - q x1 - r x2 with p = k t/det, q = 2 t (k + t)/det,
+ * r = 2 t/det; row 2 equals t (x1[n] + x1[n+1]) (the trapezoid of
+ * x2' = w x1), which is cheaper and is what fw_sogi_step_f32 uses. One
+ * division per k change. */
+static void fw_sogi_gains(fw_sogi_f32_t *s) {
+  const float t = s->t;
   const float kt = s->k * t;
-  const float inv_a0 = 1.0f / (1.0f + kt + t2);
-  s->bd0 = kt * inv_a0;
-  s->bq0 = kt * t * inv_a0;
-  s->bq1 = 2.0f * s->bq0;
-  s->a1 = 2.0f * (t2 - 1.0f) * inv_a0;
-  s->a2 = (1.0f - kt + t2) * inv_a0;
+  const float e = 1.0f / (1.0f + kt + t * t);
+  s->p = kt * e;
+  s->q = 2.0f * t * (s->k + t) * e;
+  s->r = 2.0f * t * e;
 }
 
 bool fw_sogi_init_f32(fw_sogi_f32_t *s, float f0_Hz, float k, float dt_s) {
@@ -35,8 +38,9 @@ bool fw_sogi_init_f32(fw_sogi_f32_t *s, float f0_Hz, float k, float dt_s) {
   s->w_rad_s = 0.0f;
   s->dt_s = 0.0f;
   s->c = 1.0f;
+  s->t = 0.0f;
   s->k = 0.0f;
-  s->bd0 = s->bq0 = s->bq1 = s->a1 = s->a2 = 0.0f;
+  s->p = s->q = s->r = 0.0f;
   fw_sogi_reset_f32(s);
   if (!fw_isfinite_f32(f0_Hz) || !fw_isfinite_f32(k) || !fw_isfinite_f32(dt_s) ||
       !(f0_Hz > 0.0f) || !(dt_s > 0.0f) || !(k >= FW_SOGI_K_MIN) ||
@@ -55,8 +59,9 @@ bool fw_sogi_init_f32(fw_sogi_f32_t *s, float f0_Hz, float k, float dt_s) {
   s->w_rad_s = w_rad_s;
   s->dt_s = dt_s;
   s->c = w_rad_s / tn; /* pre-warp constant (1/s) */
+  s->t = tn;
   s->k = k;
-  fw_sogi_coeffs(s);
+  fw_sogi_gains(s);
   return true;
 }
 
@@ -65,28 +70,38 @@ void fw_sogi_set_k_f32(fw_sogi_f32_t *s, float k) {
     return; /* NaN k or uninitialised filter: keep the current gain */
   }
   s->k = fw_clampf(k, FW_SOGI_K_MIN, FW_SOGI_K_MAX);
-  fw_sogi_coeffs(s); /* state (transposed delay line) is kept */
+  fw_sogi_gains(s); /* the state (x1 = v', x2 = qv', v_prev) is untouched */
+}
+
+void fw_sogi_copy_gain_f32(fw_sogi_f32_t *dst, const fw_sogi_f32_t *src) {
+  if (dst == NULL || src == NULL || !(src->w_rad_s > 0.0f) ||
+      !(dst->w_rad_s == src->w_rad_s) || !(dst->dt_s == src->dt_s)) {
+    return; /* different filters (or uninitialised): gains would not apply */
+  }
+  dst->k = src->k;
+  dst->p = src->p;
+  dst->q = src->q;
+  dst->r = src->r;
 }
 
 void fw_sogi_reset_f32(fw_sogi_f32_t *s) {
-  s->zd1 = s->zd2 = 0.0f;
-  s->zq1 = s->zq2 = 0.0f;
+  s->x1 = 0.0f;
+  s->x2 = 0.0f;
+  s->v_prev = 0.0f;
 }
 
 float fw_sogi_step_f32(fw_sogi_f32_t *s, float v, float *qv) {
   if (!fw_isfinite_f32(v)) {
-    v = 0.0f; /* a bad sample must not poison the delay line */
+    v = 0.0f; /* a bad sample must not poison the state */
   }
-  /* D: b = [bd0, 0, -bd0]  (DF2T) */
-  const float d = s->bd0 * v + s->zd1;
-  s->zd1 = s->zd2 - s->a1 * d;
-  s->zd2 = -s->bd0 * v - s->a2 * d;
-  /* Q: b = [bq0, 2 bq0, bq0] */
-  const float q = s->bq0 * v + s->zq1;
-  s->zq1 = s->bq1 * v + s->zq2 - s->a1 * q;
-  s->zq2 = s->bq0 * v - s->a2 * q;
+  const float u = v + s->v_prev;
+  const float x1_old = s->x1;
+  const float x1 = x1_old + (s->p * u - s->q * x1_old - s->r * s->x2);
+  s->x2 += s->t * (x1_old + x1);
+  s->x1 = x1;
+  s->v_prev = v;
   if (qv != NULL) {
-    *qv = q;
+    *qv = s->x2;
   }
-  return d;
+  return x1;
 }

@@ -10,8 +10,12 @@ float32 inputs (so the C functions see exactly the same inputs):
 * PI: re-implementation of the algorithm documented in firmware_c/src/fw_math.c.
 * SOGI: the continuous D(s), Q(s) of fw_sogi.h at s = j w, and the discrete
   pre-warped response obtained by substituting s = c (1 - z^-1)/(1 + z^-1)
-  into D(s), Q(s) at z = exp(j w dt) (no coefficient formulas involved); a
-  time-domain run through a DF2T biquad written in numpy, with a k change.
+  into D(s), Q(s) at z = exp(j w dt) (no coefficient formulas involved),
+  asserted equal to the response of the state-space trapezoid matrices; a
+  time-domain run of the trapezoid (I - A/c) x[n+1] = (I + A/c) x[n] +
+  (B/c)(v[n+1] + v[n]) solved with numpy, with a k switch and k toggling;
+  the k-toggling continuity case, with the former DF2T form run alongside
+  to show (asserted) that it fails the bound the state-space form meets.
 * PLL: the difference equations of fw_pll.h, angle step and angle ramp.
 
 Usage::
@@ -226,8 +230,35 @@ def sogi_disc(w0, k, dt, w):
     return k * w0 * s / den, k * w0**2 / den
 
 
+def sogi_ss_matrices(w0, k, dt):
+    """Trapezoid of the SOGI state equations with the pre-warped step 1/c
+    (c = w0 / tan(w0 dt / 2)), straight from the fw_sogi.h definition:
+    (I - A/c) x[n+1] = (I + A/c) x[n] + (B/c) (v[n+1] + v[n]),
+    A = [[-k w0, -w0], [w0, 0]], B = [k w0, 0]. Returns (M, N, b) with
+    M = I - A/c, N = I + A/c, b = B/c (no closed-form gains involved)."""
+    c = w0 / np.tan(w0 * dt / 2)
+    a = np.array([[-k * w0, -w0], [w0, 0.0]])
+    b = np.array([k * w0, 0.0])
+    eye = np.eye(2)
+    return eye - a / c, eye + a / c, b / c
+
+
+def sogi_ss_run(w0, dt, x, ks):
+    """Time run of the state-space trapezoid (states = outputs v', qv'),
+    k[n] used for the step that takes input x[n]; a k change keeps x."""
+    st, v_prev = np.zeros(2), 0.0
+    yd, yq = [], []
+    for xi, ki in zip(np.asarray(x, np.float64), ks):
+        m, n_, b = sogi_ss_matrices(w0, float(ki), dt)
+        st = np.linalg.solve(m, n_ @ st + b * (xi + v_prev))
+        v_prev = xi
+        yd.append(st[0])
+        yq.append(st[1])
+    return np.array(yd), np.array(yq)
+
+
 def sogi_biquads(w0, k, dt):
-    """(bD, bQ, a) from the header formulas (used only for the time run)."""
+    """(bD, bQ, a) of the former DF2T implementation (kept for the contrast)."""
     c = w0 / np.tan(w0 * dt / 2)
     a0 = c * c + k * w0 * c + w0 * w0
     a = np.array([1.0, 2 * (w0 * w0 - c * c) / a0, (c * c - k * w0 * c + w0 * w0) / a0])
@@ -242,6 +273,34 @@ def df2t(b, a, x, z):
     z[0] = b[1] * x - a[1] * y + z[1]
     z[1] = b[2] * x - a[2] * y
     return y
+
+
+def sogi_df2t_run(w0, dt, x, ks):
+    """The former implementation: D as a DF2T biquad whose coefficients are
+    swapped on a k change with the delay line kept."""
+    z = [0.0, 0.0]
+    return np.array(
+        [df2t(*sogi_biquads(w0, float(ki), dt)[0::2], xi, z) for xi, ki in zip(x, ks)]
+    )
+
+
+# continuity under k changes: centred sine, k toggled between these every
+# SOGI_TOG_PERIOD samples; max |v' - v| over samples >= SOGI_TOG_SETTLE
+SOGI_TOG_KS, SOGI_TOG_PERIOD, SOGI_TOG_N, SOGI_TOG_SETTLE = (0.2, 0.8), 5, 4000, 2000
+SOGI_TOG_PHASE, SOGI_TOG_BOUND = 0.4, 0.02  # bound: 2 % of the amplitude
+
+
+def sogi_toggle_case(w0, dt):
+    """(x, k schedule, max err state-space, max err DF2T, DF2T max err at fixed k)."""
+    n = np.arange(SOGI_TOG_N)
+    x = np.sin(w0 * dt * n + SOGI_TOG_PHASE).astype(F32).astype(np.float64)
+    ks = np.where((n // SOGI_TOG_PERIOD) % 2 == 0, *SOGI_TOG_KS)
+    e_ss = np.abs(sogi_ss_run(w0, dt, x, ks)[0] - x)[SOGI_TOG_SETTLE:].max()
+    e_df = np.abs(sogi_df2t_run(w0, dt, x, ks) - x)[SOGI_TOG_SETTLE:].max()
+    e_fix = np.abs(sogi_df2t_run(w0, dt, x, np.full(SOGI_TOG_N, SOGI_TOG_KS[0])) - x)[
+        SOGI_TOG_SETTLE:
+    ].max()
+    return x, ks, e_ss, e_df, e_fix
 
 
 def gen_sogi(rng: np.random.Generator) -> str:
@@ -283,15 +342,23 @@ def gen_sogi(rng: np.random.Generator) -> str:
         w = 2 * np.pi * f_grid
         dc, qc = sogi_cont(w0, k, w)
         dd, qd = sogi_disc(w0, k, dt, w)
+        # the state-space trapezoid has exactly the substituted transfer
+        # functions: (zM - N) X = b (z + 1) V, checked here at every grid point
+        for i, wi in enumerate(w):
+            m, n_, b = sogi_ss_matrices(w0, k, dt)
+            z = np.exp(1j * wi * dt)
+            hx = np.linalg.solve(z * m - n_, b * (z + 1))
+            assert abs(hx[0] - dd[i]) < 1e-12 and abs(hx[1] - qd[i]) < 1e-12, (k, wi)
         out += [
             _arr(f"ref_sogi_{tag}_cont_D", np.stack([dc.real, dc.imag], 1), "double"),
             _arr(f"ref_sogi_{tag}_cont_Q", np.stack([qc.real, qc.imag], 1), "double"),
             _arr(f"ref_sogi_{tag}_disc_D", np.stack([dd.real, dd.imag], 1), "double"),
             _arr(f"ref_sogi_{tag}_disc_Q", np.stack([qd.real, qd.imag], 1), "double"),
         ]
-    # time domain: 3 kHz square wave + 20 Hz fundamental + 5th harmonic of
-    # the injection, k = 0.5 until REF_SOGI_KSWITCH then k = 0.8 (state kept)
-    n_t, n_sw = 480, 240
+    # time domain: 3 kHz square wave + 20 Hz fundamental + 15 kHz + noise;
+    # k = 0.5 until REF_SOGI_KSWITCH, 0.8 until REF_SOGI_KTOGGLE, then toggled
+    # 0.2 / 0.8 every 5 samples (state kept at every change)
+    n_t, n_sw, n_tog = 480, 240, 360
     t = np.arange(n_t) * dt
     sq = np.where((np.arange(n_t) % 8) < 4, 1.0, -1.0)
     x = (
@@ -300,18 +367,36 @@ def gen_sogi(rng: np.random.Generator) -> str:
         + 0.1 * np.sin(2 * np.pi * 15000 * t)
         + 0.02 * rng.standard_normal(n_t)
     ).astype(F32)
-    zd, zq = [0.0, 0.0], [0.0, 0.0]
-    yd, yq = [], []
-    for i, xi in enumerate(x.astype(np.float64)):
-        bd, bq, a = sogi_biquads(w0, SOGI_KS[0] if i < n_sw else SOGI_KS[1], dt)
-        yd.append(df2t(bd, a, xi, zd))
-        yq.append(df2t(bq, a, xi, zq))
+    idx = np.arange(n_t)
+    ks = np.where(idx < n_sw, SOGI_KS[0], SOGI_KS[1])
+    ks = np.where((idx >= n_tog) & (((idx - n_tog) // 5) % 2 == 0), 0.2, ks).astype(F32)
+    yd, yq = sogi_ss_run(w0, dt, x, ks.astype(np.float64))
+    # before the first change the new and the former form are the same filter
+    yd_df = sogi_df2t_run(w0, dt, x.astype(np.float64), ks.astype(np.float64))
+    assert np.abs(yd_df[:n_sw] - yd[:n_sw]).max() < 1e-12
     out += [
         _def("REF_SOGI_NT", n_t),
         _def("REF_SOGI_KSWITCH", n_sw),
+        _def("REF_SOGI_KTOGGLE", n_tog),
         _arr("ref_sogi_t_x", x, "float"),
+        _arr("ref_sogi_t_k", ks, "float"),
         _arr("ref_sogi_t_d", yd, "double"),
         _arr("ref_sogi_t_q", yq, "double"),
+    ]
+    # continuity: the state-space form passes the bound, the former DF2T
+    # form (same transfer functions for fixed k) fails it by a wide margin
+    _x, _ks, e_ss, e_df, e_fix = sogi_toggle_case(w0, dt)
+    assert e_ss < 1e-6 and e_fix < 1e-6, (e_ss, e_fix)  # float32 input rounding
+    assert e_df > 3 * SOGI_TOG_BOUND, e_df
+    out += [
+        _def("REF_SOGI_TOG_K_LO", F32(SOGI_TOG_KS[0])),
+        _def("REF_SOGI_TOG_K_HI", F32(SOGI_TOG_KS[1])),
+        _def("REF_SOGI_TOG_PERIOD", SOGI_TOG_PERIOD),
+        _def("REF_SOGI_TOG_N", SOGI_TOG_N),
+        _def("REF_SOGI_TOG_SETTLE", SOGI_TOG_SETTLE),
+        _def("REF_SOGI_TOG_PHASE", F32(SOGI_TOG_PHASE)),
+        _def("REF_SOGI_TOG_BOUND", F32(SOGI_TOG_BOUND)),
+        _def("REF_SOGI_TOG_ERR_DF2T", F32(e_df)),
     ]
     return "".join(out)
 

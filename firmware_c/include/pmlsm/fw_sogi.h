@@ -3,21 +3,38 @@
  * @brief Second-order generalized integrator (SOGI) band-pass / quadrature
  *        signal generator, fixed or adaptive gain (paper eq. 12, 13).
  *
- * Continuous prototype (centre angular frequency w, gain k):
+ * Continuous prototype (centre angular frequency w, gain k), written as a
+ * state-space model whose two states ARE the two outputs:
+ *   x1' = k w (v - x1) - w x2,   x2' = w x1,   v' = x1,  qv' = x2
  *   D(s) = v'/v  = k w s   / (s^2 + k w s + w^2)   (band-pass, in phase)
  *   Q(s) = qv'/v = k w^2   / (s^2 + k w s + w^2)   (quadrature, -90 deg)
  *
- * Discretization: bilinear (Tustin) with pre-warping at the centre
- * frequency, s -> c (1 - z^-1) / (1 + z^-1), c = w / tan(w dt / 2). The
- * centre frequency maps exactly, so the discrete D has unity gain and zero
- * phase at w for every sampling rate below Nyquist; the -3 dB bandwidth is
- * k w (rad/s) up to frequency warping. Each output is one direct-form-II
- * transposed biquad sharing the denominator
- *   a0 = c^2 + k w c + w^2, a1 = 2 (w^2 - c^2), a2 = c^2 - k w c + w^2
- *   D:  b = k w c  * [1, 0, -1] / a0
- *   Q:  b = k w^2  * [1, 2,  1] / a0
- * Changing k (adaptive SOGI) recomputes the coefficients and keeps the
- * state, which is valid because the state is the transposed-form delay line.
+ * Discretization: trapezoidal rule applied to the state equations, with the
+ * step pre-warped at the centre frequency (1/c replaces dt/2,
+ * c = w / tan(w dt / 2)). With A = [[-k w, -w], [w, 0]], B = [k w; 0]:
+ *   (I - A/c) x[n+1] = (I + A/c) x[n] + (B/c) (v[n+1] + v[n]).
+ * For a fixed k this is exactly the bilinear transform
+ * s -> c (1 - z^-1) / (1 + z^-1) of D(s) and Q(s): the centre maps exactly,
+ * so the discrete D has unity gain and zero phase at w for every sampling
+ * rate below Nyquist, and the -3 dB bandwidth is k w (rad/s) up to frequency
+ * warping. In the dimensionless t = w / c = tan(w dt / 2), e = 1 / (1 + k t
+ * + t^2) (the closed-form inverse of I - A/c has this single divisor), one
+ * step is
+ *   u   = v[n+1] + v[n]
+ *   x1 += p u - q x1 - r x2      p = k t e, q = 2 t (k + t) e, r = 2 t e
+ *   x2 += t (x1_old + x1_new)    (trapezoid of x2' = w x1)
+ * (algebraically identical to the matrix form above; the increment form
+ * keeps the pole positions accurate in float32 when w dt is small).
+ *
+ * Why state space and not two biquads: the adaptive SOGI changes k every few
+ * samples. The states here are the physical outputs v', qv' (plus the
+ * previous input sample), which do not depend on k, so a k change only
+ * changes the gains p, q, r and never disturbs the state: the output stays
+ * continuous. (In a direct-form biquad the delay-line contents are
+ * coefficient-weighted signal combinations, so changing k re-interprets them
+ * and injects a glitch at every change.) At the centre frequency the
+ * steady-state trajectory x1 = v, x2 = -(90 deg shifted v) satisfies the
+ * recursion for every k, so toggling k leaves a centred sine undisturbed.
  *
  * Requires w dt < pi (centre below Nyquist); fw_sogi_init_f32 returns false
  * otherwise, and also for non-positive or non-finite arguments.
@@ -34,11 +51,13 @@ extern "C" {
 typedef struct {
   float w_rad_s; /**< centre angular frequency */
   float dt_s;    /**< sample time */
-  float c;       /**< pre-warp constant w / tan(w dt / 2) */
+  float c;       /**< pre-warp constant w / tan(w dt / 2) (1/s) */
+  float t;       /**< tan(w dt / 2) = w / c (dimensionless) */
   float k;       /**< current gain */
-  float bd0, bq0, bq1, a1, a2; /**< normalised coefficients (bd1=0, bd2=-bd0, bq2=bq0) */
-  float zd1, zd2;  /**< D biquad state */
-  float zq1, zq2;  /**< Q biquad state */
+  float p, q, r; /**< k-dependent step gains (see above) */
+  float x1;      /**< state 1 = in-phase output v' */
+  float x2;      /**< state 2 = quadrature output qv' */
+  float v_prev;  /**< previous input sample (trapezoid) */
 } fw_sogi_f32_t;
 
 /** Limits on k accepted by the SOGI (documented, range-checked). */
@@ -51,12 +70,21 @@ bool fw_sogi_init_f32(fw_sogi_f32_t *s, float f0_Hz, float k, float dt_s);
 /** Change k (clamped to [FW_SOGI_K_MIN, FW_SOGI_K_MAX]); state is kept. */
 void fw_sogi_set_k_f32(fw_sogi_f32_t *s, float k);
 
-/** Clear the state. */
+/**
+ * Copy the k-dependent gains (k, p, q, r) of src into dst, keeping dst's
+ * state: gives a second SOGI the same new k with one coefficient
+ * computation. Both must be initialised with the same centre frequency and
+ * sample time; if w or dt differ (or either pointer is NULL) dst is left
+ * unchanged.
+ */
+void fw_sogi_copy_gain_f32(fw_sogi_f32_t *dst, const fw_sogi_f32_t *src);
+
+/** Clear the state (outputs and the stored previous input). */
 void fw_sogi_reset_f32(fw_sogi_f32_t *s);
 
 /**
  * One sample: returns the in-phase band-pass output v' and writes the
- * quadrature output qv' to *qv (may be NULL).
+ * quadrature output qv' to *qv (may be NULL). A non-finite v is treated as 0.
  */
 float fw_sogi_step_f32(fw_sogi_f32_t *s, float v, float *qv);
 
