@@ -1,0 +1,450 @@
+/**
+ * @file fw_app.c
+ * @brief Drive application glue: fw_ctrl + CANopen node + serial link.
+ */
+#include "pmlsm/fw_app.h"
+
+#include <math.h>
+#include <string.h>
+
+#ifndef PMLSM_BUILD_ID
+#define PMLSM_BUILD_ID "dev"
+#endif
+
+#define FW_APP_MODE_CSV 9
+#define FW_APP_MODE_CST 10
+
+/* ---- helpers ------------------------------------------------------------- */
+
+static int32_t fw_app_sat_i32(float v) {
+  if (!(v == v)) {
+    return 0;
+  }
+  if (v >= 2147483520.0f) {
+    return INT32_MAX;
+  }
+  if (v <= -2147483520.0f) {
+    return INT32_MIN;
+  }
+  return (int32_t)lrintf(v);
+}
+
+static int32_t fw_app_sat_i16(float v) {
+  int32_t x = fw_app_sat_i32(v);
+  return x > 32767 ? 32767 : (x < -32768 ? -32768 : x);
+}
+
+uint8_t fw_app_error_register(uint16_t code) {
+  if (code == 0u) {
+    return 0u;
+  }
+  uint8_t reg = 0x01u;
+  switch (code & 0xF000u) {
+  case 0x2000u:
+    reg |= 0x02u;
+    break;
+  case 0x3000u:
+    reg |= 0x04u;
+    break;
+  case 0x8000u:
+    reg |= 0x10u;
+    break;
+  case 0xF000u:
+    reg |= 0x80u;
+    break;
+  default:
+    break;
+  }
+  return reg;
+}
+
+static uint32_t fw_app_now_us(const fw_app_t *app) {
+  uint64_t f = app->f_pwm_Hz > 0u ? app->f_pwm_Hz : 1u;
+  return (uint32_t)(((uint64_t)app->step * 1000000u) / f);
+}
+
+static const co_od_cfg_link_t *fw_app_cfg_link(uint16_t index, uint8_t sub) {
+  uint16_t pos;
+  if (co_od_find(index, sub, &pos) != CO_OD_OK) {
+    return NULL;
+  }
+  for (uint32_t k = 0u; k < CO_OD_CFG_COUNT; k++) {
+    if (co_od_cfg_links[k].pos == pos) {
+      return &co_od_cfg_links[k];
+    }
+  }
+  return NULL;
+}
+
+/** Mirror the core's configuration into the OD. */
+static void fw_app_sync_cfg_to_od(fw_app_t *app) {
+  const fw_config_t *cfg = fw_get_config(&app->ctrl);
+  if (cfg == NULL) {
+    return;
+  }
+  for (uint32_t k = 0u; k < CO_OD_CFG_COUNT; k++) {
+    const fw_config_field_t *f = fw_config_field_find(co_od_cfg_links[k].field);
+    const co_od_entry_t *e = co_od_entry(co_od_cfg_links[k].pos);
+    if (f == NULL || e == NULL) {
+      continue;
+    }
+    const uint8_t *base = (const uint8_t *)cfg + f->offset;
+    if (f->is_u32) {
+      uint32_t v;
+      memcpy(&v, base, sizeof v);
+      co_node_set_u32(&app->node, co_od_cfg_links[k].pos, v);
+    } else {
+      float v;
+      memcpy(&v, base, sizeof v);
+      co_node_set_f32(&app->node, co_od_cfg_links[k].pos, v);
+    }
+  }
+  co_node_set_u32(&app->node, CO_OD_2002_00,
+                  cfg->extractor == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE ? 1u : 0u);
+}
+
+static void fw_app_sync_static_od(fw_app_t *app) {
+  co_node_set_u32(&app->node, CO_OD_2040_00, FW_VERSION_U32);
+  co_node_set_str(&app->node, CO_OD_2041_00, PMLSM_BUILD_ID);
+  fw_app_sync_cfg_to_od(app);
+}
+
+static co_abort_t fw_app_status_abort(fw_status_t st) {
+  switch (st) {
+  case FW_OK:
+    return CO_ABORT_NONE;
+  case FW_ERR_STATE:
+    return CO_ABORT_DEVICE_STATE;
+  case FW_ERR_NULL:
+    return CO_ABORT_GENERAL;
+  default:
+    return CO_ABORT_VALUE_RANGE;
+  }
+}
+
+static void fw_app_trace_command(fw_app_t *app, uint8_t cmd) {
+  co_node_t *n = &app->node;
+  switch (cmd) {
+  case 0u:
+    fw_trace_stop(&app->trace);
+    break;
+  case 1u: {
+    uint8_t ids[FW_SERIAL_MAX_SIGNALS];
+    uint8_t cnt = (uint8_t)co_node_get_u32(n, CO_OD_2070_07);
+    if (cnt > FW_SERIAL_MAX_SIGNALS) {
+      cnt = FW_SERIAL_MAX_SIGNALS;
+    }
+    for (uint8_t k = 0u; k < cnt; k++) {
+      ids[k] = (uint8_t)co_node_get_u32(n, (uint16_t)(CO_OD_2070_08 + k));
+    }
+    float dt = app->f_pwm_Hz > 0u ? 1.0f / (float)app->f_pwm_Hz : 0.0f;
+    (void)fw_trace_arm(&app->trace, ids, cnt, co_node_get_u32(n, CO_OD_2070_06),
+                       (uint8_t)co_node_get_u32(n, CO_OD_2070_03),
+                       co_node_get_f32(n, CO_OD_2070_04),
+                       (fw_trace_edge_t)co_node_get_u32(n, CO_OD_2070_05), dt);
+    break;
+  }
+  case 2u:
+    fw_trace_trigger(&app->trace, app->step);
+    break;
+  case 3u:
+    (void)fw_trace_upload_start(&app->trace);
+    break;
+  default:
+    break;
+  }
+}
+
+/* ---- CANopen hooks --------------------------------------------------------- */
+
+static co_abort_t fw_app_on_write(void *ctx, uint16_t index, uint8_t sub, const uint8_t *data,
+                                  size_t len) {
+  fw_app_t *app = (fw_app_t *)ctx;
+  if (app == NULL || data == NULL) {
+    return CO_ABORT_GENERAL;
+  }
+  uint32_t v = co_le_get(data, len > 4u ? 4u : len);
+  if (index == 0x6040u) {
+    app->cw = (uint16_t)v;
+    app->cw_pending = 1u;
+    return CO_ABORT_NONE;
+  }
+  if (index == 0x2000u) {
+    fw_status_t st = fw_set_extractor(&app->ctrl, (fw_extractor_t)v);
+    if (st == FW_OK) {
+      co_node_set_u32(&app->node, CO_OD_2002_00,
+                      v == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE ? 1u : 0u);
+    }
+    return fw_app_status_abort(st);
+  }
+  if (index == 0x2002u) {
+    fw_extractor_t ex = v != 0u ? FW_EXTRACTOR_SOGI_ADAPTIVE : FW_EXTRACTOR_SOGI;
+    fw_status_t st = fw_set_extractor(&app->ctrl, ex);
+    if (st == FW_OK) {
+      co_node_set_u32(&app->node, CO_OD_2000_00, (uint32_t)ex);
+    }
+    return fw_app_status_abort(st);
+  }
+  if (index == 0x2070u && sub == 1u) {
+    fw_app_trace_command(app, (uint8_t)v);
+    return CO_ABORT_NONE;
+  }
+  const co_od_cfg_link_t *link = fw_app_cfg_link(index, sub);
+  if (link != NULL) {
+    const fw_config_field_t *f = fw_config_field_find(link->field);
+    const fw_config_t *cur = fw_get_config(&app->ctrl);
+    if (f == NULL || cur == NULL) {
+      return CO_ABORT_APP;
+    }
+    fw_config_t cfg = *cur;
+    uint8_t *base = (uint8_t *)&cfg + f->offset;
+    if (f->is_u32) {
+      memcpy(base, &v, sizeof v);
+    } else {
+      float x;
+      memcpy(&x, &v, sizeof x);
+      memcpy(base, &x, sizeof x);
+    }
+    fw_config_issue_t issue;
+    fw_status_t st = fw_set_config(&app->ctrl, &cfg, &issue);
+    /* FW_ERR_SALIENCY: the core stored the configuration (enabling will
+       raise FW_FAULT_SALIENCY_TOO_LOW), so the OD must show it too */
+    return st == FW_ERR_SALIENCY ? CO_ABORT_NONE : fw_app_status_abort(st);
+  }
+  return CO_ABORT_NONE;
+}
+
+static void fw_app_on_event(void *ctx, co_event_t ev, uint32_t arg) {
+  fw_app_t *app = (fw_app_t *)ctx;
+  (void)arg;
+  if (app == NULL) {
+    return;
+  }
+  switch (ev) {
+  case CO_EV_HB_LOST:
+    app->count.hb_lost++;
+    fw_raise_fault(&app->ctrl, FW_FAULT_HEARTBEAT_LOST);
+    break;
+  case CO_EV_RESET_NODE:
+  case CO_EV_RESET_COMM:
+    /* the OD went back to its defaults: show the core's real state again */
+    fw_app_sync_static_od(app);
+    break;
+  default:
+    break;
+  }
+}
+
+/* ---- UART ring ------------------------------------------------------------------ */
+
+static bool fw_app_uart_push(fw_app_t *app, const uint8_t *data, size_t len) {
+  uint32_t used = app->uart_head - app->uart_tail;
+  if ((size_t)(FW_APP_UART_LEN - used) < len) {
+    app->count.uart_dropped++;
+    return false;
+  }
+  for (size_t i = 0u; i < len; i++) {
+    app->uart[(app->uart_head + i) % FW_APP_UART_LEN] = data[i];
+  }
+  app->uart_head += (uint32_t)len;
+  return true;
+}
+
+static void fw_app_send_frame(fw_app_t *app, uint8_t type, const uint8_t *payload, size_t len) {
+  uint8_t frame[FW_SERIAL_MAX_ENCODED];
+  size_t n = 0u;
+  /* the sequence number advances even if the frame is dropped: the
+     receiver sees the gap and counts the loss */
+  if (fw_serial_link_send(&app->link, type, payload, len, frame, sizeof frame, &n) ==
+      FW_SERIAL_OK) {
+    (void)fw_app_uart_push(app, frame, n);
+  }
+}
+
+size_t fw_app_uart_read(fw_app_t *app, uint8_t *buf, size_t cap) {
+  if (app == NULL || buf == NULL) {
+    return 0u;
+  }
+  size_t n = 0u;
+  while (n < cap && app->uart_tail != app->uart_head) {
+    buf[n++] = app->uart[app->uart_tail % FW_APP_UART_LEN];
+    app->uart_tail++;
+  }
+  return n;
+}
+
+/* ---- life cycle --------------------------------------------------------------- */
+
+fw_status_t fw_app_init(fw_app_t *app, const fw_config_t *cfg, uint8_t node_id) {
+  if (app == NULL || cfg == NULL) {
+    return FW_ERR_NULL;
+  }
+  if (node_id < 1u || node_id > 127u) {
+    return FW_ERR_RANGE;
+  }
+  memset(app, 0, sizeof *app);
+  app->mode_applied = -1;
+  fw_status_t st = fw_init(&app->ctrl, cfg);
+  const fw_config_t *used = fw_get_config(&app->ctrl);
+  float f = used != NULL ? used->f_pwm_Hz : 0.0f;
+  app->f_pwm_Hz = (f > 0.0f && f < 4.0e9f) ? (uint32_t)lrintf(f) : 1u;
+  co_callbacks_t cb = {app, fw_app_on_write, fw_app_on_event};
+  (void)co_node_init(&app->node, node_id, &cb);
+  fw_serial_link_init(&app->link);
+  (void)fw_trace_init(&app->trace, app->trace_buf, FW_APP_TRACE_FLOATS);
+  fw_app_sync_static_od(app);
+  co_node_set_u32(&app->node, CO_OD_6041_00, fw_statusword(&app->ctrl));
+  app->init_done = 1u;
+  return st;
+}
+
+bool fw_app_can_rx(fw_app_t *app, const fw_can_frame_t *frame) {
+  if (app == NULL || frame == NULL) {
+    return false;
+  }
+  return co_node_rx_isr(&app->node, frame) == CO_OK;
+}
+
+bool fw_app_can_tx_pop(fw_app_t *app, fw_can_frame_t *frame) {
+  if (app == NULL || frame == NULL) {
+    return false;
+  }
+  return co_node_tx_pop(&app->node, frame);
+}
+
+void fw_app_snapshot(const void *app, fw_snapshot_t *snap) {
+  const fw_app_t *a = (const fw_app_t *)app;
+  if (a == NULL || snap == NULL) {
+    return;
+  }
+  fw_get_snapshot(&a->ctrl, snap);
+}
+
+size_t fw_app_sizeof(void) { return sizeof(fw_app_t); }
+
+fw_ctrl_t *fw_app_ctrl(fw_app_t *app) { return app != NULL ? &app->ctrl : NULL; }
+co_node_t *fw_app_node(fw_app_t *app) { return app != NULL ? &app->node : NULL; }
+const fw_app_counters_t *fw_app_counters(const fw_app_t *app) {
+  return app != NULL ? &app->count : NULL;
+}
+
+/* ---- step ---------------------------------------------------------------------- */
+
+static void fw_app_apply_commands(fw_app_t *app) {
+  co_node_t *n = &app->node;
+  const fw_config_t *cfg = fw_get_config(&app->ctrl);
+  if (app->cw_pending) {
+    app->cw_pending = 0u;
+    (void)fw_controlword(&app->ctrl, app->cw);
+  }
+  int32_t mode = co_node_get_i32(n, CO_OD_6060_00);
+  fw_mode_t m = mode == FW_APP_MODE_CST ? FW_MODE_FORCE : FW_MODE_SPEED;
+  if (app->mode_applied != (int32_t)m && fw_set_mode(&app->ctrl, m) == FW_OK) {
+    app->mode_applied = (int32_t)m;
+  }
+  if (cfg == NULL) {
+    return;
+  }
+  float v_mps = (float)co_node_get_i32(n, CO_OD_60FF_00) * 1.0e-6f;
+  (void)fw_set_speed_ref(&app->ctrl, fw_units_mps_to_radps_e(cfg, v_mps));
+  float t_pm = (float)co_node_get_i32(n, CO_OD_6071_00);
+  (void)fw_set_iq_ref(&app->ctrl, t_pm * 1.0e-3f * cfg->i_max_A);
+}
+
+static void fw_app_update_od(fw_app_t *app, const fw_snapshot_t *s) {
+  co_node_t *n = &app->node;
+  const fw_config_t *cfg = fw_get_config(&app->ctrl);
+  float i_max = (cfg != NULL && cfg->i_max_A > 0.0f) ? cfg->i_max_A : 1.0f;
+  co_node_set_u32(n, CO_OD_6041_00, s->statusword);
+  co_node_set_i32(n, CO_OD_6061_00, s->mode == (uint8_t)FW_MODE_FORCE ? FW_APP_MODE_CST
+                                                                         : FW_APP_MODE_CSV);
+  co_node_set_i32(n, CO_OD_6064_00, fw_app_sat_i32(s->pos_hat_m * 1.0e6f));
+  co_node_set_i32(n, CO_OD_606C_00, fw_app_sat_i32(s->speed_hat_mps * 1.0e6f));
+  co_node_set_i32(n, CO_OD_6077_00, fw_app_sat_i16(s->i_dq_A[1] / i_max * 1000.0f));
+  co_node_set_u32(n, CO_OD_603F_00, s->fault_code);
+  co_node_set_f32(n, CO_OD_2020_01, s->theta_hat_rad);
+  co_node_set_f32(n, CO_OD_2020_02, s->omega_hat_radps);
+  co_node_set_f32(n, CO_OD_2020_03, s->speed_hat_mps);
+  co_node_set_f32(n, CO_OD_2020_04, s->pll_err_rad);
+  co_node_set_f32(n, CO_OD_2020_05, s->hf_amp_A);
+  co_node_set_f32(n, CO_OD_2020_06, s->pll_err_f_rad);
+  co_node_set_f32(n, CO_OD_2020_07, s->sogi_k_eff);
+  co_node_set_u32(n, CO_OD_2020_08, s->start_phase);
+  co_node_set_f32(n, CO_OD_2020_09, s->accel_dist_radps2);
+  uint16_t hist[FW_FAULT_HISTORY_LEN];
+  uint32_t nh = fw_fault_history(&app->ctrl, hist, FW_FAULT_HISTORY_LEN);
+  for (uint32_t k = 0u; k < 8u; k++) {
+    co_node_set_u32(n, (uint16_t)(CO_OD_2030_01 + k), k < nh ? hist[k] : 0u);
+  }
+  co_node_set_u32(n, CO_OD_2070_02, (uint32_t)app->trace.state);
+}
+
+static void fw_app_faults(fw_app_t *app, const fw_snapshot_t *s) {
+  uint16_t code = s->fault_code;
+  if (code == app->last_fault) {
+    return;
+  }
+  uint8_t reg = fw_app_error_register(code);
+  uint8_t msef[5] = {s->cia402_state, (uint8_t)s->step_count, (uint8_t)(s->step_count >> 8),
+                     (uint8_t)(s->step_count >> 16), (uint8_t)(s->step_count >> 24)};
+  /* a new fault, or 0x0000 "error reset / no error" when it was cleared */
+  if (co_node_emcy(&app->node, code, reg, msef) == CO_OK) {
+    app->count.emcy++;
+  }
+  app->last_fault = code;
+}
+
+static void fw_app_serial(fw_app_t *app, const fw_snapshot_t *s) {
+  co_node_t *n = &app->node;
+  uint32_t dec = co_node_get_u32(n, CO_OD_2060_01);
+  if (dec > 0u && app->step % dec == 0u) {
+    uint8_t ids[FW_SERIAL_MAX_SIGNALS];
+    uint8_t cnt = (uint8_t)co_node_get_u32(n, CO_OD_2060_02);
+    uint8_t payload[FW_SERIAL_MAX_PAYLOAD];
+    if (cnt > FW_SERIAL_MAX_SIGNALS) {
+      cnt = FW_SERIAL_MAX_SIGNALS;
+    }
+    for (uint8_t k = 0u; k < cnt; k++) {
+      ids[k] = (uint8_t)co_node_get_u32(n, (uint16_t)(CO_OD_2060_03 + k));
+    }
+    size_t len = fw_serial_telemetry_payload(s, ids, cnt, payload, sizeof payload);
+    if (len > 0u) {
+      fw_app_send_frame(app, FW_SERIAL_TYPE_TELEMETRY, payload, len);
+      app->count.telemetry_sent++;
+    }
+  }
+  fw_trace_sample(&app->trace, s, s->fault_code != 0u);
+  if (app->trace.state == FW_TRACE_UPLOADING) {
+    /* one upload frame per control period, when the UART has room */
+    uint32_t used = app->uart_head - app->uart_tail;
+    if (FW_APP_UART_LEN - used >= FW_SERIAL_MAX_ENCODED) {
+      uint8_t type = 0u;
+      uint8_t payload[FW_SERIAL_MAX_PAYLOAD];
+      size_t len = 0u;
+      if (fw_trace_upload_next(&app->trace, &type, payload, sizeof payload, &len)) {
+        fw_app_send_frame(app, type, payload, len);
+      }
+    }
+  }
+}
+
+void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
+  fw_app_t *app = (fw_app_t *)ctx;
+  fw_snapshot_t snap;
+  if (app == NULL || in == NULL || out == NULL) {
+    if (out != NULL) {
+      memset(out, 0, sizeof *out);
+    }
+    return;
+  }
+  uint32_t now = fw_app_now_us(app);
+  co_node_process_rx(&app->node, now);
+  fw_app_apply_commands(app);
+  fw_step(&app->ctrl, in, out);
+  fw_get_snapshot(&app->ctrl, &snap);
+  fw_app_update_od(app, &snap);
+  fw_app_faults(app, &snap);
+  fw_app_serial(app, &snap);
+  co_node_process_tx(&app->node, now);
+  app->step++;
+}

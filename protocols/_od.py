@@ -1,0 +1,307 @@
+"""Load and expand protocols/od.yaml, the drive's object dictionary.
+
+The YAML is the single source of truth; this module turns it into a flat,
+sorted list of :class:`OdEntry` (one per index/sub-index) that the
+generators (C table, EDS, Markdown) and the tests share.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+OD_YAML = Path(__file__).with_name("od.yaml")
+
+#: CiA 301 basic data types used here: name -> (code, size in bytes, C tag).
+TYPES: dict[str, tuple[int, int, str]] = {
+    "BOOLEAN": (0x0001, 1, "CO_TYPE_BOOLEAN"),
+    "INTEGER8": (0x0002, 1, "CO_TYPE_I8"),
+    "INTEGER16": (0x0003, 2, "CO_TYPE_I16"),
+    "INTEGER32": (0x0004, 4, "CO_TYPE_I32"),
+    "UNSIGNED8": (0x0005, 1, "CO_TYPE_U8"),
+    "UNSIGNED16": (0x0006, 2, "CO_TYPE_U16"),
+    "UNSIGNED32": (0x0007, 4, "CO_TYPE_U32"),
+    "REAL32": (0x0008, 4, "CO_TYPE_REAL32"),
+    "VISIBLE_STRING": (0x0009, 0, "CO_TYPE_VSTRING"),
+}
+ACCESS = ("ro", "rw", "wo", "const")
+INT_RANGE = {
+    "BOOLEAN": (0, 1),
+    "INTEGER8": (-(2**7), 2**7 - 1),
+    "INTEGER16": (-(2**15), 2**15 - 1),
+    "INTEGER32": (-(2**31), 2**31 - 1),
+    "UNSIGNED8": (0, 2**8 - 1),
+    "UNSIGNED16": (0, 2**16 - 1),
+    "UNSIGNED32": (0, 2**32 - 1),
+}
+
+NODEID_RE = re.compile(r"^\$NODEID\+(0x[0-9A-Fa-f]+|\d+)$")
+
+
+class OdError(ValueError):
+    """od.yaml is malformed; the message names the object and field."""
+
+
+@dataclass(frozen=True)
+class OdEntry:
+    """One object dictionary entry (a VAR, or one sub-index of a RECORD/ARRAY).
+
+    Attributes
+    ----------
+    index, sub : int
+        Object index and sub-index.
+    name : str
+        Parameter name (the object's name for VARs, the sub's name otherwise).
+    object_name : str
+        Name of the enclosing object (equal to ``name`` for VARs).
+    kind : str
+        ``var``, ``record`` or ``array`` (of the enclosing object).
+    type : str
+        CiA 301 type name, see :data:`TYPES`.
+    access : str
+        ``ro``, ``rw``, ``wo`` or ``const``.
+    unit : str
+        Physical unit on the wire ("" when dimensionless).
+    min, max : int | float | None
+        Inclusive limits (None: the type's range).
+    default : int | float | str
+        Default value; for COB-IDs with ``nodeid_relative`` the node id is added.
+    nodeid_relative : bool
+        Default is ``$NODEID+default``.
+    pdo : bool
+        PDO mappable.
+    size : int
+        Size in bytes (maximum length for strings).
+    fw_config : str | None
+        fw_config_t field this entry mirrors.
+    doc : str
+        Description.
+    """
+
+    index: int
+    sub: int
+    name: str
+    object_name: str
+    kind: str
+    type: str
+    access: str
+    unit: str = ""
+    min: int | float | None = None
+    max: int | float | None = None
+    default: int | float | str = 0
+    nodeid_relative: bool = False
+    pdo: bool = False
+    size: int = 0
+    fw_config: str | None = None
+    doc: str = ""
+
+    @property
+    def type_code(self) -> int:
+        return TYPES[self.type][0]
+
+    @property
+    def is_int(self) -> bool:
+        return self.type in INT_RANGE
+
+    @property
+    def c_ident(self) -> str:
+        """Identifier used in the generated C header (CO_OD_6040_00)."""
+        return f"CO_OD_{self.index:04X}_{self.sub:02X}"
+
+
+@dataclass
+class ObjectDictionary:
+    """The expanded dictionary: device info, entries sorted by (index, sub), signals."""
+
+    device: dict[str, Any]
+    entries: list[OdEntry]
+    signals: list[dict[str, str]]
+    fw_config: dict[str, dict[str, float]] = field(default_factory=dict)
+
+    def objects(self) -> dict[int, list[OdEntry]]:
+        """Entries grouped by index, in order."""
+        out: dict[int, list[OdEntry]] = {}
+        for e in self.entries:
+            out.setdefault(e.index, []).append(e)
+        return out
+
+    def find(self, index: int, sub: int = 0) -> OdEntry:
+        for e in self.entries:
+            if e.index == index and e.sub == sub:
+                return e
+        raise KeyError(f"0x{index:04X}:{sub}")
+
+
+def _parse_default(where: str, typ: str, raw: Any) -> tuple[int | float | str, bool]:
+    if typ == "VISIBLE_STRING":
+        return ("" if raw is None else str(raw)), False
+    if raw is None:
+        return (0.0 if typ == "REAL32" else 0), False
+    if isinstance(raw, str):
+        m = NODEID_RE.match(raw.strip())
+        if not m:
+            raise OdError(f"{where}: default {raw!r} is not a number or $NODEID+n")
+        return int(m.group(1), 0), True
+    if typ == "REAL32":
+        return float(raw), False
+    if isinstance(raw, float):
+        raise OdError(f"{where}: integer type {typ} has float default {raw}")
+    return int(raw), False
+
+
+def _entry(obj: dict[str, Any], sub: dict[str, Any], kind: str,
+           fw_limits: dict[str, dict[str, float]]) -> OdEntry:
+    index = int(obj["index"])
+    sub_i = int(sub.get("sub", 0))
+    where = f"od.yaml 0x{index:04X}:{sub_i}"
+    typ = sub.get("type")
+    if typ not in TYPES:
+        raise OdError(f"{where}: unknown type {typ!r}")
+    access = sub.get("access", "ro")
+    if access not in ACCESS:
+        raise OdError(f"{where}: access {access!r} not in {ACCESS}")
+    fwc = sub.get("fw_config")
+    mn, mx, dflt = sub.get("min"), sub.get("max"), sub.get("default")
+    if fwc is not None:
+        if fwc not in fw_limits:
+            raise OdError(f"{where}: fw_config field {fwc!r} has no entry in the fw_config section")
+        lim = fw_limits[fwc]
+        mn = lim["min"] if mn is None else mn
+        mx = lim["max"] if mx is None else mx
+        dflt = lim["default"] if dflt is None else dflt
+        if not sub.get("unit") and lim.get("unit"):
+            sub = {**sub, "unit": lim["unit"]}
+        if typ != "REAL32":
+            mn, mx, dflt = int(mn), int(mx), int(dflt)
+    default, rel = _parse_default(where, typ, dflt)
+    if typ in INT_RANGE:
+        lo, hi = INT_RANGE[typ]
+        for label, v in (("min", mn), ("max", mx)):
+            if v is not None and not (isinstance(v, int) and lo <= v <= hi):
+                raise OdError(f"{where}: {label} {v!r} outside {typ} range")
+        if not rel:
+            lo2 = lo if mn is None else mn
+            hi2 = hi if mx is None else mx
+            if not lo2 <= int(default) <= hi2:
+                raise OdError(f"{where}: default {default} outside [{lo2}, {hi2}]")
+    elif typ == "REAL32":
+        mn = None if mn is None else float(mn)
+        mx = None if mx is None else float(mx)
+        if mn is not None and mx is not None and not mn <= float(default) <= mx:
+            raise OdError(f"{where}: default {default} outside [{mn}, {mx}]")
+    size = TYPES[typ][1]
+    if typ == "VISIBLE_STRING":
+        size = int(sub.get("size", 0)) or 0
+    name = str(sub.get("name", obj["name"]))
+    return OdEntry(
+        index=index, sub=sub_i, name=name, object_name=str(obj["name"]), kind=kind,
+        type=typ, access=access, unit=str(sub.get("unit", "") or ""), min=mn, max=mx,
+        default=default, nodeid_relative=rel, pdo=bool(sub.get("pdo", False)),
+        size=size, fw_config=fwc, doc=str(sub.get("doc", "") or ""),
+    )
+
+
+def _pdo_objects(pdos: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
+    """Expand the `pdos` section into CiA 301 communication/mapping objects."""
+    objs: list[dict[str, Any]] = []
+    for n, p in enumerate(pdos.get("rpdo", [])):
+        objs.append({
+            "index": 0x1400 + n, "name": f"RPDO{n + 1} communication parameter",
+            "kind": "record",
+            "doc": "bit 31 of the COB-ID: PDO not valid. Type 0-240: applied at the next SYNC; "
+                   "254/255: applied on reception",
+            "subs": [
+                {"sub": 1, "name": "COB-ID", "type": "UNSIGNED32", "access": "rw",
+                 "default": p["cob_id"]},
+                {"sub": 2, "name": "Transmission type", "type": "UNSIGNED8", "access": "rw",
+                 "default": p["trans_type"]},
+            ],
+        })
+    for n, p in enumerate(pdos.get("tpdo", [])):
+        objs.append({
+            "index": 0x1800 + n, "name": f"TPDO{n + 1} communication parameter",
+            "kind": "record",
+            "doc": "Type 0: on SYNC if changed; 1-240: every n-th SYNC; 254/255: on change "
+                   "(inhibit time) and on the event timer",
+            "subs": [
+                {"sub": 1, "name": "COB-ID", "type": "UNSIGNED32", "access": "rw",
+                 "default": p["cob_id"]},
+                {"sub": 2, "name": "Transmission type", "type": "UNSIGNED8", "access": "rw",
+                 "default": p["trans_type"]},
+                {"sub": 3, "name": "Inhibit time", "type": "UNSIGNED16", "access": "rw",
+                 "unit": "100 us", "default": p.get("inhibit", 0)},
+                {"sub": 5, "name": "Event timer", "type": "UNSIGNED16", "access": "rw",
+                 "unit": "ms", "default": p.get("event_timer", 0)},
+            ],
+        })
+    for base, key, label in ((0x1600, "rpdo", "RPDO"), (0x1A00, "tpdo", "TPDO")):
+        for n, p in enumerate(pdos.get(key, [])):
+            m = list(p.get("map", []))
+            if len(m) > 8:
+                raise OdError(f"od.yaml pdos.{key}[{n}]: more than 8 mapped objects")
+            subs = [{"sub": 0, "name": "Number of mapped objects", "type": "UNSIGNED8",
+                     "access": "rw", "min": 0, "max": 8, "default": len(m)}]
+            for k in range(8):
+                subs.append({"sub": k + 1, "name": f"Mapped object {k + 1}",
+                             "type": "UNSIGNED32", "access": "rw",
+                             "default": m[k] if k < len(m) else 0})
+            objs.append({"index": base + n, "name": f"{label}{n + 1} mapping parameter",
+                         "kind": "record",
+                         "doc": "0xIIIISSLL: index, sub-index, length in bits. To change: "
+                                "disable the PDO (COB-ID bit 31), write 0 to sub 0, write "
+                                "the entries, write the count, enable.",
+                         "subs": subs})
+    return objs
+
+
+def load(path: Path | str = OD_YAML) -> ObjectDictionary:
+    """Load and validate od.yaml; raises :class:`OdError` naming the field."""
+    path = Path(path)
+    data = yaml.safe_load(path.read_text())
+    fw_limits = data.get("fw_config", {}) or {}
+    objs = list(data["objects"]) + _pdo_objects(data.get("pdos", {}) or {})
+    max_string = int(data["device"].get("max_string", 24))
+    entries: list[OdEntry] = []
+    seen: set[tuple[int, int]] = set()
+    for obj in objs:
+        kind = obj.get("kind", "var")
+        if kind == "var":
+            e = _entry(obj, obj, "var", fw_limits)
+            if e.type == "VISIBLE_STRING" and e.size == 0:
+                e = OdEntry(**{**e.__dict__, "size": max_string})
+            items = [e]
+        elif kind in ("record", "array"):
+            subs = list(obj["subs"])
+            items = []
+            if not any(int(s.get("sub", 0)) == 0 for s in subs):
+                highest = max(int(s["sub"]) for s in subs)
+                items.append(OdEntry(
+                    index=int(obj["index"]), sub=0, name="Highest sub-index supported",
+                    object_name=str(obj["name"]), kind=kind, type="UNSIGNED8", access="const",
+                    size=1, default=highest))
+            for s in subs:
+                s2 = dict(s)
+                e = _entry(obj, s2, kind, fw_limits)
+                if e.type == "VISIBLE_STRING" and e.size == 0:
+                    e = OdEntry(**{**e.__dict__, "size": max_string})
+                items.append(e)
+        else:
+            raise OdError(f"od.yaml 0x{int(obj['index']):04X}: kind {kind!r}")
+        for e in items:
+            if (e.index, e.sub) in seen:
+                raise OdError(f"od.yaml 0x{e.index:04X}:{e.sub}: defined twice")
+            seen.add((e.index, e.sub))
+            entries.append(e)
+        if kind != "var" and obj.get("doc"):
+            # keep the object doc on sub 0 for the docs table
+            i0 = next(i for i, e in enumerate(entries) if e.index == int(obj["index"]))
+            if not entries[i0].doc:
+                entries[i0] = OdEntry(**{**entries[i0].__dict__, "doc": str(obj["doc"])})
+    entries.sort(key=lambda e: (e.index, e.sub))
+    signals = list(data.get("signals", []))
+    return ObjectDictionary(device=dict(data["device"]), entries=entries, signals=signals,
+                            fw_config=fw_limits)

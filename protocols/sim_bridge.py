@@ -1,0 +1,285 @@
+"""Bridge a python-can bus to the drive application (fw_app) running in C.
+
+The drive application (control core + CANopen node + serial link,
+``firmware_c/comm``) is compiled into a shared library and stepped either
+in closed loop with the simulated plant of ``sim_fallback`` (when that
+library is available) or against a null plant (zero currents, constant
+DC link; enough for NMT/SDO/PDO/heartbeat/EMCY). CAN frames are forwarded
+both ways once per chunk of control periods; the simulation is paced to
+wall-clock time by default so that CANopen timeouts keep their meaning.
+
+Example::
+
+    bus = can.Bus(interface="virtual", channel="pmlsm")
+    with DriveBridge(bus, node_id=5) as drive:
+        drive.start()          # background thread, real-time pacing
+        ...                    # canopen.Network on another virtual bus handle
+"""
+
+from __future__ import annotations
+
+import ctypes as C
+import logging
+import threading
+import time
+from typing import Any
+
+import can
+
+from . import _clib
+
+log = logging.getLogger(__name__)
+
+#: fw_config_t fields taken from the simulated motor (machine, power stage,
+#: scaled gains); everything else keeps the firmware defaults.
+MOTOR_FIELDS = frozenset({
+    "f_pwm_Hz", "R_ohm", "L_d_H", "L_q_H", "psi_f_Wb", "pole_pairs", "pole_pitch_m",
+    "u_dc_min_V", "u_dc_max_V", "i_trip_A", "i_max_A", "speed_max_radps_e",
+    "cur_kp_V_per_A", "cur_ki_V_per_As", "spd_kp_A_per_radps", "spd_ki_A_per_rad",
+    "u_inj_V", "f_inj_Hz", "extractor", "pll_accel_per_A",
+    "adc_A_per_count", "adc_offset_counts", "adc_V_per_count", "adc_max_count",
+})
+
+
+class FwCanFrame(C.Structure):
+    """Mirror of ``fw_can_frame_t``."""
+
+    _fields_ = [("id", C.c_uint16), ("dlc", C.c_uint8), ("rtr", C.c_uint8),
+                ("data", C.c_uint8 * 8)]
+
+
+class FwInputs(C.Structure):
+    _fields_ = [("i_abc_A", C.c_float * 3), ("u_dc_V", C.c_float)]
+
+
+class FwOutputs(C.Structure):
+    _fields_ = [("duty_abc", C.c_float * 3), ("pwm_enable", C.c_uint8)]
+
+
+class FwConfigField(C.Structure):
+    """Mirror of ``fw_config_field_t``."""
+
+    _fields_ = [("name", C.c_char_p), ("unit", C.c_char_p), ("offset", C.c_size_t),
+                ("is_u32", C.c_uint8), ("min", C.c_float), ("max", C.c_float)]
+
+
+class FwConfigIssue(C.Structure):
+    """Mirror of ``fw_config_issue_t``."""
+
+    _fields_ = [("status", C.c_int), ("field", C.c_char_p), ("value", C.c_float),
+                ("min", C.c_float), ("max", C.c_float)]
+
+
+def _declare(lib: C.CDLL) -> None:
+    V = C.c_void_p
+    lib.fw_app_sizeof.restype = C.c_size_t
+    lib.fw_app_init.argtypes = [V, V, C.c_uint8]
+    lib.fw_app_init.restype = C.c_int
+    lib.fw_app_can_rx.argtypes = [V, C.POINTER(FwCanFrame)]
+    lib.fw_app_can_rx.restype = C.c_bool
+    lib.fw_app_can_tx_pop.argtypes = [V, C.POINTER(FwCanFrame)]
+    lib.fw_app_can_tx_pop.restype = C.c_bool
+    lib.fw_app_step.argtypes = [V, C.POINTER(FwInputs), C.POINTER(FwOutputs)]
+    lib.fw_app_uart_read.argtypes = [V, C.c_char_p, C.c_size_t]
+    lib.fw_app_uart_read.restype = C.c_size_t
+    lib.fw_config_default.argtypes = [V]
+    lib.fw_config_field_find.argtypes = [C.c_char_p]
+    lib.fw_config_field_find.restype = C.POINTER(FwConfigField)
+    lib.fw_config_check.argtypes = [V, C.POINTER(FwConfigIssue)]
+    lib.fw_config_check.restype = C.c_int
+
+
+class DriveBridge:
+    """The drive application on a python-can bus.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+        The drive's side of the bus (e.g. ``interface="virtual"``).
+    node_id : int
+        CANopen node id (1..127).
+    plant : {"auto", "sim", "none"}
+        "sim": closed loop with ``sim_fallback.Sim`` (error if unavailable);
+        "none": null plant; "auto": "sim" when importable.
+    chunk_steps : int
+        Control periods per bridge iteration (frames are exchanged between chunks).
+    realtime : float
+        Wall-clock pacing factor for :meth:`start` (1.0 = real time, 0 = as fast as possible).
+    sim_kwargs : dict
+        Passed to ``sim_fallback.Sim`` (motor, seed, noise, x0_m, ...).
+    """
+
+    def __init__(self, bus: can.BusABC, node_id: int = 5, plant: str = "auto",
+                 chunk_steps: int = 24, realtime: float = 1.0,
+                 sim_kwargs: dict[str, Any] | None = None) -> None:
+        self.bus = bus
+        self.node_id = node_id
+        self.chunk_steps = chunk_steps
+        self.realtime = realtime
+        self._L = _clib.load_app()
+        _declare(self._L)
+        self._app = C.create_string_buffer(self._L.fw_app_sizeof())
+        self.sim = None
+        if plant in ("auto", "sim"):
+            try:
+                from sim_fallback import _lib as simlib
+                from sim_fallback._sim import Sim
+
+                self.sim = Sim(**(sim_kwargs or {}))
+            except Exception:
+                if plant == "sim":
+                    raise
+                self.sim = None
+        # Our own fw_config_t (this library's layout), defaults first, then the
+        # simulated motor's values copied field by field by name, so that the
+        # two libraries never have to agree on the struct layout.
+        self._cfg = C.create_string_buffer(4096)
+        self._L.fw_config_default(self._cfg)
+        if self.sim is not None:
+            self._copy_config(self.sim.cfg)
+        rc = self._L.fw_app_init(self._app, self._cfg, node_id)
+        if rc != 0:
+            raise RuntimeError(f"fw_app_init returned fw_status_t {rc} (configuration refused)")
+        self.f_pwm_Hz = 24000.0
+        if self.sim is not None:
+            self.f_pwm_Hz = 1.0 / self.sim.dt_s
+            port = simlib.SimController()
+            port.ctx = C.cast(self._app, C.c_void_p)
+            port.step = C.cast(self._L.fw_app_step, C.c_void_p)
+            port.step_adc = None
+            port.snapshot = C.cast(self._L.fw_app_snapshot, C.c_void_p)
+            port.set_ref = None
+            self._port = port
+            self.sim._L.sim_set_controller(self.sim._h, C.byref(port))
+        self._in = FwInputs()
+        self._in.u_dc_V = 300.0
+        self._out = FwOutputs()
+        self.steps = 0
+        self.uart = bytearray()
+        self.sent: list[can.Message] = []
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self.error: BaseException | None = None
+        self._flush_tx()  # boot-up message
+
+    def _copy_config(self, src: C.Structure) -> None:
+        """Copy the sim's fw_config_t by field name; a field the core refuses
+        keeps the firmware default (logged), so a binding that is out of step
+        with the header cannot stop the bridge."""
+        dflt = C.create_string_buffer(self._cfg.raw, len(self._cfg))
+        for name, _ in getattr(src, "_fields_", []):
+            if name not in MOTOR_FIELDS:
+                continue
+            f = self._L.fw_config_field_find(name.encode())
+            if not f:
+                continue
+            v = getattr(src, name)
+            off = f.contents.offset
+            if f.contents.is_u32:
+                C.c_uint32.from_buffer(self._cfg, off).value = int(v) & 0xFFFFFFFF
+            else:
+                C.c_float.from_buffer(self._cfg, off).value = float(v)
+        issue = FwConfigIssue()
+        for _ in range(64):
+            if self._L.fw_config_check(self._cfg, C.byref(issue)) in (0, 4):  # OK, SALIENCY
+                return
+            if not issue.field:
+                break
+            f = self._L.fw_config_field_find(issue.field)
+            off = f.contents.offset
+            log.warning("sim config field %s = %g refused (range %g..%g): firmware default kept",
+                        issue.field.decode(), issue.value, issue.min, issue.max)
+            self._cfg[off:off + 4] = dflt.raw[off:off + 4]
+
+    # ---- stepping --------------------------------------------------------
+    def _flush_rx(self) -> None:
+        while True:
+            msg = self.bus.recv(timeout=0)
+            if msg is None:
+                return
+            if msg.is_extended_id or msg.is_error_frame:
+                continue
+            f = FwCanFrame()
+            f.id = msg.arbitration_id
+            f.dlc = min(msg.dlc, 8)
+            f.rtr = 1 if msg.is_remote_frame else 0
+            for i, b in enumerate(bytes(msg.data)[:8]):
+                f.data[i] = b
+            self._L.fw_app_can_rx(self._app, C.byref(f))
+
+    def _flush_tx(self) -> None:
+        f = FwCanFrame()
+        while self._L.fw_app_can_tx_pop(self._app, C.byref(f)):
+            msg = can.Message(arbitration_id=f.id, is_extended_id=False,
+                              data=bytes(f.data[: f.dlc]), is_remote_frame=bool(f.rtr))
+            self.bus.send(msg)
+        buf = C.create_string_buffer(4096)
+        n = self._L.fw_app_uart_read(self._app, buf, 4096)
+        if n:
+            self.uart += buf.raw[:n]
+
+    def advance(self, n_steps: int) -> None:
+        """Run n_steps control periods now, exchanging frames every chunk."""
+        with self._lock:
+            left = n_steps
+            while left > 0:
+                k = min(left, self.chunk_steps)
+                self._flush_rx()
+                if self.sim is not None:
+                    self.sim.advance(k, decimation=k, channels=[])
+                else:
+                    for _ in range(k):
+                        self._L.fw_app_step(self._app, C.byref(self._in), C.byref(self._out))
+                self.steps += k
+                self._flush_tx()
+                left -= k
+
+    def state(self) -> dict[str, float]:
+        """True plant state (truth, for test assertions), {} without a plant."""
+        return self.sim.state() if self.sim is not None else {}
+
+    def _run(self) -> None:
+        t0 = time.perf_counter()
+        s0 = self.steps
+        dt = 1.0 / self.f_pwm_Hz
+        try:
+            while not self._stop.is_set():
+                self.advance(self.chunk_steps)
+                if self.realtime > 0:
+                    due = t0 + (self.steps - s0) * dt / self.realtime
+                    wait = due - time.perf_counter()
+                    if wait > 0:
+                        time.sleep(wait)
+                    elif wait < -0.005:
+                        # fell behind (GIL, scheduler): do not catch up in a
+                        # burst, which would compress wall-clock gaps between
+                        # received frames into nothing of simulated time
+                        t0 -= wait
+        except BaseException as e:  # pragma: no cover - reported to the test
+            self.error = e
+
+    def start(self) -> None:
+        """Step in a background thread, paced to wall-clock time."""
+        if self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name="drive-bridge", daemon=True)
+            self._thread.start()
+
+    def stop(self) -> None:
+        if self._thread is not None:
+            self._stop.set()
+            self._thread.join(timeout=5)
+            self._thread = None
+
+    def close(self) -> None:
+        self.stop()
+        if self.sim is not None:
+            self.sim.close()
+            self.sim = None
+
+    def __enter__(self) -> DriveBridge:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
