@@ -1,70 +1,54 @@
-"""Build and load the firmware's protocol code as a shared library (ctypes).
+"""Load the firmware's protocol code as shared libraries (ctypes).
 
-Used by the Python tests (vectors against the C implementation) and by
-:mod:`protocols.sim_bridge`. The library is compiled straight from the
-sources with the system C compiler into ``build/comm/py`` and rebuilt when a
-source is newer.
+The libraries are built by the project's one CMake build (``pip install .``
+installs them into this package; a development build leaves them under
+``build/*/firmware_c/comm``):
+
+* ``libpmlsm_co``   : the CANopen + serial stacks alone (vectors, tests);
+* ``libpmlsm_comm`` : the whole drive application: core + CANopen + serial
+  (``fw_app_*``), used by :mod:`protocols.sim_bridge`.
+
+Search order: ``$PMLSM_CO_LIB`` / ``$PMLSM_COMM_LIB``, this package's folder
+(wheel install), ``$PMLSM_BUILD_DIR/firmware_c/comm``, then
+``<repo>/build/*/firmware_c/comm`` (newest first).
 """
 
 from __future__ import annotations
 
 import ctypes
 import os
-import shutil
-import subprocess
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-FW = ROOT / "firmware_c"
-COMM = FW / "comm"
-OUT = ROOT / "build" / "comm" / "py"
-
-CO_SOURCES = [
-    COMM / "src" / "co_od.c",
-    COMM / "src" / "co_node.c",
-    COMM / "src" / "fw_serial.c",
-    COMM / "generated" / "co_od_table.c",
-    COMM / "generated" / "fw_serial_signals.c",
-]
+_HERE = Path(__file__).resolve().parent
+_REPO = _HERE.parent
 
 
-def _core_sources() -> list[Path]:
-    return sorted((FW / "src").glob("*.c"))
-
-
-def _compiler() -> str:
-    for cc in (os.environ.get("CC"), "cc", "gcc", "clang"):
-        if cc and shutil.which(cc):
-            return cc
-    raise OSError("no C compiler found (set CC)")
-
-
-def build(name: str, with_app: bool, out_dir: Path = OUT) -> Path:
-    """Compile lib<name>.so; with_app adds the core and fw_app.c."""
-    srcs = list(CO_SOURCES)
-    if with_app:
-        srcs += _core_sources() + [COMM / "src" / "fw_app.c"]
-    headers = list((COMM / "include" / "pmlsm").glob("*.h")) + list(
-        (COMM / "generated").glob("*.h")) + list((FW / "include" / "pmlsm").glob("*.h"))
-    out_dir.mkdir(parents=True, exist_ok=True)
-    lib = out_dir / f"lib{name}.so"
-    newest = max(p.stat().st_mtime for p in srcs + headers)
-    if lib.exists() and lib.stat().st_mtime >= newest:
-        return lib
-    tmp = lib.with_suffix(f".{os.getpid()}.tmp")
-    cmd = [_compiler(), "-std=c11", "-O2", "-g", "-shared", "-fPIC",
-           f"-I{COMM / 'include'}", f"-I{COMM / 'generated'}", f"-I{FW / 'include'}",
-           "-o", str(tmp), *map(str, srcs), "-lm"]
-    subprocess.run(cmd, check=True, capture_output=True, text=True)
-    os.replace(tmp, lib)
-    return lib
+def find(name: str, env: str) -> Path:
+    """Path of ``lib<name>.so``; raises OSError naming every place looked at."""
+    fname = f"lib{name}.so"
+    tried: list[Path] = []
+    if os.environ.get(env):
+        tried.append(Path(os.environ[env]))
+    tried.append(_HERE / fname)
+    if os.environ.get("PMLSM_BUILD_DIR"):
+        tried.append(Path(os.environ["PMLSM_BUILD_DIR"]) / "firmware_c" / "comm" / fname)
+    builds = sorted(_REPO.glob(f"build/*/firmware_c/comm/{fname}"),
+                    key=lambda p: p.stat().st_mtime, reverse=True)
+    tried.extend(builds)
+    for p in tried:
+        if p.is_file():
+            return p
+    raise OSError(
+        f"{fname} not found (looked in: {', '.join(map(str, tried)) or 'nowhere'}); "
+        "build it with `pip install .` or `cmake -S . -B build/dev && cmake --build build/dev`, "
+        f"or point ${env} at it")
 
 
 def load_co() -> ctypes.CDLL:
     """The CANopen + serial stacks alone (no control core)."""
-    return ctypes.CDLL(str(build("pmlsm_co_py", with_app=False)))
+    return ctypes.CDLL(str(find("pmlsm_co", "PMLSM_CO_LIB")))
 
 
 def load_app() -> ctypes.CDLL:
     """The whole drive application: core + CANopen + serial (fw_app_*)."""
-    return ctypes.CDLL(str(build("pmlsm_app_py", with_app=True)))
+    return ctypes.CDLL(str(find("pmlsm_comm", "PMLSM_COMM_LIB")))

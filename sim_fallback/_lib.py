@@ -5,7 +5,8 @@ The structures below mirror ``fw_ctrl.h`` and ``pmlsm_sim.h`` field by field;
 C compiler's answer (``sim_layout_offsetof`` / ``sim_layout_sizeof``).
 
 Library search order: ``$PMLSM_SIM_LIB``, the package directory (wheel
-install), ``build/sim/sim_fallback``, then any ``build/*/sim_fallback``.
+install), ``$PMLSM_BUILD_DIR/sim_fallback``, then any ``build/*/sim_fallback``
+(newest first).
 """
 
 from __future__ import annotations
@@ -202,8 +203,9 @@ def _candidates() -> list[Path]:
     if env:
         out.append(Path(env))
     out.append(here / _LIBNAME)
+    if os.environ.get("PMLSM_BUILD_DIR"):
+        out.append(Path(os.environ["PMLSM_BUILD_DIR"]) / "sim_fallback" / _LIBNAME)
     root = here.parent
-    out.append(root / "build" / "sim" / "sim_fallback" / _LIBNAME)
     out += sorted((root / "build").glob(f"*/sim_fallback/{_LIBNAME}"),
                   key=lambda p: -p.stat().st_mtime)
     return out
