@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def build(build_dir: Path) -> Path:
     subprocess.run(
         ["cmake", "-S", str(ROOT), "-B", str(build_dir), "-G", "Ninja",
-         "-DCMAKE_BUILD_TYPE=Release", "-DPMLSM_BUILD_SIM=OFF"],
+         "-DCMAKE_BUILD_TYPE=Release", "-DPMLSM_BUILD_SIM=OFF", "-DPMLSM_BUILD_TESTS=ON"],
         check=True, capture_output=True,
     )
     subprocess.run(["cmake", "--build", str(build_dir), "--target", "bench_fw_step"],
@@ -48,7 +48,7 @@ def callgrind_ir(exe: Path, n: int) -> int:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--build-dir", default=str(ROOT / "build" / "bench"))
+    ap.add_argument("--build-dir", default=str(ROOT / "build" / "benchmarks"))
     args = ap.parse_args()
     exe = build(Path(args.build_dir))
     timing = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout

@@ -81,6 +81,7 @@ static void reset_dynamics(fw_ctrl_t *c) {
                                                                      : cfg->sogi_k;
   (void)fw_sogi_init_f32(&c->sogi_a, cfg->f_inj_Hz, k, c->dt_s);
   (void)fw_sogi_init_f32(&c->sogi_b, cfg->f_inj_Hz, k, c->dt_s);
+  c->sogi_gd_s = c->sogi_gd_s_k / c->sogi_a.k;
   fw_pll_init_f32(&c->pll, cfg->pll_kp, cfg->pll_ki, cfg->speed_max_radps_e);
   memset(c->h_prev_raw, 0, sizeof(c->h_prev_raw));
   memset(c->h_prev_sogi, 0, sizeof(c->h_prev_sogi));
@@ -124,6 +125,11 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
     float t = tanf(h);
     c->sogi_gd_s_k = (2.0f / w0) * h * (1.0f + t * t) / t;
   }
+  /* reciprocals and products the step would otherwise divide for */
+  c->eps_gain = cfg->L_q_H / (cfg->L_q_H - cfg->L_d_H);
+  c->inv_n_inj = 1.0f / (float)c->n_inj;
+  c->inv_adapt_err = 1.0f / cfg->sogi_adapt_err_rad;
+  c->hf_min_A = cfg->hf_min_ratio * c->dt_s * cfg->u_inj_V / cfg->L_q_H;
   reset_dynamics(c);
 }
 
@@ -134,6 +140,7 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
 static void sogi_set_k_both(fw_ctrl_t *c, float k) {
   fw_sogi_set_k_f32(&c->sogi_a, k);
   fw_sogi_copy_gain_f32(&c->sogi_b, &c->sogi_a);
+  c->sogi_gd_s = c->sogi_gd_s_k / c->sogi_a.k; /* k is clamped > 0 by set_k */
 }
 
 /* ---- configuration and commands ----------------------------------------- */
@@ -346,7 +353,7 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_
    * (1 + G_sum/G_diff) w tau / 2 (3 w tau for Lq = 1.5 Ld). */
   float tau_s = 0.5f * c->dt_s;
   if (ex != FW_EXTRACTOR_PSEUDO) {
-    tau_s += c->sogi_gd_s_k / c->sogi_a.k;
+    tau_s += c->sogi_gd_s;
   }
   (void)sc;
   fw_sincos_f32_t sc_d = fw_sincos_f32(c->pll.theta_rad - c->pll.w_i_radps * tau_s);
@@ -355,14 +362,14 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_
    * later in this step, so here sign_hist[0] = s(k-1), sign_hist[1] = s(k-2). */
   float s = c->sign_hist[1];
   ring_push(c, s * dh_dq.x, s * dh_dq.y, i_ab.x, i_ab.y);
-  float inv_n = 1.0f / (float)c->ring_fill;
+  float inv_n = c->ring_fill == c->n_inj ? c->inv_n_inj : 1.0f / (float)c->ring_fill;
   float E_d = c->sum_ed * inv_n;
   float E_q = c->sum_eq * inv_n;
 
   float eps = 0.0f;
   float floor_A = 1e-6f;
   if (E_d > floor_A) {
-    eps = (E_q / E_d) * cfg->L_q_H / (cfg->L_q_H - cfg->L_d_H);
+    eps = (E_q / E_d) * c->eps_gain;
     eps = fw_clampf(eps, -1.0f, 1.0f);
   }
   float ae = fabsf(eps);
@@ -371,7 +378,7 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_
   if (ex == FW_EXTRACTOR_SOGI_ADAPTIVE) {
     /* Observable adaptation (replaces eq. 13's theta - theta_hat): a wide
      * band while the PLL error is large, a narrow one when locked. */
-    float r = fw_clampf(c->err_f / cfg->sogi_adapt_err_rad, 0.0f, 1.0f);
+    float r = fw_clampf(c->err_f * c->inv_adapt_err, 0.0f, 1.0f);
     float k = cfg->sogi_k_adapt_min + (cfg->sogi_k_adapt_max - cfg->sogi_k_adapt_min) * r;
     if (fabsf(k - c->sogi_a.k) > FW_SOGI_K_STEP) {
       sogi_set_k_both(c, k);
@@ -419,8 +426,7 @@ static void supervise_estimator(fw_ctrl_t *c) {
   if (c->phase_time_s < FW_HF_SUPERVISION_DELAY_S || c->ring_fill < c->n_inj) {
     return;
   }
-  float e_min = cfg->hf_min_ratio * c->dt_s * cfg->u_inj_V / cfg->L_q_H;
-  if (cfg->u_inj_V > 0.0f && c->snap.hf_amp_A < e_min) {
+  if (cfg->u_inj_V > 0.0f && c->snap.hf_amp_A < c->hf_min_A) {
     latch_fault(c, FW_FAULT_EST_HF_LOW);
     return;
   }

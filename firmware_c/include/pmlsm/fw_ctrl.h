@@ -276,6 +276,11 @@ typedef struct {
   float omega_f;
   float spd_alpha;        /**< speed filter coefficient */
   float sogi_gd_s_k;      /**< SOGI group delay at the carrier times k (s) */
+  float sogi_gd_s;        /**< SOGI group delay at the present k (s) */
+  float eps_gain;         /**< L_q / (L_q - L_d): ratio -> angle error */
+  float inv_n_inj;        /**< 1 / n_inj */
+  float inv_adapt_err;    /**< 1 / sogi_adapt_err_rad */
+  float hf_min_A;         /**< HF-loss threshold hf_min_ratio T u_inj / L_q */
   float err_alpha;        /**< |PLL error| filter coefficient */
   float inj_sign;         /**< injection sign commanded this step */
   float qs_still_s;       /**< time at standstill during quick stop */

@@ -1,0 +1,586 @@
+#!/usr/bin/env python3
+"""Cost of one fw_step() on a Cortex-M4F, from instructions counted under QEMU.
+
+What it does
+  1. Cross-compiles the firmware core (firmware_c/src/*.c) with the real
+     target flags (-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard)
+     plus the harness in benchmarks/cm4/ into a bare-metal image for QEMU's
+     mps2-an386 board (a Cortex-M4F), once per optimisation level (-O2 and
+     -Os by default; -Os is what the project's MinSizeRel CM4 image uses).
+  2. Runs it once untraced ("warm"): the locked-mover plant of
+     benchmarks/bench_fw_step.c drives the core into closed-loop RUN (0.2 s +
+     24 000 samples, same as the host benchmark); the controller state and
+     the recorded inputs are written to a host file through semihosting.
+  3. Runs it again ("count") under `-d exec,nochain` with one instruction
+     per translation block, replaying BATCH x NB recorded inputs, each batch
+     from a copy of the saved state (as bench_fw_step.c does; batches are
+     whole injection periods so the controller stays locked). Every
+     instruction executed from fw_step's first instruction until control is
+     back in the harness is counted, callees included; the harness checks
+     that the controller is still in RUN without a fault after every batch.
+  4. Classifies each executed instruction from the image's disassembly and
+     converts the counts to cycles with a low and a high Cortex-M4 cost
+     model (see CYCLE MODEL below), then prints instructions/step (median
+     over batches), the cycle range, the share of the 7083-cycle budget
+     (170 MHz / 24 kHz) and the margin to the 50 % target.
+
+Needs: arm-none-eabi-gcc + newlib (Debian: gcc-arm-none-eabi,
+libnewlib-arm-none-eabi) and qemu-system-arm (Debian: qemu-system-arm).
+Exits 2 with a message when they are missing, 1 when a step fails (build
+error, warm-up not reaching RUN, controller leaving RUN during the replay),
+3 when the sources changed during the run. Outputs go to benchmarks/out/cm4/.
+
+Usage: python3 benchmarks/bench_cm4_estimate.py [--opt O2,Os] [--batch 80]
+       [--batches 10] [--json out.json] [--keep-log]
+
+CYCLE MODEL (Cortex-M4 TRM r0p1 table 3-1, FPv4-SP table 7-1; zero-wait-
+state instruction fetch, i.e. code in CCM SRAM or always hitting the
+flash accelerator):
+  - data processing, MUL, SMULL/UMULL/SMLAL/UMLAL, most FP (VADD, VSUB,
+    VMUL, VNMUL, VABS, VNEG, VCMP, VCVT, VMOV, VMRS/VMSR): 1
+  - MLA/MLS: 2; SDIV/UDIV: 2 (low) .. 12 (high)
+  - VMLA/VMLS/VNMLA/VNMLS/VFMA/VFMS/VFNMA/VFNMS: 3; VMOV of 2 core regs: 2
+  - VDIV, VSQRT: 14
+  - single load/store (LDR*, STR*, VLDR, VSTR): 2 (high); 1 (low) when it
+    directly follows another single load/store (address/data pipelining)
+  - LDRD/STRD: 3; LDM/STM/PUSH/POP/VLDM/VSTM/VPUSH/VPOP: 1 + N words
+  - every change of flow (taken branch, BL, BX, POP {pc}, ...): + P pipeline
+    refill cycles, P = 1 (low) .. 3 (high); TBB/TBH: +1 more
+  - IT: 0 (low, folded) .. 1 (high)
+  Not in the model: flash wait states on misses of the flash accelerator
+  (reported separately as a cold-flash fetch bound: executed code bytes / 8
+  plus one line per change of flow, times 1 + 4 wait states),
+  interrupt entry/exit (~12 + ~10 cycles, + ~17 + ~17 with lazy FP
+  stacking; added to the budget line), bus contention with DMA.
+"""
+
+from __future__ import annotations
+
+import argparse
+import bisect
+import hashlib
+import json
+import re
+import shutil
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+FW = ROOT / "firmware_c"
+CM4 = ROOT / "benchmarks" / "cm4"
+OUT = ROOT / "benchmarks" / "out" / "cm4"
+
+F_CPU_HZ = 170e6
+F_ISR_HZ = 24e3
+BUDGET = F_CPU_HZ / F_ISR_HZ  # 7083.3 cycles
+TARGET_SHARE = 0.50
+ISR_OVERHEAD = (22, 56)  # entry + exit cycles, without / with lazy FP context stacking
+FLASH_WS = 4  # flash wait states of an STM32G4-class part at 170 MHz
+
+CPU_FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard"]
+TOOLS = ["arm-none-eabi-gcc", "arm-none-eabi-objdump", "arm-none-eabi-nm", "qemu-system-arm"]
+INSTALL_HINT = (
+    "install them with: apt-get update && apt-get install -y gcc-arm-none-eabi "
+    "libnewlib-arm-none-eabi qemu-system-arm"
+)
+
+
+def die(msg: str, code: int = 1) -> None:
+    print(f"bench_cm4_estimate: {msg}", file=sys.stderr)
+    sys.exit(code)
+
+
+def run(cmd: list[str], **kw) -> subprocess.CompletedProcess:
+    return subprocess.run(cmd, capture_output=True, text=True, **kw)
+
+
+def check_tools() -> None:
+    missing = [t for t in TOOLS if shutil.which(t) is None]
+    if missing:
+        die(f"missing tools: {', '.join(missing)}; {INSTALL_HINT}", 2)
+    # newlib's semihosting crt0 for the hard-float v7e-m multilib
+    r = run(["arm-none-eabi-gcc", *CPU_FLAGS, "-print-file-name=rdimon-crt0.o"])
+    if r.returncode != 0 or not Path(r.stdout.strip()).is_file():
+        die(f"newlib (rdimon-crt0.o) not found for {' '.join(CPU_FLAGS)}; {INSTALL_HINT}", 2)
+    r = run(["qemu-system-arm", "-M", "help"])
+    if "mps2-an386" not in r.stdout:
+        die("qemu-system-arm has no mps2-an386 machine (need QEMU >= 6.0)", 2)
+
+
+def qemu_version() -> tuple[int, int]:
+    r = run(["qemu-system-arm", "--version"])
+    m = re.search(r"version (\d+)\.(\d+)", r.stdout)
+    return (int(m.group(1)), int(m.group(2))) if m else (0, 0)
+
+
+def one_insn_per_tb_args() -> list[str]:
+    # -singlestep was renamed to -accel tcg,one-insn-per-tb=on in QEMU 8.1
+    return ["-accel", "tcg,one-insn-per-tb=on"] if qemu_version() >= (8, 1) else ["-singlestep"]
+
+
+def source_fingerprint() -> str:
+    """sha256 (12 hex) over the core's sources and headers and the harness."""
+    h = hashlib.sha256()
+    files = [*(FW / "src").glob("*.c"), *(FW / "include").rglob("*.h"), *CM4.glob("*")]
+    for p in sorted(files):
+        if p.is_file():
+            h.update(p.name.encode())
+            h.update(p.read_bytes())
+    return h.hexdigest()[:12]
+
+
+def build(opt: str, outdir: Path) -> Path:
+    outdir.mkdir(parents=True, exist_ok=True)
+    elf = outdir / "harness.elf"
+    srcs = sorted(str(p) for p in (FW / "src").glob("*.c"))
+    cmd = [
+        "arm-none-eabi-gcc",
+        *CPU_FLAGS,
+        f"-{opt}",
+        "-std=c11",
+        "-DNDEBUG",
+        "-ffunction-sections",
+        "-fdata-sections",
+        "-Wall",
+        "-Wextra",
+        "-g",
+        f"-I{FW / 'include'}",
+        *srcs,
+        str(CM4 / "harness.c"),
+        str(CM4 / "startup.c"),
+        "-T",
+        str(CM4 / "cm4.ld"),
+        "--specs=nano.specs",
+        "--specs=rdimon.specs",
+        "-Wl,--gc-sections",
+        f"-Wl,-Map={outdir / 'harness.map'}",
+        "-lm",
+        "-o",
+        str(elf),
+    ]
+    r = run(cmd)
+    if r.returncode != 0:
+        die(f"cross build (-{opt}) failed:\n{r.stderr}")
+    return elf
+
+
+def qemu(
+    elf: Path, args: list[str], extra: list[str], timeout: float
+) -> subprocess.CompletedProcess:
+    # QEMU option syntax: a literal comma inside a value is written ",,"
+    semi = "enable=on,target=native," + ",".join(
+        "arg=" + a.replace(",", ",,") for a in ["harness", *args]
+    )
+    cmd = [
+        "qemu-system-arm",
+        "-M",
+        "mps2-an386",
+        "-nographic",
+        "-monitor",
+        "none",
+        "-serial",
+        "none",
+        "-kernel",
+        str(elf),
+        "-semihosting-config",
+        semi,
+        *extra,
+    ]
+    try:
+        return run(cmd, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        die(f"qemu timed out: {' '.join(cmd)}")
+    raise AssertionError
+
+
+def symbols(elf: Path) -> list[tuple[int, int, str]]:
+    r = run(["arm-none-eabi-nm", "-S", "--defined-only", str(elf)])
+    out = []
+    for line in r.stdout.splitlines():
+        p = line.split()
+        if len(p) == 4 and p[2] in "tTwW":
+            out.append((int(p[0], 16), int(p[1], 16), p[3]))
+    return sorted(out)
+
+
+INSN_RE = re.compile(r"^\s*([0-9a-f]+):\s+((?:[0-9a-f]{4}\s?){1,2})\s+(\S+)\s*(.*)$")
+
+
+def disassemble(elf: Path) -> dict[int, tuple[int, str, str]]:
+    r2 = run(["arm-none-eabi-objdump", "-d", str(elf)])
+    insns: dict[int, tuple[int, str, str]] = {}
+    for line in r2.stdout.splitlines():
+        m = INSN_RE.match(line)
+        if not m:
+            continue
+        addr = int(m.group(1), 16)
+        size = 2 * len(m.group(2).split())
+        insns[addr] = (size, m.group(3).lower(), m.group(4).split("@")[0].strip().lower())
+    return insns
+
+
+COND = tuple(("eq ne cs cc hs lo mi pl vs vc hi ls ge lt gt le al").split())
+
+
+def base_mnemonic(mn: str) -> str:
+    mn = mn.split(".")[0]  # drop .w/.n/.f32
+    if mn in KNOWN_BASES or mn in V_BASES:
+        return mn
+    for c in COND:  # conditional forms inside IT blocks, e.g. movlt, ldrne, vldrmi
+        if mn.endswith(c) and len(mn) > len(c):
+            b = mn[: -len(c)]
+            if b in KNOWN_BASES or b in V_BASES:
+                return b
+    return mn
+
+
+KNOWN_BASES = set(
+    (
+        "mov movs mvn mvns add adds sub subs rsb rsbs and ands orr orrs eor eors bic bics cmp "
+        "cmn tst teq lsl lsls lsr lsrs asr asrs ldr ldrb ldrh ldrsb ldrsh ldrd str strb strh "
+        "strd b bl bx blx pop push ldm ldmia stm stmia mul muls mla mls sdiv udiv ubfx sbfx "
+        "uxtb uxth sxtb sxth movw movt clz ssat usat bfi bfc orn adc sbc addw subw tbb tbh "
+        "cbz cbnz ldrex strex smull umull smlal umlal nop ror rors neg negs"
+    ).split()
+)
+
+V_BASES = set(
+    (
+        "vldr vstr vldm vldmia vldmdb vstm vstmia vstmdb vpush vpop vmov vmrs vmsr vadd vsub "
+        "vmul vnmul vdiv vsqrt vabs vneg vcmp vcmpe vcvt vcvtr vmla vmls vnmla vnmls vfma "
+        "vfms vfnma vfnms"
+    ).split()
+)
+
+SINGLE_LS = set(("ldr ldrb ldrh ldrsb ldrsh ldrex ldrt str strb strh strex vldr vstr").split())
+MULTI = set(
+    (
+        "ldm ldmia ldmfd ldmdb stm stmia stmea stmdb stmfd push pop vldm vldmia vldmdb vstm "
+        "vstmia vstmdb vpush vpop"
+    ).split()
+)
+FP_MAC = {"vmla", "vmls", "vnmla", "vnmls", "vfma", "vfms", "vfnma", "vfnms"}
+
+
+def reg_words(ops: str) -> int:
+    """Number of 32-bit words moved by a register-list instruction."""
+    m = re.search(r"\{([^}]*)\}", ops)
+    if not m:
+        return 1
+    n = 0
+    for part in m.group(1).split(","):
+        part = part.strip()
+        if not part:
+            continue
+        w = 2 if part.startswith("d") else 1
+        if "-" in part:
+            a, b = part.split("-")
+            n += (int(re.sub(r"\D", "", b)) - int(re.sub(r"\D", "", a)) + 1) * w
+        else:
+            n += w
+    return n
+
+
+def classify(mn: str, ops: str) -> tuple[str, int, int, bool]:
+    """-> (class, low cycles, high cycles, pipelinable single load/store);
+    pipeline refill after a change of flow is added by the caller."""
+    b = base_mnemonic(mn)
+    if not b or mn.startswith("."):  # literal-pool data: never executed
+        return "?", 1, 1, False
+    if b in ("vdiv", "vsqrt"):
+        return b, 14, 14, False
+    if b in FP_MAC:
+        return "fp_mac", 3, 3, False
+    if b in SINGLE_LS:
+        kind = "load" if b.startswith(("ldr", "vldr")) else "store"
+        return kind, 2, 2, True
+    if b in ("ldrd", "strd"):
+        return ("load" if b == "ldrd" else "store"), 3, 3, False
+    if b in MULTI:
+        n = reg_words(ops)
+        kind = "load" if b.startswith(("ldm", "pop", "vldm", "vpop")) else "store"
+        return kind, 1 + n, 1 + n, False
+    if b in ("mla", "mls"):
+        return "mul", 2, 2, False
+    if b in ("mul", "muls", "smull", "umull", "smlal", "umlal"):
+        return "mul", 1, 1, False
+    if b in ("sdiv", "udiv"):
+        return "div", 2, 12, False
+    if b in ("tbb", "tbh"):
+        return "branch", 2, 2, False
+    if b in ("b", "bl", "bx", "blx", "cbz", "cbnz"):
+        return "branch", 1, 1, False
+    if b == "it" or re.fullmatch(r"it[te]{0,3}", b):
+        return "it", 0, 1, False
+    if b == "vmov" and ops.count(",") >= 2:  # vmov r0, r1, d0 / vmov s0, s1, r0, r1
+        return "fp", 2, 2, False
+    if b.startswith("v"):
+        return "fp", 1, 1, False
+    return "alu", 1, 1, False
+
+
+def parse_trace(log: Path, insns, syms, batch: int, nb: int):
+    """Walk the exec log; count per step from fw_step's entry until the PC is
+    back in replay_batch. Returns per-step insn counts and low/high cycles,
+    per-class and per-function totals."""
+    by_name = {name: (a, s) for a, s, name in syms}
+    entry = by_name["fw_step"][0]
+    rb_lo, rb_sz = by_name["replay_batch"]
+    rb_hi = rb_lo + rb_sz
+    starts = [a for a, _, _ in syms]
+
+    def func_of(pc: int) -> str:
+        i = bisect.bisect_right(starts, pc) - 1
+        return syms[i][2] if i >= 0 else "?"
+
+    steps_n, steps_lo, steps_hi, steps_flow, steps_bytes = [], [], [], [], []
+    cls_count: dict[str, int] = {}
+    fn_count: dict[str, int] = {}
+    pc_count: dict[int, int] = {}
+    unknown = 0
+    inside = False
+    n = lo = hi = flow = nbytes = 0
+    prev = None  # (pc, size, is_single_ls)
+    with open(log, errors="replace") as f:
+        for line in f:
+            if not line.startswith("Trace"):
+                continue
+            lb = line.find("[")
+            fields = line[lb + 1 : line.find("]", lb)].split("/")
+            pc = int(fields[1], 16)
+            if inside and prev is not None and pc != prev[0] + prev[1]:
+                flow += 1  # the previous instruction changed the flow
+            if not inside:
+                if pc == entry:
+                    inside, n, lo, hi, flow, nbytes, prev = True, 0, 0, 0, 0, 0, None
+                else:
+                    continue
+            elif rb_lo <= pc < rb_hi:
+                steps_n.append(n)
+                steps_lo.append(lo + flow * 1)
+                steps_hi.append(hi + flow * 3)
+                steps_flow.append(flow)
+                steps_bytes.append(nbytes)
+                inside = False
+                continue
+            ins = insns.get(pc)
+            if ins is None:
+                unknown += 1
+                size, c, lc, hc, pipe = 2, "?", 1, 1, False
+            else:
+                size = ins[0]
+                c, lc, hc, pipe = classify(ins[1], ins[2])
+            if pipe and prev is not None and prev[2]:
+                lc = 1
+            n += 1
+            nbytes += size
+            lo += lc
+            hi += hc
+            cls_count[c] = cls_count.get(c, 0) + 1
+            pc_count[pc] = pc_count.get(pc, 0) + 1
+            prev = (pc, size, pipe)
+    for pc, k in pc_count.items():
+        fn = func_of(pc)
+        fn_count[fn] = fn_count.get(fn, 0) + k
+    footprint = sum(insns[pc][0] if pc in insns else 2 for pc in pc_count)
+    if len(steps_n) != batch * nb:
+        die(f"trace holds {len(steps_n)} complete fw_step calls, expected {batch * nb}")
+    return (
+        steps_n,
+        steps_lo,
+        steps_hi,
+        steps_flow,
+        steps_bytes,
+        footprint,
+        cls_count,
+        fn_count,
+        unknown,
+    )
+
+
+def batch_medians(v: list[int], batch: int) -> float:
+    per = [sum(v[i : i + batch]) / batch for i in range(0, len(v), batch)]
+    return statistics.median(per)
+
+
+def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool) -> dict:
+    outdir = elf.parent
+    state = outdir / f"state_{mode}.bin"
+    r = qemu(elf, ["warm", str(state), str(batch * nb), mode], [], timeout=600)
+    if r.returncode != 0 or "warm ok" not in r.stdout:
+        die(f"warm-up run (-{opt}) failed (rc {r.returncode}):\n{r.stdout}{r.stderr}")
+    log = outdir / f"exec_{mode}.log"
+    r = qemu(
+        elf,
+        ["count", str(state), str(batch), str(nb)],
+        [*one_insn_per_tb_args(), "-d", "exec,nochain", "-D", str(log)],
+        timeout=900,
+    )
+    if r.returncode != 0 or "closed_loop=yes" not in r.stdout:
+        die(
+            f"count run (-{opt}) failed or left closed loop (rc {r.returncode}):\n"
+            f"{r.stdout}{r.stderr}"
+        )
+    syms = symbols(elf)
+    insns = disassemble(elf)
+    (steps_n, steps_lo, steps_hi, steps_flow, steps_bytes, footprint, cls, fns, unknown) = (
+        parse_trace(log, insns, syms, batch, nb)
+    )
+    # flash fetch bound with no accelerator hits: 64-bit lines, 1 + WS cycles each,
+    # one extra line per change of flow
+    fetch = [(b / 8 + f) * (1 + FLASH_WS) for b, f in zip(steps_bytes, steps_flow, strict=True)]
+    if not keep_log:
+        log.unlink()
+    total = sum(steps_n)
+    res = {
+        "opt": opt,
+        "mode": mode,
+        "steps": len(steps_n),
+        "batch": batch,
+        "batches": nb,
+        "insns_per_step_median": batch_medians(steps_n, batch),
+        "insns_per_step_min": min(steps_n),
+        "insns_per_step_max": max(steps_n),
+        "cycles_low_median": batch_medians(steps_lo, batch),
+        "cycles_high_median": batch_medians(steps_hi, batch),
+        "cycles_high_max_step": max(steps_hi),
+        "flow_changes_per_step": batch_medians(steps_flow, batch),
+        "code_bytes_executed_per_step": batch_medians(steps_bytes, batch),
+        "code_footprint_bytes": footprint,
+        "cold_flash_fetch_bound_cycles": batch_medians(fetch, batch),
+        "class_per_step": {k: v / len(steps_n) for k, v in sorted(cls.items())},
+        "functions_per_step": {
+            k: v / len(steps_n) for k, v in sorted(fns.items(), key=lambda kv: -kv[1])
+        },
+        "unknown_pcs": unknown,
+        "total_insns": total,
+    }
+    return res
+
+
+def report(res: dict) -> None:
+    opt = res["opt"]
+    lo, hi = res["cycles_low_median"], res["cycles_high_median"]
+    what = {"force": "FORCE mode as bench_fw_step.c", "speed": "SPEED mode, speed loop on"}
+    print(
+        f"\n== fw_step on Cortex-M4F, -{opt}, {what[res['mode']]} "
+        f"({res['steps']} closed-loop RUN steps, "
+        f"{res['batches']} batches of {res['batch']}) =="
+    )
+    print(
+        f"instructions/step: median {res['insns_per_step_median']:.1f}  "
+        f"(single steps: min {res['insns_per_step_min']}, max {res['insns_per_step_max']})"
+    )
+    cls = res["class_per_step"]
+    mix = "  ".join(f"{k} {v:.1f}" for k, v in sorted(cls.items(), key=lambda kv: -kv[1]))
+    print(f"mix per step: {mix}  | changes of flow {res['flow_changes_per_step']:.1f}")
+    top = list(res["functions_per_step"].items())[:8]
+    print("by function (insns/step): " + ", ".join(f"{k} {v:.0f}" for k, v in top))
+    worst_step = res["cycles_high_max_step"]
+    print(
+        f"estimated cycles/step (zero-wait fetch): {lo:.0f} .. {hi:.0f}  "
+        f"(worst single step, high model: {worst_step})"
+    )
+    print(
+        f"share of the {BUDGET:.0f}-cycle budget (170 MHz / 24 kHz): "
+        f"{100 * lo / BUDGET:.1f} % .. {100 * hi / BUDGET:.1f} %  "
+        f"(with ISR entry/exit {ISR_OVERHEAD[0]}..{ISR_OVERHEAD[1]} cycles: "
+        f"{100 * (lo + ISR_OVERHEAD[0]) / BUDGET:.1f} % .. "
+        f"{100 * (hi + ISR_OVERHEAD[1]) / BUDGET:.1f} %)"
+    )
+    tgt = TARGET_SHARE * BUDGET
+    worst = worst_step + ISR_OVERHEAD[1]
+    verdict = "MEETS" if worst <= tgt else "MISSES"
+    print(
+        f"margin to the 50 % target ({tgt:.0f} cycles), worst step, high model, incl. ISR "
+        f"entry/exit: {tgt - worst:+.0f} cycles -> {verdict} the target; "
+        f"headroom to 100 %: {BUDGET - worst:+.0f} cycles"
+    )
+    fb = res["cold_flash_fetch_bound_cycles"]
+    print(
+        f"caveat, code in flash: {res['code_bytes_executed_per_step']:.0f} code bytes "
+        f"executed/step, "
+        f"footprint {res['code_footprint_bytes']} B; if every fetch missed the flash "
+        f"accelerator ({FLASH_WS} WS, 64-bit lines) fetch alone would take ~{fb:.0f} cycles "
+        f"({100 * fb / BUDGET:.0f} % of budget): run the ISR path from CCM SRAM"
+    )
+    if res["unknown_pcs"]:
+        print(f"warning: {res['unknown_pcs']} executed PCs not found in the disassembly")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--opt", default="O2,Os", help="comma-separated -O levels (default O2,Os)")
+    ap.add_argument(
+        "--modes",
+        default="force,speed",
+        help="control modes: force (i_q reference, as bench_fw_step.c) and/or "
+        "speed (speed loop on, 0 rad/s reference); default force,speed",
+    )
+    ap.add_argument(
+        "--batch",
+        type=int,
+        default=80,
+        help="steps per batch, a multiple of the injection period "
+        "(8 samples at the default config; default 80)",
+    )
+    ap.add_argument("--batches", type=int, default=10, help="number of batches (default 10)")
+    ap.add_argument("--json", type=Path, help="also write the results as JSON")
+    ap.add_argument("--keep-log", action="store_true", help="keep the QEMU exec log")
+    a = ap.parse_args()
+    check_tools()
+    if a.batch * a.batches < 200:
+        die("need at least 200 counted steps (batch x batches)")
+    if a.batch * a.batches > 4000:
+        die("at most 4000 counted steps (the harness's input buffer)")
+    v = run(["qemu-system-arm", "--version"]).stdout.splitlines()[0]
+    g = run(["arm-none-eabi-gcc", "--version"]).stdout.splitlines()[0]
+    print(f"tools: {g}; {v}; board mps2-an386 (Cortex-M4F)")
+    print(
+        f"flags: {' '.join(CPU_FLAGS)} -O<level> -DNDEBUG; budget {BUDGET:.0f} cycles, "
+        f"target <= {TARGET_SHARE * BUDGET:.0f}"
+    )
+    fp0 = source_fingerprint()
+    print(f"sources: firmware_c/src + include + benchmarks/cm4, sha256 {fp0}")
+    results = []
+    modes = [m.strip() for m in a.modes.split(",") if m.strip()]
+    if not modes or any(m not in ("force", "speed") for m in modes):
+        die("--modes takes force and/or speed")
+    for opt in [o.strip() for o in a.opt.split(",") if o.strip()]:
+        elf = build(opt, OUT / opt)
+        for mode in modes:
+            res = measure(opt, mode, elf, a.batch, a.batches, a.keep_log)
+            report(res)
+            results.append(res)
+    print(
+        "\nsummary (instructions/step median; cycles/step low..high; % of budget incl. ISR "
+        "entry/exit):"
+    )
+    for r in results:
+        lo, hi = r["cycles_low_median"], r["cycles_high_median"]
+        print(
+            f"  -{r['opt']:<3} {r['mode']:<6} {r['insns_per_step_median']:7.1f} insns  "
+            f"{lo:5.0f} .. {hi:5.0f} cycles  "
+            f"{100 * (lo + ISR_OVERHEAD[0]) / BUDGET:4.1f} .. "
+            f"{100 * (hi + ISR_OVERHEAD[1]) / BUDGET:4.1f} %  "
+            f"margin to 50 % (worst step): "
+            f"{TARGET_SHARE * BUDGET - r['cycles_high_max_step'] - ISR_OVERHEAD[1]:+.0f} cycles"
+        )
+    for r in results:
+        r["source_sha256_12"] = fp0
+    if a.json:
+        a.json.write_text(json.dumps(results, indent=2))
+    if source_fingerprint() != fp0:
+        print(
+            "WARNING: the sources changed while this ran; the -O levels may have measured "
+            "different code. Run again.",
+            file=sys.stderr,
+        )
+        return 3
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
