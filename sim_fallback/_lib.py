@@ -31,7 +31,7 @@ FW_CONFIG_FIELDS: list[tuple[str, type]] = [
     ("spd_kp_A_per_radps", _f), ("spd_ki_A_per_rad", _f), ("spd_filter_Hz", _f),
     ("u_inj_V", _f), ("f_inj_Hz", _f), ("extractor", _u32), ("sogi_k", _f),
     ("sogi_k_adapt_max", _f), ("sogi_k_adapt_min", _f), ("sogi_adapt_err_rad", _f),
-    ("pll_kp", _f), ("pll_ki", _f), ("pll_accel_per_A", _f), ("pll_kd", _f),
+    ("pll_kp", _f), ("pll_ki", _f), ("pll_accel_per_A", _f), ("pll_bw_min", _f), ("pll_kd", _f),
     ("align_time_s", _f), ("pol_pulse_V", _f),
     ("pol_pulse_samples", _u32), ("pol_pulse_pairs", _u32), ("pol_margin", _f),
     ("saliency_min", _f), ("hf_min_ratio", _f), ("pll_err_max_rad", _f),

@@ -44,6 +44,7 @@ static const fw_config_field_t k_fields[] = {
     F32(pll_kp, "1/s", 0.0f, 1e4f),
     F32(pll_ki, "1/s^2", 0.0f, 1e7f),
     F32(pll_accel_per_A, "rad/(s^2 A)", 0.0f, 1e7f),
+    F32(pll_bw_min, "", 0.1f, 1.0f),
     F32(pll_kd, "1/s^3", 0.0f, 1e9f),
     F32(align_time_s, "s", 0.0f, 5.0f),
     F32(pol_pulse_V, "V", 0.0f, 600.0f),
@@ -92,12 +93,13 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->extractor = (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE;
   cfg->sogi_k = 0.5f;
   cfg->sogi_k_adapt_max = 0.8f;
-  cfg->sogi_k_adapt_min = 0.2f;
-  cfg->sogi_adapt_err_rad = 0.05f;
+  cfg->sogi_k_adapt_min = 0.5f; /* = the fixed-k value: adapt only widens in transients */
+  cfg->sogi_adapt_err_rad = 0.02f; /* |filtered error| for full SOGI k and observer bandwidth */
   cfg->pll_kp = 86.6f;
   cfg->pll_ki = 5000.0f;
   /* p K_t / J = p * 1.5 p psi_f / J (electrical rad/s^2 per A) */
   cfg->pll_accel_per_A = cfg->pole_pairs * 1.5f * cfg->pole_pairs * cfg->psi_f_Wb / 0.03f;
+  cfg->pll_bw_min = 0.5f; /* halve the observer poles when locked: noise */
   cfg->pll_kd = 1.0e5f; /* poles -28 +/- 50j, -30 rad/s with the paper's kp, ki */
   cfg->align_time_s = 0.08f;
   cfg->pol_pulse_V = 60.0f;

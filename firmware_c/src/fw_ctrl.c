@@ -372,13 +372,16 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_
     eps = (E_q / E_d) * c->eps_gain;
     eps = fw_clampf(eps, -1.0f, 1.0f);
   }
-  float ae = fabsf(eps);
-  c->err_f += c->err_alpha * (ae - c->err_f);
+  /* Low-passed *signed* error: its magnitude is the tracking error. The
+   * per-sample eps carries ~0.04 rad of sensor noise, so a filtered |eps|
+   * would measure the noise, not the lock. */
+  c->err_f += c->err_alpha * (eps - c->err_f);
+  const float err_abs = fabsf(c->err_f);
 
   if (ex == FW_EXTRACTOR_SOGI_ADAPTIVE) {
     /* Observable adaptation (replaces eq. 13's theta - theta_hat): a wide
      * band while the PLL error is large, a narrow one when locked. */
-    float r = fw_clampf(c->err_f * c->inv_adapt_err, 0.0f, 1.0f);
+    float r = fw_clampf(err_abs * c->inv_adapt_err, 0.0f, 1.0f);
     float k = cfg->sogi_k_adapt_min + (cfg->sogi_k_adapt_max - cfg->sogi_k_adapt_min) * r;
     if (fabsf(k - c->sogi_a.k) > FW_SOGI_K_STEP) {
       sogi_set_k_both(c, k);
@@ -388,6 +391,15 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_
   if (c->ring_fill < c->n_inj || c->phase_time_s < FW_EST_SETTLE_S) {
     eps = 0.0f; /* filters still settling: extrapolate, do not correct */
   }
+  /* Bandwidth scheduling: all observer poles scaled by lambda in [bw_min, 1],
+   * lambda rising with the tracking error (same observable as the SOGI). */
+  {
+    float lam = cfg->pll_bw_min +
+                (1.0f - cfg->pll_bw_min) * fw_clampf(err_abs * c->inv_adapt_err, 0.0f, 1.0f);
+    c->pll_scale = lam;
+    c->pll.kp = cfg->pll_kp * lam;
+    c->pll.ki = cfg->pll_ki * lam * lam;
+  }
   fw_pll_step_f32(&c->pll, eps, c->dt_s);
   /* Mechanical observer extension of the PLL: the speed state also
    * integrates the acceleration the measured thrust current predicts, plus
@@ -396,7 +408,7 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_
   if (c->phase == FW_START_RUN) {
     c->pll.w_i_radps += c->dt_s * (cfg->pll_accel_per_A * c->snap.i_dq_A[1] + c->accel_dist);
     c->pll.w_i_radps = fw_clampf(c->pll.w_i_radps, -cfg->speed_max_radps_e, cfg->speed_max_radps_e);
-    c->accel_dist += c->dt_s * cfg->pll_kd * eps;
+    c->accel_dist += c->dt_s * cfg->pll_kd * c->pll_scale * c->pll_scale * c->pll_scale * eps;
   }
   float dth = fw_wrap_pi_f32(c->pll.theta_rad - c->theta_prev);
   c->pos_unwrapped_e += dth;
@@ -431,7 +443,7 @@ static void supervise_estimator(fw_ctrl_t *c) {
     return;
   }
   if (c->phase == FW_START_RUN) {
-    if (c->err_f > cfg->pll_err_max_rad) {
+    if (fabsf(c->err_f) > cfg->pll_err_max_rad) {
       c->pll_err_time_s += c->dt_s;
       if (c->pll_err_time_s > cfg->pll_err_time_s) {
         latch_fault(c, FW_FAULT_EST_PLL_ERROR);

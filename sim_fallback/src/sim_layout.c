@@ -40,6 +40,7 @@ static const layout_row_t k_rows[] = {
     ROW(fw_config_t, pll_kp),
     ROW(fw_config_t, pll_ki),
     ROW(fw_config_t, pll_accel_per_A),
+    ROW(fw_config_t, pll_bw_min),
     ROW(fw_config_t, pll_kd),
     ROW(fw_config_t, align_time_s),
     ROW(fw_config_t, pol_pulse_V),

@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 213u
-#define CO_OD_RAM_SIZE 702u
+#define CO_OD_COUNT 214u
+#define CO_OD_RAM_SIZE 706u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -144,89 +144,90 @@
 #define CO_OD_2011_02 131u /* PLL gains: ki */
 #define CO_OD_2011_03 132u /* PLL gains: kd */
 #define CO_OD_2011_04 133u /* PLL gains: Acceleration feed-forward */
-#define CO_OD_2020_00 134u /* Estimator: Highest sub-index supported */
-#define CO_OD_2020_01 135u /* Estimator: Estimated angle */
-#define CO_OD_2020_02 136u /* Estimator: Estimated speed */
-#define CO_OD_2020_03 137u /* Estimator: Estimated linear speed */
-#define CO_OD_2020_04 138u /* Estimator: PLL error */
-#define CO_OD_2020_05 139u /* Estimator: HF amplitude */
-#define CO_OD_2020_06 140u /* Estimator: Filtered PLL error */
-#define CO_OD_2020_07 141u /* Estimator: SOGI k in use */
-#define CO_OD_2020_08 142u /* Estimator: Start-up phase */
-#define CO_OD_2020_09 143u /* Estimator: Disturbance acceleration */
-#define CO_OD_2030_00 144u /* Fault history: Highest sub-index supported */
-#define CO_OD_2030_01 145u /* Fault history: Fault 1 */
-#define CO_OD_2030_02 146u /* Fault history: Fault 2 */
-#define CO_OD_2030_03 147u /* Fault history: Fault 3 */
-#define CO_OD_2030_04 148u /* Fault history: Fault 4 */
-#define CO_OD_2030_05 149u /* Fault history: Fault 5 */
-#define CO_OD_2030_06 150u /* Fault history: Fault 6 */
-#define CO_OD_2030_07 151u /* Fault history: Fault 7 */
-#define CO_OD_2030_08 152u /* Fault history: Fault 8 */
-#define CO_OD_2040_00 153u /* Firmware version: Firmware version */
-#define CO_OD_2041_00 154u /* Build id: Build id */
-#define CO_OD_2042_00 155u /* Device tag: Device tag */
-#define CO_OD_2050_00 156u /* Drive configuration: Highest sub-index supported */
-#define CO_OD_2050_01 157u /* Drive configuration: PWM frequency */
-#define CO_OD_2050_02 158u /* Drive configuration: Phase resistance */
-#define CO_OD_2050_03 159u /* Drive configuration: L_d */
-#define CO_OD_2050_04 160u /* Drive configuration: L_q */
-#define CO_OD_2050_05 161u /* Drive configuration: PM flux linkage */
-#define CO_OD_2050_06 162u /* Drive configuration: Pole pitch */
-#define CO_OD_2050_07 163u /* Drive configuration: DC undervoltage trip */
-#define CO_OD_2050_08 164u /* Drive configuration: DC overvoltage trip */
-#define CO_OD_2050_09 165u /* Drive configuration: Overcurrent trip */
-#define CO_OD_2050_0A 166u /* Drive configuration: Current limit */
-#define CO_OD_2050_0B 167u /* Drive configuration: Speed limit */
-#define CO_OD_2050_0C 168u /* Drive configuration: Current loop kp */
-#define CO_OD_2050_0D 169u /* Drive configuration: Current loop ki */
-#define CO_OD_2050_0E 170u /* Drive configuration: Speed loop kp */
-#define CO_OD_2050_0F 171u /* Drive configuration: Speed loop ki */
-#define CO_OD_2050_10 172u /* Drive configuration: Speed filter */
-#define CO_OD_2050_11 173u /* Drive configuration: Saliency minimum */
-#define CO_OD_2050_12 174u /* Drive configuration: Quick stop time */
-#define CO_OD_2060_00 175u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 176u /* Telemetry: Decimation */
-#define CO_OD_2060_02 177u /* Telemetry: Signal count */
-#define CO_OD_2060_03 178u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 179u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 180u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 181u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 182u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 183u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 184u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 185u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 186u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 187u /* Trace: Command */
-#define CO_OD_2070_02 188u /* Trace: State */
-#define CO_OD_2070_03 189u /* Trace: Trigger signal */
-#define CO_OD_2070_04 190u /* Trace: Trigger level */
-#define CO_OD_2070_05 191u /* Trace: Trigger edge */
-#define CO_OD_2070_06 192u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 193u /* Trace: Signal count */
-#define CO_OD_2070_08 194u /* Trace: Signal 1 */
-#define CO_OD_2070_09 195u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 196u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 197u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 198u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 199u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 200u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 201u /* Trace: Signal 8 */
-#define CO_OD_603F_00 202u /* Error code: Error code */
-#define CO_OD_6040_00 203u /* Controlword: Controlword */
-#define CO_OD_6041_00 204u /* Statusword: Statusword */
-#define CO_OD_6060_00 205u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 206u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 207u /* Position actual value: Position actual value */
-#define CO_OD_606C_00 208u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 209u /* Target torque: Target torque */
-#define CO_OD_6077_00 210u /* Torque actual value: Torque actual value */
-#define CO_OD_60FF_00 211u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 212u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2011_05 134u /* PLL gains: Bandwidth scale when locked */
+#define CO_OD_2020_00 135u /* Estimator: Highest sub-index supported */
+#define CO_OD_2020_01 136u /* Estimator: Estimated angle */
+#define CO_OD_2020_02 137u /* Estimator: Estimated speed */
+#define CO_OD_2020_03 138u /* Estimator: Estimated linear speed */
+#define CO_OD_2020_04 139u /* Estimator: PLL error */
+#define CO_OD_2020_05 140u /* Estimator: HF amplitude */
+#define CO_OD_2020_06 141u /* Estimator: Filtered PLL error */
+#define CO_OD_2020_07 142u /* Estimator: SOGI k in use */
+#define CO_OD_2020_08 143u /* Estimator: Start-up phase */
+#define CO_OD_2020_09 144u /* Estimator: Disturbance acceleration */
+#define CO_OD_2030_00 145u /* Fault history: Highest sub-index supported */
+#define CO_OD_2030_01 146u /* Fault history: Fault 1 */
+#define CO_OD_2030_02 147u /* Fault history: Fault 2 */
+#define CO_OD_2030_03 148u /* Fault history: Fault 3 */
+#define CO_OD_2030_04 149u /* Fault history: Fault 4 */
+#define CO_OD_2030_05 150u /* Fault history: Fault 5 */
+#define CO_OD_2030_06 151u /* Fault history: Fault 6 */
+#define CO_OD_2030_07 152u /* Fault history: Fault 7 */
+#define CO_OD_2030_08 153u /* Fault history: Fault 8 */
+#define CO_OD_2040_00 154u /* Firmware version: Firmware version */
+#define CO_OD_2041_00 155u /* Build id: Build id */
+#define CO_OD_2042_00 156u /* Device tag: Device tag */
+#define CO_OD_2050_00 157u /* Drive configuration: Highest sub-index supported */
+#define CO_OD_2050_01 158u /* Drive configuration: PWM frequency */
+#define CO_OD_2050_02 159u /* Drive configuration: Phase resistance */
+#define CO_OD_2050_03 160u /* Drive configuration: L_d */
+#define CO_OD_2050_04 161u /* Drive configuration: L_q */
+#define CO_OD_2050_05 162u /* Drive configuration: PM flux linkage */
+#define CO_OD_2050_06 163u /* Drive configuration: Pole pitch */
+#define CO_OD_2050_07 164u /* Drive configuration: DC undervoltage trip */
+#define CO_OD_2050_08 165u /* Drive configuration: DC overvoltage trip */
+#define CO_OD_2050_09 166u /* Drive configuration: Overcurrent trip */
+#define CO_OD_2050_0A 167u /* Drive configuration: Current limit */
+#define CO_OD_2050_0B 168u /* Drive configuration: Speed limit */
+#define CO_OD_2050_0C 169u /* Drive configuration: Current loop kp */
+#define CO_OD_2050_0D 170u /* Drive configuration: Current loop ki */
+#define CO_OD_2050_0E 171u /* Drive configuration: Speed loop kp */
+#define CO_OD_2050_0F 172u /* Drive configuration: Speed loop ki */
+#define CO_OD_2050_10 173u /* Drive configuration: Speed filter */
+#define CO_OD_2050_11 174u /* Drive configuration: Saliency minimum */
+#define CO_OD_2050_12 175u /* Drive configuration: Quick stop time */
+#define CO_OD_2060_00 176u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 177u /* Telemetry: Decimation */
+#define CO_OD_2060_02 178u /* Telemetry: Signal count */
+#define CO_OD_2060_03 179u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 180u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 181u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 182u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 183u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 184u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 185u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 186u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 187u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 188u /* Trace: Command */
+#define CO_OD_2070_02 189u /* Trace: State */
+#define CO_OD_2070_03 190u /* Trace: Trigger signal */
+#define CO_OD_2070_04 191u /* Trace: Trigger level */
+#define CO_OD_2070_05 192u /* Trace: Trigger edge */
+#define CO_OD_2070_06 193u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 194u /* Trace: Signal count */
+#define CO_OD_2070_08 195u /* Trace: Signal 1 */
+#define CO_OD_2070_09 196u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 197u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 198u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 199u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 200u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 201u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 202u /* Trace: Signal 8 */
+#define CO_OD_603F_00 203u /* Error code: Error code */
+#define CO_OD_6040_00 204u /* Controlword: Controlword */
+#define CO_OD_6041_00 205u /* Statusword: Statusword */
+#define CO_OD_6060_00 206u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 207u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 208u /* Position actual value: Position actual value */
+#define CO_OD_606C_00 209u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 210u /* Target torque: Target torque */
+#define CO_OD_6077_00 211u /* Torque actual value: Torque actual value */
+#define CO_OD_60FF_00 212u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 213u /* Supported drive modes: Supported drive modes */
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 29u
+#define CO_OD_CFG_COUNT 30u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 

@@ -140,6 +140,8 @@ typedef struct {
   float pll_ki; /**< paper 5000 */
   float pll_accel_per_A; /**< torque feed-forward: el. rad/s^2 per A of i_q
                               (p K_t / J or (pi/tau) K_F / m); 0 = paper's pure PI PLL */
+  float pll_bw_min;      /**< observer bandwidth scale when locked (0.1..1; 1 = fixed
+                              paper gains); rises to 1 with |filtered PLL error| */
   float pll_kd;          /**< disturbance (load/friction) integrator gain, 1/s^3;
                               0 = none. Stable for pll_kd < pll_kp * pll_ki */
   /* start-up */
@@ -216,7 +218,7 @@ typedef struct {
   float pos_hat_mech_rad;  /**< unwrapped rotary-equivalent position */
   float speed_hat_rpm;     /**< rotary-equivalent speed */
   float pll_err_rad;       /**< normalised PLL error (approx theta - theta_hat) */
-  float pll_err_f_rad;     /**< low-passed |PLL error| (adaptation, supervision) */
+  float pll_err_f_rad;     /**< low-passed signed PLL error; |.| drives adaptation, supervision */
   float accel_dist_radps2; /**< observer's disturbance acceleration (load, friction) */
   float hf_amp_A;          /**< demodulated HF amplitude on d-hat per sample */
   float hf_q_A;            /**< demodulated HF q-hat component per sample */
@@ -270,8 +272,9 @@ typedef struct {
   float ring_ib[FW_INJ_MAX_SAMPLES];
   float sum_ed, sum_eq, sum_ia, sum_ib;
   uint32_t ring_idx, ring_fill;
-  float err_f;            /**< low-passed |PLL error| */
+  float err_f;            /**< low-passed signed PLL error */
   float accel_dist;       /**< estimated disturbance acceleration (el. rad/s^2) */
+  float pll_scale;        /**< present observer bandwidth scale */
   float pll_err_time_s;
   float omega_f;
   float spd_alpha;        /**< speed filter coefficient */
