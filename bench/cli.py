@@ -1,19 +1,437 @@
-"""Command-line entry point ``bench``."""
+"""Command-line entry point ``bench``.
+
+Exit codes: 0 success / all expectations passed, 1 an expectation failed,
+2 invalid sequence or usage, 3 drive or connection error, 130 interrupted
+(Ctrl-C / SIGTERM; the drive was brought to the safe state first).
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import logging
+import signal
 import sys
+from pathlib import Path
+from typing import Any
 
 from bench import __version__
 
+EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_DRIVE, EXIT_INTERRUPT = 0, 1, 2, 3, 130
+
+
+def _conn_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("connection (hardware if found, else the simulated drive)")
+    g.add_argument("--sim", action="store_true",
+                   help="use the simulated drive (python-can virtual bus, same CANopen)")
+    g.add_argument("--interface", help="python-can interface: socketcan, pcan, slcan, kvaser, "
+                                       "... (default: python-can configuration)")
+    g.add_argument("--channel", help="python-can channel, e.g. can0, PCAN_USBBUS1, "
+                                     "/dev/ttyACM0 or socket://host:port for slcan")
+    g.add_argument("--bitrate", type=int, help="CAN bitrate in bit/s, e.g. 1000000")
+    g.add_argument("--serial", metavar="URL",
+                   help="serial telemetry link (pyserial URL: /dev/ttyUSB0, socket://host:port,"
+                        " loop://)")
+    g.add_argument("--node-id", type=int, default=1, help="drive node id (default 1)")
+    g.add_argument("--load-node", type=int, help="node id of the load machine (hardware)")
+    g.add_argument("--motor", default=None,
+                   help="motor file (sim, and unit conversion on hardware); default: the "
+                        "sequence's, else paper_salient")
+    g.add_argument("--extractor", choices=("pseudo", "sogi", "sogi_adaptive"),
+                   help="simulated drive: HF extractor (default: the sequence's)")
+    g.add_argument("--seed", type=int, help="simulated drive: noise seed (default: the "
+                                            "sequence's)")
+    g.add_argument("--realtime", action="store_true",
+                   help="simulated drive: pace to the wall clock (default: as fast as possible)")
+
+
+def _rerun_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--rerun", nargs="+", metavar="MODE",
+                   help="live telemetry with rerun: 'spawn' (viewer; headless -> .rrd), "
+                        "'save PATH' (.rrd file), 'serve' (gRPC server, prints the URL), "
+                        "'connect URL'")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``bench`` argument parser (``--help`` on every subcommand)."""
+    ap = argparse.ArgumentParser(
+        prog="bench", description="HIL bench for the sensorless PMLSM drive: run test "
+        "sequences, live telemetry, parameters, configuration and faults, on hardware or "
+        "on the simulated drive.",
+        epilog="Exit codes: 0 ok, 1 expectation failed, 2 invalid input, 3 drive/connection "
+               "error, 130 interrupted (drive disabled first).")
+    ap.add_argument("--version", action="version", version=f"bench {__version__}")
+    ap.add_argument("-v", "--verbose", action="count", default=0, help="more logging")
+    sub = ap.add_subparsers(dest="cmd", metavar="COMMAND")
+
+    p = sub.add_parser("run", help="run test sequence(s) and write logs and a report",
+                       description="Validate SEQ.yaml files (before anything moves), run them "
+                       "on the drive, log (CAN BLF, MF4 signals, metadata) into runs/, and "
+                       "write an HTML report. Exit 1 when an expectation fails.")
+    p.add_argument("sequences", nargs="+", metavar="SEQ.yaml")
+    _conn_args(p)
+    p.add_argument("--summary-json", metavar="PATH",
+                   help='write {"sequence", "passed", "metrics": {...}} (a list for several '
+                        "sequences)")
+    p.add_argument("--junit", metavar="PATH", help="write JUnit XML (one testcase per "
+                                                   "expectation)")
+    p.add_argument("--runs", default="runs", metavar="DIR", help="run folder root (default "
+                                                                 "runs/)")
+    p.add_argument("--trace-format", choices=("blf", "asc"), default="blf",
+                   help="raw CAN trace format")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _rerun_arg(p)
+
+    p = sub.add_parser("validate", help="validate sequence files only",
+                       description="Check sequence files against the schema; errors name the "
+                                   "file, line and field.")
+    p.add_argument("sequences", nargs="+", metavar="SEQ.yaml")
+
+    p = sub.add_parser("live", help="enable the drive and stream live telemetry to rerun",
+                       description="Enable the drive in speed mode at --speed and stream "
+                       "telemetry to rerun until Ctrl-C or --duration; the drive is disabled "
+                       "on exit. Headless (no viewer) writes an .rrd file.")
+    _conn_args(p)
+    _rerun_arg(p)
+    p.add_argument("--speed", type=float, default=100.0, help="speed reference (default 100)")
+    p.add_argument("--unit", default="r/min", choices=("r/min", "rpm", "m/s", "mm/s"),
+                   help="unit of --speed")
+    p.add_argument("--duration", type=float, default=0.0,
+                   help="stop after this many seconds of drive time (0 = until Ctrl-C)")
+
+    p = sub.add_parser("info", help="connection, identity, firmware check, state",
+                       description="Show what the bench is connected to, the drive identity, "
+                                   "the firmware version checked against the EDS and the state.")
+    _conn_args(p)
+
+    p = sub.add_parser("param", help="read or write a parameter by name",
+                       description="Parameters by name (fw_config field such as u_inj_V, "
+                       "'Object.Sub' such as 'Injection.Amplitude', or 0xIIII:S), with units. "
+                       "Values may carry the unit: `bench param set u_inj_V '20 V'`.")
+    psub = p.add_subparsers(dest="action", metavar="ACTION")
+    pg = psub.add_parser("get", help="read a parameter", description="Read a parameter.")
+    pg.add_argument("name")
+    _conn_args(pg)
+    ps = psub.add_parser("set", help="write a parameter", description="Write a parameter; "
+                         "the drive's SDO abort code is explained (range, read-only, state).")
+    ps.add_argument("name")
+    ps.add_argument("value")
+    _conn_args(ps)
+    pl = psub.add_parser("list", help="list parameters", description="List the parameters.")
+    pl.add_argument("--all", action="store_true", help="include CiA 301 communication objects")
+
+    p = sub.add_parser("config", help="configuration backup / restore",
+                       description="Back the drive's rw parameters up to a JSON file, or "
+                                   "restore them from one.")
+    csub = p.add_subparsers(dest="action", metavar="ACTION")
+    cb = csub.add_parser("backup", help="write the configuration to FILE",
+                         description="Write every rw parameter (with units) to FILE (JSON).")
+    cb.add_argument("file")
+    _conn_args(cb)
+    cr = csub.add_parser("restore", help="write the configuration from FILE",
+                         description="Write the parameters in FILE (JSON from backup).")
+    cr.add_argument("file")
+    _conn_args(cr)
+
+    p = sub.add_parser("faults", help="read (and reset) faults",
+                       description="Show the latched fault, error register, fault history "
+                                   "and EMCY messages; --reset sends a fault reset.")
+    p.add_argument("--reset", action="store_true", help="fault reset (controlword bit 7)")
+    _conn_args(p)
+    return ap
+
+
+def _sigterm_as_interrupt() -> None:
+    def handler(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    signal.signal(signal.SIGTERM, handler)
+
+
+def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
+    from bench._session import connect
+
+    motor = args.motor or (seq.motor if seq is not None else "paper_salient")
+    extractor = args.extractor or (seq.extractor if seq is not None else "sogi_adaptive")
+    seed = args.seed if args.seed is not None else (seq.seed if seq is not None else 0)
+    x0 = seq.x0 if seq is not None else 0.0
+    return connect(sim=args.sim, interface=args.interface, channel=args.channel,
+                   bitrate=args.bitrate, serial_url=args.serial, realtime=args.realtime,
+                   motor=motor, extractor=extractor, seed=seed, x0=x0, node_id=args.node_id,
+                   load_node=args.load_node)
+
+
+def _make_rerun(spec: list[str] | None, default_dir: Path, pole_pairs: float) -> Any:
+    if not spec:
+        return None
+    from bench._live import RerunSink
+
+    mode = spec[0]
+    target = spec[1] if len(spec) > 1 else None
+    if mode == "save" and target is None:
+        target = str(default_dir / "telemetry.rrd")
+    if mode == "spawn":
+        target = str(default_dir / "telemetry.rrd")
+    sink = RerunSink(mode, target, pole_pairs=pole_pairs)
+    if sink.url:
+        print(f"bench: rerun gRPC server at {sink.url} (rerun --connect {sink.url})",
+              file=sys.stderr)
+    if sink.path:
+        print(f"bench: rerun recording -> {sink.path}", file=sys.stderr)
+    return sink
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from bench._sequence import SequenceError, load_sequence
+
+    rc = EXIT_OK
+    for f in args.sequences:
+        try:
+            s = load_sequence(f)
+            print(f"{f}: ok ({s.name}, {len(s.steps)} steps, {s.duration_s:g} s, "
+                  f"{len(s.expectations)} expectations)")
+        except SequenceError as e:
+            print(e, file=sys.stderr)
+            rc = EXIT_USAGE
+    return rc
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from bench._report import summary, write_junit
+    from bench._sequence import SequenceError, load_sequence
+    from bench._session import run_sequence
+
+    seqs = []
+    bad = False
+    for f in args.sequences:  # validate everything before anything moves
+        try:
+            seqs.append(load_sequence(f))
+        except SequenceError as e:
+            print(e, file=sys.stderr)
+            bad = True
+    if bad:
+        return EXIT_USAGE
+    results = []
+    summaries = []
+    rc = EXIT_OK
+    for seq in seqs:
+        try:
+            conn = _connect(args, seq)
+        except Exception as e:  # noqa: BLE001
+            print(f"bench: cannot connect: {e}", file=sys.stderr)
+            return EXIT_DRIVE
+        rerun = None
+        try:
+            rerun = _make_rerun(args.rerun, Path(args.runs), conn.units.pole_pairs)
+            out = run_sequence(seq, conn, runs_root=args.runs, progress=not args.no_progress,
+                               rerun=rerun, trace_format=args.trace_format)
+        finally:
+            if rerun is not None:
+                rerun.close()
+            conn.close()
+        r = out.result
+        results.append(r)
+        extra = {"run_dir": str(out.run_dir), "lost_frames": out.logstats["lost_frames"],
+                 "simulated": conn.is_sim}
+        summaries.append(summary(r, extra))
+        _print_result(r, out)
+        if out.interrupted is not None:
+            if isinstance(out.interrupted, KeyboardInterrupt):
+                print(f"bench: interrupted; drive safe state: {r.safe_state}", file=sys.stderr)
+                rc = EXIT_INTERRUPT
+            else:
+                print(f"bench: run aborted: {r.error}; drive safe state: {r.safe_state}",
+                      file=sys.stderr)
+                rc = EXIT_DRIVE
+            break
+        if not r.passed and rc == EXIT_OK:
+            rc = EXIT_FAIL
+    if args.summary_json:
+        doc: Any = summaries[0] if len(summaries) == 1 else summaries
+        Path(args.summary_json).write_text(json.dumps(doc, indent=2) + "\n")
+    if args.junit:
+        write_junit(args.junit, results)
+    return rc
+
+
+def _print_result(r: Any, out: Any) -> None:
+    print(f"\n{r.sequence}: {'PASSED' if r.passed else 'FAILED'}  "
+          f"(sequence {r.duration_s:.3f} s, wall {r.wall_s:.2f} s)")
+    for e in r.expectations:
+        m = "n/a" if e.measured != e.measured else f"{e.measured:.5g}"
+        print(f"  [{'PASS' if e.passed else 'FAIL'}] {e.name}: {m} (required {e.criterion})")
+    lost = out.logstats.get("lost_frames", {})
+    print(f"  CAN frames logged: {out.logstats.get('frames_logged')}, lost frames: {lost}")
+    if out.logstats.get("receive_errors"):
+        print(f"  receive-thread errors: {out.logstats['receive_errors']}")
+    print(f"  run folder: {out.run_dir}")
+    if out.report:
+        print(f"  report: {out.report}")
+
+
+def cmd_live(args: argparse.Namespace) -> int:
+    from bench._logging import run_dir_for
+
+    conn = _connect(args)
+    d = conn.drive
+    out_dir = run_dir_for("live", "runs")
+    rerun = _make_rerun(args.rerun or ["spawn"], out_dir, conn.units.pole_pairs)
+    if conn.sim is not None:
+        conn.sim.sink = rerun.log_sim_chunk
+        conn.sim.set_realtime(True)  # live viewing: the simulated drive follows the wall clock
+    interrupted = False
+    conn.start_heartbeat()
+    try:
+        d.enable("speed")
+        d.set_speed_mps(conn.units.speed_to_mps(args.speed, args.unit))
+        t0 = d.clock.now()
+        print("bench: live; Ctrl-C to stop (the drive is disabled on exit)", file=sys.stderr)
+        while args.duration <= 0 or d.clock.now() - t0 < args.duration:
+            d.clock.sleep_until(d.clock.now() + 0.1)
+            if d.state == "FAULT":
+                from bench._drive import fault_text
+
+                print(f"bench: drive FAULT {fault_text(d.fault_code())}", file=sys.stderr)
+                break
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        try:
+            d.disable()
+            print("bench: drive disabled", file=sys.stderr)
+        except Exception as e:  # noqa: BLE001
+            print(f"bench: SAFE STATE FAILED: {e}", file=sys.stderr)
+        if conn.sim is not None:
+            conn.sim.sink = None
+        rerun.close()
+        conn.close()
+    return EXIT_INTERRUPT if interrupted else EXIT_OK
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    conn = _connect(args)
+    try:
+        d = conn.drive
+        ident = d.identity()
+        print(f"connection: {conn.description}")
+        for k, v in ident.items():
+            print(f"  {k}: {v:#x}" if isinstance(v, int) and k in (
+                "vendor_id", "product_code", "revision", "firmware_version_u32")
+                else f"  {k}: {v}")
+        probs = d.check_firmware(ident)
+        print("firmware vs EDS: " + ("matches" if not probs else "MISMATCH: " + "; ".join(probs)))
+        print(f"state: {d.state}  fault: {d.fault_code():#06x}")
+        print(f"units: pole pitch {conn.units.pole_pitch_m} m, pole pairs "
+              f"{conn.units.pole_pairs:g}")
+        return EXIT_OK if not probs else EXIT_DRIVE
+    finally:
+        conn.close()
+
+
+def cmd_param(args: argparse.Namespace) -> int:
+    from bench._drive import ParamError, param_table
+
+    if args.action == "list":
+        seen = set()
+        for p in param_table().values():
+            if p.address in seen or (not args.all and 0x1000 <= p.index < 0x2000):
+                continue
+            seen.add(p.address)
+            rng = f"[{p.min}, {p.max}]" if p.min is not None or p.max is not None else ""
+            print(f"{p.address:>10}  {p.name:<34} {p.access:<5} {p.unit:<10} {rng}")
+        return EXIT_OK
+    if args.action not in ("get", "set"):
+        print("bench param: choose get, set or list (see --help)", file=sys.stderr)
+        return EXIT_USAGE
+    conn = _connect(args)
+    try:
+        d = conn.drive
+        if args.action == "get":
+            v, p = d.get(args.name)
+        else:
+            p = d.set(args.name, args.value)
+            v, p = d.get(args.name)
+        print(f"{p.name} ({p.address}) = {v} {p.unit}".rstrip())
+        return EXIT_OK
+    except ParamError as e:
+        print(f"bench: {e}", file=sys.stderr)
+        return EXIT_DRIVE
+    finally:
+        conn.close()
+
+
+def cmd_config(args: argparse.Namespace) -> int:
+    from bench._drive import ParamError
+
+    if args.action not in ("backup", "restore"):
+        print("bench config: choose backup or restore (see --help)", file=sys.stderr)
+        return EXIT_USAGE
+    conn = _connect(args)
+    try:
+        d = conn.drive
+        if args.action == "backup":
+            doc = {"bench_version": __version__, "drive": d.identity(),
+                   "parameters": d.backup()}
+            Path(args.file).write_text(json.dumps(doc, indent=2) + "\n")
+            print(f"bench: {len(doc['parameters'])} parameters -> {args.file}")
+            return EXIT_OK
+        doc = json.loads(Path(args.file).read_text())
+        params = doc.get("parameters", doc)
+        errors = d.restore(params)
+        for e in errors:
+            print(f"bench: {e}", file=sys.stderr)
+        print(f"bench: restored {len(params) - len(errors)} of {len(params)} parameters")
+        return EXIT_OK if not errors else EXIT_DRIVE
+    except (ParamError, OSError, ValueError) as e:
+        print(f"bench: {e}", file=sys.stderr)
+        return EXIT_DRIVE
+    finally:
+        conn.close()
+
+
+def cmd_faults(args: argparse.Namespace) -> int:
+    from bench._drive import DriveError, fault_text
+
+    conn = _connect(args)
+    try:
+        d = conn.drive
+        f = d.faults()
+        print(f"state: {f['state']}")
+        print(f"error code (0x603F): {fault_text(f['error_code'])}")
+        print(f"error register (0x1001): {f['error_register']:#04x}")
+        print("history (newest first): " + (", ".join(fault_text(c) for c in f["history"])
+                                            or "empty"))
+        for code, reg in f["emcy"]:
+            print(f"EMCY: {fault_text(code)} register {reg:#04x}")
+        if args.reset:
+            print(f"fault reset -> {d.reset_faults()}")
+        return EXIT_OK
+    except DriveError as e:
+        print(f"bench: {e}", file=sys.stderr)
+        return EXIT_DRIVE
+    finally:
+        conn.close()
+
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="bench", description="PMLSM sensorless drive bench")
-    parser.add_argument("--version", action="version", version=f"bench {__version__}")
-    parser.parse_args(argv)
-    print(f"bench {__version__}")
-    return 0
+    """Entry point of the ``bench`` console script."""
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING - 10 * min(args.verbose, 2),
+                        format="%(levelname)s %(name)s: %(message)s")
+    if not args.verbose:
+        logging.getLogger("canopen").setLevel(logging.ERROR)
+    if args.cmd is None:
+        ap.print_help()
+        return EXIT_USAGE
+    _sigterm_as_interrupt()
+    handlers = {"run": cmd_run, "validate": cmd_validate, "live": cmd_live, "info": cmd_info,
+                "param": cmd_param, "config": cmd_config, "faults": cmd_faults}
+    try:
+        return handlers[args.cmd](args)
+    except KeyboardInterrupt:
+        print("bench: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPT
 
 
 if __name__ == "__main__":

@@ -1,0 +1,631 @@
+"""The drive under test and the load, reached through CANopen (canopen library).
+
+:class:`Drive` wraps a ``canopen.BaseNode402`` built from the EDS generated
+from ``protocols/od.yaml``. It is the same code for hardware and for the
+simulated drive: only the python-can bus underneath differs. Time is read
+from a :class:`Clock`: the wall clock on hardware, the simulation clock for
+the simulated drive.
+
+Units: the drive's CiA 402 objects use um, um/s and per mille of the rated
+force (see od.yaml); this module converts to and from m/s and N.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import canopen
+from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
+
+log = logging.getLogger("bench.drive")
+
+ROOT = Path(__file__).resolve().parent.parent
+#: EDS generated from protocols/od.yaml.
+DEFAULT_EDS = ROOT / "protocols" / "generated" / "pmlsm_drive.eds"
+
+#: CiA 402 modes of operation used by the drive.
+MODES: dict[str, int] = {"speed": 9, "force": 10}
+#: canopen names of the modes.
+_MODE_NAMES = {"speed": "CYCLIC SYNCHRONOUS VELOCITY", "force": "CYCLIC SYNCHRONOUS TORQUE"}
+
+#: CiA 301 SDO abort codes -> plain explanation.
+SDO_ABORTS: dict[int, str] = {
+    0x05040000: "SDO protocol timed out",
+    0x05040001: "client/server command specifier not valid",
+    0x06010000: "unsupported access to an object",
+    0x06010001: "attempt to read a write-only object",
+    0x06010002: "attempt to write a read-only object",
+    0x06020000: "object does not exist in the object dictionary",
+    0x06040041: "object cannot be mapped to the PDO",
+    0x06040042: "the number and length of the objects to be mapped would exceed PDO length",
+    0x06040043: "general parameter incompatibility",
+    0x06070010: "data type does not match, length of service parameter does not match",
+    0x06090011: "sub-index does not exist",
+    0x06090030: "invalid value for parameter",
+    0x06090031: "value of parameter written too high",
+    0x06090032: "value of parameter written too low",
+    0x08000000: "general error",
+    0x08000020: "data cannot be transferred or stored to the application",
+    0x08000021: "data cannot be transferred because of local control",
+    0x08000022: "data cannot be transferred in the present device state",
+}
+
+#: Fault codes (fw_fault_t in firmware_c/include/pmlsm/fw_ctrl.h).
+FAULTS: dict[int, str] = {
+    0x0000: "no fault",
+    0x2310: "overcurrent",
+    0x3210: "DC-link overvoltage",
+    0x3220: "DC-link undervoltage",
+    0x5210: "invalid input (NaN/inf)",
+    0x5220: "ADC count out of range",
+    0x6320: "configuration invalid",
+    0x8130: "supervisor heartbeat lost",
+    0xFF01: "HF response too small: estimator lost lock",
+    0xFF02: "PLL error persistently large",
+    0xFF03: "saliency too low: injection refused",
+    0xFF04: "magnet polarity undetermined",
+}
+
+
+def fault_text(code: int) -> str:
+    """Readable text of a drive fault code."""
+    return f"0x{code:04X} {FAULTS.get(code, 'unknown fault')}"
+
+
+class DriveError(RuntimeError):
+    """The drive refused a command or did not reach the requested state."""
+
+
+class ParamError(DriveError):
+    """A parameter read/write failed; the message explains the SDO abort code."""
+
+
+class Clock(Protocol):
+    """Time base of a drive (s)."""
+
+    def now(self) -> float:
+        """Current time (s)."""
+
+    def sleep_until(self, t_s: float) -> None:
+        """Block until :meth:`now` >= ``t_s``."""
+
+
+class WallClock:
+    """The host's monotonic clock (hardware runs)."""
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def sleep_until(self, t_s: float) -> None:
+        while True:
+            dt = t_s - time.monotonic()
+            if dt <= 0:
+                return
+            time.sleep(min(dt, 0.05))
+
+
+# ---- parameters by name ---------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter of the object dictionary.
+
+    Attributes
+    ----------
+    name : str
+        Canonical name (``fw_config`` field name when the object mirrors one,
+        else ``Object.Sub`` as in the EDS).
+    index, sub : int
+    unit : str
+        Unit on the wire ("" when dimensionless).
+    type : str
+        CiA 301 type name.
+    access : str
+        ``ro``, ``rw``, ``wo`` or ``const``.
+    min, max : float or None
+        Documented limits.
+    doc : str
+    """
+
+    name: str
+    index: int
+    sub: int
+    unit: str
+    type: str
+    access: str
+    min: float | None
+    max: float | None
+    doc: str
+
+    @property
+    def address(self) -> str:
+        """``0xIIII:SS``."""
+        return f"0x{self.index:04X}:{self.sub}"
+
+
+def param_table() -> dict[str, Param]:
+    """All parameters from ``protocols/od.yaml`` keyed by every accepted name.
+
+    Accepted names: the fw_config field (``u_inj_V``), ``Object.Sub``
+    (``Injection.Amplitude``), the object name for variables
+    (``Target velocity``) and the address (``0x2010:1``).
+    """
+    from protocols import _od
+
+    od = _od.load()
+    cfg = od.fw_config
+    out: dict[str, Param] = {}
+    for e in od.entries:
+        lo, hi = e.min, e.max
+        if e.fw_config and e.fw_config in cfg:
+            lo = cfg[e.fw_config].get("min", lo)
+            hi = cfg[e.fw_config].get("max", hi)
+        dotted = e.name if e.kind == "var" else f"{e.object_name}.{e.name}"
+        canon = e.fw_config or dotted
+        p = Param(canon, e.index, e.sub, e.unit or "", e.type, e.access, lo, hi, e.doc)
+        for key in {canon, dotted, f"0x{e.index:04X}:{e.sub}", f"0x{e.index:04x}:{e.sub}"}:
+            out.setdefault(key, p)
+        if e.kind == "var":
+            out.setdefault(f"0x{e.index:04X}", p)
+    return out
+
+
+def explain_abort(err: SdoAbortedError, p: Param | None = None, value: Any = None) -> str:
+    """Human-readable text for an SDO abort, with the allowed range when known."""
+    code = int(err.code)
+    what = SDO_ABORTS.get(code, "unknown abort code")
+    msg = f"drive refused: SDO abort 0x{code:08X} ({what})"
+    if p is not None:
+        msg = f"{p.name} ({p.address}): {msg}"
+        if code in (0x06090030, 0x06090031, 0x06090032) and (p.min is not None
+                                                             or p.max is not None):
+            msg += f"; allowed range [{p.min}, {p.max}] {p.unit}".rstrip()
+            if value is not None:
+                msg += f", got {value}"
+    return msg
+
+
+# ---- the drive ------------------------------------------------------------------------
+
+
+class Drive:
+    """A CiA 402 drive through canopen (hardware or simulated, same code).
+
+    Parameters
+    ----------
+    network : canopen.Network
+        Connected network (its notifier running).
+    node_id : int
+        Node id of the drive (1..127).
+    eds : str or Path
+        EDS file (default: the generated ``pmlsm_drive.eds``).
+    force_rated_N : float
+        Force that 1000 per mille of 0x6071/0x6077 means (N); read from the
+        drive when None (K_f * i_max_A).
+    clock : Clock
+        Time base; :class:`WallClock` by default.
+    sdo_timeout_s : float
+        SDO response timeout (s).
+
+    Notes
+    -----
+    References are written by SDO (expedited, one round trip), which keeps
+    the drive's PDO mapping free for telemetry and works on every transport.
+    """
+
+    def __init__(self, network: canopen.Network, node_id: int = 1,
+                 eds: str | Path = DEFAULT_EDS, force_rated_N: float | None = None,
+                 clock: Clock | None = None, sdo_timeout_s: float = 0.5) -> None:
+        self.network = network
+        self.node_id = node_id
+        self.node = canopen.BaseNode402(node_id, str(eds))
+        self.node.sdo.RESPONSE_TIMEOUT = sdo_timeout_s
+        network.add_node(self.node)
+        self.clock: Clock = clock or WallClock()
+        self._force_rated_N = force_rated_N
+        self._params: dict[str, Param] | None = None
+        self.enabled = False
+        self.mode = "speed"
+
+    # ---- identity ---------------------------------------------------------------------
+    def identity(self) -> dict[str, Any]:
+        """Identity (0x1018), names, firmware version (0x2040) and build id (0x2041)."""
+        sdo = self.node.sdo
+        fw = int(sdo[0x2040].raw)
+        out: dict[str, Any] = {
+            "node_id": self.node_id,
+            "device_name": str(sdo[0x1008].raw),
+            "software_version": str(sdo[0x100A].raw),
+            "vendor_id": int(sdo[0x1018][1].raw),
+            "product_code": int(sdo[0x1018][2].raw),
+            "revision": int(sdo[0x1018][3].raw),
+            "serial": int(sdo[0x1018][4].raw),
+            "firmware_version": f"{(fw >> 16) & 0xFF}.{(fw >> 8) & 0xFF}.{fw & 0xFF}",
+            "firmware_version_u32": fw,
+            "build_id": str(sdo[0x2041].raw),
+        }
+        return out
+
+    def check_firmware(self, ident: dict[str, Any] | None = None) -> list[str]:
+        """Compare the drive's identity with the EDS; return the mismatches (empty: ok)."""
+        ident = ident or self.identity()
+        od = self.node.object_dictionary
+        problems = []
+        exp_prod = int(od[0x1018][2].default)
+        exp_rev = int(od[0x1018][3].default)
+        exp_fw = int(od[0x2040].default)
+        if ident["product_code"] != exp_prod:
+            problems.append(f"product code 0x{ident['product_code']:08X} != EDS 0x{exp_prod:08X}")
+        if ident["revision"] != exp_rev:
+            problems.append(f"revision 0x{ident['revision']:08X} != EDS 0x{exp_rev:08X}")
+        if ident["firmware_version_u32"] != exp_fw:
+            problems.append(f"firmware 0x{ident['firmware_version_u32']:06X} != EDS "
+                            f"0x{exp_fw:06X}")
+        return problems
+
+    # ---- setup ------------------------------------------------------------------------
+    def setup(self, read_pdos: bool = True, operational: bool = True) -> None:
+        """Read the PDO configuration, register the 402 callbacks, go OPERATIONAL.
+
+        Parameters
+        ----------
+        read_pdos : bool
+            Upload the PDO configuration by SDO (True) or trust the EDS defaults.
+        operational : bool
+            Send NMT start so the drive transmits its TPDOs.
+        """
+        if read_pdos:
+            self.node.tpdo.read()
+            self.node.rpdo.read()
+        else:
+            self.node.tpdo.read(from_od=True)
+            self.node.rpdo.read(from_od=True)
+        self.node.setup_pdos(upload=False)
+        if operational:
+            self.node.nmt.state = "OPERATIONAL"
+
+    # ---- state machine ----------------------------------------------------------------
+    @property
+    def statusword(self) -> int:
+        """Statusword (0x6041) read by SDO."""
+        return int(self.node.sdo[0x6041].raw)
+
+    @property
+    def state(self) -> str:
+        """CiA 402 state name, from a fresh SDO read of the statusword."""
+        sw = self.statusword
+        for name, (mask, bits) in canopen.profiles.p402.State402.SW_MASK.items():
+            if sw & mask == bits:
+                return name
+        return "UNKNOWN"
+
+    def _goto(self, target: str, timeout_s: float) -> None:
+        """Walk the CiA 402 state machine to ``target`` with confirmed steps.
+
+        Uses BaseNode402's transition tables (``State402.TRANSITIONTABLE``,
+        ``next_state_indirect``); each controlword is an SDO download (so the
+        drive acknowledged it) and each new state is confirmed by an SDO read
+        of the statusword. This does not depend on when an event-driven TPDO
+        arrives, which keeps the walk's traffic identical from run to run
+        (and the simulated drive's timeline reproducible).
+        """
+        from canopen.profiles.p402 import State402
+
+        deadline = time.monotonic() + timeout_s
+        state = self.state
+        for _ in range(8):
+            if state == target:
+                return
+            if state == "FAULT":
+                raise DriveError(f"drive in FAULT ({fault_text(self.fault_code())}) while "
+                                 f"going to {target}")
+            nxt = target if (state, target) in State402.TRANSITIONTABLE else \
+                State402.next_state_indirect(state)
+            cw = State402.TRANSITIONTABLE.get((state, nxt))
+            if cw is None:
+                raise DriveError(f"no CiA 402 transition from {state} towards {target}")
+            self._sync_rpdo_cache(0x6040, cw)
+            self.write_raw(0x6040, 0, cw)
+            while (state := self.state) != nxt:
+                if state == "FAULT" or time.monotonic() > deadline:
+                    break
+                time.sleep(0.001)
+            if time.monotonic() > deadline and state != target:
+                break
+        if state != target:
+            if state == "FAULT":
+                raise DriveError(f"drive in FAULT ({fault_text(self.fault_code())}) while "
+                                 f"going to {target}")
+            raise DriveError(f"drive did not reach {target} within {timeout_s} s (now {state})")
+
+    def set_mode(self, mode: str) -> None:
+        """Select ``speed`` (CSV, 9) or ``force`` (CST, 10) and check 0x6061."""
+        if mode not in MODES:
+            raise ValueError(f"mode {mode!r}; allowed: {sorted(MODES)}")
+        self.write_raw(0x6060, 0, MODES[mode])
+        deadline = time.monotonic() + 1.0
+        while int(self.node.sdo[0x6061].raw) != MODES[mode]:
+            if time.monotonic() > deadline:
+                raise DriveError(f"drive did not confirm mode {mode} (0x6061)")
+            time.sleep(0.001)
+        self.mode = mode
+
+    def enable(self, mode: str = "speed", timeout_s: float = 2.0) -> None:
+        """Zero the references, select ``mode`` and go to OPERATION ENABLED."""
+        if self.state == "FAULT":
+            raise DriveError(f"drive in FAULT ({fault_text(self.fault_code())}); "
+                             "run `bench faults --reset` first")
+        self.set_speed_mps(0.0)
+        self.write_raw(0x6071, 0, 0)
+        self._sync_rpdo_cache(0x6071, 0)
+        self.set_mode(mode)
+        self._goto("OPERATION ENABLED", timeout_s)
+        self.enabled = True
+
+    def disable(self, timeout_s: float = 1.0) -> None:
+        """Zero the references and go to SWITCH ON DISABLED (PWM off).
+
+        Falls back to a direct SDO write of the controlword if the state walk
+        fails, and raises :class:`DriveError` only when the drive still reports
+        OPERATION ENABLED afterwards.
+        """
+        for idx in (0x60FF, 0x6071):
+            try:
+                self._sync_rpdo_cache(idx, 0)
+                self.node.sdo[idx].raw = 0
+            except Exception as e:  # keep going: disabling matters more
+                log.warning("zeroing 0x%04X failed: %s", idx, e)
+        try:
+            self._goto("SWITCH ON DISABLED", timeout_s)
+        except Exception as e:
+            log.warning("state walk to SWITCH ON DISABLED failed (%s); writing controlword", e)
+            self.node.sdo[0x6040].raw = 0x0000  # DISABLE VOLTAGE
+            if self.state in ("OPERATION ENABLED", "QUICK STOP ACTIVE"):
+                raise DriveError("drive still enabled after DISABLE VOLTAGE") from e
+        self.enabled = False
+
+    def quick_stop(self) -> None:
+        """Controlword QUICK STOP (0x0002): decelerate, then PWM off."""
+        self.node.sdo[0x6040].raw = 0x0002
+
+    # ---- references -------------------------------------------------------------------
+    def set_speed_mps(self, v_mps: float) -> None:
+        """Target velocity (0x60FF, um/s) from m/s."""
+        raw = int(round(v_mps * 1e6))
+        self.write_raw(0x60FF, 0, raw)
+        self._sync_rpdo_cache(0x60FF, raw)
+
+    @property
+    def force_rated_N(self) -> float:
+        """Force (N) meant by 1000 per mille of 0x6071/0x6077: K_f i_max_A."""
+        if self._force_rated_N is None:
+            sdo = self.node.sdo
+            i_max = float(sdo[0x2050][10].raw)
+            psi = float(sdo[0x2050][5].raw)
+            tau = float(sdo[0x2050][6].raw)
+            self._force_rated_N = 1.5 * math.pi / tau * psi * i_max
+        return self._force_rated_N
+
+    def set_force_N(self, force_N: float) -> None:
+        """Target torque (0x6071, per mille of :attr:`force_rated_N`) from N."""
+        pm = int(round(1000.0 * force_N / self.force_rated_N))
+        if not -1000 <= pm <= 1000:
+            raise DriveError(f"force {force_N:.3g} N is {pm} per mille of the rated "
+                             f"{self.force_rated_N:.3g} N; allowed [-1000, 1000]")
+        self.write_raw(0x6071, 0, pm)
+        self._sync_rpdo_cache(0x6071, pm)
+
+    def _sync_rpdo_cache(self, index: int, raw: int) -> None:
+        """Keep canopen's RPDO image equal to what was written by SDO.
+
+        BaseNode402 sends the controlword in RPDO1, which also carries the
+        target velocity: a stale image would overwrite the reference.
+        """
+        ptr = self.node.rpdo_pointers.get(index)
+        if ptr is not None:
+            ptr.raw = raw
+    def actual(self) -> dict[str, float]:
+        """Estimated position (m), speed (m/s) and force (N) read by SDO."""
+        sdo = self.node.sdo
+        return {"pos_hat_m": int(sdo[0x6064].raw) * 1e-6,
+                "speed_hat_mps": int(sdo[0x606C].raw) * 1e-6,
+                "force_hat_N": int(sdo[0x6077].raw) * 1e-3 * self.force_rated_N}
+
+    # ---- parameters -------------------------------------------------------------------
+    @property
+    def params(self) -> dict[str, Param]:
+        if self._params is None:
+            self._params = param_table()
+        return self._params
+
+    def param(self, name: str) -> Param:
+        """Look a parameter up by any accepted name (see :func:`param_table`)."""
+        try:
+            return self.params[name]
+        except KeyError:
+            near = sorted(k for k in self.params if name.lower() in k.lower())[:8]
+            hint = f"; did you mean: {', '.join(near)}" if near else ""
+            raise ParamError(f"unknown parameter {name!r}{hint}") from None
+
+    def write_raw(self, index: int, sub: int, value: Any) -> None:
+        """SDO download with SDO aborts turned into :class:`ParamError`."""
+        obj = self.node.sdo[index] if sub == 0 and not isinstance(
+            self.node.object_dictionary[index], (canopen.objectdictionary.ODRecord,
+                                                 canopen.objectdictionary.ODArray)) \
+            else self.node.sdo[index][sub]
+        try:
+            obj.raw = value
+        except SdoAbortedError as e:
+            p = next((q for q in self.params.values() if q.index == index and q.sub == sub),
+                     None)
+            raise ParamError(explain_abort(e, p, value)) from e
+        except SdoCommunicationError as e:
+            raise ParamError(f"0x{index:04X}:{sub}: no answer from the drive ({e})") from e
+
+    def read_raw(self, index: int, sub: int = 0) -> Any:
+        """SDO upload with aborts turned into :class:`ParamError`."""
+        ent = self.node.object_dictionary[index]
+        obj = self.node.sdo[index] if not isinstance(
+            ent, (canopen.objectdictionary.ODRecord, canopen.objectdictionary.ODArray)) \
+            else self.node.sdo[index][sub]
+        try:
+            return obj.raw
+        except SdoAbortedError as e:
+            raise ParamError(explain_abort(e)) from e
+        except SdoCommunicationError as e:
+            raise ParamError(f"0x{index:04X}:{sub}: no answer from the drive ({e})") from e
+
+    def get(self, name: str) -> tuple[Any, Param]:
+        """Read a parameter by name; returns (value, Param)."""
+        p = self.param(name)
+        return self.read_raw(p.index, p.sub), p
+
+    def set(self, name: str, value: str | float | int) -> Param:
+        """Write a parameter by name; ``value`` may carry the unit (``"20 V"``).
+
+        Raises
+        ------
+        ParamError
+            Unknown name, wrong unit, not writable, or refused by the drive
+            (the SDO abort code is explained, with the allowed range).
+        """
+        p = self.param(name)
+        v = parse_value(value, p)
+        if p.access in ("ro", "const"):
+            raise ParamError(f"{p.name} ({p.address}) is read-only")
+        try:
+            self.write_raw(p.index, p.sub, v)
+        except ParamError as e:
+            cause = e.__cause__
+            if isinstance(cause, SdoAbortedError):
+                raise ParamError(explain_abort(cause, p, value)) from cause
+            raise
+        return p
+
+    # ---- configuration backup / restore ----------------------------------------------
+    def backup(self) -> dict[str, Any]:
+        """Every readable ``rw`` parameter, by canonical name, with units."""
+        out: dict[str, Any] = {}
+        seen = set()
+        for p in self.params.values():
+            if p.access != "rw" or (p.index, p.sub) in seen or 0x1400 <= p.index < 0x1C00:
+                continue
+            if p.index in (0x6040, 0x60FF, 0x6071, 0x2070):  # commands, not configuration
+                continue
+            seen.add((p.index, p.sub))
+            v = self.read_raw(p.index, p.sub)
+            out[p.name] = {"value": v, "unit": p.unit, "address": p.address}
+        return out
+
+    def restore(self, cfg: dict[str, Any], progress: Callable[[str], None] | None = None
+                ) -> list[str]:
+        """Write a :meth:`backup` back; returns the errors (empty: all written)."""
+        errors = []
+        for name, ent in cfg.items():
+            v = ent["value"] if isinstance(ent, dict) else ent
+            try:
+                self.set(name, v)
+                if progress:
+                    progress(name)
+            except ParamError as e:
+                errors.append(str(e))
+        return errors
+
+    # ---- trace buffer (scope) ---------------------------------------------------------
+    #: Trace storage of the firmware (FW_APP_TRACE_FLOATS: samples x signals).
+    trace_capacity_floats = 4096
+
+    def trace_capture(self, signals: list[str], pre_s: float, f_pwm_Hz: float) -> dict[str, Any]:
+        """Arm the drive's trace buffer with ``signals`` and trigger it now.
+
+        The capture runs at the full control rate; its length is the buffer
+        capacity divided by the number of signals (4096 / 4 = 1024 samples,
+        43 ms at 24 kHz). Returns what was configured and ``t_trigger_clock``,
+        the drive-clock time (s) at which the trigger command was acknowledged.
+        The data comes back over the serial link after :meth:`trace_upload`.
+        """
+        from protocols import serial_link
+
+        names = serial_link.signal_names()
+        ids = [names.index(sig) for sig in signals]
+        per_sig = self.trace_capacity_floats // max(1, len(ids))
+        pre = min(int(round(pre_s * f_pwm_Hz)), per_sig // 2)
+        self.write_raw(0x2070, 1, 0)  # stop
+        self.write_raw(0x2070, 7, len(ids))
+        for k, i in enumerate(ids):
+            self.write_raw(0x2070, 8 + k, i)
+        self.write_raw(0x2070, 6, pre)
+        self.write_raw(0x2070, 1, 1)  # arm
+        self.write_raw(0x2070, 1, 2)  # force trigger
+        t_trigger = self.clock.now()
+        state = int(self.read_raw(0x2070, 2))
+        if state not in (2, 3):
+            raise DriveError(f"trace did not trigger (0x2070:2 state {state})")
+        return {"ids": ids, "pre_samples": pre, "samples": per_sig, "t_trigger_clock": t_trigger}
+
+    def trace_upload(self) -> None:
+        """Ask the drive to send the last capture over the serial link (0x2070:1 = 3)."""
+        self.write_raw(0x2070, 1, 3)
+
+    # ---- faults -----------------------------------------------------------------------
+    def fault_code(self) -> int:
+        """Latched fault (0x603F), 0 if none."""
+        return int(self.node.sdo[0x603F].raw)
+
+    def faults(self) -> dict[str, Any]:
+        """Current fault, error register and fault history (newest first)."""
+        hist = []
+        for sub in range(1, 9):
+            c = int(self.node.sdo[0x2030][sub].raw)
+            if c:
+                hist.append(c)
+        return {"state": self.state, "error_code": self.fault_code(),
+                "error_register": int(self.node.sdo[0x1001].raw), "history": hist,
+                "emcy": [(int(e.code), e.register) for e in self.node.emcy.log]}
+
+    def reset_faults(self, timeout_s: float = 1.0) -> str:
+        """Fault reset (controlword bit 7 rising edge); returns the new state."""
+        self.node.sdo[0x6040].raw = 0x0000
+        self.node.sdo[0x6040].raw = 0x0080
+        deadline = time.monotonic() + timeout_s
+        while self.state == "FAULT":
+            if time.monotonic() > deadline:
+                raise DriveError(f"fault reset refused; fault {fault_text(self.fault_code())}")
+            time.sleep(0.01)
+        self.node.sdo[0x6040].raw = 0x0000
+        return self.state
+
+
+def parse_value(value: str | float | int, p: Param) -> Any:
+    """Parse ``"20"``, ``"20 V"``, ``"0x10"`` for a parameter; checks the unit."""
+    if isinstance(value, (int, float)):
+        v: Any = value
+    else:
+        text = value.strip()
+        num, _, unit = text.partition(" ")
+        unit = unit.strip()
+        if unit and p.unit and unit != p.unit:
+            raise ParamError(f"{p.name}: unit {unit!r} given, the parameter is in {p.unit!r}")
+        if p.type == "VISIBLE_STRING":
+            return text
+        try:
+            v = int(num, 0) if p.type != "REAL32" else float(num)
+        except ValueError:
+            try:
+                v = float(num)
+            except ValueError:
+                raise ParamError(f"{p.name}: {value!r} is not a number") from None
+    if p.type == "REAL32":
+        return float(v)
+    if p.type == "VISIBLE_STRING":
+        return str(v)
+    if float(v) != int(v):
+        raise ParamError(f"{p.name} is an integer ({p.type}); got {value!r}")
+    return int(v)

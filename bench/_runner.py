@@ -1,0 +1,392 @@
+"""Execute a validated sequence against a drive, evaluate expectations.
+
+Safety: whatever happens inside :meth:`Runner.run` (an expectation evaluated,
+a drive error, an exception in the bench, Ctrl-C / SIGINT, SIGTERM), the
+``finally`` path removes the load and disables the drive (SWITCH ON
+DISABLED, PWM off) before the exception propagates. A second Ctrl-C during
+that path is ignored, so it cannot be cut short.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import signal
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from bench._load import LoadDevice, NoLoad
+from bench._metrics import compute_metrics
+from bench._sequence import Sequence, Step
+from bench._units import MotorUnits
+
+log = logging.getLogger("bench.runner")
+
+
+class DriveLike(Protocol):
+    """What the runner needs from a drive (:class:`bench.Drive` implements it)."""
+
+    clock: Any
+
+    def enable(self, mode: str = "speed") -> None: ...
+    def disable(self) -> None: ...
+    def set_mode(self, mode: str) -> None: ...
+    def set_speed_mps(self, v_mps: float) -> None: ...
+    def set_force_N(self, force_N: float) -> None: ...
+
+
+class Recorder(Protocol):
+    """Where the runner puts events and gets truth data from (see bench._logging)."""
+
+    def event(self, t_s: float, kind: str, detail: dict[str, Any]) -> None: ...
+    def truth(self) -> dict[str, np.ndarray] | None: ...
+    def trace_window(self, name: str, t0_s: float, t1_s: float, signals: list[str]) -> None: ...
+
+
+@dataclass
+class ExpectResult:
+    """Outcome of one ``expect`` step.
+
+    Attributes
+    ----------
+    name : str
+        ``<metric>@[t0,t1]`` unless the step names itself.
+    metric : str
+    window_s : tuple of float
+        Evaluation window in sequence time (s).
+    measured : float
+        Metric value (NaN if unavailable).
+    passed : bool
+    criterion : str
+        E.g. ``<= 0.01`` or ``== 1 ± 0.1``.
+    message : str
+        Explanation when failed.
+    line : int
+        Line of the expect step in the sequence file.
+    """
+
+    name: str
+    metric: str
+    window_s: tuple[float, float]
+    measured: float
+    passed: bool
+    criterion: str
+    message: str = ""
+    line: int = 0
+
+
+@dataclass
+class RunResult:
+    """Outcome of a run.
+
+    Attributes
+    ----------
+    sequence : str
+    passed : bool
+        Every expectation passed and nothing went wrong.
+    expectations : list of ExpectResult
+    metrics : dict
+        Metrics over ``[settle_s, end]`` (NaN when the truth is unavailable).
+    error : str or None
+        Exception text if the run was aborted.
+    aborted : bool
+        Interrupted (Ctrl-C / signal) or failed with an exception.
+    safe_state : str
+        What the safe-state path reported (``disabled`` or an error text).
+    duration_s : float
+        Sequence time at the end (s).
+    wall_s : float
+        Wall time of the run (s).
+    events : list of dict
+    """
+
+    sequence: str
+    passed: bool = False
+    expectations: list[ExpectResult] = field(default_factory=list)
+    metrics: dict[str, float] = field(default_factory=dict)
+    error: str | None = None
+    aborted: bool = False
+    safe_state: str = ""
+    duration_s: float = 0.0
+    wall_s: float = 0.0
+    events: list[dict[str, Any]] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+class _NullRecorder:
+    def __init__(self) -> None:
+        self.events: list[dict[str, Any]] = []
+
+    def event(self, t_s: float, kind: str, detail: dict[str, Any]) -> None:
+        self.events.append({"t_s": t_s, "kind": kind, **detail})
+
+    def truth(self) -> dict[str, np.ndarray] | None:
+        return None
+
+    def trace_window(self, name: str, t0_s: float, t1_s: float, signals: list[str]) -> None:
+        pass
+
+
+def _criterion(p: dict[str, Any]) -> str:
+    if "op" in p:
+        return f"{p['op']} {p['limit']:g}"
+    return f"== {p['value']:g} ± {p['tolerance']:g}"
+
+
+def evaluate(p: dict[str, Any], measured: float) -> bool:
+    """Whether ``measured`` meets an expect step's criterion (NaN never does)."""
+    if measured is None or not math.isfinite(measured):
+        return False
+    if "op" in p:
+        lim = float(p["limit"])
+        return {"<": measured < lim, "<=": measured <= lim, ">": measured > lim,
+                ">=": measured >= lim}[p["op"]]
+    return abs(measured - float(p["value"])) <= float(p["tolerance"])
+
+
+class Runner:
+    """Runs sequences on a drive.
+
+    Parameters
+    ----------
+    drive : DriveLike
+        The drive under test (its ``clock`` is the run's time base).
+    units : MotorUnits
+        For r/min and N·m conversions.
+    load : LoadDevice
+        Load machine (hardware) or plant load (sim); :class:`NoLoad` if None.
+    recorder : Recorder
+        Event log and truth source; a null recorder if None.
+    progress : callable(t_s, total_s), optional
+        Called while waiting, with the sequence time (s).
+    ramp_step_s : float
+        Update period of stepwise ramps (s).
+    f_pwm_Hz : float, optional
+        Control rate of the drive; enables the drive's trace buffer for
+        ``trace_capture`` steps (else only the recorded window is marked).
+    """
+
+    def __init__(self, drive: DriveLike, units: MotorUnits, load: LoadDevice | None = None,
+                 recorder: Recorder | None = None,
+                 progress: Callable[[float, float], None] | None = None,
+                 ramp_step_s: float = 0.005, f_pwm_Hz: float | None = None) -> None:
+        self.drive = drive
+        self.units = units
+        self.load: LoadDevice = load or NoLoad()
+        self.rec: Recorder = recorder or _NullRecorder()
+        self.progress = progress
+        self.ramp_step_s = ramp_step_s
+        self.f_pwm_Hz = f_pwm_Hz
+        #: drive trace captures armed during the run (uploaded by the session afterwards)
+        self.traces: list[dict[str, Any]] = []
+        self.clock = drive.clock
+        self._t0 = 0.0
+        self._speed_mps = 0.0
+        self._force_N = 0.0
+        self._load_N = 0.0
+
+    # ---- time -------------------------------------------------------------------------
+    def now(self) -> float:
+        """Sequence time (s)."""
+        return self.clock.now() - self._t0
+
+    def _sleep_until(self, t_seq: float, total: float) -> None:
+        """Sleep in slices so progress updates and Ctrl-C stay responsive."""
+        while True:
+            now = self.now()
+            if self.progress:
+                self.progress(min(now, total), total)
+            if now >= t_seq - 1e-9:  # clocks advance in steps; avoid float ties
+                return
+            self.clock.sleep_until(self._t0 + min(t_seq, now + 0.05))
+
+    # ---- steps ------------------------------------------------------------------------
+    def _speed(self, p: dict[str, Any], key: str = "value") -> float:
+        return self.units.speed_to_mps(float(p[key]), p["unit"])
+
+    def _force(self, p: dict[str, Any], key: str = "value") -> float:
+        return self.units.force_to_N(float(p[key]), p["unit"])
+
+    def _ramp(self, setter: Callable[[float], None], start: float, end: float,
+              duration: float, t_start: float, total: float, step: float) -> None:
+        n = max(1, int(math.ceil(duration / step)))
+        for k in range(1, n + 1):
+            setter(start + (end - start) * k / n)
+            self._sleep_until(t_start + duration * k / n, total)
+
+    def _do(self, step: Step, seq: Sequence, result: RunResult) -> None:
+        p = step.params
+        kind = step.kind
+        d = self.drive
+        total = seq.duration_s
+        if kind == "enable":
+            self.load.enable()
+            d.enable(p.get("mode", "speed"))
+        elif kind == "disable":
+            self._set_load(0.0)
+            d.disable()
+        elif kind == "set_mode":
+            d.set_mode(p["mode"])
+        elif kind == "set_speed":
+            self._speed_mps = self._speed(p)
+            d.set_speed_mps(self._speed_mps)
+        elif kind == "set_force":
+            self._force_N = self._force(p)
+            d.set_force_N(self._force_N)
+        elif kind == "ramp":
+            step_s = float(p.get("step_s", self.ramp_step_s))
+            if p["quantity"] == "speed":
+                target = self._speed(p, "to")
+
+                def setter(v: float) -> None:
+                    self._speed_mps = v
+                    d.set_speed_mps(v)
+                start = self._speed_mps
+            else:
+                target = self._force(p, "to")
+
+                def setter(v: float) -> None:
+                    self._force_N = v
+                    d.set_force_N(v)
+                start = self._force_N
+            self._ramp(setter, start, target, float(p["duration_s"]), step.t_start_s, total,
+                       step_s)
+        elif kind == "load_step":
+            self._set_load(self._force(p))
+        elif kind == "load_ramp":
+            target = self._force(p, "to")
+            dur = float(p["duration_s"])
+            if self.load.ramp_force_N(target, dur):
+                self._load_N = target
+                self._sleep_until(step.t_start_s + dur, total)
+            else:
+                self._ramp(self._set_load, self._load_N, target, dur, step.t_start_s, total,
+                           self.ramp_step_s)
+        elif kind == "wait":
+            self._sleep_until(step.t_start_s + float(p["duration_s"]), total)
+        elif kind == "trace_capture":
+            t = self.now()
+            pre = float(p.get("pre_s", 0.0))
+            signals = list(p.get("signals", [])) or ["theta_hat_rad", "pll_err_rad",
+                                                     "i_q_A", "omega_hat_radps"]
+            self.rec.trace_window(p["name"], max(0.0, t - pre), t + float(p["duration_s"]),
+                                  signals)
+            arm = getattr(self.drive, "trace_capture", None)
+            if arm is not None and self.f_pwm_Hz:
+                try:  # the drive's own scope at the full control rate (uploaded at the end)
+                    cfg = arm(signals, pre, self.f_pwm_Hz)
+                    self.traces.append({"name": p["name"], "t_s": t, **cfg,
+                                        "signals": signals})
+                except Exception as e:  # noqa: BLE001 - a measurement, not a safety matter
+                    log.warning("drive trace capture '%s' failed: %s", p["name"], e)
+                    self.rec.event(t, "trace_failed", {"name": p["name"], "error": str(e)})
+        elif kind == "expect":
+            result.expectations.append(self._expect(step, seq))
+        else:  # pragma: no cover - the schema forbids it
+            raise ValueError(f"unknown step {kind}")
+
+    def _set_load(self, force_N: float) -> None:
+        self._load_N = force_N
+        self.load.set_force_N(force_N)
+
+    def _expect(self, step: Step, seq: Sequence) -> ExpectResult:
+        p = step.params
+        now = self.now()
+        t0, t1 = (float(v) for v in p.get("window_s", (seq.settle_s, now)))
+        name = p.get("name") or f"{p['metric']}@[{t0:g},{t1:g}]s"
+        truth = self.rec.truth()
+        if truth is None:
+            return ExpectResult(name, p["metric"], (t0, t1), float("nan"), False, _criterion(p),
+                                "metric unavailable: needs the true position (simulated drive "
+                                "or a reference encoder)", step.line)
+        m = compute_metrics(truth, self.units, t0, t1)[p["metric"]]
+        ok = evaluate(p, m)
+        msg = "" if ok else f"measured {m:.6g}, required {_criterion(p)}"
+        return ExpectResult(name, p["metric"], (t0, t1), m, ok, _criterion(p), msg, step.line)
+
+    # ---- safe state -------------------------------------------------------------------
+    def safe_state(self) -> str:
+        """Remove the load and disable the drive; never raises. Returns a status text."""
+        in_main = threading.current_thread() is threading.main_thread()
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None
+        try:
+            msgs = []
+            for what, fn in (("load", self._load_off), ("drive", self.drive.disable)):
+                for attempt in range(3):
+                    try:
+                        fn()
+                        break
+                    except Exception as e:  # noqa: BLE001 - we must keep trying
+                        log.error("safe state: %s disable attempt %d failed: %s", what,
+                                  attempt + 1, e)
+                        if attempt == 2:
+                            msgs.append(f"{what}: {e}")
+                        time.sleep(0.05)
+            return "disabled" if not msgs else "SAFE STATE FAILED: " + "; ".join(msgs)
+        finally:
+            if in_main and old is not None:
+                signal.signal(signal.SIGINT, old)
+
+    def _load_off(self) -> None:
+        try:
+            self.load.set_force_N(0.0)
+        finally:
+            self.load.disable()
+
+    # ---- run --------------------------------------------------------------------------
+    def run(self, seq: Sequence) -> RunResult:
+        """Execute ``seq``; the drive is disabled on every exit path.
+
+        Exceptions (including KeyboardInterrupt) propagate after the safe
+        state; the partial :class:`RunResult` is available as
+        ``self.result``.
+        """
+        result = RunResult(sequence=seq.name)
+        self.result = result
+        wall0 = time.monotonic()
+        self._t0 = self.clock.now()
+        mark = getattr(self.rec, "mark_start", None)
+        if mark is not None:
+            mark(self._t0)
+        self.rec.event(0.0, "start", {"sequence": seq.name})
+        try:
+            for step in seq.steps:
+                self.rec.event(self.now(), "step", {"index": step.index, "step": step.kind,
+                                                    "params": step.params})
+                self._do(step, seq, result)
+            result.duration_s = self.now()
+        except BaseException as e:
+            result.aborted = True
+            result.error = f"{type(e).__name__}: {e}" if str(e) else type(e).__name__
+            self.rec.event(self.now(), "abort", {"error": result.error})
+            raise
+        finally:
+            result.safe_state = self.safe_state()
+            self.rec.event(self.now(), "safe_state", {"status": result.safe_state})
+            result.duration_s = result.duration_s or self.now()
+            try:
+                truth = self.rec.truth()
+            except Exception as e:  # noqa: BLE001 - never mask the original exception
+                log.error("truth data unavailable: %s", e)
+                truth = None
+            if truth is not None and len(truth.get("t_s", ())) > 0:
+                result.metrics = compute_metrics(truth, self.units, seq.settle_s,
+                                                 min(result.duration_s, seq.duration_s))
+            else:
+                result.metrics = dict.fromkeys(
+                    ("position_error_rms_rad", "position_error_max_rad",
+                     "position_error_rms_mm", "speed_error_max_rpm", "speed_error_max_mps",
+                     "settling_time_s"), float("nan"))
+            result.passed = (not result.aborted and result.safe_state == "disabled"
+                             and all(x.passed for x in result.expectations))
+            result.wall_s = time.monotonic() - wall0
+            if isinstance(self.rec, _NullRecorder):
+                result.events = self.rec.events
+        return result

@@ -1,0 +1,543 @@
+"""Connecting to a drive (hardware or the simulated drive) and running sequences.
+
+:func:`connect` returns a :class:`Connection`: a python-can bus, a canopen
+network with the drive (:class:`bench.Drive`), the load device, the clock and,
+for the simulated drive, the :class:`bench.SimDrive` behind the bus. The bench
+code that follows is identical for both.
+
+Connection rules
+    ``--sim``: the simulated drive. Else a bus from ``--interface/--channel/
+    --bitrate`` or python-can's configuration (``~/.canrc``, ``CAN_INTERFACE``
+    ...); if none is configured, the bus cannot be opened or the drive does not
+    answer, the bench falls back to the simulated drive and says so on stderr.
+    ``--serial URL`` (pyserial URL, e.g. ``/dev/ttyUSB0``, ``socket://host:port``,
+    ``loop://``) adds the drive's serial telemetry link; telemetry sequence
+    numbers give the lost-frame count. The simulated drive's UART is read the
+    same way (in-process byte pipe).
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import threading
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import can
+import canopen
+import numpy as np
+
+from bench._drive import Drive
+from bench._load import CanopenLoad, LoadDevice, NoLoad
+from bench._logging import RunLogger, run_dir_for
+from bench._report import make_plots, write_html, write_junit, write_summary_json
+from bench._runner import Runner, RunResult
+from bench._sequence import Sequence
+from bench._units import MotorUnits, motor_units
+
+log = logging.getLogger("bench.session")
+
+# TPDO-mapped objects -> (signal name, unit, scale to SI or None for "per mille force")
+_PDO_SIGNALS: dict[tuple[int, int], tuple[str, str, float | None]] = {
+    (0x6041, 0): ("statusword", "", 1.0),
+    (0x6061, 0): ("mode_display", "", 1.0),
+    (0x6064, 0): ("pos_hat_m", "m", 1e-6),
+    (0x606C, 0): ("speed_hat_mps", "m/s", 1e-6),
+    (0x6077, 0): ("force_hat_N", "N", None),
+    (0x603F, 0): ("error_code", "", 1.0),
+    (0x1001, 0): ("error_register", "", 1.0),
+    (0x2020, 1): ("theta_hat_rad", "rad", 1.0),
+    (0x2020, 2): ("omega_hat_radps", "rad/s", 1.0),
+    (0x2020, 3): ("speed_hat_mps_pll", "m/s", 1.0),
+    (0x2020, 4): ("pll_err_rad", "rad", 1.0),
+    (0x2020, 5): ("hf_amp_A", "A", 1.0),
+    (0x2020, 6): ("pll_err_f_rad", "rad", 1.0),
+    (0x2020, 7): ("sogi_k_eff", "", 1.0),
+    (0x2020, 8): ("start_phase", "", 1.0),
+}
+
+
+class NoHardware(RuntimeError):
+    """No usable CAN bus or no drive answering on it."""
+
+
+@dataclass
+class Connection:
+    """An open connection to a drive.
+
+    Attributes
+    ----------
+    bus : can.BusABC
+    network : canopen.Network
+    drive : Drive
+    load : LoadDevice
+    units : MotorUnits
+    description : str
+        Human-readable (printed and stored in the run metadata).
+    sim : SimDrive or None
+        The simulated drive behind the bus, when simulated.
+    serial : object or None
+        Serial port (pyserial or the sim's byte pipe) carrying telemetry.
+    """
+
+    bus: can.BusABC
+    network: canopen.Network
+    drive: Drive
+    load: LoadDevice
+    units: MotorUnits
+    description: str
+    sim: Any = None
+    serial: Any = None
+    info: dict[str, Any] = field(default_factory=dict)
+    _hb_task: Any = None
+
+    @property
+    def is_sim(self) -> bool:
+        return self.sim is not None
+
+    def clock_of(self, msg_ts: float) -> float:
+        """Convert a frame timestamp (s since the epoch) to the drive clock (s)."""
+        if self.sim is not None:
+            return msg_ts - self.sim.epoch
+        return msg_ts - (time.time() - time.monotonic())
+
+    def start_heartbeat(self, period_ms: int = 100) -> None:
+        """Hardware: be the supervisor the drive watches while it may move.
+
+        The bench (node 0x7F) produces a heartbeat every ``period_ms``; the
+        drive's consumer heartbeat (0x1016:1) watches it with a 5x margin and
+        faults (quick stop, then PWM off) if the bench dies. :meth:`close`
+        switches the watch off before stopping the heartbeat, so a clean exit
+        does not fault the drive. Not used for the simulated drive, whose
+        clock does not follow the wall clock.
+        """
+        if self.sim is not None or self._hb_task is not None:
+            return
+        self._hb_task = self.network.send_periodic(0x700 + 0x7F, bytes([0x05]),
+                                                   period_ms / 1000.0)
+        self.drive.node.sdo[0x1016][1].raw = (0x7F << 16) | (5 * period_ms)
+
+    def close(self) -> None:
+        """Disconnect everything (does not change the drive state)."""
+        if self._hb_task is not None:
+            try:
+                self.drive.node.sdo[0x1016][1].raw = 0  # stop watching, then stop beating
+            except Exception as e:  # noqa: BLE001
+                log.warning("could not switch the drive's heartbeat watch off: %s", e)
+            self._hb_task.stop()
+            self._hb_task = None
+        try:
+            self.network.disconnect()
+        except Exception as e:  # noqa: BLE001 - canopen re-raises receive-thread errors here
+            log.warning("CAN receive thread had failed: %s: %s", type(e).__name__, e)
+        if self.serial is not None and self.sim is None:
+            self.serial.close()
+        if self.sim is not None:
+            self.sim.close()
+
+
+def _say(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def open_sim(motor: str = "paper_salient", extractor: str = "sogi_adaptive", seed: int = 0,
+             x0: float | str = 0.0, realtime: bool = False, node_id: int = 1,
+             record_decimation: int = 1, read_pdos: bool = True,
+             chunk_s: float = 1e-3) -> Connection:
+    """Start the simulated drive on a fresh ``virtual`` channel and connect to it.
+
+    ``chunk_s`` is the simulated time per C call, which is also the SYNC period (s).
+    """
+    from bench._simdrive import SimDrive, SimLoad
+
+    channel = f"pmlsm-sim-{uuid.uuid4().hex[:8]}-vcan"  # no trailing digits (BLF channel)
+    sim = SimDrive(channel, motor=motor, extractor=extractor, seed=seed, x0=x0,
+                   node_id=node_id, realtime=realtime, chunk_s=chunk_s,
+                   record_decimation=record_decimation).start()
+    try:
+        bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        net = canopen.Network(bus)
+        net.NOTIFIER_CYCLE = 0.1  # quick shutdown; frames are still delivered at once
+        net.connect()
+        drive = Drive(net, node_id, clock=sim.clock)
+        drive.setup(read_pdos=read_pdos)
+    except Exception:
+        sim.close()
+        raise
+    units = MotorUnits(pole_pitch_m=sim.motor.tau_m, pole_pairs=float(sim.motor.pole_pairs))
+    desc = (f"SIMULATED drive (motor {sim.motor.name}, extractor {extractor}, seed {seed}, "
+            f"{'paced to the wall clock' if realtime else 'as fast as possible'}) on "
+            f"python-can virtual channel {channel}")
+    return Connection(bus, net, drive, SimLoad(sim), units, desc, sim=sim, serial=sim.serial,
+                      info={"kind": "sim", "channel": channel, "x0_m": sim.x0_m})
+
+
+def open_hardware(interface: str | None, channel: str | None, bitrate: int | None,
+                  node_id: int = 1, load_node: int | None = None, motor: str | None = None,
+                  serial_url: str | None = None, probe_timeout_s: float = 0.5) -> Connection:
+    """Open a python-can bus and check that the drive answers.
+
+    Raises
+    ------
+    NoHardware
+        No interface configured, the bus cannot be opened, or no answer from
+        node ``node_id``.
+    """
+    kw: dict[str, Any] = {}
+    if interface:
+        kw["interface"] = interface
+    if channel:
+        kw["channel"] = channel
+    if bitrate:
+        kw["bitrate"] = bitrate
+    if not interface:
+        try:
+            cfg = can.util.load_config()
+        except (can.CanError, NotImplementedError, ValueError):
+            cfg = {}
+        if not cfg.get("interface"):
+            raise NoHardware("no CAN interface given (--interface) or configured "
+                             "(~/.canrc, CAN_INTERFACE)")
+    try:
+        bus = can.Bus(**kw)
+    except (can.CanError, OSError, ImportError, ValueError, NotImplementedError) as e:
+        raise NoHardware(f"cannot open CAN bus {kw}: {e}") from e
+    net = canopen.Network(bus)
+    net.connect()
+    try:
+        drive = Drive(net, node_id, sdo_timeout_s=probe_timeout_s)
+        try:
+            _ = drive.node.sdo[0x1000].raw  # probe: does the drive answer?
+        except Exception as e:
+            raise NoHardware(f"no answer from drive node {node_id} on {kw}: {e}") from e
+        drive.node.sdo.RESPONSE_TIMEOUT = 0.5
+        drive.setup(read_pdos=True)
+        load: LoadDevice = NoLoad()
+        if load_node:
+            ld = Drive(net, load_node)
+            ld.setup(read_pdos=True)
+            load = CanopenLoad(ld)
+        port = None
+        if serial_url:
+            import serial
+
+            port = serial.serial_for_url(serial_url, baudrate=921600, timeout=0.1)
+        units = motor_units(motor)
+        desc = f"HARDWARE drive node {node_id} on {kw}"
+        return Connection(bus, net, drive, load, units, desc, serial=port,
+                          info={"kind": "hardware", "bus": kw, "node_id": node_id})
+    except BaseException:
+        net.disconnect()
+        raise
+
+
+def connect(sim: bool = False, interface: str | None = None, channel: str | None = None,
+            bitrate: int | None = None, serial_url: str | None = None,
+            realtime: bool = False, motor: str = "paper_salient",
+            extractor: str = "sogi_adaptive", seed: int = 0, x0: float | str = 0.0,
+            node_id: int = 1, load_node: int | None = None, record_decimation: int = 1,
+            say: Callable[[str], None] = _say) -> Connection:
+    """Hardware if available and not ``sim``; else the simulated drive (announced)."""
+    if not sim:
+        try:
+            c = open_hardware(interface, channel, bitrate, node_id, load_node, motor,
+                              serial_url)
+            say(f"bench: connected to {c.description}")
+            return c
+        except NoHardware as e:
+            say(f"bench: no drive hardware found ({e}).")
+            say("bench: FALLING BACK TO THE SIMULATED DRIVE - results are from a simulation, "
+                "not from hardware.")
+    c = open_sim(motor, extractor, seed, x0, realtime, node_id, record_decimation)
+    say(f"bench: using the {c.description}")
+    return c
+
+
+# ---- decoding what comes over the wire --------------------------------------------------
+
+
+class PdoRecorder:
+    """Decodes the drive's TPDOs into SI signals (``pdo.<name>``) for the logger."""
+
+    def __init__(self, conn: Connection, logger: RunLogger) -> None:
+        self.conn = conn
+        self.logger = logger
+        self._buf: dict[str, tuple[list[float], list[float], str]] = {}
+        self._lock = threading.Lock()
+        try:
+            self._rated = float(conn.drive.force_rated_N)
+        except Exception:  # noqa: BLE001 - unknown rating: log per mille
+            self._rated = float("nan")
+        for tpdo in conn.drive.node.tpdo.values():
+            if tpdo.enabled:
+                tpdo.add_callback(self._on_pdo)
+
+    def _on_pdo(self, pdo_map: Any) -> None:
+        t = self.conn.clock_of(pdo_map.timestamp or time.time())
+        with self._lock:
+            for var in pdo_map:
+                key = (var.index, var.subindex)
+                spec = _PDO_SIGNALS.get(key)
+                if spec is None:
+                    continue
+                name, unit, scale = spec
+                raw = var.raw
+                if scale is None:  # per mille of the rated force -> N
+                    val = float(raw) * 1e-3 * self._rated
+                else:
+                    val = float(raw) * scale
+                b = self._buf.setdefault(name, ([], [], unit))
+                b[0].append(t)
+                b[1].append(val)
+
+    def drain(self) -> None:
+        with self._lock:
+            buf, self._buf = self._buf, {}
+        for name, (t, v, unit) in buf.items():
+            self.logger.append(np.asarray(t), {name: np.asarray(v)}, {name: unit},
+                               prefix="pdo.")
+
+
+class TelemetryReader(threading.Thread):
+    """Reads the serial telemetry link into the logger (``tel.<signal>``)."""
+
+    def __init__(self, port: Any, logger: RunLogger, f_pwm_Hz: float) -> None:
+        super().__init__(name="bench-telemetry", daemon=True)
+        from protocols import serial_link
+
+        self.sl = serial_link
+        self.port = port
+        self.logger = logger
+        self.rx = serial_link.Receiver()
+        self.asm = serial_link.TraceAssembler()
+        self.traces: list[Any] = []
+        self.names = serial_link.signal_names()
+        self.f_pwm_Hz = f_pwm_Hz
+        self._stop = threading.Event()
+        self.error: str | None = None
+
+    def run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                data = self.port.read(4096)
+                if not data:
+                    if getattr(self.port, "closed", False):
+                        return
+                    continue
+                cols: dict[str, tuple[list[float], list[float]]] = {}
+                for fr in self.rx.feed(data):
+                    if fr.type != self.sl.FrameType.TELEMETRY:
+                        tr = self.asm.feed(fr)
+                        if tr is not None:
+                            self.traces.append(tr)
+                        continue
+                    tel = self.sl.parse_telemetry(fr.payload)
+                    t = tel.step / self.f_pwm_Hz
+                    for i, v in zip(tel.ids, tel.values, strict=True):
+                        name = self.names[i] if i < len(self.names) else f"sig{i}"
+                        c = cols.setdefault(name, ([], []))
+                        c[0].append(t)
+                        c[1].append(v)
+                for name, (t, v) in cols.items():
+                    self.logger.append(np.asarray(t), {name: np.asarray(v)}, {},
+                                       prefix="tel.")
+        except Exception as e:  # noqa: BLE001 - surfaced in the result
+            self.error = f"{type(e).__name__}: {e}"
+            log.error("telemetry reader: %s", self.error)
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    @property
+    def stats(self) -> dict[str, int]:
+        return {"frames_ok": self.rx.frames_ok, "frames_bad": self.rx.frames_bad,
+                "frames_lost": self.rx.frames_lost}
+
+
+# ---- a complete run ---------------------------------------------------------------------
+
+
+@dataclass
+class RunOutput:
+    """What :func:`run_sequence` produced."""
+
+    result: RunResult
+    run_dir: Any
+    logstats: dict[str, Any]
+    report: Any
+    interrupted: BaseException | None = None
+
+
+def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
+                 summary_json: str | None = None, junit: str | None = None,
+                 progress: bool = True, rerun: Any = None, trace_format: str = "blf",
+                 report: bool = True) -> RunOutput:
+    """Run ``seq`` on an open connection: log, evaluate, report.
+
+    KeyboardInterrupt is caught after the safe state, recorded as an aborted
+    run and returned in ``interrupted`` (the report and JUnit are still
+    written), so the caller can exit with 130.
+    """
+    run_dir = run_dir_for(seq.name, runs_root)
+    if conn.sim is not None:
+        conn.sim.wait_idle()
+    logger = RunLogger(run_dir, conn.network, trace_format=trace_format)
+    sent0 = (conn.sim.frames_to_bus + conn.sim.syncs_sent) if conn.sim is not None else 0
+    sinks: list[Callable[..., None]] = [
+        lambda t, v, u: logger.append(t, v, u, prefix="sim.")]
+    if rerun is not None:
+        sinks.append(rerun.log_sim_chunk)
+    if conn.sim is not None:
+        conn.sim.sink = lambda t, v, u: [s(t, v, u) for s in sinks]
+    pdo = PdoRecorder(conn, logger)
+    tel = None
+    f_pwm = float(conn.sim.sim.cfg.f_pwm_Hz) if conn.sim is not None else 24000.0
+    if conn.serial is not None:
+        tel = TelemetryReader(conn.serial, logger, f_pwm)
+        tel.start()
+    drive = conn.drive
+    conn.start_heartbeat()
+    meta: dict[str, Any] = {
+        "connection": conn.description, "connection_info": conn.info,
+        "sequence": {"name": seq.name, "file": str(seq.path), "motor": seq.motor,
+                     "extractor": seq.extractor, "seed": seq.seed,
+                     "description": seq.description, "document": seq.raw},
+        "seed": seq.seed, "units": {"pole_pitch_m": conn.units.pole_pitch_m,
+                                    "pole_pairs": conn.units.pole_pairs},
+    }
+    try:
+        ident = drive.identity()
+        meta["drive"] = ident
+        meta["firmware_check"] = drive.check_firmware(ident) or "matches the EDS"
+        meta["drive_config"] = drive.backup()
+    except Exception as e:  # noqa: BLE001 - metadata must not stop a run
+        meta["drive_error"] = str(e)
+    logger.write_meta(meta)
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=round(seq.duration_s, 3), unit="s", desc=seq.name, leave=False,
+                   bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} s "
+                              "[{elapsed}<{remaining}]")
+
+    def prog(t: float, total: float) -> None:
+        pdo.drain()
+        t = min(t, bar.total) if bar is not None else t
+        if bar is not None and t - bar.n >= 0.01:
+            bar.update(round(t - bar.n, 3))
+        if rerun is not None:
+            rerun.set_time_hint(t)
+
+    try:
+        f_pwm = float(drive.read_raw(0x2050, 1))  # PWM = control rate, from the drive
+    except Exception:  # noqa: BLE001 - keep the default
+        pass
+    runner = Runner(drive, conn.units, conn.load, logger, progress=prog,
+                    f_pwm_Hz=f_pwm if tel is not None else None)
+    interrupted: BaseException | None = None
+    try:
+        result = runner.run(seq)
+    except KeyboardInterrupt as e:
+        interrupted = e
+        result = runner.result
+    except Exception as e:  # noqa: BLE001 - the run result records it
+        interrupted = e
+        result = runner.result
+    finally:
+        if bar is not None:
+            bar.close()
+    if runner.traces and tel is not None:
+        _collect_trace(runner, drive, tel, logger)
+    if conn.sim is not None:
+        conn.sim.sink = None
+    if conn.sim is not None and conn.sim.wait_idle():
+        _settle_count(logger)
+    pdo.drain()
+    if tel is not None:
+        tel.stop()
+    logstats = logger.close(join_mf4=True)
+    if tel is not None:
+        logstats["telemetry"] = tel.stats
+        logstats["lost_frames"]["serial_telemetry"] = tel.rx.frames_lost
+        if tel.error:
+            logstats["receive_errors"].append("telemetry: " + tel.error)
+    if conn.sim is not None:
+        sent = conn.sim.frames_to_bus + conn.sim.syncs_sent - sent0
+        logstats["lost_frames"]["can"] = max(0, sent - logstats["frames_logged"])
+        logstats["sim_frames_to_bus"] = sent
+    if logstats["receive_errors"]:
+        _say("bench: CAN receive-thread errors: " + "; ".join(logstats["receive_errors"]))
+    logger.write_meta({"result": {"passed": result.passed, "error": result.error,
+                                  "safe_state": result.safe_state},
+                       "logging": logstats})
+    rep = None
+    extra = {"run_dir": str(run_dir), "lost_frames": logstats["lost_frames"],
+             "receive_errors": logstats["receive_errors"],
+             "simulated": conn.is_sim}
+    if report:
+        plots = make_plots(logger, result, conn.units, run_dir)
+        rep = run_dir / "report.html"
+        write_html(rep, result, plots, logger.meta, logstats)
+    write_summary_json(run_dir / "summary.json", result, extra)
+    write_junit(run_dir / "junit.xml", [result])
+    if summary_json:
+        write_summary_json(summary_json, result, extra)
+    if junit:
+        write_junit(junit, [result])
+    return RunOutput(result, run_dir, logstats, rep, interrupted)
+
+
+def _collect_trace(runner: Runner, drive: Drive, tel: TelemetryReader, logger: RunLogger,
+                   timeout_s: float = 1.0) -> None:
+    """Upload the drive's last trace capture over the serial link into ``trace.*``.
+
+    The buffer holds one capture, so this is the last ``trace_capture`` step's.
+    Waiting uses the drive clock (the simulated drive keeps running for it).
+    """
+    spec = runner.traces[-1]
+    try:
+        drive.trace_upload()
+        t_end = drive.clock.now() + timeout_s
+        while not tel.traces and drive.clock.now() < t_end:
+            drive.clock.sleep_until(drive.clock.now() + 0.02)
+            time.sleep(0.005)  # let the reader thread catch up with the bytes
+    except Exception as e:  # noqa: BLE001 - a measurement, not a safety matter
+        logger.event(runner.now(), "trace_failed", {"name": spec["name"], "error": str(e)})
+        return
+    if not tel.traces:
+        logger.event(runner.now(), "trace_failed", {"name": spec["name"],
+                                                    "error": "no upload received"})
+        return
+    tr = tel.traces[-1]
+    if getattr(drive.clock, "exact_steps", False):
+        # simulated drive: its clock is control steps x dt, so the header's trigger step
+        # places the capture exactly
+        t = tr.trigger_step * tr.dt_s + tr.time_s()
+    else:  # hardware: the bench-side time at which the trigger was acknowledged
+        t = spec["t_trigger_clock"] + tr.time_s()
+    names = [tel.names[i] if i < len(tel.names) else f"sig{i}" for i in tr.ids]
+    logger.append(t, {n: tr.samples[:, k].astype(np.float64) for k, n in enumerate(names)},
+                  {}, prefix=f"trace.{spec['name']}.")
+    logger.event(spec["t_s"], "trace_uploaded", {"name": spec["name"], "samples":
+                                                int(tr.samples.shape[0]),
+                                                "missing": tr.missing})
+
+
+def _settle_count(logger: RunLogger, timeout_s: float = 1.0) -> None:
+    """Wait until the notifier has delivered every queued frame to the trace."""
+    if logger.trace is None:
+        return
+    deadline = time.monotonic() + timeout_s
+    last = -1
+    while time.monotonic() < deadline:
+        n = logger.trace.count
+        if n == last:
+            return
+        last = n
+        time.sleep(0.02)

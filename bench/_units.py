@@ -1,0 +1,94 @@
+"""Unit conversions between the sequence files' units and the drive's SI units.
+
+The paper describes its linear motor in rotary-equivalent units (r/min, N·m).
+A linear motor is described by its pole pitch tau (m); the rotary equivalent
+needs the pole-pair count p as well. With the equivalent radius
+``r = p tau / pi`` (so that ``theta_e = p theta_m = pi x / tau``):
+
+* speed: ``v [m/s] = n [r/min] * 2 pi / 60 * r``
+* force: ``F [N] = T [N·m] / r``
+
+The bench works in linear SI units internally (m/s, N); per-mille force values
+(CiA 402 0x6071) are relative to the drive's rated force.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+#: Speed units accepted in sequence files.
+SPEED_UNITS: tuple[str, ...] = ("r/min", "rpm", "m/s", "mm/s")
+#: Force/torque units accepted in sequence files.
+FORCE_UNITS: tuple[str, ...] = ("N", "N*m", "N.m", "Nm", "N·m")
+
+
+@dataclass(frozen=True)
+class MotorUnits:
+    """Geometry needed to convert rotary-equivalent units to linear ones.
+
+    Attributes
+    ----------
+    pole_pitch_m : float
+        Pole pitch tau (m); ``theta_e = pi x / tau``.
+    pole_pairs : float
+        Rotary-equivalent pole pairs p (dimensionless).
+    """
+
+    pole_pitch_m: float
+    pole_pairs: float
+
+    @property
+    def radius_m(self) -> float:
+        """Equivalent radius ``r = p tau / pi`` (m)."""
+        return self.pole_pairs * self.pole_pitch_m / math.pi
+
+    def speed_to_mps(self, value: float, unit: str) -> float:
+        """Convert a speed in ``unit`` (one of :data:`SPEED_UNITS`) to m/s."""
+        if unit in ("r/min", "rpm"):
+            return value * 2.0 * math.pi / 60.0 * self.radius_m
+        if unit == "m/s":
+            return float(value)
+        if unit == "mm/s":
+            return value * 1e-3
+        raise ValueError(f"unknown speed unit {unit!r}; allowed: {SPEED_UNITS}")
+
+    def mps_to_rpm(self, v_mps: float) -> float:
+        """Linear speed (m/s) to rotary-equivalent speed (r/min)."""
+        return v_mps / self.radius_m * 60.0 / (2.0 * math.pi)
+
+    def force_to_N(self, value: float, unit: str) -> float:
+        """Convert a force (N) or rotary-equivalent torque (N·m) to N."""
+        if unit == "N":
+            return float(value)
+        if unit in ("N*m", "N.m", "Nm", "N·m"):
+            return value / self.radius_m
+        raise ValueError(f"unknown force unit {unit!r}; allowed: {FORCE_UNITS}")
+
+    def theta_e_rad(self, x_m: float) -> float:
+        """Electrical angle (rad) of a position x (m)."""
+        return math.pi * x_m / self.pole_pitch_m
+
+    def rad_e_to_mm(self, angle_rad: float) -> float:
+        """Electrical angle (rad) to mover displacement (mm)."""
+        return angle_rad * self.pole_pitch_m / math.pi * 1e3
+
+
+#: The paper's Table 1 geometry (p = 4) with the sim's pole pitch (24 mm).
+PAPER_UNITS = MotorUnits(pole_pitch_m=0.024, pole_pairs=4.0)
+
+
+def motor_units(motor: str | None) -> MotorUnits:
+    """Units of a motor file from ``sim_fallback/motors`` (name or path).
+
+    Falls back to :data:`PAPER_UNITS` when the simulator package cannot be
+    imported (e.g. a bench-only install talking to hardware).
+    """
+    if not motor:
+        return PAPER_UNITS
+    try:
+        from sim_fallback._motors import load_motor
+    except ImportError:  # pragma: no cover - bench-only install
+        return PAPER_UNITS
+    m = load_motor(motor)
+    return MotorUnits(pole_pitch_m=m.tau_m, pole_pairs=float(m.pole_pairs))

@@ -1,0 +1,180 @@
+"""Runner: safe state on exceptions and SIGINT, expectations, with canopen's LocalNode
+standing in for the drive (over python-can ``virtual``)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import uuid
+from collections.abc import Iterator
+
+import can
+import canopen
+import pytest
+
+from bench import Drive, MotorUnits, Runner, validate_sequence
+from bench._fake import FakeDrive402
+
+UNITS = MotorUnits(pole_pitch_m=0.024, pole_pairs=4)
+HEAD = "name: t\nmotor: paper_salient\nextractor: sogi_adaptive\nseed: 0\nsteps:\n"
+
+
+@pytest.fixture()
+def rig() -> Iterator[tuple[Drive, FakeDrive402]]:
+    ch = f"test-{uuid.uuid4().hex[:8]}"
+    fake = FakeDrive402(can.Bus(interface="virtual", channel=ch))
+    net = canopen.Network(can.Bus(interface="virtual", channel=ch))
+    net.NOTIFIER_CYCLE = 0.1
+    net.connect()
+    drive = Drive(net, 1)
+    drive.setup(read_pdos=False)
+    yield drive, fake
+    net.disconnect()
+    fake.close()
+
+
+class FailingLoad:
+    name = "failing"
+
+    def __init__(self) -> None:
+        self.calls: list[float] = []
+
+    def enable(self) -> None:
+        pass
+
+    def disable(self) -> None:
+        self.calls.append(0.0)
+
+    def set_force_N(self, force_N: float) -> None:
+        self.calls.append(force_N)
+        if force_N:
+            raise RuntimeError("load machine tripped")
+
+    def ramp_force_N(self, force_N: float, duration_s: float) -> bool:
+        return False
+
+
+def test_walks_402_state_machine_and_writes_references(rig) -> None:
+    drive, fake = rig
+    seq = validate_sequence(HEAD + "  - enable: {mode: speed}\n"
+                            "  - set_speed: {value: 0.5, unit: m/s}\n"
+                            "  - wait: {duration_s: 0.05}\n  - disable: {}\n")
+    r = Runner(drive, UNITS).run(seq)
+    assert fake.history == ["SWITCH ON DISABLED", "READY TO SWITCH ON", "SWITCHED ON",
+                            "OPERATION ENABLED", "SWITCH ON DISABLED"]
+    assert (0x60FF, 0, 500000) in fake.writes  # 0.5 m/s in um/s
+    assert (0x6060, 0, 9) in fake.writes      # CSV
+    assert r.passed and r.safe_state == "disabled" and not r.aborted
+
+
+def test_exception_mid_sequence_disables_drive_first(rig) -> None:
+    drive, fake = rig
+    load = FailingLoad()
+    seq = validate_sequence(HEAD + "  - enable: {}\n  - set_speed: {value: 100, unit: r/min}\n"
+                            "  - load_step: {value: 2, unit: N*m}\n"
+                            "  - wait: {duration_s: 5}\n  - disable: {}\n")
+    runner = Runner(drive, UNITS, load=load)
+    with pytest.raises(RuntimeError, match="load machine tripped"):
+        runner.run(seq)
+    assert fake.state == "SWITCH ON DISABLED"
+    assert fake.history[-2:] == ["OPERATION ENABLED", "SWITCH ON DISABLED"]
+    assert load.calls[-1] == 0.0  # load removed too
+    r = runner.result
+    assert r.aborted and not r.passed and r.safe_state == "disabled"
+    assert "load machine tripped" in r.error
+
+
+def test_sigint_mid_sequence_disables_drive_before_exit(rig) -> None:
+    drive, fake = rig
+    seq = validate_sequence(HEAD + "  - enable: {}\n  - set_speed: {value: 100, unit: r/min}\n"
+                            "  - wait: {duration_s: 30}\n  - disable: {}\n")
+    runner = Runner(drive, UNITS)
+    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            runner.run(seq)
+    finally:
+        timer.cancel()
+    assert fake.state == "SWITCH ON DISABLED"
+    assert runner.result.aborted and runner.result.safe_state == "disabled"
+    assert runner.result.duration_s < 5
+
+
+def test_failed_safe_state_is_reported(rig) -> None:
+    drive, fake = rig
+    fake.fail_disable = True
+    seq = validate_sequence(HEAD + "  - enable: {}\n  - disable: {}\n")
+    runner = Runner(drive, UNITS)
+    with pytest.raises(Exception):  # noqa: B017 - the disable step itself fails
+        runner.run(seq)
+    assert runner.result.safe_state.startswith("SAFE STATE FAILED")
+    assert not runner.result.passed
+
+
+def test_expectation_without_truth_fails_with_reason(rig) -> None:
+    drive, _ = rig
+    seq = validate_sequence(HEAD + "  - enable: {}\n  - wait: {duration_s: 0.05}\n"
+                            "  - expect: {metric: position_error_rms_rad, op: '<', limit: 1}\n"
+                            "  - disable: {}\n")
+    r = Runner(drive, UNITS).run(seq)
+    (e,) = r.expectations
+    assert not e.passed and "true position" in e.message
+    assert not r.passed
+
+
+def test_fault_on_enable_is_a_clear_error(rig) -> None:
+    drive, fake = rig
+    fake.raise_fault(0xFF03)
+    seq = validate_sequence(HEAD + "  - enable: {}\n  - disable: {}\n")
+    with pytest.raises(Exception, match="0xFF03 saliency too low"):
+        Runner(drive, UNITS).run(seq)
+
+
+def test_param_errors_are_explained(rig) -> None:
+    drive, _ = rig
+    from bench import ParamError
+
+    with pytest.raises(ParamError, match="unit 'A' given, the parameter is in 'V'"):
+        drive.set("u_inj_V", "20 A")
+    with pytest.raises(ParamError, match="read-only"):
+        drive.set("Statusword", 1)
+    with pytest.raises(ParamError, match="unknown parameter 'u_inj'; did you mean: u_inj_V"):
+        drive.set("u_inj", 1)
+    value, p = drive.get("Injection.Amplitude")
+    assert p.name == "u_inj_V" and p.unit == "V" and isinstance(value, float)
+
+
+def test_hardware_path_with_a_stand_in_drive(tmp_path) -> None:
+    """`connect` on a real python-can bus with a (LocalNode) drive: no fallback, heartbeat
+    watch configured while running and switched off on close, run folder written."""
+    import json
+
+    from bench import connect, run_sequence
+
+    ch = f"hw-{uuid.uuid4().hex[:8]}-bus"
+    fake = FakeDrive402(can.Bus(interface="virtual", channel=ch))
+    said: list[str] = []
+    try:
+        conn = connect(interface="virtual", channel=ch, say=said.append)
+        try:
+            assert not conn.is_sim and "HARDWARE" in conn.description
+            seq = validate_sequence(HEAD + "  - enable: {}\n"
+                                    "  - set_speed: {value: 10, unit: mm/s}\n"
+                                    "  - wait: {duration_s: 0.2}\n  - disable: {}\n")
+            out = run_sequence(seq, conn, runs_root=str(tmp_path), progress=False)
+            hb = [w for w in fake.writes if w[0] == 0x1016]
+            assert hb and hb[0][2] == (0x7F << 16) | 500
+        finally:
+            conn.close()
+        assert fake.writes[-1][:2] == (0x1016, 1) and fake.writes[-1][2] == 0
+        assert out.result.passed and out.result.safe_state == "disabled"
+        assert fake.history[-1] == "SWITCH ON DISABLED"
+        assert (0x60FF, 0, 10000) in fake.writes
+        meta = json.loads((out.run_dir / "meta.json").read_text())
+        assert meta["connection_info"]["kind"] == "hardware"
+        assert meta["drive"]["firmware_version"] == "0.1.0"
+        assert any("connected to HARDWARE" in s for s in said)
+    finally:
+        fake.close()
