@@ -40,7 +40,9 @@ def summary(result: RunResult, extra: dict[str, Any] | None = None) -> dict[str,
         "metrics": _clean(dict(result.metrics)),
         "expectations": [_clean({"name": e.name, "metric": e.metric, "measured": e.measured,
                                  "criterion": e.criterion, "window_s": list(e.window_s),
-                                 "passed": e.passed}) for e in result.expectations],
+                                 "passed": e.passed, "paper": e.paper,
+                                 "paper_reproduced": e.paper_met})
+                         for e in result.expectations],
         "aborted": result.aborted,
         "error": result.error,
         "safe_state": result.safe_state,
@@ -73,6 +75,11 @@ def write_junit(path: str | Path, results: list[RunResult]) -> None:
                                   type="ExpectationFailed")
                 f.text = (f"{e.metric} over {list(e.window_s)} s: measured {e.measured!r}, "
                           f"required {e.criterion} (sequence line {e.line})")
+            if e.paper is not None:
+                props = ET.SubElement(tc, "properties")
+                ET.SubElement(props, "property", name="paper", value=f"{e.paper:g}")
+                ET.SubElement(props, "property", name="paper_reproduced",
+                              value=str(bool(e.paper_met)).lower())
             cases.append(tc)
         run = ET.Element("testcase", classname=f"bench.{r.sequence}", name="run",
                          time=f"{r.wall_s:.3f}")
@@ -266,7 +273,10 @@ def write_html(path: Path, result: RunResult, plots: list[tuple[str, str]],
         f"<tr class='{'pass' if e.passed else 'fail'}'><td>{_fmt(e.name)}</td>"
         f"<td>{_fmt(e.metric)}</td><td>[{e.window_s[0]:g}, {e.window_s[1]:g}]</td>"
         f"<td>{_fmt(e.measured)}</td><td>{_fmt(e.criterion)}</td>"
-        f"<td>{'PASS' if e.passed else 'FAIL'}</td><td>{_fmt(e.message)}</td></tr>"
+        f"<td>{'PASS' if e.passed else 'FAIL'}</td>"
+        f"<td>{'' if e.paper is None else _fmt(e.paper)}</td>"
+        f"<td>{'' if e.paper_met is None else ('yes' if e.paper_met else 'NO')}</td>"
+        f"<td>{_fmt(e.message)}</td></tr>"
         for e in result.expectations)
     metrics = "\n".join(f"<tr><td>{_fmt(k)}</td><td>{_fmt(v)}</td></tr>"
                         for k, v in result.metrics.items())
@@ -299,7 +309,7 @@ img {{ max-width: 100%; }} figcaption {{ color: #555; font-size: 13px; }}
 <p>{html.escape(str(meta.get('sequence', {}).get('description', '')))}</p>
 <h2>Expectations</h2>
 <table><tr><th>expectation</th><th>metric</th><th>window (s)</th><th>measured</th>
-<th>required</th><th>result</th><th>note</th></tr>
+<th>required</th><th>result</th><th>paper</th><th>paper reproduced</th><th>note</th></tr>
 {rows}
 </table>
 <h2>Metrics after the settle window</h2>

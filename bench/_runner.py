@@ -68,6 +68,12 @@ class ExpectResult:
         Explanation when failed.
     line : int
         Line of the expect step in the sequence file.
+    paper : float or None
+        The value the reference paper claims for this metric (``paper:`` in the
+        step), judged with the same operator; reported beside the bench's own
+        limit so a claim that is not reproduced stays visible.
+    paper_met : bool or None
+        Whether the measurement also meets the paper's value.
     """
 
     name: str
@@ -78,6 +84,8 @@ class ExpectResult:
     criterion: str
     message: str = ""
     line: int = 0
+    paper: float | None = None
+    paper_met: bool | None = None
 
 
 @dataclass
@@ -309,7 +317,15 @@ class Runner:
         m = compute_metrics(truth, self.units, t0, t1)[p["metric"]]
         ok = evaluate(p, m)
         msg = "" if ok else f"measured {m:.6g}, required {_criterion(p)}"
-        return ExpectResult(name, p["metric"], (t0, t1), m, ok, _criterion(p), msg, step.line)
+        paper = p.get("paper")
+        paper_met = None
+        if paper is not None:
+            paper_met = evaluate({**p, "limit": paper} if "op" in p else
+                                 {**p, "value": paper}, m)
+            if not paper_met:
+                msg = (msg + "; " if msg else "") + f"paper's {paper:g} not reproduced"
+        return ExpectResult(name, p["metric"], (t0, t1), m, ok, _criterion(p), msg, step.line,
+                            paper, paper_met)
 
     # ---- safe state -------------------------------------------------------------------
     def safe_state(self) -> str:

@@ -88,6 +88,7 @@ _STEP_SCHEMAS: dict[str, dict[str, Any]] = {
             "limit": _num,
             "value": _num,
             "tolerance": {"type": "number", "minimum": 0},
+            "paper": _num,
             "window_s": {"type": "array", "items": _num, "minItems": 2, "maxItems": 2},
             "name": {"type": "string"},
             "doc": {"type": "string"},

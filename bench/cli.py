@@ -259,7 +259,11 @@ def _print_result(r: Any, out: Any) -> None:
           f"(sequence {r.duration_s:.3f} s, wall {r.wall_s:.2f} s)")
     for e in r.expectations:
         m = "n/a" if e.measured != e.measured else f"{e.measured:.5g}"
-        print(f"  [{'PASS' if e.passed else 'FAIL'}] {e.name}: {m} (required {e.criterion})")
+        paper = ""
+        if e.paper is not None:
+            paper = f"; paper {e.paper:g}: {'reproduced' if e.paper_met else 'NOT reproduced'}"
+        print(f"  [{'PASS' if e.passed else 'FAIL'}] {e.name}: {m} "
+              f"(required {e.criterion}{paper})")
     lost = out.logstats.get("lost_frames", {})
     print(f"  CAN frames logged: {out.logstats.get('frames_logged')}, lost frames: {lost}")
     if out.logstats.get("receive_errors"):

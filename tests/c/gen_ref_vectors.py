@@ -248,7 +248,7 @@ def sogi_ss_run(w0, dt, x, ks):
     k[n] used for the step that takes input x[n]; a k change keeps x."""
     st, v_prev = np.zeros(2), 0.0
     yd, yq = [], []
-    for xi, ki in zip(np.asarray(x, np.float64), ks):
+    for xi, ki in zip(np.asarray(x, np.float64), ks, strict=True):
         m, n_, b = sogi_ss_matrices(w0, float(ki), dt)
         st = np.linalg.solve(m, n_ @ st + b * (xi + v_prev))
         v_prev = xi
@@ -280,7 +280,7 @@ def sogi_df2t_run(w0, dt, x, ks):
     swapped on a k change with the delay line kept."""
     z = [0.0, 0.0]
     return np.array(
-        [df2t(*sogi_biquads(w0, float(ki), dt)[0::2], xi, z) for xi, ki in zip(x, ks)]
+        [df2t(*sogi_biquads(w0, float(ki), dt)[0::2], xi, z) for xi, ki in zip(x, ks, strict=True)]
     )
 
 

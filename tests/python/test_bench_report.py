@@ -58,3 +58,25 @@ def test_junit_aborted_run_is_an_error(tmp_path: Path) -> None:
     err = run.find("error")
     assert err is not None and "KeyboardInterrupt" in err.get("message")
     assert suite.get("errors") == "1"
+
+
+def test_paper_claim_reported_beside_the_limit(tmp_path: Path) -> None:
+    """A passing expectation whose paper value is not met says so everywhere."""
+    from bench._runner import evaluate
+
+    p = {"metric": "speed_error_max_rpm", "op": "<=", "limit": 3.5, "paper": 1.0}
+    assert evaluate(p, 1.6) and not evaluate({**p, "limit": p["paper"]}, 1.6)
+    e = ExpectResult("speed", "speed_error_max_rpm", (0.6, 1.0), 1.6, True, "<= 3.5",
+                     "paper's 1 not reproduced", line=30, paper=1.0, paper_met=False)
+    r = RunResult("paper_load_step", passed=True, expectations=[e], metrics=dict(METRICS),
+                  safe_state="disabled", duration_s=1.0, wall_s=1.0)
+    s = tmp_path / "s.json"
+    write_summary_json(s, r)
+    (x,) = json.loads(s.read_text())["expectations"]
+    assert x["paper"] == 1.0 and x["paper_reproduced"] is False and x["passed"] is True
+    j = tmp_path / "j.xml"
+    write_junit(j, [r])
+    case = ET.parse(j).getroot().find("testsuite").find("testcase")
+    props = {p.get("name"): p.get("value") for p in case.find("properties")}
+    assert props == {"paper": "1", "paper_reproduced": "false"}
+    assert case.find("failure") is None
