@@ -19,6 +19,7 @@
 #include <time.h>
 
 #include "pmlsm/fw_ctrl.h"
+#include "locked_mover.h"
 
 #define N_REC 24000
 
@@ -35,50 +36,9 @@ static double now_ns(void) {
   return (double)ts.tv_sec * 1e9 + (double)ts.tv_nsec;
 }
 
-/* Locked mover at 0.4 rad, dq currents, 10 Euler sub-steps; records inputs. */
-static void warm_up(fw_ctrl_t *c) {
-  fw_config_t cfg;
-  fw_config_default(&cfg);
-  fw_init(c, &cfg);
-  fw_set_mode(c, FW_MODE_FORCE);
-  fw_set_iq_ref(c, 2.0f);
-  fw_controlword(c, FW_CW_SHUTDOWN);
-  fw_controlword(c, FW_CW_ENABLE_OPERATION);
-  double th = 0.4, id = 0, iq = 0, duty[3] = {0.5, 0.5, 0.5};
-  int en = 0;
-  const double dt = 1.0 / 24000.0, udc = 300.0;
-  int n_total = (int)(0.2 * 24000) + N_REC;
-  for (int k = 0; k < n_total; k++) {
-    fw_inputs_t in;
-    double cs = cos(th), sn = sin(th);
-    double ia = id * cs - iq * sn, ib = id * sn + iq * cs;
-    in.i_abc_A[0] = (float)ia;
-    in.i_abc_A[1] = (float)(-0.5 * ia + 0.8660254 * ib);
-    in.i_abc_A[2] = (float)(-0.5 * ia - 0.8660254 * ib);
-    in.u_dc_V = (float)udc;
-    if (k >= n_total - N_REC) {
-      g_rec[k - (n_total - N_REC)] = in;
-    }
-    fw_outputs_t out;
-    fw_step(c, &in, &out);
-    if (en) {
-      double va = duty[0] * udc, vb = duty[1] * udc, vc = duty[2] * udc;
-      double ua = (2 * va - vb - vc) / 3, ub = (vb - vc) / sqrt(3.0);
-      double ud = ua * cs + ub * sn, uq = -ua * sn + ub * cs;
-      for (int j = 0; j < 10; j++) {
-        double Ldd = 0.012 - 0.0012 * tanh(id / 5.0);
-        id += dt / 10 * (ud - 0.958 * id) / Ldd;
-        iq += dt / 10 * (uq - 0.958 * iq) / 0.018;
-      }
-    }
-    memcpy(duty, (double[3]){out.duty_abc[0], out.duty_abc[1], out.duty_abc[2]}, sizeof(duty));
-    en = out.pwm_enable;
-  }
-}
-
 int main(int argc, char **argv) {
   static fw_ctrl_t base, c;
-  warm_up(&base);
+  locked_mover_warm_up(&base, 0, g_rec, N_REC);
   if (base.phase != FW_START_RUN || fw_fault_code(&base) != FW_FAULT_NONE) {
     fprintf(stderr, "warm-up did not reach closed loop (phase %d, fault 0x%04x)\n",
             (int)base.phase, (unsigned)fw_fault_code(&base));

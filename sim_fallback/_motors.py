@@ -63,7 +63,7 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float, float, str, Any]] = {
     ("inverter", "f_pwm_Hz"): (False, 4000.0, 100000.0, "Hz", 24000.0),
     ("inverter", "dead_time_s"): (False, 0.0, 5e-6, "s", 0.0),
     ("inverter", "dead_band_A"): (False, 0.0, 10.0, "A", 0.05),
-    ("inverter", "n_sub"): (False, 1, 1024, "", 4),
+    ("inverter", "n_sub"): (False, 1, 1024, "", 1),
     # sensing
     ("sensing", "adc_bits"): (False, 8, 16, "bit", 12),
     ("sensing", "adc_i_fullscale_A"): (False, 0.1, 1000.0, "A", 25.0),

@@ -180,10 +180,20 @@ class Sim:
         rec = _lib.SimRecord()
         rec.capacity = n_rec
         out: dict[str, np.ndarray] = {}
-        for name, ptype, dtype, cols in _lib.RECORD_CHANNELS:
-            if name not in want:
-                continue
-            a = np.empty((n_rec, cols) if cols > 1 else n_rec, dtype=dtype)
+        # One allocation for all channels (64-byte aligned views): a long
+        # recording is then large enough for numpy to back it with huge pages,
+        # which removes most of the page faults taken while the C loop writes
+        # it (~2.5 us per 4 KiB fault in a VM, i.e. ~0.1 us per recorded
+        # period). The views keep the shared buffer alive.
+        sel = [c for c in _lib.RECORD_CHANNELS if c[0] in want]
+        sizes = [-(-n_rec * cols * np.dtype(dtype).itemsize // 64) * 64
+                 for _, _, dtype, cols in sel]
+        buf = np.empty(sum(sizes) + 64, dtype=np.uint8)
+        off = -buf.ctypes.data % 64
+        for (name, ptype, dtype, cols), size in zip(sel, sizes, strict=True):
+            a = buf[off:off + n_rec * cols * np.dtype(dtype).itemsize].view(dtype)
+            a = a.reshape((n_rec, cols)) if cols > 1 else a
+            off += size
             setattr(rec, name, a.ctypes.data_as(ptype))
             out[name] = a
         got = self._L.sim_run(self._h, n_steps, decimation, C.byref(rec))

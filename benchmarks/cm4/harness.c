@@ -6,7 +6,7 @@
  *   harness warm  STATE N [force|speed]
  *                           drive the core into closed-loop RUN against the
  *                           locked-mover plant of benchmarks/bench_fw_step.c
- *                           (same warm-up: 0.2 s + N_REC recorded samples,
+ *                           (same warm-up, benchmarks/locked_mover.h: 0.2 s + N_REC recorded samples,
  *                           FORCE mode with i_q_ref = 2 A; "speed" instead
  *                           runs the speed loop with a 0 rad/s reference),
  *                           then write the final controller state and the
@@ -27,6 +27,7 @@
 #include <string.h>
 
 #include "pmlsm/fw_ctrl.h"
+#include "../locked_mover.h"
 
 #define N_REC 24000
 #define N_MAX 4000
@@ -34,54 +35,6 @@
 static fw_inputs_t g_rec[N_REC];
 static fw_ctrl_t g_base, g_c;
 volatile float g_sink;
-
-/* Locked mover at 0.4 rad, dq currents, 10 Euler sub-steps; records inputs.
- * Copied from benchmarks/bench_fw_step.c (keep in step with it). */
-static void warm_up(fw_ctrl_t *c, int speed_mode) {
-  fw_config_t cfg;
-  fw_config_default(&cfg);
-  fw_init(c, &cfg);
-  fw_set_mode(c, FW_MODE_FORCE);
-  fw_set_iq_ref(c, 2.0f);
-  if (speed_mode) { /* variant: speed loop active (reference 0, mover locked) */
-    fw_set_mode(c, FW_MODE_SPEED);
-    fw_set_speed_ref(c, 0.0f);
-  }
-  fw_controlword(c, FW_CW_SHUTDOWN);
-  fw_controlword(c, FW_CW_ENABLE_OPERATION);
-  double th = 0.4, id = 0, iq = 0, duty[3] = {0.5, 0.5, 0.5};
-  int en = 0;
-  const double dt = 1.0 / 24000.0, udc = 300.0;
-  int n_total = (int)(0.2 * 24000) + N_REC;
-  for (int k = 0; k < n_total; k++) {
-    fw_inputs_t in;
-    double cs = cos(th), sn = sin(th);
-    double ia = id * cs - iq * sn, ib = id * sn + iq * cs;
-    in.i_abc_A[0] = (float)ia;
-    in.i_abc_A[1] = (float)(-0.5 * ia + 0.8660254 * ib);
-    in.i_abc_A[2] = (float)(-0.5 * ia - 0.8660254 * ib);
-    in.u_dc_V = (float)udc;
-    if (k >= n_total - N_REC) {
-      g_rec[k - (n_total - N_REC)] = in;
-    }
-    fw_outputs_t out;
-    fw_step(c, &in, &out);
-    if (en) {
-      double va = duty[0] * udc, vb = duty[1] * udc, vc = duty[2] * udc;
-      double ua = (2 * va - vb - vc) / 3, ub = (vb - vc) / sqrt(3.0);
-      double ud = ua * cs + ub * sn, uq = -ua * sn + ub * cs;
-      for (int j = 0; j < 10; j++) {
-        double Ldd = 0.012 - 0.0012 * tanh(id / 5.0);
-        id += dt / 10 * (ud - 0.958 * id) / Ldd;
-        iq += dt / 10 * (uq - 0.958 * iq) / 0.018;
-      }
-    }
-    duty[0] = out.duty_abc[0];
-    duty[1] = out.duty_abc[1];
-    duty[2] = out.duty_abc[2];
-    en = out.pwm_enable;
-  }
-}
 
 /* The only caller of fw_step in `count` mode: the trace counter starts at
  * fw_step's first instruction and stops when control is back in here. */
@@ -103,7 +56,7 @@ int main(int argc, char **argv) {
     int n = atoi(argv[3]);
     if (n < 1 || n > N_MAX) n = N_MAX;
     int speed_mode = argc >= 5 && strcmp(argv[4], "speed") == 0;
-    warm_up(&g_base, speed_mode);
+    locked_mover_warm_up(&g_base, speed_mode, g_rec, N_REC);
     if (!in_run(&g_base)) {
       printf("CM4: warm-up did not reach closed loop (phase %d, fault 0x%04x)\n",
              (int)g_base.phase, (unsigned)fw_fault_code(&g_base));

@@ -72,7 +72,7 @@ sim_t *sim_new(const sim_plant_params_t *p) {
   sim_plant_derive(s);
   sim_rng_seed(s, p->seed);
   s->duty[0] = s->duty[1] = s->duty[2] = 0.5;
-  for (int k = 0; k < SIM_REF_COUNT; ++k) s->sched[k].last_sent = NAN;
+  for (int k = 0; k < SIM_REF_COUNT; ++k) s->sched[k].last_sent = (double)NAN;
   return s;
 }
 
@@ -108,7 +108,7 @@ int sim_set_schedule(sim_t *s, sim_ref_kind_t kind, const double *t_s,
   sc->n = 0u;
   sc->cursor = 0u;
   sc->ramp = ramp ? 1u : 0u;
-  sc->last_sent = NAN;
+  sc->last_sent = (double)NAN;
   if (n == 0u) return 0;
   sc->t_s = (double *)malloc(n * sizeof(double));
   sc->value = (double *)malloc(n * sizeof(double));
@@ -137,7 +137,7 @@ uint64_t sim_step_count(const sim_t *s) { return s ? s->k : 0u; }
 
 /** Schedule value at time t (NaN when the schedule is empty). */
 static double sched_eval(sim_sched_store_t *sc, double t) {
-  if (sc->n == 0u) return NAN;
+  if (sc->n == 0u) return (double)NAN;
   if (t < sc->t_s[0]) return sc->value[0];
   /* cursor only moves forward; time is monotonic */
   while (sc->cursor + 1u < sc->n && sc->t_s[sc->cursor + 1u] <= t) ++sc->cursor;
@@ -150,7 +150,7 @@ static double sched_eval(sim_sched_store_t *sc, double t) {
 }
 
 double sim_sched_value(const sim_t *s, sim_ref_kind_t kind) {
-  if (!s || (unsigned)kind >= (unsigned)SIM_REF_COUNT) return NAN;
+  if (!s || (unsigned)kind >= (unsigned)SIM_REF_COUNT) return (double)NAN;
   sim_sched_store_t tmp = s->sched[kind];
   tmp.cursor = 0u;
   return sched_eval(&tmp, s->t_s);
@@ -172,16 +172,16 @@ void sim_sample(sim_t *s, fw_inputs_t *in, fw_adc_inputs_t *adc) {
                            -0.5 * i_al - 0.5 * SIM_SQRT3 * i_be};
   for (int j = 0; j < 3; ++j) {
     double cnt = s->adc_mid + p->adc_offset_counts[j] +
-                 i_abc[j] * (1.0 + p->adc_gain_err[j]) / s->adc_lsb_A;
-    if (p->adc_noise_counts > 0.0) cnt += p->adc_noise_counts * sim_rng_gauss(s);
-    cnt = clampd(nearbyint(cnt), 0.0, s->adc_max);
+                 i_abc[j] * (1.0 + p->adc_gain_err[j]) * s->inv_adc_lsb_A;
+    if (p->adc_noise_counts > 0.0) cnt += p->adc_noise_counts * sim_rng_gauss_inline(s);
+    cnt = clampd(sim_nearbyint(cnt), 0.0, s->adc_max);
     if (adc) adc->i_abc_counts[j] = (uint16_t)cnt;
     /* what the drive computes with its nominal scaling */
     if (in) in->i_abc_A[j] = (float)((cnt - s->adc_mid) * s->adc_lsb_A);
   }
   double u = p->u_dc_V;
-  if (p->udc_noise_V > 0.0) u += p->udc_noise_V * sim_rng_gauss(s);
-  const double ucnt = clampd(nearbyint(u / s->udc_lsb_V), 0.0, s->adc_max);
+  if (p->udc_noise_V > 0.0) u += p->udc_noise_V * sim_rng_gauss_inline(s);
+  const double ucnt = clampd(sim_nearbyint(u * s->inv_udc_lsb_V), 0.0, s->adc_max);
   if (adc) adc->u_dc_counts = (uint16_t)ucnt;
   if (in) in->u_dc_V = (float)(ucnt * s->udc_lsb_V);
 }
@@ -211,6 +211,9 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
               rec->hf_amp_A || rec->sogi_k_eff || rec->i_dq_hat_A || rec->speed_ref_radps_e ||
               rec->cia402_state || rec->start_phase || rec->fault_code);
   uint32_t n_rec = 0u;
+  /* periods until the next recorded one (k % decimation == 0), counted down
+   * instead of a 64-bit modulo per period */
+  uint64_t rec_in = (decimation - s->k % decimation) % decimation;
   fw_inputs_t in;
   fw_adc_inputs_t adc;
   fw_outputs_t out;
@@ -240,7 +243,9 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
       s->ctrl.step(s->ctrl.ctx, &in, &out);
 
     /* 4. record (truth at t_k, controller view at t_k) */
-    if (rec && (s->k % decimation) == 0u && n_rec < cap) {
+    const int rec_now = (rec_in == 0u);
+    rec_in = rec_now ? decimation - 1u : rec_in - 1u;
+    if (rec_now && n_rec < cap) {
       const uint32_t r = n_rec++;
       if (want_snap && s->ctrl.snapshot) s->ctrl.snapshot(s->ctrl.ctx, &snap);
       const double th = s->k_theta * s->st.x_m;

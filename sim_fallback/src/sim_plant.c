@@ -38,29 +38,14 @@ void sim_rng_seed(sim_t *s, uint64_t seed) {
   for (int i = 0; i < ZIG_C; ++i) s->zig_r[i] = s->zig_x[i + 1] / s->zig_x[i];
 }
 
-static inline uint64_t rotl64(uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
-
-static inline uint64_t xoshiro_next(uint64_t r[4]) {
-  const uint64_t result = rotl64(r[1] * 5u, 7) * 9u;
-  const uint64_t t = r[1] << 17;
-  r[2] ^= r[0];
-  r[3] ^= r[1];
-  r[1] ^= r[2];
-  r[0] ^= r[3];
-  r[2] ^= t;
-  r[3] = rotl64(r[3], 45);
-  return result;
-}
-
 /** Uniform in (0, 1], 53-bit resolution. */
 static inline double rng_uniform(sim_t *s) {
-  return ((double)(xoshiro_next(s->rng) >> 11) + 1.0) * 0x1.0p-53;
+  return ((double)(sim_xoshiro_next(s->rng) >> 11) + 1.0) * 0x1.0p-53;
 }
 
-/** Standard normal deviate (ziggurat; ~99 % of draws take the fast path). */
-double sim_rng_gauss(sim_t *s) {
+/** Tail / wedge of the ziggurat for raw draw r, then further draws if rejected. */
+double sim_rng_gauss_slow(sim_t *s, uint64_t r) {
   for (;;) {
-    const uint64_t r = xoshiro_next(s->rng);
     const unsigned i = (unsigned)(r & 0x7Fu);                        /* layer */
     const double u = (double)(r >> 11) * 0x1.0p-52 - 1.0;           /* [-1, 1) */
     if (fabs(u) < s->zig_r[i]) return u * s->zig_x[i];
@@ -76,10 +61,37 @@ double sim_rng_gauss(sim_t *s) {
     const double f0 = exp(-0.5 * (s->zig_x[i] * s->zig_x[i] - x * x));
     const double f1 = exp(-0.5 * (s->zig_x[i + 1] * s->zig_x[i + 1] - x * x));
     if (f1 + rng_uniform(s) * (f0 - f1) < 1.0) return x;
+    r = sim_xoshiro_next(s->rng);
   }
 }
 
+/** Standard normal deviate (ziggurat; ~99 % of draws take the fast path). */
+double sim_rng_gauss(sim_t *s) { return sim_rng_gauss_inline(s); }
+
 /* ---- plant ------------------------------------------------------------- */
+
+/*
+ * Cheap stage evaluations. Inside one PWM period the angle moves by
+ * omega_e T (1.7e-3 rad at 100 r/min) and i_d by a fraction of an ampere, so
+ * every RK stage expands around a basis point computed exactly with libm:
+ *   sin/cos(th0 + d): rotation by d with Taylor cos d to d^6, sin d to d^7
+ *       (truncation < 5e-15 for |d| <= SIM_BASIS_FAR_DTH = 0.06 rad),
+ *   psi_d(i_d0 + di) and 1 / L_dd(i_d0 + di): Taylor polynomials of orders
+ *       8 and 7 in di, coefficients from the power series of tanh
+ *       (y' = 1 - y^2) and its reciprocal around i_d0 = the grid point
+ *       (spacing 0.05 I_sat) nearest to i_d at the sub-step start; relative
+ *       truncation of 1 / L_dd < 4e-12 for |di| <= 0.075 I_sat and < 4e-11 at
+ *       the far limit |di| = BASIS_FAR_DZ I_sat = 0.1 I_sat (psi_d < 2e-13).
+ * The grid coefficients are computed with libm on first use and kept, so the
+ * injection's HF ripple (+-0.25 A, more than a grid step) costs a table
+ * look-up, not a libm refresh. Polynomials are evaluated in Estrin form
+ * (short dependency chains) and 1 / L_dd is a polynomial: no stage divides.
+ * The angle basis is refreshed at a sub-step start whenever |d| > 0.03 rad.
+ * A stage further away than the far limits (huge steps, e.g. h = 1 ms in the
+ * convergence test) uses libm directly.
+ */
+#define BASIS_MAX_DTH SIM_BASIS_MAX_DTH
+#define BASIS_FAR_DZ 0.10
 
 void sim_plant_derive(sim_t *s) {
   const sim_plant_params_t *p = &s->p;
@@ -91,12 +103,16 @@ void sim_plant_derive(sim_t *s) {
   s->adc_mid = 0.5 * full;
   s->adc_max = full - 1.0;
   s->udc_lsb_V = p->udc_fullscale_V / full;
+  s->inv_adc_lsb_A = 1.0 / s->adc_lsb_A;
+  s->inv_udc_lsb_V = 1.0 / s->udc_lsb_V;
   s->u_dt_V = p->u_dc_V * p->dead_time_s * p->f_pwm_Hz;
   s->inv_L_q = 1.0 / p->L_q_H;
   s->inv_mass = 1.0 / p->mass_kg;
   s->inv_I_sat = 1.0 / p->I_sat_A;
   s->k_cog = 2.0 * SIM_PI / p->cog_period_m;
-  s->k_dL_Isat = p->dL_sat_H * p->I_sat_A;
+  s->flux_grid_A = SIM_FLUX_GRID_DZ * p->I_sat_A;
+  s->inv_flux_grid_A = 1.0 / s->flux_grid_A;
+  s->flux_far_A = (p->dL_sat_H == 0.0) ? (double)INFINITY : BASIS_FAR_DZ * p->I_sat_A;
   s->basis_valid = 0;
 }
 
@@ -105,26 +121,6 @@ static inline double lncosh(double z) {
   const double a = fabs(z);
   return a + log1p(exp(-2.0 * a)) - 0.69314718055994530942;
 }
-
-/*
- * Cheap stage evaluations. Inside one PWM period the angle moves by
- * omega_e T (1.7e-3 rad at 100 r/min) and i_d by a fraction of an ampere, so
- * every RK stage expands sin/cos and tanh/ln cosh around a basis point
- * computed exactly with libm:
- *   sin/cos(th0 + d): rotation by d with 4th/5th-order Taylor cos d, sin d
- *                      (truncation < 2e-11 for |d| <= 0.045),
- *   tanh(z0 + e) = T + S e - T S e^2 + S (3T^2 - 1) e^3 / 3
- *                  + T S (2 - 3T^2) e^4 / 3,                         S = 1 - T^2
- *   ln cosh(z0 + e) = g + T e + S e^2 / 2 - T S e^3 / 3 + S (3T^2 - 1) e^4 / 12
- *                  + T S (2 - 3T^2) e^5 / 15
- *                      (truncation < 2e-8 dL for |e| <= 0.05).
- * The basis is refreshed at a sub-step start whenever |d| > 0.03 rad or
- * |e| > 0.05 (i_d moved by 0.05 I_sat), so the expansion error stays far below
- * the model's own accuracy; the HF ripple of the injection (a few tenths of
- * an ampere) does not force a refresh every sub-step.
- */
-#define BASIS_MAX_DTH 0.03
-#define BASIS_MAX_DZ 0.05
 
 /** Angle part of the basis: exact sin/cos of theta_e (and the cogging angle) at x. */
 static void basis_update_angle(sim_t *s, double x_m) {
@@ -143,19 +139,91 @@ static void basis_update_angle(sim_t *s, double x_m) {
   }
 }
 
-/** Flux part of the basis: exact tanh and ln cosh of i_d / I_sat. */
-static void basis_update_flux(sim_t *s, double i_d_A) {
-  s->b_id0 = i_d_A;
-  const double z = i_d_A * s->inv_I_sat;
-  s->b_T0 = tanh(z);
-  s->b_S0 = 1.0 - s->b_T0 * s->b_T0;
-  s->b_g0 = lncosh(z);
+/** Taylor coefficients of psi_d and 1 / L_dd around i_d0 (exact libm anchor). */
+static void flux_coef(const sim_t *s, double i_d0, sim_flux_coef_t *fc) {
+  const sim_plant_params_t *p = &s->p;
+  enum { N = SIM_FLUX_ORDER };
+  double psi[N + 2], iL[N + 1];
+  for (int k = 0; k <= N + 1; ++k) psi[k] = 0.0;
+  for (int k = 0; k <= N; ++k) iL[k] = 0.0;
+  if (p->dL_sat_H == 0.0) { /* linear: exact for every di */
+    psi[0] = p->psi_f_Wb + p->L_d0_H * i_d0;
+    psi[1] = p->L_d0_H;
+    iL[0] = 1.0 / p->L_d0_H;
+  } else {
+    const double z = i_d0 * s->inv_I_sat;
+    /* tanh(z + e) = sum c_k e^k from y' = 1 - y^2 */
+    double c[N + 1];
+    c[0] = tanh(z);
+    for (int k = 0; k < N; ++k) {
+      double acc = (k == 0) ? 1.0 : 0.0;
+      for (int j = 0; j <= k; ++j) acc -= c[j] * c[k - j];
+      c[k + 1] = acc / (double)(k + 1);
+    }
+    /* L_dd(i_d0 + di) = sum a_k di^k; psi_d' = L_dd */
+    double a[N + 1];
+    double sc = 1.0; /* inv_I_sat^k */
+    for (int k = 0; k <= N; ++k) {
+      a[k] = -p->dL_sat_H * c[k] * sc;
+      sc *= s->inv_I_sat;
+    }
+    a[0] += p->L_d0_H;
+    psi[0] = p->psi_f_Wb + p->L_d0_H * i_d0 - p->dL_sat_H * p->I_sat_A * lncosh(z);
+    for (int k = 0; k <= N; ++k) psi[k + 1] = a[k] / (double)(k + 1);
+    /* reciprocal series */
+    const double b0 = 1.0 / a[0];
+    iL[0] = b0;
+    for (int n = 1; n <= N; ++n) {
+      double acc = 0.0;
+      for (int k = 1; k <= n; ++k) acc += a[k] * iL[n - k];
+      iL[n] = -acc * b0;
+    }
+  }
+  for (int k = 0; k <= N; ++k) {
+    fc->ip[k][0] = iL[k];
+    fc->ip[k][1] = psi[k];
+  }
+  fc->psi_top = psi[N + 1];
+}
+
+#define FLUX_K_NONE INT32_MIN
+
+/** Flux expansion point for a sub-step starting at i_d: nearest grid point. */
+static inline void flux_select(sim_t *s, double i_d_A) {
+  if (s->p.dL_sat_H == 0.0) {
+    if (s->flux_k != 0) { /* linear: one exact set, never refreshed */
+      flux_coef(s, 0.0, &s->flux_lin);
+      s->b_id0 = 0.0;
+      s->fc = &s->flux_lin;
+      s->flux_k = 0;
+    }
+    return;
+  }
+  const double q = i_d_A * s->inv_flux_grid_A;
+  if (fabs(q) < (double)SIM_FLUX_TAB_HALF) {
+    const int32_t k = (int32_t)lrint(q);
+    if (k == s->flux_k) return;
+    const size_t j = (size_t)(k + SIM_FLUX_TAB_HALF);
+    s->b_id0 = (double)k * s->flux_grid_A;
+    if (!s->flux_ok[j]) {
+      flux_coef(s, s->b_id0, &s->flux_tab[j]);
+      s->flux_ok[j] = 1;
+    }
+    s->fc = &s->flux_tab[j];
+    s->flux_k = k;
+  } else { /* beyond the grid (|i_d| > 16 I_sat): expand at i_d itself */
+    s->b_id0 = i_d_A;
+    flux_coef(s, i_d_A, &s->flux_lin);
+    s->fc = &s->flux_lin;
+    s->flux_k = FLUX_K_NONE;
+  }
 }
 
 static inline void basis_ensure(sim_t *s, double x_m, double i_d_A) {
   if (!s->basis_valid) {
     basis_update_angle(s, x_m);
-    basis_update_flux(s, i_d_A);
+    s->flux_k = FLUX_K_NONE;
+    flux_select(s, i_d_A);
     s->basis_valid = 1;
     return;
   }
@@ -163,138 +231,173 @@ static inline void basis_ensure(sim_t *s, double x_m, double i_d_A) {
   if (fabs(s->k_theta * dx) > BASIS_MAX_DTH ||
       (s->p.cog_amp_N != 0.0 && fabs(s->k_cog * dx) > BASIS_MAX_DTH))
     basis_update_angle(s, x_m);
-  if (s->p.dL_sat_H != 0.0 && fabs((i_d_A - s->b_id0) * s->inv_I_sat) > BASIS_MAX_DZ)
-    basis_update_flux(s, i_d_A);
+  flux_select(s, i_d_A);
 }
 
-/**
- * cos, sin of (angle0 + d) from cos/sin of angle0: Taylor cos d to d^4,
- * sin d to d^5 (truncation < 2e-11 resp. 1e-13 for |d| <= 1.5 BASIS_MAX_DTH),
- * libm beyond.
- */
-static inline void rot_taylor(double c0, double s0, double d, double *c, double *sn) {
-  double cd, sd;
-  if (fabs(d) > 1.5 * BASIS_MAX_DTH) { /* far stage (huge step): exact */
-    cd = cos(d);
-    sd = sin(d);
-  } else {
-    const double d2 = d * d;
-    cd = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0));
-    sd = d * (1.0 - d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0)));
-  }
-  *c = c0 * cd - s0 * sd;
-  *sn = s0 * cd + c0 * sd;
-}
-
-/** Exact (libm) psi_d(i_d) and incremental L_dd(i_d). */
-static inline void d_axis_flux_exact(const sim_plant_params_t *p, double i_d, double *psi_d,
-                                     double *L_dd) {
+/** Exact (libm) psi_d(i_d) and 1 / L_dd(i_d). */
+static void d_axis_flux_exact(const sim_plant_params_t *p, double i_d, double *psi_d,
+                              double *inv_L_dd) {
   if (p->dL_sat_H == 0.0) {
     *psi_d = p->psi_f_Wb + p->L_d0_H * i_d;
-    *L_dd = p->L_d0_H;
+    *inv_L_dd = 1.0 / p->L_d0_H;
     return;
   }
   const double z = i_d / p->I_sat_A;
   *psi_d = p->psi_f_Wb + p->L_d0_H * i_d - p->dL_sat_H * p->I_sat_A * lncosh(z);
-  *L_dd = p->L_d0_H - p->dL_sat_H * tanh(z);
+  *inv_L_dd = 1.0 / (p->L_d0_H - p->dL_sat_H * tanh(z));
 }
 
-/** psi_d and L_dd from the basis expansion. */
-static inline void d_axis_flux(const sim_t *s, double i_d, double *psi_d, double *L_dd) {
-  const sim_plant_params_t *p = &s->p;
-  if (p->dL_sat_H == 0.0) {
-    *psi_d = p->psi_f_Wb + p->L_d0_H * i_d;
-    *L_dd = p->L_d0_H;
-    return;
-  }
-  const double e = (i_d - s->b_id0) * s->inv_I_sat;
-  if (fabs(e) > 1.5 * BASIS_MAX_DZ) { /* far stage (huge step): exact */
-    d_axis_flux_exact(p, i_d, psi_d, L_dd);
-    return;
-  }
-  const double T = s->b_T0, S = s->b_S0, c3 = S * (3.0 * T * T - 1.0);
-  const double c4 = T * S * (2.0 - 3.0 * T * T);
-  const double th = T + e * (S + e * (-T * S + e * (c3 / 3.0 + e * (c4 / 3.0))));
-  const double lc =
-      s->b_g0 + e * (T + e * (0.5 * S + e * (-T * S / 3.0 + e * (c3 / 12.0 + e * (c4 / 15.0)))));
-  *psi_d = p->psi_f_Wb + p->L_d0_H * i_d - s->k_dL_Isat * lc;
-  *L_dd = p->L_d0_H - p->dL_sat_H * th;
-}
+#if SIM_FLUX_ORDER != 7
+#error "d_axis_flux evaluates order-7 polynomials"
+#endif
+#if defined(__GNUC__) && !defined(SIM_NO_VECTOR)
+/* 2-wide vectors (SSE2 / NEON / scalar code by the compiler): element-wise IEEE
+ * operations, so the same values as the scalar fallback (-DSIM_NO_VECTOR). */
+#define SIM_VECTOR 1
+typedef double sim_v2d __attribute__((vector_size(16), may_alias));
+#else
+#define SIM_VECTOR 0
+#endif
 
-void sim_plant_sincos(sim_t *s, double x_m, double *c, double *sn) {
-  const double d = s->k_theta * (x_m - s->b_x0);
-  if (s->basis_valid && fabs(d) <= BASIS_MAX_DTH) {
-    rot_taylor(s->b_c0, s->b_s0, d, c, sn);
-  } else {
-    *c = cos(s->k_theta * x_m);
-    *sn = sin(s->k_theta * x_m);
+/** psi_d and 1 / L_dd from the basis expansion (libm when far). */
+SIM_INLINE void d_axis_flux(const sim_t *s, double i_d, double *psi_d, double *inv_L_dd) {
+  const double di = i_d - s->b_id0;
+  if (fabs(di) > s->flux_far_A) { /* far stage (huge step): exact */
+    d_axis_flux_exact(&s->p, i_d, psi_d, inv_L_dd);
+    return;
   }
+  const double d2 = di * di, d4 = d2 * d2;
+  const sim_flux_coef_t *fc = s->fc;
+  /* Estrin: (c0 + c1 x) + x^2 (c2 + c3 x) + x^4 ((c4 + c5 x) + x^2 (c6 + c7 x)) */
+#if SIM_VECTOR
+  const sim_v2d *c = (const sim_v2d *)fc->ip;
+  const sim_v2d r = (c[0] + c[1] * di) + d2 * (c[2] + c[3] * di) +
+                    d4 * ((c[4] + c[5] * di) + d2 * (c[6] + c[7] * di));
+  *inv_L_dd = r[0];
+  *psi_d = r[1] + (d4 * d4) * fc->psi_top;
+#else
+  double r[2];
+  for (int j = 0; j < 2; ++j) {
+    const double(*c)[2] = fc->ip;
+    r[j] = (c[0][j] + c[1][j] * di) + d2 * (c[2][j] + c[3][j] * di) +
+           d4 * ((c[4][j] + c[5][j] * di) + d2 * (c[6][j] + c[7][j] * di));
+  }
+  *inv_L_dd = r[0];
+  *psi_d = r[1] + (d4 * d4) * fc->psi_top;
+#endif
 }
 
 double sim_plant_force(const sim_t *s, const sim_plant_state_t *st) {
-  double psi_d, L_dd;
+  double psi_d, inv_L_dd;
   if (s->basis_valid)
-    d_axis_flux(s, st->i_d_A, &psi_d, &L_dd); /* expansion (exact when far) */
+    d_axis_flux(s, st->i_d_A, &psi_d, &inv_L_dd); /* expansion (exact when far) */
   else
-    d_axis_flux_exact(&s->p, st->i_d_A, &psi_d, &L_dd);
+    d_axis_flux_exact(&s->p, st->i_d_A, &psi_d, &inv_L_dd);
   return s->k_force * (psi_d * st->i_q_A - s->p.L_q_H * st->i_q_A * st->i_d_A);
 }
 
 /** Inputs held constant over one RK4 sub-step. */
 typedef struct {
-  double u_ab_V[2];   /**< stator voltage, stationary frame */
-  double u_dq0_V[2];  /**< the same in the rotor frame at the basis angle */
+  double u_dq0_V[2];  /**< stator voltage in the rotor frame at the basis angle */
   double F_load_N;
   int mech_dir;       /**< 0: stuck/locked; +1/-1: sliding direction (Coulomb sign) */
   int elec_open;      /**< 1: PWM off and currents extinct: i held at 0 */
 } substep_in_t;
 
-/* Inlined into the RK4 stages so that k1..k4 stay in registers (a call
- * returning them through memory costs store-forwarding stalls). */
-#if defined(__GNUC__)
-#define SIM_INLINE static inline __attribute__((always_inline))
-#else
-#define SIM_INLINE static inline
-#endif
-
-/** dy/dt for y = {i_d, i_q, x, v}. Returns the net drive force (without friction). */
-SIM_INLINE double deriv(const sim_t *s, const double y[4], const substep_in_t *in,
-                    double dy[4]) {
+/**
+ * dy/dt for y = {i_d, i_q, x, v}; returns the net drive force (without
+ * friction). cog / elec / slide are compile-time constants at the
+ * specialised call sites (rk4_*), so the common case carries no branches
+ * but the far-stage checks. Inlined so that k1..k4 stay in registers.
+ */
+SIM_INLINE double deriv_t(const sim_t *s, const double y[4], const substep_in_t *in,
+                          double dy[4], const int cog, const int elec, const int slide) {
   const sim_plant_params_t *p = &s->p;
   const double dx = y[2] - s->b_x0;
-  /* rotor-frame voltage: the basis-frame voltage rotated back by the stage's
-   * angle offset d (cos/sin(-d) = cos d, -sin d) */
-  double cd, sd;
-  rot_taylor(1.0, 0.0, s->k_theta * dx, &cd, &sd);
-  const double u_d = cd * in->u_dq0_V[0] + sd * in->u_dq0_V[1];
-  const double u_q = cd * in->u_dq0_V[1] - sd * in->u_dq0_V[0];
-  const double w = s->k_theta * y[3];
-  double psi_d, L_dd;
-  d_axis_flux(s, y[0], &psi_d, &L_dd);
-  if (in->elec_open) {
+  double psi_d, inv_L_dd;
+  d_axis_flux(s, y[0], &psi_d, &inv_L_dd);
+  if (elec) {
+    /* rotor-frame voltage: the basis-frame voltage rotated back by the
+     * stage's angle offset d (cos/sin(-d) = cos d, -sin d) */
+    double cd, sd;
+    sim_cs_small(s->k_theta * dx, &cd, &sd);
+    const double u_d = cd * in->u_dq0_V[0] + sd * in->u_dq0_V[1];
+    const double u_q = cd * in->u_dq0_V[1] - sd * in->u_dq0_V[0];
+    const double w = s->k_theta * y[3];
+    dy[0] = ((u_d - p->R_ohm * y[0]) + w * p->L_q_H * y[1]) * inv_L_dd;
+    dy[1] = ((u_q - p->R_ohm * y[1]) - w * psi_d) * s->inv_L_q;
+  } else {
     dy[0] = 0.0;
     dy[1] = 0.0;
-  } else {
-    dy[0] = (u_d - p->R_ohm * y[0] + w * p->L_q_H * y[1]) / L_dd;
-    dy[1] = (u_q - p->R_ohm * y[1] - w * psi_d) * s->inv_L_q;
   }
   const double F_em = s->k_force * (psi_d * y[1] - p->L_q_H * y[1] * y[0]);
   double F_cog = 0.0;
-  if (p->cog_amp_N != 0.0) {
+  if (cog) {
     double cc, cs;
-    rot_taylor(s->b_cc0, s->b_cs0, s->k_cog * dx, &cc, &cs);
+    sim_rot(s->b_cc0, s->b_cs0, s->k_cog * dx, &cc, &cs);
     F_cog = p->cog_amp_N * cs;
   }
-  const double F_drive = F_em + F_cog - in->F_load_N;
-  if (in->mech_dir == 0) {
+  const double F_drive = (F_em + F_cog) - in->F_load_N;
+  if (slide) {
+    dy[2] = y[3];
+    dy[3] = ((F_drive - p->b_visc_Ns_per_m * y[3]) - p->F_coulomb_N * (double)in->mech_dir) *
+            s->inv_mass;
+  } else {
     dy[2] = 0.0;
     dy[3] = 0.0;
-  } else {
-    dy[2] = y[3];
-    dy[3] = (F_drive - p->b_visc_Ns_per_m * y[3] - p->F_coulomb_N * (double)in->mech_dir) *
-            s->inv_mass;
   }
   return F_drive;
+}
+
+/** One classical RK4 step of length h from y0 to y1. */
+SIM_INLINE void rk4_t(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
+                      double y1[4], const int cog, const int elec, const int slide) {
+  double k1[4], k2[4], k3[4], k4[4], yt[4];
+  const double hh = 0.5 * h, h6 = h * (1.0 / 6.0);
+  (void)deriv_t(s, y0, in, k1, cog, elec, slide);
+  for (int j = 0; j < 4; ++j) yt[j] = y0[j] + hh * k1[j];
+  (void)deriv_t(s, yt, in, k2, cog, elec, slide);
+  for (int j = 0; j < 4; ++j) yt[j] = y0[j] + hh * k2[j];
+  (void)deriv_t(s, yt, in, k3, cog, elec, slide);
+  for (int j = 0; j < 4; ++j) yt[j] = y0[j] + h * k3[j];
+  (void)deriv_t(s, yt, in, k4, cog, elec, slide);
+  for (int j = 0; j < 4; ++j) y1[j] = y0[j] + h6 * ((k1[j] + k4[j]) + 2.0 * (k2[j] + k3[j]));
+}
+
+/* Specialisations: the two common cases (no cogging, PWM on, sliding or
+ * stuck) and a generic one. */
+static void rk4_slide(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
+                      double y1[4]) {
+  rk4_t(s, in, y0, h, y1, 0, 1, 1);
+}
+static void rk4_stuck(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
+                      double y1[4]) {
+  rk4_t(s, in, y0, h, y1, 0, 1, 0);
+}
+static void rk4_generic(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
+                        double y1[4]) {
+  rk4_t(s, in, y0, h, y1, s->p.cog_amp_N != 0.0, !in->elec_open, in->mech_dir != 0);
+}
+
+/** Net drive force at y (stuck / break-away decisions). */
+static double drive_force(const sim_t *s, const double y[4], const substep_in_t *in) {
+  double dtmp[4];
+  substep_in_t in0 = *in;
+  in0.mech_dir = 0;
+  return deriv_t(s, y, &in0, dtmp, s->p.cog_amp_N != 0.0, 0, 0);
+}
+
+/** RK4 step with the specialisation matching the sub-step's inputs. */
+static inline void rk4_dispatch(const sim_t *s, const substep_in_t *in, const double y0[4],
+                                double h, double y1[4]) {
+  if (s->p.cog_amp_N == 0.0 && !in->elec_open) {
+    if (in->mech_dir != 0)
+      rk4_slide(s, in, y0, h, y1);
+    else
+      rk4_stuck(s, in, y0, h, y1);
+  } else {
+    rk4_generic(s, in, y0, h, y1);
+  }
 }
 
 /** Linearised sign for the dead-time error. */
@@ -313,15 +416,16 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
   substep_in_t in;
   in.F_load_N = s->F_load_N;
   in.elec_open = 0;
+  double u_ab[2];
   double i_al = 0.0, i_be = 0.0;
   if (u_ab_fixed) {
     /* ideal inverter: the voltage is the same for every sub-step */
-    in.u_ab_V[0] = u_ab_fixed[0];
-    in.u_ab_V[1] = u_ab_fixed[1];
+    u_ab[0] = u_ab_fixed[0];
+    u_ab[1] = u_ab_fixed[1];
   } else {
     /* phase currents at sub-step start select dead-time error / diode rail */
     double c, sn;
-    rot_taylor(s->b_c0, s->b_s0, s->k_theta * (st->x_m - s->b_x0), &c, &sn);
+    sim_rot(s->b_c0, s->b_s0, s->k_theta * (st->x_m - s->b_x0), &c, &sn);
     i_al = c * st->i_d_A - sn * st->i_q_A;
     i_be = sn * st->i_d_A + c * st->i_q_A;
     const double i_abc[3] = {i_al, -0.5 * i_al + 0.5 * SIM_SQRT3 * i_be,
@@ -337,44 +441,134 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
       for (int j = 0; j < 3; ++j) u_pole[j] = 0.0;
       in.elec_open = 1;
     }
-    in.u_ab_V[0] = (2.0 / 3.0) * (u_pole[0] - 0.5 * u_pole[1] - 0.5 * u_pole[2]);
-    in.u_ab_V[1] = (u_pole[1] - u_pole[2]) * (1.0 / SIM_SQRT3);
+    u_ab[0] = (2.0 / 3.0) * (u_pole[0] - 0.5 * u_pole[1] - 0.5 * u_pole[2]);
+    u_ab[1] = (u_pole[1] - u_pole[2]) * (1.0 / SIM_SQRT3);
   }
 
-  in.u_dq0_V[0] = s->b_c0 * in.u_ab_V[0] + s->b_s0 * in.u_ab_V[1];
-  in.u_dq0_V[1] = -s->b_s0 * in.u_ab_V[0] + s->b_c0 * in.u_ab_V[1];
+  in.u_dq0_V[0] = s->b_c0 * u_ab[0] + s->b_s0 * u_ab[1];
+  in.u_dq0_V[1] = -s->b_s0 * u_ab[0] + s->b_c0 * u_ab[1];
 
   /* mechanics: stuck, or sliding in a fixed direction for this sub-step */
   double y0[4] = {st->i_d_A, st->i_q_A, st->x_m, st->v_mps};
-  double k1[4], k2[4], k3[4], k4[4], yt[4];
+  int can_break = 0;  /* stuck over this sub-step: may break away inside it */
+  double F0 = 0.0;    /* drive force at the sub-step start (when stuck) */
   if (p->locked) {
     in.mech_dir = 0;
   } else if (st->stuck || st->v_mps == 0.0) {
     in.mech_dir = 0;
-    const double F_drive = deriv(s, y0, &in, k1);
-    if (fabs(F_drive) > p->F_static_N) {
-      in.mech_dir = F_drive > 0.0 ? 1 : -1;
+    F0 = drive_force(s, y0, &in);
+    if (fabs(F0) > p->F_static_N) {
+      in.mech_dir = F0 > 0.0 ? 1 : -1;
       st->stuck = 0;
     } else {
       st->stuck = 1;
       st->v_mps = 0.0;
       y0[3] = 0.0;
+      can_break = 1;
     }
   } else {
     in.mech_dir = st->v_mps > 0.0 ? 1 : -1;
   }
 
-  deriv(s, y0, &in, k1);
-  for (int j = 0; j < 4; ++j) yt[j] = y0[j] + 0.5 * h * k1[j];
-  deriv(s, yt, &in, k2);
-  for (int j = 0; j < 4; ++j) yt[j] = y0[j] + 0.5 * h * k2[j];
-  deriv(s, yt, &in, k3);
-  for (int j = 0; j < 4; ++j) yt[j] = y0[j] + h * k3[j];
-  (void)deriv(s, yt, &in, k4);
   double y1[4];
-  for (int j = 0; j < 4; ++j) y1[j] = y0[j] + h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+  rk4_dispatch(s, &in, y0, h, y1);
 
-  /* diode conduction ends when the current vector reverses or vanishes */
+  /* break-away inside the sub-step: the drive force crossed F_static. The
+   * crossing is located by regula falsi on the drive force (re-integrating
+   * from the sub-step start; three RK4 passes, only at this rare event), and
+   * the sub-step is redone as stuck up to it and sliding after it. */
+  if (can_break) {
+    const double F1 = drive_force(s, y1, &in);
+    if (fabs(F1) > p->F_static_N) {
+      const double dir = F1 > 0.0 ? 1.0 : -1.0;
+      double fa = 0.0, ga = dir * F0 - p->F_static_N, fb = 1.0, gb = dir * F1 - p->F_static_N;
+      double f = (ga < 0.0) ? -ga / (gb - ga) : 0.0;
+      double ym[4];
+      for (int it = 0;; ++it) {
+        if (f > 0.0) {
+          rk4_dispatch(s, &in, y0, f * h, ym);
+        } else {
+          for (int j = 0; j < 4; ++j) ym[j] = y0[j];
+        }
+        if (it == 2 || f <= 0.0) break;
+        const double gm = dir * drive_force(s, ym, &in) - p->F_static_N;
+        if (gm == 0.0) break;
+        if (gm < 0.0) {
+          fa = f;
+          ga = gm;
+        } else {
+          fb = f;
+          gb = gm;
+        }
+        f = fa + (fb - fa) * (-ga) / (gb - ga);
+      }
+      in.mech_dir = (int)dir;
+      st->stuck = 0;
+      if (f < 1.0) {
+        rk4_dispatch(s, &in, ym, (1.0 - f) * h, y1);
+      } else {
+        for (int j = 0; j < 4; ++j) y1[j] = ym[j];
+      }
+      for (int j = 0; j < 4; ++j) y0[j] = ym[j]; /* start of the sliding part */
+      h *= 1.0 - f;
+    }
+  }
+
+  /* sliding ended? velocity crossed zero, or entered the stick band */
+  if (in.mech_dir != 0) {
+    const int crossed = (in.mech_dir > 0) ? (y1[3] <= 0.0) : (y1[3] >= 0.0);
+    /* without any friction force the reversal is smooth: no event */
+    const int friction = p->F_coulomb_N != 0.0 || p->F_static_N != 0.0;
+    if (crossed && friction && y0[3] != y1[3]) {
+      /* v crossed zero inside the sub-step: locate the crossing (regula
+       * falsi on v, re-integrating from the sub-step start; three RK4 passes,
+       * only at this rare event), then decide stick or reversal there and
+       * integrate the rest with the right friction (stuck, or Coulomb of
+       * the new direction) */
+      double fa = 0.0, va = y0[3], fb = 1.0, vb = y1[3];
+      double f = va / (va - vb);
+      double ym[4];
+      for (int it = 0;; ++it) {
+        if (f > 0.0) {
+          rk4_dispatch(s, &in, y0, f * h, ym);
+        } else {
+          for (int j = 0; j < 4; ++j) ym[j] = y0[j];
+        }
+        const double vm = ym[3];
+        if (it == 2 || vm == 0.0) break;
+        if ((vm > 0.0) == (va > 0.0)) {
+          fa = f;
+          va = vm;
+        } else {
+          fb = f;
+          vb = vm;
+        }
+        f = fa + (fb - fa) * va / (va - vb);
+      }
+      ym[3] = 0.0;
+      const double F_drive = drive_force(s, ym, &in);
+      if (fabs(F_drive) <= p->F_static_N) {
+        in.mech_dir = 0; /* static friction holds: stick */
+        st->stuck = 1;
+      } else {
+        in.mech_dir = F_drive > 0.0 ? 1 : -1; /* keeps going the other way */
+      }
+      if (f < 1.0) {
+        rk4_dispatch(s, &in, ym, (1.0 - f) * h, y1);
+      } else {
+        for (int j = 0; j < 4; ++j) y1[j] = ym[j];
+      }
+      if (in.mech_dir == 0) y1[3] = 0.0;
+    } else if (fabs(y1[3]) < p->v_stick_mps) {
+      const double y1z[4] = {y1[0], y1[1], y1[2], 0.0};
+      if (fabs(drive_force(s, y1z, &in)) <= p->F_static_N) {
+        y1[3] = 0.0; /* static friction holds: stick */
+        st->stuck = 1;
+      }
+    }
+  }
+  /* diode conduction ends when the current vector reverses or vanishes (after
+   * the mechanical events, which may redo the sub-step) */
   if (!pwm_on && !in.elec_open) {
     const double th1 = s->k_theta * y1[2];
     const double c1 = cos(th1), s1 = sin(th1);  /* rare path: exact */
@@ -382,34 +576,6 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
     if (a1 * i_al + b1 * i_be <= 0.0 || sqrt(a1 * a1 + b1 * b1) < 1e-3) {
       y1[0] = 0.0;
       y1[1] = 0.0;
-    }
-  }
-  /* sliding ended? velocity crossed zero, or entered the stick band */
-  if (in.mech_dir != 0) {
-    const double dir = (double)in.mech_dir;
-    const int crossed = (in.mech_dir > 0) ? (y1[3] <= 0.0) : (y1[3] >= 0.0);
-    if (crossed || fabs(y1[3]) < p->v_stick_mps) {
-      double dtmp[4];
-      substep_in_t in0 = in;
-      in0.mech_dir = 0;
-      const double y1z[4] = {y1[0], y1[1], y1[2], 0.0};
-      const double F_drive = deriv(s, y1z, &in0, dtmp);
-      if (fabs(F_drive) <= p->F_static_N) {
-        y1[3] = 0.0; /* static friction holds: stick */
-        st->stuck = 1;
-      } else if (crossed) {
-        /* keeps going the other way: after the crossing (fraction f of the
-         * sub-step, linear estimate) Coulomb friction flips sign, which
-         * adds 2 F_c dir / m over the rest of the sub-step */
-        const double f = y0[3] / (y0[3] - y1[3]);
-        const double v = y1[3] + (1.0 - f) * h * 2.0 * p->F_coulomb_N * dir * s->inv_mass;
-        if (v * dir >= 0.0) {
-          y1[3] = 0.0;
-          st->stuck = 1;
-        } else {
-          y1[3] = v;
-        }
-      }
     }
   }
   st->i_d_A = y1[0];

@@ -444,17 +444,27 @@ static void co_sdo_init_download(co_node_t *node, const uint8_t *d) {
   co_sdo_send(node, r);
 }
 
+/** A segment request must arrive in the expected transfer state with the
+ *  expected toggle bit; otherwise the transfer is aborted. */
+static bool co_sdo_segment_ok(co_node_t *node, const uint8_t *d, co_sdo_state_t want) {
+  co_sdo_t *s = &node->sdo;
+  if (s->state != want) {
+    co_sdo_abort(node, s->index, s->sub, CO_ABORT_CMD);
+    return false;
+  }
+  if ((uint8_t)((d[0] >> 4) & 1u) != s->toggle) {
+    co_sdo_abort(node, s->index, s->sub, CO_ABORT_TOGGLE);
+    return false;
+  }
+  return true;
+}
+
 static void co_sdo_download_segment(co_node_t *node, const uint8_t *d) {
   co_sdo_t *s = &node->sdo;
-  uint8_t t = (uint8_t)((d[0] >> 4) & 1u);
-  if (s->state != CO_SDO_DOWNLOAD) {
-    co_sdo_abort(node, s->index, s->sub, CO_ABORT_CMD);
+  if (!co_sdo_segment_ok(node, d, CO_SDO_DOWNLOAD)) {
     return;
   }
-  if (t != s->toggle) {
-    co_sdo_abort(node, s->index, s->sub, CO_ABORT_TOGGLE);
-    return;
-  }
+  const uint8_t t = s->toggle; /* checked equal to the request's toggle bit */
   size_t n = (size_t)(7u - ((d[0] >> 1) & 0x07u));
   bool last = (d[0] & 0x01u) != 0u;
   if ((size_t)s->done + n > sizeof s->buf) {
@@ -518,15 +528,10 @@ static void co_sdo_init_upload(co_node_t *node, const uint8_t *d) {
 
 static void co_sdo_upload_segment(co_node_t *node, const uint8_t *d) {
   co_sdo_t *s = &node->sdo;
-  uint8_t t = (uint8_t)((d[0] >> 4) & 1u);
-  if (s->state != CO_SDO_UPLOAD) {
-    co_sdo_abort(node, s->index, s->sub, CO_ABORT_CMD);
+  if (!co_sdo_segment_ok(node, d, CO_SDO_UPLOAD)) {
     return;
   }
-  if (t != s->toggle) {
-    co_sdo_abort(node, s->index, s->sub, CO_ABORT_TOGGLE);
-    return;
-  }
+  const uint8_t t = s->toggle; /* checked equal to the request's toggle bit */
   size_t remaining = (size_t)(s->size - s->done);
   size_t n = remaining > 7u ? 7u : remaining;
   bool last = remaining <= 7u;
