@@ -251,8 +251,10 @@ static void test_config_checks(void) {
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_SALIENCY);
   bad.L_q_H = 1.05f * bad.L_d_H;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_SALIENCY);
-  bad.L_q_H = 1.11f * bad.L_d_H;
+  bad.L_q_H = 1.1f * bad.L_d_H; /* exactly the threshold, despite float32 rounding */
   TT_CHECK(fw_config_check(&bad, &iss) == FW_OK);
+  bad.L_q_H = 1.0999f * bad.L_d_H;
+  TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_SALIENCY);
   bad.L_q_H = 0.85f * bad.L_d_H; /* Lq < Ld is saliency too */
   TT_CHECK(fw_config_check(&bad, &iss) == FW_OK);
 }
