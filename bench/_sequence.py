@@ -412,8 +412,11 @@ def validate_sequence(text: str, file: str = "<string>") -> Sequence:
             if e.validator == "required" and isinstance(e.instance, dict):
                 line, col = _mark(marks, path)
                 missing = [r for r in e.validator_value if r not in e.instance]
-                issues.append(Issue(file, line, col, _field(path + (missing[0],)) if missing
-                                    else _field(path), e.message))
+                # one error per missing key (duplicates are dropped below)
+                for r in missing or [None]:
+                    issues.append(Issue(file, line, col,
+                                        _field(path + (r,)) if r else _field(path),
+                                        f"{r!r} is a required property" if r else e.message))
                 continue
             if "propertyNames" in e.schema_path:
                 line, col = _mark(marks, path + (e.instance,))

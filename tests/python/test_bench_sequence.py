@@ -137,3 +137,12 @@ def test_trace_signals_must_exist_in_the_object_dictionary() -> None:
     (i,) = _issues(text)
     assert i.field == "steps[6].trace_capture.signals[1]" and "theta_true" in i.message
     assert i.line == 12
+
+
+def test_each_missing_top_level_key_named_once(tmp_path) -> None:
+    p = tmp_path / "bad.yaml"
+    p.write_text("name: bad\nsteps:\n  - wait: {duration_s: 0.1}\n")
+    with pytest.raises(SequenceError) as ei:
+        load_sequence(p)
+    fields = sorted(i.field for i in ei.value.issues)
+    assert fields == ["extractor", "motor", "seed"]
