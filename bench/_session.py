@@ -93,6 +93,7 @@ class Connection:
     sim: Any = None
     serial: Any = None
     info: dict[str, Any] = field(default_factory=dict)
+    sync_period_ms: int = 10
     _hb_task: Any = None
 
     @property
@@ -106,7 +107,7 @@ class Connection:
         return msg_ts - (time.time() - time.monotonic())
 
     def start_heartbeat(self, period_ms: int = 100) -> None:
-        """Hardware: be the supervisor the drive watches while it may move.
+        """Hardware: be the supervisor the drive watches while it may move, and the SYNC producer.
 
         The bench (node 0x7F) produces a heartbeat every ``period_ms``; the
         drive's consumer heartbeat (0x1016:1) watches it with a 5x margin and
@@ -120,6 +121,9 @@ class Connection:
         self._hb_task = self.network.send_periodic(0x700 + 0x7F, bytes([0x05]),
                                                    period_ms / 1000.0)
         self.drive.node.sdo[0x1016][1].raw = (0x7F << 16) | (5 * period_ms)
+        # The bench is also the SYNC producer: the drive's TPDOs (position,
+        # velocity, torque) are SYNC-triggered and would never flow without one.
+        self.network.sync.start(self.sync_period_ms / 1000.0)
 
     def close(self) -> None:
         """Disconnect everything (does not change the drive state)."""
@@ -130,6 +134,7 @@ class Connection:
                 log.warning("could not switch the drive's heartbeat watch off: %s", e)
             self._hb_task.stop()
             self._hb_task = None
+            self.network.sync.stop()
         try:
             self.network.disconnect()
         except Exception as e:  # noqa: BLE001 - canopen re-raises receive-thread errors here

@@ -155,6 +155,7 @@ def test_hardware_path_with_a_stand_in_drive(tmp_path) -> None:
 
     ch = f"hw-{uuid.uuid4().hex[:8]}-bus"
     fake = FakeDrive402(can.Bus(interface="virtual", channel=ch))
+    spy = can.Bus(interface="virtual", channel=ch)  # another node on the same bus
     said: list[str] = []
     try:
         conn = connect(interface="virtual", channel=ch, say=said.append)
@@ -166,6 +167,11 @@ def test_hardware_path_with_a_stand_in_drive(tmp_path) -> None:
             out = run_sequence(seq, conn, runs_root=str(tmp_path), progress=False)
             hb = [w for w in fake.writes if w[0] == 0x1016]
             assert hb and hb[0][2] == (0x7F << 16) | 500
+            ids = []
+            while (m := spy.recv(0.0)) is not None:
+                ids.append(m.arbitration_id)
+            assert ids.count(0x080) >= 5, "the bench must produce SYNC on hardware"
+            assert 0x77F in ids  # its heartbeat
         finally:
             conn.close()
         assert fake.writes[-1][:2] == (0x1016, 1) and fake.writes[-1][2] == 0
@@ -178,3 +184,4 @@ def test_hardware_path_with_a_stand_in_drive(tmp_path) -> None:
         assert any("connected to HARDWARE" in s for s in said)
     finally:
         fake.close()
+        spy.shutdown()
