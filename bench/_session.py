@@ -123,7 +123,8 @@ class Connection:
         self.drive.node.sdo[0x1016][1].raw = (0x7F << 16) | (5 * period_ms)
         # The bench is also the SYNC producer: the drive's TPDOs (position,
         # velocity, torque) are SYNC-triggered and would never flow without one.
-        self.network.sync.start(self.sync_period_ms / 1000.0)
+        if self.sync_period_ms > 0:
+            self.network.sync.start(self.sync_period_ms / 1000.0)
 
     def close(self) -> None:
         """Disconnect everything (does not change the drive state)."""
@@ -134,7 +135,8 @@ class Connection:
                 log.warning("could not switch the drive's heartbeat watch off: %s", e)
             self._hb_task.stop()
             self._hb_task = None
-            self.network.sync.stop()
+            if self.sync_period_ms > 0:
+                self.network.sync.stop()
         try:
             self.network.disconnect()
         except Exception as e:  # noqa: BLE001 - canopen re-raises receive-thread errors here

@@ -34,6 +34,9 @@ def _conn_args(p: argparse.ArgumentParser) -> None:
                         " loop://)")
     g.add_argument("--node-id", type=int, default=1, help="drive node id (default 1)")
     g.add_argument("--load-node", type=int, help="node id of the load machine (hardware)")
+    g.add_argument("--sync-period-ms", type=int, default=10,
+                   help="hardware: SYNC period the bench produces (default 10; 0 = another "
+                        "node on the bus produces SYNC)")
     g.add_argument("--motor", default=None,
                    help="motor file (sim, and unit conversion on hardware); default: the "
                         "sequence's, else paper_salient")
@@ -155,10 +158,14 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
     extractor = args.extractor or (seq.extractor if seq is not None else "sogi_adaptive")
     seed = args.seed if args.seed is not None else (seq.seed if seq is not None else 0)
     x0 = seq.x0 if seq is not None else 0.0
-    return connect(sim=args.sim, interface=args.interface, channel=args.channel,
+    conn = connect(sim=args.sim, interface=args.interface, channel=args.channel,
                    bitrate=args.bitrate, serial_url=args.serial, realtime=args.realtime,
                    motor=motor, extractor=extractor, seed=seed, x0=x0, node_id=args.node_id,
                    load_node=args.load_node)
+    if args.sync_period_ms < 0:
+        raise SystemExit("bench: --sync-period-ms must be >= 0")
+    conn.sync_period_ms = args.sync_period_ms
+    return conn
 
 
 def _make_rerun(spec: list[str] | None, default_dir: Path, pole_pairs: float) -> Any:
