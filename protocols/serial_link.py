@@ -154,6 +154,10 @@ class Receiver:
     frames_ok, frames_bad, frames_lost : int
         Valid frames, rejected frames, and frames missing from the sequence
         (a rejected frame also shows up as lost when the next one arrives).
+    restarts : int
+        Sequence jumps *backwards* (modulo 2^16, a gap of more than 32768):
+        the sender restarted (drive reset) and counts from 0 again. They are not
+        counted as lost frames.
     errors : Counter
         Rejections by reason (cobs, short, crc, too_long).
     """
@@ -161,6 +165,7 @@ class Receiver:
     frames_ok: int = 0
     frames_bad: int = 0
     frames_lost: int = 0
+    restarts: int = 0
     errors: Counter = field(default_factory=Counter)
     _buf: bytearray = field(default_factory=bytearray)
     _overflow: bool = False
@@ -191,7 +196,11 @@ class Receiver:
                 self._reject(e.reason)
                 continue
             if self._next_seq is not None and fr.seq != self._next_seq:
-                self.frames_lost += (fr.seq - self._next_seq) & 0xFFFF
+                gap = (fr.seq - self._next_seq) & 0xFFFF
+                if gap > 0x8000:
+                    self.restarts += 1  # behind the expected number: sender restarted
+                else:
+                    self.frames_lost += gap
             self._next_seq = (fr.seq + 1) & 0xFFFF
             self.frames_ok += 1
             out.append(fr)

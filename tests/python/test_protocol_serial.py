@@ -190,3 +190,17 @@ def test_trace_upload_from_c_decoded_in_python(lib):
     np.testing.assert_array_equal(trace.samples[:, 1],
                                   np.arange(k_trig - 40, k_trig + 110, dtype=np.float32))
     assert trace.time_s()[40] == 0.0
+
+
+def test_receiver_sender_restart_is_not_loss():
+    """A drive reset restarts the sequence at 0: counted as a restart, not as
+    ~65000 lost frames; a forward gap across the 16-bit wrap is still loss."""
+    rx = sl.Receiver()
+    stream = b"".join(sl.encode_frame(sl.FrameType.TELEMETRY, s, b"x")
+                      for s in (1000, 1001, 1002, 0, 1, 3))
+    frames = rx.feed(stream)
+    assert [f.seq for f in frames] == [1000, 1001, 1002, 0, 1, 3]
+    assert rx.restarts == 1 and rx.frames_lost == 1  # only seq 2 after the restart
+    rx2 = sl.Receiver()
+    rx2.feed(b"".join(sl.encode_frame(sl.FrameType.TELEMETRY, s) for s in (65534, 65535, 2)))
+    assert rx2.frames_lost == 2 and rx2.restarts == 0  # 0 and 1 lost across the wrap
