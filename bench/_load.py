@@ -73,7 +73,12 @@ class CanopenLoad:
         self.drive = drive
 
     def enable(self) -> None:
-        self.drive.enable("force")
+        d = self.drive
+        # The runner enables the load with every `enable` step; Drive.enable zeroes 0x6071,
+        # which would silently drop a load already applied (the simulated load keeps it).
+        if d.enabled and d.mode == "force" and d.state == "OPERATION ENABLED":
+            return
+        d.enable("force")
 
     def disable(self) -> None:
         self.drive.disable()

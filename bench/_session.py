@@ -110,8 +110,9 @@ class Connection:
         """Hardware: be the supervisor the drive watches while it may move, and the SYNC producer.
 
         The bench (node 0x7F) produces a heartbeat every ``period_ms``; the
-        drive's consumer heartbeat (0x1016:1) watches it with a 5x margin and
-        faults (quick stop, then PWM off) if the bench dies. :meth:`close`
+        drive's consumer heartbeat (0x1016:1), and the load machine's
+        (:class:`CanopenLoad`), watch it with a 5x margin and fault (quick
+        stop, then PWM off) if the bench dies. :meth:`close`
         switches the watch off before stopping the heartbeat, so a clean exit
         does not fault the drive. Not used for the simulated drive, whose
         clock does not follow the wall clock.
@@ -120,19 +121,27 @@ class Connection:
             return
         self._hb_task = self.network.send_periodic(0x700 + 0x7F, bytes([0x05]),
                                                    period_ms / 1000.0)
-        self.drive.node.sdo[0x1016][1].raw = (0x7F << 16) | (5 * period_ms)
+        for d in self._watchers():  # the load machine too: a dead bench must stop it as well
+            d.node.sdo[0x1016][1].raw = (0x7F << 16) | (5 * period_ms)
         # The bench is also the SYNC producer: the drive's TPDOs (position,
         # velocity, torque) are SYNC-triggered and would never flow without one.
         if self.sync_period_ms > 0:
             self.network.sync.start(self.sync_period_ms / 1000.0)
 
+    def _watchers(self) -> list[Drive]:
+        """The nodes that watch the bench's heartbeat: the drive and a load machine."""
+        load = self.load.drive if isinstance(self.load, CanopenLoad) else None
+        return [self.drive] + ([load] if load is not None else [])
+
     def close(self) -> None:
         """Disconnect everything (does not change the drive state)."""
         if self._hb_task is not None:
-            try:
-                self.drive.node.sdo[0x1016][1].raw = 0  # stop watching, then stop beating
-            except Exception as e:  # noqa: BLE001
-                log.warning("could not switch the drive's heartbeat watch off: %s", e)
+            for d in self._watchers():
+                try:
+                    d.node.sdo[0x1016][1].raw = 0  # stop watching, then stop beating
+                except Exception as e:  # noqa: BLE001
+                    log.warning("could not switch node %d's heartbeat watch off: %s",
+                                d.node_id, e)
             self._hb_task.stop()
             self._hb_task = None
             if self.sync_period_ms > 0:
