@@ -234,7 +234,14 @@ def open_hardware(interface: str | None, channel: str | None, bitrate: int | Non
         drive.setup(read_pdos=True)
         load: LoadDevice = NoLoad()
         if load_node:
-            ld = Drive(net, load_node)
+            ld = Drive(net, load_node, sdo_timeout_s=probe_timeout_s)
+            try:
+                _ = ld.node.sdo[0x1000].raw  # probe: does the load machine answer?
+            except Exception as e:
+                # the drive is there, so no fallback to the simulator: a clear error
+                raise ConnectionError(f"load machine node {load_node} on {kw} does not "
+                                      f"answer: {e}") from e
+            ld.node.sdo.RESPONSE_TIMEOUT = 0.5
             ld.setup(read_pdos=True)
             load = CanopenLoad(ld)
         port = None
@@ -268,6 +275,9 @@ def connect(sim: bool = False, interface: str | None = None, channel: str | None
             say(f"bench: no drive hardware found ({e}).")
             say("bench: FALLING BACK TO THE SIMULATED DRIVE - results are from a simulation, "
                 "not from hardware.")
+    if load_node:
+        say(f"bench: --load-node {load_node} ignored: the simulated drive applies the load "
+            "force in its plant")
     c = open_sim(motor, extractor, seed, x0, realtime, node_id, record_decimation)
     say(f"bench: using the {c.description}")
     return c

@@ -185,3 +185,19 @@ def test_hardware_path_with_a_stand_in_drive(tmp_path) -> None:
     finally:
         fake.close()
         spy.shutdown()
+
+
+def test_silent_load_machine_is_a_clear_error_not_a_fallback() -> None:
+    """The drive answers but the configured load machine does not: no simulator
+    fallback (the drive is real), a ConnectionError that names the load node."""
+    from bench import connect
+
+    ch = f"hw-{uuid.uuid4().hex[:8]}-bus"
+    fake = FakeDrive402(can.Bus(interface="virtual", channel=ch))
+    said: list[str] = []
+    try:
+        with pytest.raises(ConnectionError, match="load machine node 5"):
+            connect(interface="virtual", channel=ch, load_node=5, say=said.append)
+        assert not any("SIMULATED" in s for s in said)
+    finally:
+        fake.close()
