@@ -200,7 +200,8 @@ fw_status_t fw_config_check(const fw_config_t *cfg, fw_config_issue_t *issue) {
     sal = -sal;
   }
   /* 1e-6 absorbs float32 rounding: Lq = 1.1 Ld must pass a 10 % threshold */
-  if (sal < cfg->saliency_min - 1e-6f) {
+  /* sal = 0 is refused even with saliency_min = 0: L_q / (L_q - L_d) is inf */
+  if (sal < cfg->saliency_min - 1e-6f || !(sal > 0.0f)) {
     return report(issue, FW_ERR_SALIENCY, "L_q_H", cfg->L_q_H,
                   cfg->L_d_H * (1.0f + cfg->saliency_min), cfg->L_d_H * 10.0f);
   }

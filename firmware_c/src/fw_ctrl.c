@@ -65,6 +65,21 @@ static void latch_fault(fw_ctrl_t *c, fw_fault_t code) {
   }
 }
 
+/** Add d (|d| <= pi) to the unwrapped position, kept as whole electrical
+ *  turns plus a remainder in [-pi, pi): a single float would lose the
+ *  increments once the position is large (ulp 0.06 rad at 1e6 rad). */
+static void pos_add(fw_ctrl_t *c, float d) {
+  float x = c->pos_unwrapped_e + d;
+  if (x >= FW_PI_F32) {
+    x -= FW_TWO_PI_F32;
+    c->pos_turns++;
+  } else if (x < -FW_PI_F32) {
+    x += FW_TWO_PI_F32;
+    c->pos_turns--;
+  }
+  c->pos_unwrapped_e = x;
+}
+
 static float lp_alpha(float f_Hz, float dt_s) {
   return 1.0f - expf(-FW_TWO_PI_F32 * f_Hz * dt_s);
 }
@@ -98,6 +113,7 @@ static void reset_dynamics(fw_ctrl_t *c) {
   c->inj_sign = 0.0f;
   c->err_f = 0.0f;
   c->accel_dist = 0.0f;
+  c->est_hold_s = 0.0f;
   c->pll_err_time_s = 0.0f;
   c->omega_f = 0.0f;
   c->theta_prev = c->pll.theta_rad;
@@ -130,6 +146,12 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   c->inv_n_inj = 1.0f / (float)c->n_inj;
   c->inv_adapt_err = 1.0f / cfg->sogi_adapt_err_rad;
   c->hf_min_A = cfg->hf_min_ratio * c->dt_s * cfg->u_inj_V / cfg->L_q_H;
+  /* references set under the old limits must obey the new ones */
+  c->speed_ref_radps_e =
+      fw_clampf(c->speed_ref_radps_e, -cfg->speed_max_radps_e, cfg->speed_max_radps_e);
+  c->i_q_ref_force_A = fw_clampf(c->i_q_ref_force_A, -cfg->i_max_A, cfg->i_max_A);
+  c->i_d_ref_A = fw_clampf(c->i_d_ref_A, -cfg->i_max_A, cfg->i_max_A);
+  pos_add(c, -c->pll.theta_rad); /* the estimate restarts from 0: keep the position */
   reset_dynamics(c);
 }
 
@@ -212,6 +234,7 @@ uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
     } else if (!ctrl->saliency_ok) {
       latch_fault(ctrl, FW_FAULT_SALIENCY_TOO_LOW); /* injection refused */
     } else {
+      pos_add(ctrl, -ctrl->pll.theta_rad); /* the estimate restarts from 0 */
       reset_dynamics(ctrl);
       ctrl->phase = FW_START_ALIGN;
     }
@@ -270,7 +293,10 @@ fw_status_t fw_set_extractor(fw_ctrl_t *ctrl, fw_extractor_t ex) {
   ctrl->cfg.extractor = (uint32_t)ex;
   sogi_set_k_both(ctrl, ex == FW_EXTRACTOR_SOGI_ADAPTIVE ? ctrl->cfg.sogi_k_adapt_max
                                                          : ctrl->cfg.sogi_k);
-  /* demodulated history belongs to the old path: restart the averages */
+  /* demodulated history belongs to the old path: restart the averages, and
+   * hold the PLL and the adaptation until the new path has settled (a change
+   * of k moves the SOGI output for a while) */
+  ctrl->est_hold_s = FW_EST_SETTLE_S;
   ctrl->ring_fill = 0u;
   ctrl->ring_idx = 0u;
   ctrl->sum_ed = ctrl->sum_eq = ctrl->sum_ia = ctrl->sum_ib = 0.0f;
@@ -372,6 +398,10 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_
     eps = (E_q / E_d) * c->eps_gain;
     eps = fw_clampf(eps, -1.0f, 1.0f);
   }
+  if (c->est_hold_s > 0.0f) { /* extractor just switched */
+    c->est_hold_s -= c->dt_s;
+    eps = 0.0f;
+  }
   /* Low-passed *signed* error: its magnitude is the tracking error. The
    * per-sample eps carries ~0.04 rad of sensor noise, so a filtered |eps|
    * would measure the noise, not the lock. */
@@ -411,7 +441,7 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_
     c->accel_dist += c->dt_s * cfg->pll_kd * c->pll_scale * c->pll_scale * c->pll_scale * eps;
   }
   float dth = fw_wrap_pi_f32(c->pll.theta_rad - c->theta_prev);
-  c->pos_unwrapped_e += dth;
+  pos_add(c, dth);
   c->theta_prev = c->pll.theta_rad;
   c->omega_f += c->spd_alpha * (c->pll.w_i_radps - c->omega_f);
 
@@ -483,7 +513,7 @@ static float polarity_step(fw_ctrl_t *c, float i_d) {
       c->polarity_flipped = 1u;
       fw_pll_reset_f32(&c->pll, c->pll.theta_rad + FW_PI_F32, 0.0f);
       c->theta_prev = c->pll.theta_rad;
-      c->pos_unwrapped_e += FW_PI_F32;
+      pos_add(c, FW_PI_F32);
     } else {
       latch_fault(c, FW_FAULT_POLARITY_UNDETERMINED);
       return 0.0f;
@@ -758,9 +788,10 @@ void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
   snap->extractor = (uint8_t)cfg->extractor;
   snap->mode = (uint8_t)ctrl->mode;
   snap->polarity_flipped = ctrl->polarity_flipped;
-  snap->pos_hat_m = ctrl->pos_unwrapped_e * cfg->pole_pitch_m / FW_PI_F32;
+  const float pos_e = (float)ctrl->pos_turns * FW_TWO_PI_F32 + ctrl->pos_unwrapped_e;
+  snap->pos_hat_m = pos_e * cfg->pole_pitch_m / FW_PI_F32;
   snap->speed_hat_mps = fw_units_radps_e_to_mps(cfg, ctrl->pll.w_i_radps);
-  snap->pos_hat_mech_rad = ctrl->pos_unwrapped_e / cfg->pole_pairs;
+  snap->pos_hat_mech_rad = pos_e / cfg->pole_pairs;
   snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, ctrl->pll.w_i_radps);
   snap->sogi_k_eff = ctrl->sogi_a.k;
   snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;

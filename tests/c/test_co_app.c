@@ -265,6 +265,87 @@ static void test_telemetry_and_trace(void) {
   TT_CHECK(dec.frames_lost == 0);
 }
 
+static void rx_sdo_write(uint16_t idx, uint8_t sub, uint32_t v, uint8_t n) {
+  uint8_t req[8] = {(uint8_t)(0x23 | ((4 - n) << 2)), (uint8_t)idx, (uint8_t)(idx >> 8), sub,
+                    (uint8_t)v, (uint8_t)(v >> 8), (uint8_t)(v >> 16), (uint8_t)(v >> 24)};
+  rx((uint16_t)(0x600 + NID), 8, req);
+}
+
+/* Review: two controlwords received in the same control period must both
+ * be applied, in order (the second used to overwrite the first). */
+static void test_two_controlwords_in_one_step(void) {
+  setup();
+  rx_sdo_write(0x6040, 0, 0x06, 2); /* shutdown: -> READY TO SWITCH ON */
+  rx_sdo_write(0x6040, 0, 0x0F, 2); /* enable operation (3 + 4) */
+  step_n(1);
+  fw_cia402_state_t st = fw_state(fw_app_ctrl(&g_app));
+  TT_CHECK(st == FW_CIA402_OPERATION_ENABLED || st == FW_CIA402_FAULT);
+  TT_CHECK(st != FW_CIA402_SWITCH_ON_DISABLED);
+}
+
+/* Review: a fault reset while the supervisor heartbeat is still missing
+ * must not leave the drive enableable: the fault re-trips, without an
+ * EMCY 0x0000 / 0x8130 pair. */
+static void test_heartbeat_fault_retrips_while_lost(void) {
+  setup();
+  TT_CHECK(sdo_write(0x1016, 1, (1u << 16) | 100u, 4) == 0);
+  uint8_t nmt[2] = {0x01, 0x00};
+  rx(0, 2, nmt);
+  uint8_t st = 0x05;
+  rx(0x701, 1, &st);
+  step_n(2400 + 200);
+  TT_CHECK(fw_fault_code(fw_app_ctrl(&g_app)) == FW_FAULT_HEARTBEAT_LOST);
+  TT_CHECK(fw_app_counters(&g_app)->emcy == 1);
+  TT_CHECK(sdo_write(0x6040, 0, 0x80, 2) == 0); /* reset, heartbeat still lost */
+  step_n(10);
+  TT_CHECK(fw_fault_code(fw_app_ctrl(&g_app)) == FW_FAULT_HEARTBEAT_LOST);
+  TT_CHECK(fw_state(fw_app_ctrl(&g_app)) == FW_CIA402_FAULT);
+  TT_CHECK(fw_app_counters(&g_app)->emcy == 1);
+  /* heartbeat back: the reset clears it */
+  rx(0x701, 1, &st);
+  step_n(1);
+  TT_CHECK(sdo_write(0x6040, 0, 0x00, 2) == 0);
+  TT_CHECK(sdo_write(0x6040, 0, 0x80, 2) == 0);
+  step_n(2);
+  TT_CHECK(fw_fault_code(fw_app_ctrl(&g_app)) == FW_FAULT_NONE);
+  TT_CHECK(fw_app_counters(&g_app)->emcy == 2);
+}
+
+/* Review: the CANopen time base must not jump when the uint32 step counter
+ * wraps (after 49.7 h at 24 kHz): a jump reads as a heartbeat timeout. */
+static void test_time_base_survives_step_wrap(void) {
+  setup();
+  TT_CHECK(sdo_write(0x1016, 1, (1u << 16) | 100u, 4) == 0);
+  uint8_t nmt[2] = {0x01, 0x00};
+  rx(0, 2, nmt);
+  g_app.step = 0xFFFFFFFFu - 1800u; /* 75 ms before the counter wraps */
+  uint8_t st = 0x05;
+  for (int k = 0; k < 6; k++) {
+    rx(0x701, 1, &st);
+    step_n(1200); /* 50 ms */
+  }
+  TT_CHECK(fw_app_counters(&g_app)->hb_lost == 0);
+  TT_CHECK(fw_fault_code(fw_app_ctrl(&g_app)) == FW_FAULT_NONE);
+}
+
+/* Review: an NMT reset puts 0x1001 back to 0 while the drive is still in
+ * FAULT; the error register must show the latched fault again. */
+static void test_error_register_after_nmt_reset(void) {
+  setup();
+  fw_raise_fault(fw_app_ctrl(&g_app), FW_FAULT_EST_HF_LOW);
+  step_n(2);
+  TT_CHECK(sdo_read(0x1001, 0) == 0x81u);
+  uint8_t nmt[2] = {0x82, 0x00}; /* reset communication */
+  rx(0, 2, nmt);
+  step_n(2);
+  TT_CHECK(fw_fault_code(fw_app_ctrl(&g_app)) == FW_FAULT_EST_HF_LOW);
+  TT_CHECK(sdo_read(0x1001, 0) == 0x81u);
+  uint8_t nmt2[2] = {0x81, 0x00}; /* reset node */
+  rx(0, 2, nmt2);
+  step_n(2);
+  TT_CHECK(sdo_read(0x1001, 0) == 0x81u);
+}
+
 int main(void) {
   TT_RUN(test_init_and_identity);
   TT_RUN(test_cia402_walk_over_sdo);
@@ -272,5 +353,9 @@ int main(void) {
   TT_RUN(test_saliency_refusal_on_enable);
   TT_RUN(test_heartbeat_loss_faults_and_emcy);
   TT_RUN(test_telemetry_and_trace);
+  TT_RUN(test_two_controlwords_in_one_step);
+  TT_RUN(test_heartbeat_fault_retrips_while_lost);
+  TT_RUN(test_time_base_survives_step_wrap);
+  TT_RUN(test_error_register_after_nmt_reset);
   return TT_SUMMARY();
 }

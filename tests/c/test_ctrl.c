@@ -476,6 +476,158 @@ static void test_units_and_refs(void) {
   TT_CHECK(fw_ctrl_sizeof() == sizeof(fw_ctrl_t));
 }
 
+/* Review: the unwrapped position must not lose float32 precision as it
+ * grows (|x| ~ 1e5 rad el. here: ulp 0.008 rad, about 1 % of a step). The
+ * estimate is spun at a fixed speed with the PLL gains at zero and checked
+ * against the increments of theta_hat summed in double. */
+static void test_pos_unwrapped_precision(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  cfg.pll_kp = cfg.pll_ki = cfg.pll_kd = 0.0f;
+  cfg.pll_accel_per_A = 0.0f;
+  cfg.hf_min_ratio = 0.0f;   /* no motor connected: no HF-loss trip */
+  cfg.align_time_s = 5.0f;   /* stay in ALIGN, where the PLL free-runs */
+  cfg.speed_max_radps_e = 20000.0f;
+  fw_ctrl_t c;
+  TT_CHECK(fw_init(&c, &cfg) == FW_OK);
+  enable(&c);
+  fw_inputs_t in = {{0.0f, 0.0f, 0.0f}, 300.0f};
+  fw_outputs_t out;
+  fw_step(&c, &in, &out);
+  c.pll.w_i_radps = c.pll.w_hat_radps = 19999.0f;
+  double ref = 0.0;
+  float prev = c.pll.theta_rad;
+  fw_snapshot_t s0;
+  fw_get_snapshot(&c, &s0);
+  for (int k = 0; k < 110000; k++) {
+    fw_step(&c, &in, &out);
+    ref += wrap((double)c.pll.theta_rad - (double)prev);
+    prev = c.pll.theta_rad;
+  }
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
+  fw_snapshot_t s;
+  fw_get_snapshot(&c, &s);
+  TT_CHECK(ref > 8.0e4);
+  double pos_e = ((double)s.pos_hat_mech_rad - (double)s0.pos_hat_mech_rad) * cfg.pole_pairs;
+  TT_CHECK_NEAR(pos_e, ref, 0.02);
+}
+
+/* Review: re-enabling restarts the PLL from 0; the restart must not add the
+ * old angle to the position a second time (locked mover: position stays). */
+static void test_pos_continuous_over_reenable(void) {
+  fw_ctrl_t c;
+  plant_t p;
+  fw_outputs_t out;
+  run_to_operation(&c, &p, &out);
+  TT_CHECK(c.phase == FW_START_RUN);
+  fw_snapshot_t s1, s2;
+  fw_get_snapshot(&c, &s1);
+  fw_controlword(&c, FW_CW_SHUTDOWN); /* power off ... */
+  for (int k = 0; k < 24; k++) {
+    loop_step(&c, &p, &out);
+  }
+  fw_controlword(&c, FW_CW_ENABLE_OPERATION); /* ... and on again */
+  for (int k = 0; k < (int)(0.2 * 24000); k++) {
+    loop_step(&c, &p, &out);
+  }
+  TT_CHECK(c.phase == FW_START_RUN);
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
+  fw_get_snapshot(&c, &s2);
+  TT_CHECK_NEAR(s2.pos_hat_mech_rad * 4.0, s1.pos_hat_mech_rad * 4.0, 0.05);
+}
+
+/* Review: L_q = L_d passes the check when saliency_min = 0 (allowed range),
+ * and L_q / (L_q - L_d) = inf then feeds NaN / inf into the PLL. */
+static void test_zero_saliency_refused(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  cfg.saliency_min = 0.0f;
+  cfg.L_q_H = cfg.L_d_H;
+  fw_config_issue_t iss;
+  TT_CHECK(fw_config_check(&cfg, &iss) == FW_ERR_SALIENCY);
+  fw_ctrl_t c;
+  fw_init(&c, &cfg);
+  enable(&c);
+  plant_t p;
+  plant_init(&p, 0.0, 0.0);
+  p.Lq = p.Ld0;
+  fw_outputs_t out;
+  for (int k = 0; k < 480; k++) {
+    loop_step(&c, &p, &out);
+  }
+  TT_CHECK(fw_isfinite_f32(c.err_f) && fw_isfinite_f32(c.pll.theta_rad) &&
+           fw_isfinite_f32(c.pll.w_i_radps) && fw_isfinite_f32(c.pll.kp));
+}
+
+/* Review: references set under the old limits must obey a new, smaller
+ * i_max_A / speed_max_radps_e (i_d and the FORCE i_q go to the current loop
+ * unclamped). */
+static void test_refs_clamped_on_config_change(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  fw_ctrl_t c;
+  fw_init(&c, &cfg);
+  TT_CHECK(fw_set_iq_ref(&c, 15.0f) == FW_OK);
+  TT_CHECK(fw_set_id_ref(&c, -15.0f) == FW_OK);
+  TT_CHECK(fw_set_speed_ref(&c, 1400.0f) == FW_OK);
+  fw_config_t small = cfg;
+  small.i_max_A = 5.0f;
+  small.speed_max_radps_e = 1000.0f;
+  fw_config_issue_t iss;
+  TT_CHECK(fw_set_config(&c, &small, &iss) == FW_OK);
+  TT_CHECK(c.i_q_ref_force_A <= 5.0f && c.i_d_ref_A >= -5.0f);
+  TT_CHECK(c.speed_ref_radps_e <= 1000.0f);
+  /* in the loop: FORCE mode at a known angle */
+  fw_set_mode(&c, FW_MODE_FORCE);
+  plant_t p;
+  plant_init(&p, 0.4, 0.1 * 0.012);
+  fw_outputs_t out;
+  enable(&c);
+  for (int k = 0; k < (int)(0.2 * 24000); k++) {
+    loop_step(&c, &p, &out);
+  }
+  TT_CHECK(c.phase == FW_START_RUN);
+  TT_CHECK(fabsf(c.snap.i_dq_ref_A[0]) <= 5.0f && fabsf(c.snap.i_dq_ref_A[1]) <= 5.0f);
+}
+
+/* Review: switching the extractor in RUN changes the SOGI gain (here 0.5 ->
+ * 0.8), whose output needs about a millisecond to settle; the PLL must hold
+ * meanwhile, as after a start, instead of integrating the transient (eps
+ * pinned at -1 for several samples). */
+static void test_extractor_switch_in_run(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  cfg.extractor = (uint32_t)FW_EXTRACTOR_PSEUDO;
+  fw_ctrl_t c;
+  fw_init(&c, &cfg);
+  fw_set_mode(&c, FW_MODE_FORCE);
+  plant_t p;
+  plant_init(&p, 0.4, 0.1 * 0.012);
+  fw_outputs_t out;
+  enable(&c);
+  for (int k = 0; k < (int)(0.2 * 24000); k++) {
+    loop_step(&c, &p, &out);
+  }
+  fw_set_iq_ref(&c, 3.0f);
+  for (int k = 0; k < (int)(0.3 * 24000); k++) {
+    loop_step(&c, &p, &out);
+  }
+  TT_CHECK(c.phase == FW_START_RUN);
+  TT_CHECK(fabs(wrap(c.pll.theta_rad - p.theta)) < 0.01);
+  TT_CHECK(fw_set_extractor(&c, FW_EXTRACTOR_SOGI_ADAPTIVE) == FW_OK);
+  double emax = 0.0, eps_max = 0.0;
+  for (int k = 0; k < (int)(0.1 * 24000); k++) {
+    loop_step(&c, &p, &out);
+    double e = fabs(wrap(c.pll.theta_rad - p.theta));
+    emax = e > emax ? e : emax;
+    double ae = fabs(c.snap.pll_err_rad);
+    eps_max = ae > eps_max ? ae : eps_max;
+  }
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
+  TT_CHECK(eps_max < 0.5);
+  TT_CHECK(emax < 0.015);
+}
+
 int main(void) {
   TT_RUN(test_demod_pseudo);
   TT_RUN(test_demod_sogi);
@@ -497,5 +649,10 @@ int main(void) {
   TT_RUN(test_fault_pll_error);
   TT_RUN(test_external_fault_and_quick_stop);
   TT_RUN(test_units_and_refs);
+  TT_RUN(test_pos_unwrapped_precision);
+  TT_RUN(test_pos_continuous_over_reenable);
+  TT_RUN(test_zero_saliency_refused);
+  TT_RUN(test_refs_clamped_on_config_change);
+  TT_RUN(test_extractor_switch_in_run);
   return TT_SUMMARY();
 }

@@ -58,9 +58,13 @@ uint8_t fw_app_error_register(uint16_t code) {
   return reg;
 }
 
-static uint32_t fw_app_now_us(const fw_app_t *app) {
-  uint64_t f = app->f_pwm_Hz > 0u ? app->f_pwm_Hz : 1u;
-  return (uint32_t)(((uint64_t)app->step * 1000000u) / f);
+/* Time base: floor(steps * 1e6 / f_pwm) us modulo 2^32, accumulated so that
+ * it stays continuous when the uint32 step counter wraps (49.7 h at 24 kHz). */
+static void fw_app_advance_time(fw_app_t *app) {
+  uint32_t f = app->f_pwm_Hz > 0u ? app->f_pwm_Hz : 1u;
+  app->us_rem += 1000000u;
+  app->now_us += app->us_rem / f;
+  app->us_rem %= f;
 }
 
 static const co_od_cfg_link_t *fw_app_cfg_link(uint16_t index, uint8_t sub) {
@@ -165,6 +169,9 @@ static co_abort_t fw_app_on_write(void *ctx, uint16_t index, uint8_t sub, const 
   }
   uint32_t v = co_le_get(data, len > 4u ? 4u : len);
   if (index == 0x6040u) {
+    if (app->cw_pending) {
+      (void)fw_controlword(&app->ctrl, app->cw); /* keep every command, in order */
+    }
     app->cw = (uint16_t)v;
     app->cw_pending = 1u;
     return CO_ABORT_NONE;
@@ -229,6 +236,7 @@ static void fw_app_on_event(void *ctx, co_event_t ev, uint32_t arg) {
   case CO_EV_RESET_COMM:
     /* the OD went back to its defaults: show the core's real state again */
     fw_app_sync_static_od(app);
+    co_node_set_u32(&app->node, CO_OD_1001_00, fw_app_error_register(app->last_fault));
     break;
   default:
     break;
@@ -437,9 +445,18 @@ void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
     }
     return;
   }
-  uint32_t now = fw_app_now_us(app);
+  uint32_t now = app->now_us;
   co_node_process_rx(&app->node, now);
   fw_app_apply_commands(app);
+  /* a fault reset does not clear a heartbeat that is still missing */
+  if (fw_fault_code(&app->ctrl) == FW_FAULT_NONE) {
+    for (uint32_t k = 0u; k < CO_HB_CONSUMERS; k++) {
+      if (app->node.hb[k].lost) {
+        fw_raise_fault(&app->ctrl, FW_FAULT_HEARTBEAT_LOST);
+        break;
+      }
+    }
+  }
   fw_step(&app->ctrl, in, out);
   fw_get_snapshot(&app->ctrl, &snap);
   fw_app_update_od(app, &snap);
@@ -447,4 +464,5 @@ void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
   fw_app_serial(app, &snap);
   co_node_process_tx(&app->node, now);
   app->step++;
+  fw_app_advance_time(app);
 }

@@ -273,6 +273,7 @@ typedef struct {
   float sum_ed, sum_eq, sum_ia, sum_ib;
   uint32_t ring_idx, ring_fill;
   float err_f;            /**< low-passed signed PLL error */
+  float est_hold_s;       /**< estimator holds while > 0 (after an extractor switch) */
   float accel_dist;       /**< estimated disturbance acceleration (el. rad/s^2) */
   float pll_scale;        /**< present observer bandwidth scale */
   float pll_err_time_s;
@@ -287,7 +288,8 @@ typedef struct {
   float err_alpha;        /**< |PLL error| filter coefficient */
   float inj_sign;         /**< injection sign commanded this step */
   float qs_still_s;       /**< time at standstill during quick stop */
-  float pos_unwrapped_e;  /**< unwrapped electrical angle estimate */
+  float pos_unwrapped_e;  /**< unwrapped electrical angle estimate: remainder in [-pi, pi) ... */
+  int32_t pos_turns;      /**< ... plus this many whole electrical turns (2 pi) */
   float theta_prev;
   float theta_k;          /**< estimate at this step's sampling instant */
   /* start-up */
@@ -360,7 +362,8 @@ fw_status_t fw_set_speed_ref(fw_ctrl_t *ctrl, float omega_ref_radps_e);
 fw_status_t fw_set_iq_ref(fw_ctrl_t *ctrl, float i_q_ref_A);
 /** d-axis current reference (clamped to i_max_A), default 0. */
 fw_status_t fw_set_id_ref(fw_ctrl_t *ctrl, float i_d_ref_A);
-/** Switch extractor at run time (state of the new path is reset). */
+/** Switch extractor at run time: the one-period averages restart and the
+ *  PLL and the adaptation hold for 1 ms while the new path settles. */
 fw_status_t fw_set_extractor(fw_ctrl_t *ctrl, fw_extractor_t ex);
 
 /** Raise an external fault (e.g. heartbeat lost). Latches like any other. */

@@ -68,6 +68,8 @@ typedef struct {
   uint32_t uart_head, uart_tail;
   uint32_t step;       /**< control periods since init */
   uint32_t f_pwm_Hz;   /**< integer PWM rate for the time base */
+  uint32_t now_us;     /**< time base: floor(steps * 1e6 / f_pwm_Hz), modulo 2^32 */
+  uint32_t us_rem;     /**< remainder of that division (< f_pwm_Hz) */
   int32_t mode_applied; /**< fw_mode_t last accepted by fw_set_mode, -1 none */
   uint8_t cw_pending;
   uint16_t cw;
