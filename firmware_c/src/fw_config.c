@@ -34,7 +34,7 @@ static const fw_config_field_t k_fields[] = {
     F32(spd_kp_A_per_radps, "A s/rad", 0.0f, 100.0f),
     F32(spd_ki_A_per_rad, "A/rad", 0.0f, 1e4f),
     F32(spd_filter_Hz, "Hz", 1.0f, 2000.0f),
-    F32(u_inj_V, "V", 0.0f, 400.0f),
+    F32(u_inj_V, "V", 1.0f, 400.0f), /* 0 would leave start-up in ALIGN for ever */
     F32(f_inj_Hz, "Hz", 100.0f, 20000.0f),
     U32(extractor, "", 0.0f, 2.0f),
     F32(sogi_k, "", FW_SOGI_K_MIN, FW_SOGI_K_MAX),

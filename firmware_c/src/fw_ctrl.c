@@ -52,16 +52,36 @@ static void hist_push(fw_ctrl_t *c, fw_fault_t code) {
   }
 }
 
+/**
+ * Fault reaction (CiA 402 FAULT REACTION ACTIVE). A communication fault
+ * (supervisor heartbeat lost) leaves the power stage and the estimator
+ * healthy: the drive first brakes under control like a quick stop, then
+ * switches off. Every other fault (electrical, input, estimator) switches the
+ * power stage off at once: a sensorless drive cannot brake safely once its
+ * measurements or its estimate are in doubt.
+ */
+static bool fault_brakes_first(fw_fault_t code) { return code == FW_FAULT_HEARTBEAT_LOST; }
+
 static void latch_fault(fw_ctrl_t *c, fw_fault_t code) {
   if (code == FW_FAULT_NONE) {
     return;
   }
   if (c->fault == FW_FAULT_NONE) {
     c->fault = code; /* the first cause is the one reported */
-    hist_push(c, code);
   }
-  if (c->sm.state != FW_CIA402_FAULT) {
+  if (c->fault_hist_count == 0u || c->fault_hist[0] != (uint16_t)code) {
+    hist_push(c, code); /* every new cause, once while it repeats */
+  }
+  if (!fault_brakes_first(code)) {
+    c->fault_hard = 1u;
+  }
+  if (c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE && c->fault_hard) {
+    fw_cia402_fault_reaction_done(&c->sm); /* a hard fault ends any braking */
+  } else if (c->sm.state != FW_CIA402_FAULT &&
+             c->sm.state != FW_CIA402_FAULT_REACTION_ACTIVE) {
     fw_cia402_fault(&c->sm);
+    c->qs_time_s = 0.0f; /* braking (if any) is timed like a quick stop */
+    c->qs_still_s = 0.0f;
   }
 }
 
@@ -226,6 +246,7 @@ uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
   fw_cia402_state_t after = fw_cia402_controlword(&ctrl->sm, cw);
   if (before == FW_CIA402_FAULT && after != FW_CIA402_FAULT) {
     ctrl->fault = FW_FAULT_NONE; /* fault reset: history is kept */
+    ctrl->fault_hard = 0u;
   }
   if (after == FW_CIA402_OPERATION_ENABLED && before != FW_CIA402_OPERATION_ENABLED &&
       before != FW_CIA402_QUICK_STOP_ACTIVE) {
@@ -637,12 +658,16 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   }
   fw_vec2_f32_t i_ab = fw_clarke_f32(safe.i_abc_A[0], safe.i_abc_A[1], safe.i_abc_A[2]);
 
+  /* Fault reaction: brake under control first, or switch off now (latch_fault). */
+  bool braking = false;
   if (c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE) {
-    /* reaction: switches off now (a sensorless drive cannot brake safely
-     * once the estimate is in doubt), then FAULT */
-    fw_cia402_fault_reaction_done(&c->sm);
+    if (!c->fault_hard && c->phase == FW_START_RUN) {
+      braking = true;
+    } else {
+      fw_cia402_fault_reaction_done(&c->sm);
+    }
   }
-  if (!fw_cia402_power_enabled(c->sm.state) || c->phase == FW_START_IDLE) {
+  if (!(fw_cia402_power_enabled(c->sm.state) || braking) || c->phase == FW_START_IDLE) {
     c->phase = FW_START_IDLE;
     memset(c->snap.i_dq_A, 0, sizeof(c->snap.i_dq_A));
     memset(c->snap.u_dq_V, 0, sizeof(c->snap.u_dq_V));
@@ -652,7 +677,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   }
 
   c->phase_time_s += dt;
-  bool quick_stop = c->sm.state == FW_CIA402_QUICK_STOP_ACTIVE;
+  bool quick_stop = c->sm.state == FW_CIA402_QUICK_STOP_ACTIVE || braking;
 
   /* ---- estimator and start-up ---- */
   fw_vec2_f32_t i_f_ab = i_ab;
@@ -683,7 +708,8 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     c->pol_k = 0u;
     c->pol_sum_pos = c->pol_sum_neg = 0.0f;
   }
-  if (!fw_cia402_power_enabled(c->sm.state)) { /* a fault was latched above */
+  braking = braking && c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE;
+  if (!(fw_cia402_power_enabled(c->sm.state) || braking)) { /* a fault was latched above */
     fill_snapshot_common(c, &safe, i_ab, out);
     return;
   }
@@ -705,7 +731,11 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
                  c->phase != FW_START_RUN;
     c->qs_still_s = still ? c->qs_still_s + dt : 0.0f;
     if (c->qs_still_s >= FW_QS_STILL_TIME_S || c->qs_time_s >= cfg->quick_stop_time_s) {
-      fw_cia402_quick_stop_done(&c->sm);
+      if (braking) {
+        fw_cia402_fault_reaction_done(&c->sm); /* stopped: PWM off, FAULT */
+      } else {
+        fw_cia402_quick_stop_done(&c->sm);
+      }
       c->phase = FW_START_IDLE;
       fill_snapshot_common(c, &safe, i_ab, out);
       return;

@@ -447,12 +447,39 @@ static void test_external_fault_and_quick_stop(void) {
   TT_CHECK(fw_state(&c) == FW_CIA402_SWITCH_ON_DISABLED);
   TT_CHECK(out.pwm_enable == 0u);
 
+  /* Heartbeat lost: controlled stop first (FAULT REACTION ACTIVE with the power
+   * stage on, i_q to zero in force mode), then PWM off and FAULT. */
   run_to_operation(&c, &p, &out);
   fw_raise_fault(&c, FW_FAULT_HEARTBEAT_LOST);
-  loop_step(&c, &p, &out);
+  TT_CHECK(fw_state(&c) == FW_CIA402_FAULT_REACTION_ACTIVE);
+  int k_on = 0;
+  for (int k = 0; k < 24000 && fw_state(&c) == FW_CIA402_FAULT_REACTION_ACTIVE; k++) {
+    loop_step(&c, &p, &out);
+    k_on += out.pwm_enable;
+  }
   TT_CHECK(fw_state(&c) == FW_CIA402_FAULT);
   TT_CHECK(out.pwm_enable == 0u);
   TT_CHECK(fw_fault_code(&c) == FW_FAULT_HEARTBEAT_LOST);
+  TT_CHECK(k_on >= (int)(0.019 * 24000));            /* braked ~20 ms ... */
+  TT_CHECK(k_on <= (int)(0.5 * 24000));              /* ... within quick_stop_time_s */
+  TT_CHECK((fw_statusword(&c) & 0x004Fu) == 0x0008u); /* FAULT */
+
+  /* A hard fault during that braking switches off at once. */
+  fw_controlword(&c, 0x0000u);
+  fw_controlword(&c, FW_CW_FAULT_RESET);
+  run_to_operation(&c, &p, &out);
+  fw_raise_fault(&c, FW_FAULT_HEARTBEAT_LOST);
+  loop_step(&c, &p, &out);
+  TT_CHECK(out.pwm_enable == 1u && fw_state(&c) == FW_CIA402_FAULT_REACTION_ACTIVE);
+  fw_inputs_t in;
+  plant_sample(&p, &in);
+  in.i_abc_A[0] = 30.0f;
+  fw_step(&c, &in, &out);
+  TT_CHECK(out.pwm_enable == 0u);
+  TT_CHECK(fw_state(&c) == FW_CIA402_FAULT);
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_HEARTBEAT_LOST); /* the first cause is reported */
+  uint16_t hist[FW_FAULT_HISTORY_LEN];
+  TT_CHECK(fw_fault_history(&c, hist, 2u) == 2u && hist[0] == (uint16_t)FW_FAULT_OVERCURRENT);
 }
 
 static void test_units_and_refs(void) {

@@ -129,7 +129,7 @@ const co_od_entry_t co_od_table[CO_OD_COUNT] = {
     {0x2003u, 0x02u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 430u, 0, 0, 0, 0.05000000074505806f, 4.0f, 0.5f, 0, "k min"},
     {0x2003u, 0x03u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 434u, 0, 0, 0, 0.0010000000474974513f, 1.0f, 0.019999999552965164f, 0, "Error at k max"},
     {0x2010u, 0x00u, CO_TYPE_U8, CO_ACC_R | CO_ACC_CONST, 0u, 1u, 438u, INT64_C(0), INT64_C(255), INT64_C(2), 0.0f, 0.0f, 0.0f, 0, "Highest sub-index supported"},
-    {0x2010u, 0x01u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 439u, 0, 0, 0, 0.0f, 400.0f, 50.0f, 0, "Amplitude"},
+    {0x2010u, 0x01u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 439u, 0, 0, 0, 1.0f, 400.0f, 50.0f, 0, "Amplitude"},
     {0x2010u, 0x02u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 443u, 0, 0, 0, 100.0f, 20000.0f, 3000.0f, 0, "Frequency"},
     {0x2011u, 0x00u, CO_TYPE_U8, CO_ACC_R | CO_ACC_CONST, 0u, 1u, 447u, INT64_C(0), INT64_C(255), INT64_C(5), 0.0f, 0.0f, 0.0f, 0, "Highest sub-index supported"},
     {0x2011u, 0x01u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 448u, 0, 0, 0, 0.0f, 10000.0f, 86.5999984741211f, 0, "kp"},

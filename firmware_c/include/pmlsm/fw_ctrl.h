@@ -302,6 +302,7 @@ typedef struct {
   float qs_time_s;
   /* faults */
   fw_fault_t fault;
+  uint8_t fault_hard;     /**< a latched fault needs the power stage off at once */
   uint16_t fault_hist[FW_FAULT_HISTORY_LEN];
   uint32_t fault_hist_count;
   /* last signals for the snapshot */
