@@ -1,33 +1,51 @@
 /**
  * @file main.c
- * @brief Minimal Cortex-M4F image: the control core driven through the blank
- *        port, as an interrupt handler would drive it. Exists to prove the
- *        core cross-compiles and links, and to measure its size.
+ * @brief Minimal Cortex-M4F image of the whole drive application: control
+ *        core + CANopen slave + serial telemetry (fw_app), driven through the
+ *        blank port as the interrupt handlers of a real board would drive it.
+ *        Exists to prove the firmware cross-compiles and links, and to measure
+ *        its size (text/data/bss printed by the build).
  */
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_app.h"
 #include "pmlsm/fw_port.h"
 
 struct fw_port {
   uint32_t unused;
 };
 
-static fw_ctrl_t g_ctrl; /* application-owned instance (not in the core) */
+static fw_app_t g_app; /* application-owned instance (the core has no globals) */
 static struct fw_port g_port;
 
-/** What the PWM/ADC interrupt does every period. */
+/** PWM/ADC interrupt: sample, one control step, latch duties, drain CAN/UART. */
 void pwm_adc_irq_handler(void);
 void pwm_adc_irq_handler(void) {
   fw_adc_inputs_t adc;
+  fw_inputs_t in;
   fw_outputs_t out;
   (void)fw_port_adc_read(&g_port, &adc);
-  fw_step_adc(&g_ctrl, &adc, &out);
+  const fw_config_t *cfg = fw_get_config(fw_app_ctrl(&g_app));
+  for (int i = 0; i < 3; i++) {
+    in.i_abc_A[i] = ((float)adc.i_abc_counts[i] - cfg->adc_offset_counts) * cfg->adc_A_per_count;
+  }
+  in.u_dc_V = (float)adc.u_dc_counts * cfg->adc_V_per_count;
+  fw_app_step(&g_app, &in, &out);
   fw_port_pwm_write(&g_port, out.duty_abc, out.pwm_enable != 0u);
+  fw_can_frame_t f;
+  while (fw_app_can_tx_pop(&g_app, &f) && fw_port_can_send(&g_port, &f)) {
+  }
+  uint8_t buf[64];
+  size_t n = fw_app_uart_read(&g_app, buf, sizeof buf);
+  (void)fw_port_uart_write(&g_port, buf, n);
 }
+
+/** CAN receive interrupt: copy and queue only (processed in the control step). */
+void can_rx_irq_handler(const fw_can_frame_t *frame);
+void can_rx_irq_handler(const fw_can_frame_t *frame) { (void)fw_app_can_rx(&g_app, frame); }
 
 int main(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  (void)fw_init(&g_ctrl, &cfg);
+  (void)fw_app_init(&g_app, &cfg, 1u);
   for (;;) {
     pwm_adc_irq_handler();
   }
