@@ -370,7 +370,7 @@ static void ring_push(fw_ctrl_t *c, float ed, float eq, float ia, float ib) {
  * Extraction, demodulation and PLL for one sample. Returns the fundamental
  * alpha/beta current (HF removed) for the current loop.
  */
-static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_f32_t sc) {
+static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab) {
   const fw_config_t *cfg = &c->cfg;
   fw_extractor_t ex = (fw_extractor_t)cfg->extractor;
 
@@ -402,7 +402,6 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, fw_sincos_
   if (ex != FW_EXTRACTOR_PSEUDO) {
     tau_s += c->sogi_gd_s;
   }
-  (void)sc;
   fw_sincos_f32_t sc_d = fw_sincos_f32(c->pll.theta_rad - c->pll.w_i_radps * tau_s);
   fw_vec2_f32_t dh_dq = fw_park_f32(dh, sc_d);
   /* Voltage applied over [k-1, k] was commanded at k-2. sign_hist is shifted
@@ -683,12 +682,12 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   fw_vec2_f32_t i_f_ab = i_ab;
   float u_d_pulse = 0.0f;
   bool pulses = c->phase == FW_START_POLARITY;
-  /* theta_hat at the sampling instant: for demodulation, the current Park
-   * and (advanced) the output transform */
+  /* theta_hat at the sampling instant: for the current Park and (advanced)
+   * the output transform; the demodulation uses its own delayed frame */
   const float theta_k = c->theta_k;
   const fw_sincos_f32_t sc = fw_sincos_f32(theta_k);
   if (!pulses) {
-    i_f_ab = estimator_step(c, i_ab, sc);
+    i_f_ab = estimator_step(c, i_ab);
   }
   fw_vec2_f32_t i_dq = fw_park_f32(pulses ? i_ab : i_f_ab, sc);
   if (pulses) {

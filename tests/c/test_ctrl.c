@@ -298,16 +298,21 @@ static void test_invalid_config_refused(void) {
 }
 
 /* Drive to RUN at a known angle, then apply a bad input and check the fault. */
+static void run_to_operation_cfg(fw_ctrl_t *c, plant_t *p, fw_outputs_t *out,
+                                 const fw_config_t *cfg, double theta, double t_s) {
+  fw_init(c, cfg);
+  fw_set_mode(c, FW_MODE_FORCE);
+  plant_init(p, theta, 0.1 * 0.012);
+  enable(c);
+  for (int k = 0; k < (int)(t_s * 24000); k++) {
+    loop_step(c, p, out);
+  }
+}
+
 static void run_to_operation(fw_ctrl_t *c, plant_t *p, fw_outputs_t *out) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  fw_init(c, &cfg);
-  fw_set_mode(c, FW_MODE_FORCE);
-  plant_init(p, 0.4, 0.1 * 0.012);
-  enable(c);
-  for (int k = 0; k < (int)(0.2 * 24000); k++) {
-    loop_step(c, p, out);
-  }
+  run_to_operation_cfg(c, p, out, &cfg, 0.4, 0.2);
 }
 
 static void expect_fault_from_input(void (*poison)(fw_inputs_t *), fw_fault_t code) {
@@ -409,15 +414,9 @@ static void test_fault_pll_error(void) {
   cfg.pll_ki = 0.0f;
   cfg.pll_kd = 0.0f;
   fw_ctrl_t c;
-  fw_init(&c, &cfg);
-  fw_set_mode(&c, FW_MODE_FORCE);
   plant_t p;
-  plant_init(&p, 0.0, 0.1 * 0.012);
   fw_outputs_t out;
-  enable(&c);
-  for (int k = 0; k < (int)(0.12 * 24000); k++) {
-    loop_step(&c, &p, &out);
-  }
+  run_to_operation_cfg(&c, &p, &out, &cfg, 0.0, 0.12);
   TT_CHECK(c.phase == FW_START_RUN);
   TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
   p.theta = 0.7;
@@ -626,15 +625,9 @@ static void test_extractor_switch_in_run(void) {
   fw_config_default(&cfg);
   cfg.extractor = (uint32_t)FW_EXTRACTOR_PSEUDO;
   fw_ctrl_t c;
-  fw_init(&c, &cfg);
-  fw_set_mode(&c, FW_MODE_FORCE);
   plant_t p;
-  plant_init(&p, 0.4, 0.1 * 0.012);
   fw_outputs_t out;
-  enable(&c);
-  for (int k = 0; k < (int)(0.2 * 24000); k++) {
-    loop_step(&c, &p, &out);
-  }
+  run_to_operation_cfg(&c, &p, &out, &cfg, 0.4, 0.2);
   fw_set_iq_ref(&c, 3.0f);
   for (int k = 0; k < (int)(0.3 * 24000); k++) {
     loop_step(&c, &p, &out);
