@@ -37,6 +37,12 @@ FW_CONFIG_FIELDS: list[tuple[str, type]] = [
     ("saliency_min", _f), ("hf_min_ratio", _f), ("pll_err_max_rad", _f),
     ("pll_err_time_s", _f), ("quick_stop_time_s", _f), ("adc_A_per_count", _f),
     ("adc_offset_counts", _f), ("adc_V_per_count", _f), ("adc_max_count", _u32),
+    ("v_max_mps", _f), ("pos_limit_min_m", _f), ("pos_limit_max_m", _f),
+    ("follow_err_mps", _f), ("follow_err_time_s", _f), ("i_rated_A", _f), ("i2t_time_s", _f),
+    ("quick_stop_option", _u32), ("fault_reaction_option", _u32), ("fault_brake_time_s", _f),
+    ("mon_angle_max_rad", _f), ("mon_detect_time_s", _f), ("mon_sal_tol", _f),
+    ("mon_bemf_max_rad", _f), ("mon_bemf_min_V", _f), ("i_sum_max_A", _f),
+    ("i_offset_max_A", _f), ("start_speed_max_mps", _f),
 ]
 
 

@@ -60,6 +60,24 @@ static const fw_config_field_t k_fields[] = {
     F32(adc_offset_counts, "", 0.0f, 65535.0f),
     F32(adc_V_per_count, "V", 1e-6f, 100.0f),
     U32(adc_max_count, "", 255.0f, 65535.0f),
+    F32(v_max_mps, "m/s", 1e-3f, 100.0f),
+    F32(pos_limit_min_m, "m", -1e4f, 1e4f),
+    F32(pos_limit_max_m, "m", -1e4f, 1e4f),
+    F32(follow_err_mps, "m/s", 1e-3f, 100.0f),
+    F32(follow_err_time_s, "s", 1e-3f, 10.0f),
+    F32(i_rated_A, "A", 0.01f, 400.0f),
+    F32(i2t_time_s, "s", 0.01f, 1000.0f),
+    U32(quick_stop_option, "", 0.0f, 2.0f),
+    U32(fault_reaction_option, "", 0.0f, 2.0f),
+    F32(fault_brake_time_s, "s", 0.0f, 1.0f),
+    F32(mon_angle_max_rad, "rad", 0.05f, 1.5f),
+    F32(mon_detect_time_s, "s", 1e-3f, 0.1f),
+    F32(mon_sal_tol, "", 0.05f, 10.0f),
+    F32(mon_bemf_max_rad, "rad", 0.05f, 3.2f),
+    F32(mon_bemf_min_V, "V", 0.1f, 1000.0f),
+    F32(i_sum_max_A, "A", 1e-3f, 500.0f),
+    F32(i_offset_max_A, "A", 1e-3f, 500.0f),
+    F32(start_speed_max_mps, "m/s", 1e-3f, 100.0f),
 };
 
 #define K_NFIELDS (sizeof(k_fields) / sizeof(k_fields[0]))
@@ -115,6 +133,24 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->adc_offset_counts = 2048.0f;
   cfg->adc_V_per_count = 500.0f / 4095.0f;
   cfg->adc_max_count = 4095u;
+  cfg->v_max_mps = 3.0f;
+  cfg->pos_limit_min_m = 0.0f; /* min >= max: software limits off */
+  cfg->pos_limit_max_m = 0.0f;
+  cfg->follow_err_mps = 0.5f;
+  cfg->follow_err_time_s = 0.5f;
+  cfg->i_rated_A = 10.0f;
+  cfg->i2t_time_s = 2.0f;
+  cfg->quick_stop_option = (uint32_t)FW_REACT_QUICK_RAMP;
+  cfg->fault_reaction_option = (uint32_t)FW_REACT_QUICK_RAMP;
+  cfg->fault_brake_time_s = 0.08f; /* heartbeat loss: PWM off within consumer time + 80 ms */
+  cfg->mon_angle_max_rad = 0.5f;
+  cfg->mon_detect_time_s = 0.01f;
+  cfg->mon_sal_tol = 0.5f;
+  cfg->mon_bemf_max_rad = 0.6f;
+  cfg->mon_bemf_min_V = 5.0f;
+  cfg->i_sum_max_A = 1.0f;
+  cfg->i_offset_max_A = 1.0f;
+  cfg->start_speed_max_mps = 0.05f;
 }
 
 size_t fw_config_field_count(void) { return K_NFIELDS; }

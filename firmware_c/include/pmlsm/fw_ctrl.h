@@ -85,8 +85,29 @@ typedef enum {
   FW_FAULT_EST_HF_LOW = 0xFF01,         /**< HF response too small: loss of lock */
   FW_FAULT_EST_PLL_ERROR = 0xFF02,      /**< PLL error persistently large */
   FW_FAULT_SALIENCY_TOO_LOW = 0xFF03,   /**< |Lq-Ld|/Ld < saliency_min: refused */
-  FW_FAULT_POLARITY_UNDETERMINED = 0xFF04 /**< +/- pulse responses too alike */
+  FW_FAULT_POLARITY_UNDETERMINED = 0xFF04, /**< +/- pulse responses too alike */
+  /* linear-axis protections */
+  FW_FAULT_I2T = 0x2350,             /**< current-time integral above the i2t limit */
+  FW_FAULT_OVERSPEED = 0x8400,       /**< |estimated speed| > v_max_mps */
+  FW_FAULT_FOLLOWING_ERROR = 0x8611, /**< |speed ref - estimate| > window for too long */
+  FW_FAULT_POSITION_LIMIT = 0x8612,  /**< estimated position outside the software limits */
+  /* integrity monitor (fw_mon.h): the estimate or the measurements are not trustworthy */
+  FW_FAULT_CURRENT_SENSOR_SUM = 0xFF05,    /**< |i_a + i_b + i_c| too large: gain/offset/open sensor */
+  FW_FAULT_CURRENT_SENSOR_OFFSET = 0xFF06, /**< standstill offset (PWM off) above i_offset_max_A */
+  FW_FAULT_SALIENCY_MISMATCH = 0xFF07,     /**< measured saliency low or far from the configured one */
+  FW_FAULT_MOVING_AT_ENABLE = 0xFF08,      /**< mover faster than start_speed_max_mps at enable */
+  FW_FAULT_EST_HF_ANGLE = 0xFF09,          /**< HF response says |angle error| > mon_angle_max_rad */
+  FW_FAULT_EST_BEMF_MISMATCH = 0xFF0A,     /**< voltage-equation residual disagrees with the estimate */
+  FW_FAULT_EST_ACCEL_IMPLAUSIBLE = 0xFF0B, /**< observer needs more acceleration than thrust + load can give */
+  FW_FAULT_CURRENT_CONTROL = 0xFF0C        /**< current loop cannot follow (open phase, lost DC link) */
 } fw_fault_t;
+
+/** Reaction option codes (CiA 402 0x605A quick stop, 0x605E fault reaction). */
+typedef enum {
+  FW_REACT_SWITCH_OFF = 0, /**< PWM off at once (disable drive function) */
+  FW_REACT_RAMP = 1,       /**< brake under control, then PWM off (time-bounded) */
+  FW_REACT_QUICK_RAMP = 2  /**< same as RAMP with the quick-stop time bound */
+} fw_reaction_t;
 
 /** Result of configuration checks and setters. */
 typedef enum {
@@ -161,6 +182,26 @@ typedef struct {
   float adc_offset_counts;   /**< zero-current count (mid-scale) */
   float adc_V_per_count;     /**< DC-link volts per count */
   uint32_t adc_max_count;    /**< full scale, e.g. 4095 for 12 bit */
+  /* linear-axis protections (0x6080, 0x607D, 0x6065/0x6066, i2t) */
+  float v_max_mps;          /**< |estimated speed| above -> FW_FAULT_OVERSPEED */
+  float pos_limit_min_m;    /**< software limit on the estimated position (min >= max: off) */
+  float pos_limit_max_m;    /**< upper software limit */
+  float follow_err_mps;     /**< speed following-error window */
+  float follow_err_time_s;  /**< ... exceeded for longer than this -> FOLLOWING_ERROR */
+  float i_rated_A;          /**< continuous current for i2t (>= i_max_A: i2t off) */
+  float i2t_time_s;         /**< time at i_max_A from cold before FW_FAULT_I2T */
+  uint32_t quick_stop_option;     /**< fw_reaction_t for QUICK STOP (0x605A) */
+  uint32_t fault_reaction_option; /**< fw_reaction_t for heartbeat-type faults (0x605E) */
+  float fault_brake_time_s; /**< longest controlled braking after a fault, then PWM off */
+  /* integrity monitor (fw_mon.h) */
+  float mon_angle_max_rad;  /**< HF-derived |angle error| limit */
+  float mon_detect_time_s;  /**< a witness must exceed its limit this long to fault */
+  float mon_sal_tol;        /**< measured/configured saliency must be within 1 -+ tol */
+  float mon_bemf_max_rad;   /**< back-EMF residual angle limit */
+  float mon_bemf_min_V;     /**< back-EMF witness active above this |e| */
+  float i_sum_max_A;        /**< limit on the filtered |i_a + i_b + i_c| */
+  float i_offset_max_A;     /**< limit on each standstill offset */
+  float start_speed_max_mps;/**< refuse to enable above this mover speed */
 } fw_config_t;
 
 /** One configuration field, for validation messages, the OD and tools. */
