@@ -89,6 +89,8 @@ class FwSnapshot(C.Structure):
         ("u_dq_V", _f * 2), ("u_inj_V", _f), ("i_ab_A", _f * 2), ("i_h_ab_A", _f * 2),
         ("speed_ref_radps_e", _f), ("force_hat_N", _f), ("torque_hat_Nm", _f),
         ("u_dc_V", _f), ("duty_abc", _f * 3),
+        ("mon_angle_hf_rad", _f), ("mon_angle_bemf_rad", _f), ("mon_e_bemf_V", _f),
+        ("mon_i_sum_A", _f), ("sal_meas", _f), ("L_small_meas_H", _f), ("L_large_meas_H", _f),
     ]
 
     def as_dict(self) -> dict:

@@ -60,7 +60,14 @@ static void hist_push(fw_ctrl_t *c, fw_fault_t code) {
  * power stage off at once: a sensorless drive cannot brake safely once its
  * measurements or its estimate are in doubt.
  */
-static bool fault_brakes_first(fw_fault_t code) { return code == FW_FAULT_HEARTBEAT_LOST; }
+static bool fault_brakes_first(const fw_ctrl_t *c, fw_fault_t code) {
+  if (c->cfg.fault_reaction_option == (uint32_t)FW_REACT_SWITCH_OFF) {
+    return false; /* 0x605E = 0: switch off for every fault */
+  }
+  /* faults that leave the estimate and the measurements trustworthy */
+  return code == FW_FAULT_HEARTBEAT_LOST || code == FW_FAULT_POSITION_LIMIT ||
+         code == FW_FAULT_I2T;
+}
 
 static void latch_fault(fw_ctrl_t *c, fw_fault_t code) {
   if (code == FW_FAULT_NONE) {
@@ -72,7 +79,7 @@ static void latch_fault(fw_ctrl_t *c, fw_fault_t code) {
   if (c->fault_hist_count == 0u || c->fault_hist[0] != (uint16_t)code) {
     hist_push(c, code); /* every new cause, once while it repeats */
   }
-  if (!fault_brakes_first(code)) {
+  if (!fault_brakes_first(c, code)) {
     c->fault_hard = 1u;
   }
   if (c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE && c->fault_hard) {
@@ -143,6 +150,10 @@ static void reset_dynamics(fw_ctrl_t *c) {
   c->pol_base = c->pol_ext = c->pol_sum_pos = c->pol_sum_neg = 0.0f;
   c->qs_time_s = 0.0f;
   c->qs_still_s = 0.0f;
+  memset(c->sal_acc, 0, sizeof(c->sal_acc));
+  c->sal_k = 0u;
+  memset(c->u_dq_prev_V, 0, sizeof(c->u_dq_prev_V));
+  c->follow_time_s = 0.0f;
 }
 
 static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
@@ -166,6 +177,10 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   c->inv_n_inj = 1.0f / (float)c->n_inj;
   c->inv_adapt_err = 1.0f / cfg->sogi_adapt_err_rad;
   c->hf_min_A = cfg->hf_min_ratio * c->dt_s * cfg->u_inj_V / cfg->L_q_H;
+  c->w_vmax_radps = fw_units_mps_to_radps_e(cfg, cfg->v_max_mps);
+  c->w_follow_radps = fw_units_mps_to_radps_e(cfg, cfg->follow_err_mps);
+  c->e_start_max_V = fw_units_mps_to_radps_e(cfg, cfg->start_speed_max_mps) * cfg->psi_f_Wb;
+  fw_mon_init(&c->mon, cfg, c->dt_s);
   /* references set under the old limits must obey the new ones */
   c->speed_ref_radps_e =
       fw_clampf(c->speed_ref_radps_e, -cfg->speed_max_radps_e, cfg->speed_max_radps_e);
@@ -255,14 +270,23 @@ uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
     } else if (!ctrl->saliency_ok) {
       latch_fault(ctrl, FW_FAULT_SALIENCY_TOO_LOW); /* injection refused */
     } else {
-      pos_add(ctrl, -ctrl->pll.theta_rad); /* the estimate restarts from 0 */
-      reset_dynamics(ctrl);
-      ctrl->phase = FW_START_ALIGN;
+      fw_fault_t f = fw_mon_enable(&ctrl->mon); /* current-sensor offsets at standstill */
+      if (f != FW_FAULT_NONE) {
+        latch_fault(ctrl, f);
+      } else {
+        pos_add(ctrl, -ctrl->pll.theta_rad); /* the estimate restarts from 0 */
+        reset_dynamics(ctrl);
+        ctrl->phase = FW_START_ALIGN;
+      }
     }
   }
   if (after == FW_CIA402_QUICK_STOP_ACTIVE && before != FW_CIA402_QUICK_STOP_ACTIVE) {
     ctrl->qs_time_s = 0.0f;
     ctrl->qs_still_s = 0.0f;
+    if (ctrl->cfg.quick_stop_option == (uint32_t)FW_REACT_SWITCH_OFF) {
+      fw_cia402_quick_stop_done(&ctrl->sm); /* 0x605A = 0: disable drive at once */
+      ctrl->phase = FW_START_IDLE;
+    }
   }
   return fw_statusword(ctrl);
 }
@@ -421,6 +445,9 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab) {
   if (c->est_hold_s > 0.0f) { /* extractor just switched */
     c->est_hold_s -= c->dt_s;
     eps = 0.0f;
+  }
+  if (c->phase == FW_START_SALIENCY) {
+    eps = 0.0f; /* injection moves to q^ during the check: hold the estimate */
   }
   /* Low-passed *signed* error: its magnitude is the tracking error. The
    * per-sample eps carries ~0.04 rad of sensor noise, so a filtered |eps|
@@ -581,6 +608,70 @@ static float polarity_step(fw_ctrl_t *c, float i_d) {
   }
 }
 
+/* ---- linear-axis protections -------------------------------------------- */
+
+/** Unwrapped estimated position, m. */
+static float pos_hat_m(const fw_ctrl_t *c) {
+  const float pos_e = (float)c->pos_turns * FW_TWO_PI_F32 + c->pos_unwrapped_e;
+  return pos_e * c->cfg.pole_pitch_m / FW_PI_F32;
+}
+
+/**
+ * i2t, overspeed, software position limits and the speed following error,
+ * all on the estimate (the drive has nothing else). A position limit trips
+ * only while the command points further out, so that the axis can be driven
+ * back after a fault reset.
+ */
+static fw_fault_t protect(fw_ctrl_t *c, fw_vec2_f32_t i_dq, bool quick_stop) {
+  const fw_config_t *cfg = &c->cfg;
+  const float dt = c->dt_s;
+  const float ir2 = cfg->i_rated_A * cfg->i_rated_A;
+  c->i2t_A2s += (i_dq.x * i_dq.x + i_dq.y * i_dq.y - ir2) * dt;
+  c->i2t_A2s = c->i2t_A2s > 0.0f ? c->i2t_A2s : 0.0f;
+  if (cfg->i_rated_A < cfg->i_max_A &&
+      c->i2t_A2s > (cfg->i_max_A * cfg->i_max_A - ir2) * cfg->i2t_time_s) {
+    return FW_FAULT_I2T;
+  }
+  if (fabsf(c->pll.w_i_radps) > c->w_vmax_radps) {
+    return FW_FAULT_OVERSPEED;
+  }
+  if (cfg->pos_limit_min_m < cfg->pos_limit_max_m) {
+    const float x = pos_hat_m(c);
+    const float cmd = c->mode == FW_MODE_SPEED ? c->speed_ref_radps_e : c->i_q_ref_force_A;
+    if ((x > cfg->pos_limit_max_m && !(cmd < 0.0f)) ||
+        (x < cfg->pos_limit_min_m && !(cmd > 0.0f))) {
+      return FW_FAULT_POSITION_LIMIT;
+    }
+  }
+  bool follow = c->mode == FW_MODE_SPEED && !quick_stop &&
+                fabsf(c->speed_ref_radps_e - c->omega_f) > c->w_follow_radps;
+  c->follow_time_s = follow ? c->follow_time_s + dt : 0.0f;
+  if (c->follow_time_s > cfg->follow_err_time_s) {
+    return FW_FAULT_FOLLOWING_ERROR;
+  }
+  return FW_FAULT_NONE;
+}
+
+/** End of the standstill saliency check: judge, then go on to the polarity test. */
+static void saliency_done(fw_ctrl_t *c) {
+  const float n_avg = (float)((FW_SAL_PERIODS - 1u) * c->n_inj);
+  const float inv = 1.0f / n_avg;
+  fw_fault_t f = fw_mon_saliency(&c->mon, &c->cfg, c->sal_acc[0] * inv, c->sal_acc[1] * inv,
+                                 c->sal_acc[2] * inv, c->sal_acc[3] * inv,
+                                 c->dt_s * c->cfg.u_inj_V);
+  c->snap.sal_meas = c->mon.sal_meas;
+  c->snap.L_small_meas_H = c->mon.L_small_meas_H;
+  c->snap.L_large_meas_H = c->mon.L_large_meas_H;
+  if (f != FW_FAULT_NONE) {
+    latch_fault(c, f);
+    return;
+  }
+  c->phase = FW_START_POLARITY;
+  c->phase_time_s = 0.0f;
+  c->pol_k = 0u;
+  c->pol_sum_pos = c->pol_sum_neg = 0.0f;
+}
+
 /* ---- the step ----------------------------------------------------------- */
 
 static fw_fault_t check_inputs(const fw_ctrl_t *c, const fw_inputs_t *in) {
@@ -655,6 +746,12 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
       memset(&safe, 0, sizeof(safe)); /* never propagate NaN into the state */
     }
   }
+  if (c->phase != FW_START_IDLE) {
+    fw_mon_compensate(&c->mon, safe.i_abc_A); /* offsets learnt at standstill */
+  }
+  fw_mon_in_t mi;
+  memset(&mi, 0, sizeof(mi));
+  memcpy(mi.i_abc_A, safe.i_abc_A, sizeof(mi.i_abc_A));
   fw_vec2_f32_t i_ab = fw_clarke_f32(safe.i_abc_A[0], safe.i_abc_A[1], safe.i_abc_A[2]);
 
   /* Fault reaction: brake under control first, or switch off now (latch_fault). */
@@ -668,6 +765,14 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   }
   if (!(fw_cia402_power_enabled(c->sm.state) || braking) || c->phase == FW_START_IDLE) {
     c->phase = FW_START_IDLE;
+    fw_mon_learn_offsets(&c->mon, safe.i_abc_A);
+    c->i2t_A2s -= c->cfg.i_rated_A * c->cfg.i_rated_A * dt; /* cools down */
+    c->i2t_A2s = c->i2t_A2s > 0.0f ? c->i2t_A2s : 0.0f;
+    fw_fault_t mf = fw_mon_update(&c->mon, &mi); /* current sum with PWM off */
+    if (mf != FW_FAULT_NONE) {
+      latch_fault(c, mf);
+    }
+    c->snap.mon_i_sum_A = c->mon.isum_f;
     memset(c->snap.i_dq_A, 0, sizeof(c->snap.i_dq_A));
     memset(c->snap.u_dq_V, 0, sizeof(c->snap.u_dq_V));
     c->snap.u_inj_V = 0.0f;
@@ -686,13 +791,21 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
    * the output transform; the demodulation uses its own delayed frame */
   const float theta_k = c->theta_k;
   const fw_sincos_f32_t sc = fw_sincos_f32(theta_k);
+  fw_vec2_f32_t e_raw = {0.0f, 0.0f}; /* raw HF difference, sign-demodulated, for the monitor */
   if (!pulses) {
+    fw_vec2_f32_t dh_raw = {i_ab.x - c->h_prev_raw[0], i_ab.y - c->h_prev_raw[1]};
+    e_raw = fw_park_f32(dh_raw, sc);
+    e_raw.x *= c->sign_hist[1];
+    e_raw.y *= c->sign_hist[1];
     i_f_ab = estimator_step(c, i_ab);
   }
   fw_vec2_f32_t i_dq = fw_park_f32(pulses ? i_ab : i_f_ab, sc);
   if (pulses) {
     u_d_pulse = polarity_step(c, i_dq.x);
-  } else {
+    if (c->phase == FW_START_RUN) {
+      fw_mon_run_start(&c->mon);
+    }
+  } else if (c->phase != FW_START_SALIENCY) {
     supervise_estimator(c);
   }
   /* End ALIGN where the HF current triangle crosses its mean (the middle of
@@ -702,10 +815,23 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   uint32_t last_idx = c->n_inj / 4u > 0u ? c->n_inj / 4u - 1u : 0u;
   if (c->phase == FW_START_ALIGN && c->phase_time_s >= cfg->align_time_s &&
       c->inj_idx == last_idx) {
-    c->phase = FW_START_POLARITY;
-    c->phase_time_s = 0.0f;
-    c->pol_k = 0u;
-    c->pol_sum_pos = c->pol_sum_neg = 0.0f;
+    /* the zero-current loop has held i = 0 for the whole alignment: its
+     * voltage is the back-EMF of a moving mover */
+    fw_fault_t mf = fw_mon_motion(&c->mon, c->e_start_max_V);
+    if (mf != FW_FAULT_NONE) {
+      latch_fault(c, mf);
+    } else {
+      c->phase = FW_START_SALIENCY; /* whole injection periods: ends on the same phase */
+      c->phase_time_s = 0.0f;
+      c->sal_k = 0u;
+      memset(c->sal_acc, 0, sizeof(c->sal_acc));
+    }
+  }
+  const uint32_t sal_col_len = FW_SAL_PERIODS * c->n_inj;
+  if (c->phase == FW_START_SALIENCY && c->sal_k % sal_col_len >= c->n_inj) {
+    uint32_t col = c->sal_k / sal_col_len; /* 0: square wave on d^, 1: on q^ */
+    c->sal_acc[2u * col] += e_raw.x;
+    c->sal_acc[2u * col + 1u] += e_raw.y;
   }
   braking = braking && c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE;
   if (!(fw_cia402_power_enabled(c->sm.state) || braking)) { /* a fault was latched above */
@@ -729,7 +855,10 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     bool still = c->mode == FW_MODE_FORCE || fabsf(c->omega_f) < FW_QS_STILL_RADPS ||
                  c->phase != FW_START_RUN;
     c->qs_still_s = still ? c->qs_still_s + dt : 0.0f;
-    if (c->qs_still_s >= FW_QS_STILL_TIME_S || c->qs_time_s >= cfg->quick_stop_time_s) {
+    /* braking after a fault is bounded by fault_brake_time_s: a lost
+     * supervisor must see the power stage off soon, at any speed */
+    float t_max = braking ? cfg->fault_brake_time_s : cfg->quick_stop_time_s;
+    if (c->qs_still_s >= FW_QS_STILL_TIME_S || c->qs_time_s >= t_max) {
       if (braking) {
         fw_cia402_fault_reaction_done(&c->sm); /* stopped: PWM off, FAULT */
       } else {
@@ -757,6 +886,43 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     u_dq.y = fw_pi_step_f32(&c->pi_q, i_q_ref - i_dq.y, ff_q, dt);
   }
 
+  /* ---- integrity monitor and protections ---- */
+  {
+    const bool running = c->phase == FW_START_RUN;
+    mi.e_hf_dq_A[0] = e_raw.x;
+    mi.e_hf_dq_A[1] = e_raw.y;
+    mi.u_dq_V[0] = c->u_dq_prev_V[0];
+    mi.u_dq_V[1] = c->u_dq_prev_V[1];
+    mi.i_dq_A[0] = i_dq.x;
+    mi.i_dq_A[1] = i_dq.y;
+    mi.i_dq_ref_A[0] = i_d_ref;
+    mi.i_dq_ref_A[1] = i_q_ref;
+    mi.omega_hat_radps = c->pll.w_i_radps;
+    mi.accel_dist_radps2 = c->accel_dist;
+    mi.running = (uint8_t)running;
+    mi.hf_valid = (uint8_t)(running && !pulses && c->ring_fill == c->n_inj &&
+                            c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S &&
+                            c->sign_hist[1] != 0.0f);
+    mi.pwm_on = 1u;
+    fw_fault_t mf = fw_mon_update(&c->mon, &mi);
+    if (mf == FW_FAULT_NONE && running) {
+      mf = protect(c, i_dq, quick_stop);
+    }
+    c->snap.mon_angle_hf_rad = c->mon.angle_hf_rad;
+    c->snap.mon_angle_bemf_rad = c->mon.angle_bemf_rad;
+    c->snap.mon_e_bemf_V = c->mon.e_bemf_V;
+    c->snap.mon_i_sum_A = c->mon.isum_f;
+    if (mf != FW_FAULT_NONE) {
+      latch_fault(c, mf);
+      if (c->fault_hard) { /* switch off now; braking faults go on braking */
+        fill_snapshot_common(c, &safe, i_ab, out);
+        return;
+      }
+    }
+  }
+  c->u_dq_prev_V[0] = u_dq.x;
+  c->u_dq_prev_V[1] = u_dq.y;
+
   /* ---- square-wave injection on the estimated d axis ---- */
   float s = 0.0f;
   if (!pulses && cfg->u_inj_V > 0.0f) {
@@ -767,7 +933,9 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   c->sign_hist[2] = c->sign_hist[1];
   c->sign_hist[1] = c->sign_hist[0];
   c->sign_hist[0] = s;
-  fw_vec2_f32_t u_cmd = {u_dq.x + s * cfg->u_inj_V, u_dq.y};
+  const bool inj_q = c->phase == FW_START_SALIENCY && c->sal_k >= sal_col_len;
+  fw_vec2_f32_t u_cmd = {u_dq.x + (inj_q ? 0.0f : s * cfg->u_inj_V),
+                         u_dq.y + (inj_q ? s * cfg->u_inj_V : 0.0f)};
 
   /* ---- modulation: the voltage acts over [k+1, k+2] (update delay), so the
    * transform uses the angle 1.5 periods after sampling ---- */
@@ -783,6 +951,12 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   c->snap.u_dq_V[0] = u_dq.x;
   c->snap.u_dq_V[1] = u_dq.y;
   c->snap.u_inj_V = s * cfg->u_inj_V;
+  if (c->phase == FW_START_SALIENCY && ++c->sal_k == 2u * sal_col_len) {
+    saliency_done(c);
+    if (c->fault_hard) {
+      outputs_off(out);
+    }
+  }
   fill_snapshot_common(c, &safe, i_ab, out);
 }
 
@@ -818,7 +992,7 @@ void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
   snap->mode = (uint8_t)ctrl->mode;
   snap->polarity_flipped = ctrl->polarity_flipped;
   const float pos_e = (float)ctrl->pos_turns * FW_TWO_PI_F32 + ctrl->pos_unwrapped_e;
-  snap->pos_hat_m = pos_e * cfg->pole_pitch_m / FW_PI_F32;
+  snap->pos_hat_m = pos_hat_m(ctrl);
   snap->speed_hat_mps = fw_units_radps_e_to_mps(cfg, ctrl->pll.w_i_radps);
   snap->pos_hat_mech_rad = pos_e / cfg->pole_pairs;
   snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, ctrl->pll.w_i_radps);

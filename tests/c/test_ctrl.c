@@ -428,9 +428,41 @@ static void test_fault_pll_error(void) {
       break;
     }
   }
+  /* The integrity monitor's HF angle witness sees the 0.7 rad error from the
+   * raw HF response within its detection budget (<= 20 ms), long before the
+   * PLL-error supervision (pll_err_time_s = 0.05 s) would. */
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_EST_HF_ANGLE);
+  TT_CHECK(k_fault > (int)(0.010 * 24000)); /* not before mon_detect_time_s */
+  TT_CHECK(k_fault <= (int)(0.020 * 24000));
+  TT_CHECK(out.pwm_enable == 0u);
+}
+
+static void test_fault_pll_error_supervision_alone(void) {
+  /* With the HF angle witness out of reach (limit at its maximum, 1.5 rad),
+   * the PLL-error supervision still trips on its own after pll_err_time_s. */
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  cfg.pll_kp = 0.0f;
+  cfg.pll_ki = 0.0f;
+  cfg.pll_kd = 0.0f;
+  cfg.mon_angle_max_rad = 1.5f;
+  cfg.mon_bemf_max_rad = 3.2f;
+  fw_ctrl_t c;
+  plant_t p;
+  fw_outputs_t out;
+  run_to_operation_cfg(&c, &p, &out, &cfg, 0.0, 0.12);
+  TT_CHECK(c.phase == FW_START_RUN);
+  p.theta = 0.7;
+  int k_fault = -1;
+  for (int k = 0; k < (int)(0.3 * 24000); k++) {
+    loop_step(&c, &p, &out);
+    if (fw_fault_code(&c) != FW_FAULT_NONE) {
+      k_fault = k;
+      break;
+    }
+  }
   TT_CHECK(fw_fault_code(&c) == FW_FAULT_EST_PLL_ERROR);
-  /* not before pll_err_time_s (0.05 s) has elapsed */
-  TT_CHECK(k_fault > (int)(0.05 * 24000));
+  TT_CHECK(k_fault > (int)(0.05 * 24000)); /* not before pll_err_time_s */
 }
 
 static void test_external_fault_and_quick_stop(void) {
@@ -667,6 +699,7 @@ int main(void) {
   TT_RUN(test_fault_adc_range);
   TT_RUN(test_fault_hf_low);
   TT_RUN(test_fault_pll_error);
+  TT_RUN(test_fault_pll_error_supervision_alone);
   TT_RUN(test_external_fault_and_quick_stop);
   TT_RUN(test_units_and_refs);
   TT_RUN(test_pos_unwrapped_precision);

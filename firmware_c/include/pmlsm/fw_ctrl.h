@@ -66,8 +66,13 @@ typedef enum {
   FW_START_IDLE = 0,     /**< power stage off */
   FW_START_ALIGN = 1,    /**< injection + PLL, zero current: angle mod pi */
   FW_START_POLARITY = 2, /**< +/- d-axis pulses: north/south decision */
-  FW_START_RUN = 3       /**< closed loop */
+  FW_START_RUN = 3,      /**< closed loop */
+  FW_START_SALIENCY = 4  /**< after ALIGN: square wave on d^, then on q^: measured saliency */
 } fw_start_phase_t;
+
+/** Injection periods per axis in the standstill saliency check (the first is
+ *  not averaged: the axis change settles). */
+#define FW_SAL_PERIODS 4u
 
 /**
  * Fault codes. Values are the CiA 301/402 emergency error codes sent in
@@ -204,6 +209,8 @@ typedef struct {
   float start_speed_max_mps;/**< refuse to enable above this mover speed */
 } fw_config_t;
 
+#include "fw_mon.h"
+
 /** One configuration field, for validation messages, the OD and tools. */
 typedef struct {
   const char *name; /**< field name as in fw_config_t */
@@ -278,6 +285,14 @@ typedef struct {
   float torque_hat_Nm;   /**< rotary equivalent, 1.5 p psi_f i_q */
   float u_dc_V;
   float duty_abc[3];
+  /* integrity monitor (fw_mon.h) */
+  float mon_angle_hf_rad;   /**< |angle error| solved from the raw HF response */
+  float mon_angle_bemf_rad; /**< angle of the voltage residual against the estimate */
+  float mon_e_bemf_V;       /**< |voltage residual| (back-EMF magnitude) */
+  float mon_i_sum_A;        /**< low-passed |i_a + i_b + i_c| */
+  float sal_meas;           /**< saliency measured at start-up (L_large / L_small - 1) */
+  float L_small_meas_H;     /**< smaller inductance measured at start-up */
+  float L_large_meas_H;     /**< larger inductance measured at start-up */
 } fw_snapshot_t;
 
 /**
@@ -339,6 +354,17 @@ typedef struct {
   uint32_t pol_k;
   float pol_base, pol_ext, pol_sum_pos, pol_sum_neg;
   uint8_t polarity_flipped;
+  /* standstill saliency check: mean responses y_dd, y_qd, y_dq, y_qq */
+  float sal_acc[4];
+  uint32_t sal_k;
+  /* integrity monitor and protections */
+  fw_mon_t mon;
+  float u_dq_prev_V[2];   /**< fundamental voltage commanded last period (applied now) */
+  float i2t_A2s;          /**< i^2 t above i_rated_A */
+  float follow_time_s;    /**< time outside the following-error window */
+  float w_vmax_radps;     /**< v_max_mps in electrical rad/s */
+  float w_follow_radps;   /**< follow_err_mps in electrical rad/s */
+  float e_start_max_V;    /**< back-EMF at start_speed_max_mps */
   /* quick stop */
   float qs_time_s;
   /* faults */

@@ -1,0 +1,120 @@
+/**
+ * @file fw_mon.h
+ * @brief Estimator integrity monitor: independent witnesses, computed from
+ *        what a drive can measure, that tell when the sensorless estimate or
+ *        the current measurement cannot be trusted.
+ *
+ * A caller-owned block (fw_mon_t) with an update function per control
+ * period and two one-shot checks used by start-up. It reads only the
+ * sampled currents, the voltage it commands and the estimator's own states;
+ * it has no path to any truth. Every witness has a documented threshold, a
+ * persistence time and a fault code (docs/integrity.md):
+ *
+ * | witness | signal | limit | fault |
+ * |---|---|---|---|
+ * | HF angle | |angle error| solved from the raw HF response on d^ and q^ against the response learnt at start-up | mon_angle_max_rad | EST_HF_ANGLE |
+ * | back-EMF | voltage-equation residual in the estimated frame: its angle and magnitude against omega^ psi_f | mon_bemf_max_rad, ratio 0.5..2 | EST_BEMF_MISMATCH |
+ * | acceleration | observer disturbance vs the acceleration the drive can produce | 2 pll_accel_per_A i_max_A | EST_ACCEL_IMPLAUSIBLE |
+ * | current sum | low-passed |i_a + i_b + i_c| | i_sum_max_A | CURRENT_SENSOR_SUM |
+ * | current control | low-passed |i_dq_ref - i_dq| | 0.5 i_max_A | CURRENT_CONTROL |
+ * | standstill offset | per-phase mean with PWM off | i_offset_max_A | CURRENT_SENSOR_OFFSET |
+ * | saliency | eigenvalues of the 2x2 HF admittance measured at standstill | saliency_min, configured saliency -+ mon_sal_tol | SALIENCY_MISMATCH |
+ * | motion at enable | |u_dq| needed to hold zero current = |omega| psi_f | start_speed_max_mps | MOVING_AT_ENABLE |
+ *
+ * Each running witness must exceed its limit for mon_detect_time_s in a row.
+ */
+#ifndef PMLSM_FW_MON_H
+#define PMLSM_FW_MON_H
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Included by fw_ctrl.h after fw_fault_t and fw_config_t are defined: include
+ * fw_ctrl.h, not this header. */
+#ifndef PMLSM_FW_CTRL_H
+#error "include pmlsm/fw_ctrl.h"
+#endif
+
+/** Inputs of one control period (all observable). */
+typedef struct {
+  float i_abc_A[3];  /**< measured phase currents (after offset compensation) */
+  float e_hf_dq_A[2];/**< sign-demodulated raw HF difference on d^, q^ (A per sample) */
+  float u_dq_V[2];   /**< fundamental voltage command applied this period (estimated frame) */
+  float i_dq_A[2];   /**< fundamental current (estimated frame) */
+  float i_dq_ref_A[2];/**< current references */
+  float omega_hat_radps; /**< estimated electrical speed */
+  float accel_dist_radps2; /**< observer's disturbance acceleration */
+  uint8_t hf_valid;  /**< square wave injected on d^ this period (closed loop) */
+  uint8_t running;   /**< closed loop (RUN phase) */
+  uint8_t pwm_on;    /**< power stage switching this period */
+} fw_mon_in_t;
+
+/** Monitor state. Treat members as private; read results with fw_mon_*(). */
+typedef struct {
+  /* configuration (copied at init) */
+  float dt_s;
+  float angle_max_rad, bemf_max_rad, bemf_min_V, detect_s;
+  float i_sum_max_A, i_offset_max_A, i_ctrl_max_A, accel_max;
+  float rho;          /**< (L_q + L_d) / (L_q - L_d) */
+  float R_ohm, L_d_H, L_q_H, psi_f_Wb;
+  float a_hf, a_slow, a_off; /**< low-pass coefficients */
+  /* learnt at start-up */
+  float e_ref_A;      /**< raw HF response along d^ when locked (0: not learnt) */
+  /* filtered signals */
+  float e_d_f, e_q_f;
+  float r_d_f, r_q_f;
+  float i_prev_A[2];  /**< last fundamental current (for L di/dt) */
+  float isum_f, ictrl_f;
+  float off_f[3];
+  float off_time_s;   /**< time with PWM off (offset learning starts after 50 ms) */
+  float offset_A[3];  /**< offsets in use (latched at enable) */
+  /* outputs */
+  float angle_hf_rad, angle_bemf_rad, e_bemf_V;
+  float sal_meas, L_small_meas_H, L_large_meas_H, sal_axis_rad;
+  /* persistence timers */
+  float t_hf, t_bemf, t_accel, t_sum, t_ctrl;
+} fw_mon_t;
+
+/** Copy thresholds and parameters from the configuration; forget what was learnt. */
+void fw_mon_init(fw_mon_t *m, const fw_config_t *cfg, float dt_s);
+
+/** Called every period with PWM off: learns the per-phase current offsets. */
+void fw_mon_learn_offsets(fw_mon_t *m, const float i_abc_A[3]);
+
+/** At enable: FW_FAULT_CURRENT_SENSOR_OFFSET if a learnt offset is too large,
+ *  else latch the offsets for compensation and return FW_FAULT_NONE. */
+fw_fault_t fw_mon_enable(fw_mon_t *m);
+
+/** Subtract the latched offsets from the measured phase currents. */
+void fw_mon_compensate(const fw_mon_t *m, float i_abc_A[3]);
+
+/**
+ * Standstill saliency check. y_dd, y_qd: mean raw HF response (A per sample,
+ * sign-demodulated) on d^ and q^ to a square wave of u_inj_V on d^; y_dq,
+ * y_qq: the same for injection on q^. The eigenvalues of the symmetric 2x2
+ * admittance are Ts u / L_small and Ts u / L_large whatever the angle error.
+ * Learns the locked HF reference on success. Returns FW_FAULT_NONE,
+ * FW_FAULT_SALIENCY_MISMATCH or FW_FAULT_EST_HF_ANGLE (d^ not on the axis of
+ * the configured saliency: the alignment did not lock).
+ */
+fw_fault_t fw_mon_saliency(fw_mon_t *m, const fw_config_t *cfg, float y_dd, float y_qd,
+                           float y_dq, float y_qq, float Ts_u_Vs);
+
+/** Motion check at the end of alignment: |u_dq| (low-passed) against the
+ *  back-EMF at start_speed_max_mps. Returns FW_FAULT_MOVING_AT_ENABLE or NONE. */
+fw_fault_t fw_mon_motion(const fw_mon_t *m, float e_start_max_V);
+
+/** Closed loop starts: forget the filtered signals of the start-up pulses. */
+void fw_mon_run_start(fw_mon_t *m);
+
+/** One control period of the running witnesses; returns the first witness
+ *  over its limit for mon_detect_time_s, else FW_FAULT_NONE. */
+fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* PMLSM_FW_MON_H */
