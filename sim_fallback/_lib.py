@@ -117,6 +117,7 @@ class SimPlantParams(C.Structure):
         ("adc_i_fullscale_A", _d), ("adc_noise_counts", _d),
         ("adc_offset_counts", _d * 3), ("adc_gain_err", _d * 3),
         ("udc_fullscale_V", _d), ("udc_noise_V", _d), ("seed", C.c_uint64),
+        ("open_phase_mask", _u32), ("adc_stuck_mask", _u32),
     ]
 
 
@@ -224,6 +225,7 @@ def _declare(lib: C.CDLL) -> None:
     sig = {
         "sim_params_check": (C.c_int, [P(SimPlantParams), P(C.c_char_p)]),
         "sim_new": (V, [P(SimPlantParams)]),
+        "sim_set_params": (C.c_int, [V, P(SimPlantParams), P(C.c_char_p)]),
         "sim_free": (None, [V]),
         "sim_set_controller": (None, [V, P(SimController)]),
         "sim_set_use_adc_counts": (None, [V, C.c_int]),

@@ -138,6 +138,23 @@ class Sim:
         self._L.sim_get_state(self._h, C.byref(st))
         return {k: getattr(st, k) for k, _ in st._fields_ if k != "pad_"}
 
+    def set_plant(self, **changes: Any) -> None:
+        """Change plant parameters mid-run (fault injection: DC-link sag, sensor
+        gain/offset errors, ``open_phase_mask``, ``adc_stuck_mask``); state and
+        time are kept. Truth only: the firmware sees the effect, never the value."""
+        for k, v in changes.items():
+            if not hasattr(self.params, k):
+                raise ValueError(f"unknown plant parameter '{k}'")
+            cur = getattr(self.params, k)
+            if isinstance(cur, C.Array):
+                for j, x in enumerate(v):
+                    cur[j] = x
+            else:
+                setattr(self.params, k, v)
+        bad = C.c_char_p()
+        if self._L.sim_set_params(self._h, self.params, C.byref(bad)) != 0:
+            raise ValueError(f"plant parameter '{bad.value.decode()}' invalid")
+
     def set_schedule(self, kind: int, spec: ScheduleLike, scale: float = 1.0) -> None:
         """Schedule SIM_REF_SPEED (rad/s el.), SIM_REF_FORCE (N) or SIM_REF_LOAD (N)."""
         s = _schedule(spec, scale)

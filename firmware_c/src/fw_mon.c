@@ -139,10 +139,12 @@ fw_fault_t fw_mon_motion(const fw_mon_t *m, float e_start_max_V) {
 
 fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in) {
   const float dt = m->dt_s;
-  /* current sum: a star-connected winding has i_a + i_b + i_c = 0 */
+  /* current sum: a star-connected winding has i_a + i_b + i_c = 0. Judged with
+   * the power stage on, after offset compensation (with PWM off a constant
+   * sum is an offset: the per-phase offset check at enable names it). */
   float isum = fabsf(in->i_abc_A[0] + in->i_abc_A[1] + in->i_abc_A[2]);
   m->isum_f += m->a_slow * (isum - m->isum_f);
-  m->t_sum = persist(m->t_sum, m->isum_f > m->i_sum_max_A, dt);
+  m->t_sum = persist(m->t_sum, in->pwm_on && m->isum_f > m->i_sum_max_A, dt);
 
   if (in->pwm_on) {
     m->off_time_s = 0.0f;

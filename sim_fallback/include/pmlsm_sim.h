@@ -61,6 +61,9 @@ typedef struct {
   double udc_fullscale_V;    /**< DC-link ADC full scale (same resolution) */
   double udc_noise_V;        /**< Gaussian noise std on the DC-link measurement */
   uint64_t seed;             /**< RNG seed (xoshiro256** via splitmix64) */
+  /* fault injection (0 = healthy) */
+  uint32_t open_phase_mask;  /**< bit j: phase j open (no current can flow in it) */
+  uint32_t adc_stuck_mask;   /**< bit j: current ADC channel j repeats its last count */
 } sim_plant_params_t;
 
 /** Plant state (truth). */
@@ -144,6 +147,10 @@ typedef struct sim_s sim_t;
 
 /** Validate parameters; returns 0 or a negative index naming the bad field. */
 int sim_params_check(const sim_plant_params_t *p, const char **bad_field);
+/** Replace the plant parameters of a running simulation (state, time, RNG and
+ *  schedules kept): fault injection such as a DC-link sag or a sensor fault at
+ *  a chosen instant. Returns 0, or the sim_params_check code (nothing changed). */
+int sim_set_params(sim_t *s, const sim_plant_params_t *p, const char **bad_field);
 /** Create (malloc) a simulation; NULL on bad params. Initial state zero. */
 sim_t *sim_new(const sim_plant_params_t *p);
 void sim_free(sim_t *s);

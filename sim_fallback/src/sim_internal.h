@@ -40,6 +40,7 @@ struct sim_s {
   /* derived constants */
   double dt_s;          /**< PWM period */
   double k_theta;       /**< pi / tau (rad per m) */
+  double adc_last_cnt[3];  /**< last current ADC counts (stuck-converter fault) */
   double k_force;       /**< 1.5 pi / tau */
   double adc_lsb_A;     /**< current per count */
   double adc_mid;       /**< zero-current count */

@@ -150,6 +150,8 @@ static const layout_row_t k_rows[] = {
     ROW(sim_plant_params_t, udc_fullscale_V),
     ROW(sim_plant_params_t, udc_noise_V),
     ROW(sim_plant_params_t, seed),
+    ROW(sim_plant_params_t, open_phase_mask),
+    ROW(sim_plant_params_t, adc_stuck_mask),
     ROW(sim_plant_state_t, i_d_A),
     ROW(sim_plant_state_t, i_q_A),
     ROW(sim_plant_state_t, x_m),

@@ -76,6 +76,15 @@ sim_t *sim_new(const sim_plant_params_t *p) {
   return s;
 }
 
+int sim_set_params(sim_t *s, const sim_plant_params_t *p, const char **bad_field) {
+  if (!s) return -1;
+  int rc = sim_params_check(p, bad_field);
+  if (rc != 0) return rc;
+  s->p = *p;
+  sim_plant_derive(s);
+  return 0;
+}
+
 void sim_free(sim_t *s) {
   if (!s) return;
   for (int k = 0; k < SIM_REF_COUNT; ++k) {
@@ -175,6 +184,8 @@ void sim_sample(sim_t *s, fw_inputs_t *in, fw_adc_inputs_t *adc) {
                  i_abc[j] * (1.0 + p->adc_gain_err[j]) * s->inv_adc_lsb_A;
     if (p->adc_noise_counts > 0.0) cnt += p->adc_noise_counts * sim_rng_gauss_inline(s);
     cnt = clampd(sim_nearbyint(cnt), 0.0, s->adc_max);
+    if (p->adc_stuck_mask & (1u << j)) cnt = s->adc_last_cnt[j]; /* frozen converter */
+    s->adc_last_cnt[j] = cnt;
     if (adc) adc->i_abc_counts[j] = (uint16_t)cnt;
     /* what the drive computes with its nominal scaling */
     if (in) in->i_abc_A[j] = (float)((cnt - s->adc_mid) * s->adc_lsb_A);

@@ -578,6 +578,22 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
       y1[1] = 0.0;
     }
   }
+  if (p->open_phase_mask) {
+    /* open phase j: no current along its axis (the floating terminal takes
+     * whatever voltage that needs); rare path, exact trigonometry */
+    const double th1 = s->k_theta * y1[2];
+    const double c1 = cos(th1), s1 = sin(th1);
+    double a1 = c1 * y1[0] - s1 * y1[1], b1 = s1 * y1[0] + c1 * y1[1];
+    for (int j = 0; j < 3; ++j) {
+      if (!(p->open_phase_mask & (1u << j))) continue;
+      const double nx = cos(2.0 * SIM_PI / 3.0 * j), ny = sin(2.0 * SIM_PI / 3.0 * j);
+      const double dot = a1 * nx + b1 * ny;
+      a1 -= dot * nx;
+      b1 -= dot * ny;
+    }
+    y1[0] = c1 * a1 + s1 * b1;
+    y1[1] = -s1 * a1 + c1 * b1;
+  }
   st->i_d_A = y1[0];
   st->i_q_A = y1[1];
   st->x_m = y1[2];
