@@ -37,6 +37,9 @@
 /* After the estimator (re)starts, the SOGI and the one-period averages need
  * this long before their output means anything; the PLL holds meanwhile. */
 #define FW_EST_SETTLE_S 0.001f
+/* Motion check during the alignment starts after this time (current loop and
+ * monitor filter settled). */
+#define FW_MOTION_CHECK_S 0.015f
 /* Voltage headroom kept for injection when limiting the current PIs. */
 #define FW_PI_VOLTAGE_SHARE 0.9f
 
@@ -813,14 +816,18 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
    * This step commands injection index inj_idx; the last + command before
    * the mean is index n/4 - 1. */
   uint32_t last_idx = c->n_inj / 4u > 0u ? c->n_inj / 4u - 1u : 0u;
-  if (c->phase == FW_START_ALIGN && c->phase_time_s >= cfg->align_time_s &&
-      c->inj_idx == last_idx) {
-    /* the zero-current loop has held i = 0 for the whole alignment: its
-     * voltage is the back-EMF of a moving mover */
+  /* During the alignment the zero-current loop holds i = 0: the voltage it
+   * needs is the back-EMF of a moving mover (judged once the loop and the
+   * monitor's filter have settled, and again at the end). */
+  if (c->phase == FW_START_ALIGN && c->phase_time_s >= FW_MOTION_CHECK_S) {
     fw_fault_t mf = fw_mon_motion(&c->mon, c->e_start_max_V);
     if (mf != FW_FAULT_NONE) {
       latch_fault(c, mf);
-    } else {
+    }
+  }
+  if (c->phase == FW_START_ALIGN && c->phase_time_s >= cfg->align_time_s &&
+      c->inj_idx == last_idx && c->fault == FW_FAULT_NONE) {
+    {
       c->phase = FW_START_SALIENCY; /* whole injection periods: ends on the same phase */
       c->phase_time_s = 0.0f;
       c->sal_k = 0u;

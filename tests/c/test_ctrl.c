@@ -546,6 +546,7 @@ static void test_pos_unwrapped_precision(void) {
   cfg.hf_min_ratio = 0.0f;   /* no motor connected: no HF-loss trip */
   cfg.align_time_s = 5.0f;   /* stay in ALIGN, where the PLL free-runs */
   cfg.speed_max_radps_e = 20000.0f;
+  cfg.start_speed_max_mps = 100.0f; /* the spun estimate's feed-forward is no back-EMF */
   fw_ctrl_t c;
   TT_CHECK(fw_init(&c, &cfg) == FW_OK);
   enable(&c);
