@@ -31,7 +31,8 @@
 #define MON_OFF_WAIT_S 0.05f  /* PWM off this long before offsets are learnt */
 #define MON_BEMF_RATIO 2.0f   /* |r| / (|w^| psi_f) must lie in [1/2, 2] */
 #define MON_CTRL_SHARE 0.5f   /* current-error limit as a share of i_max_A */
-#define MON_ACCEL_MARGIN 2.0f /* disturbance limit: 2 x the thrust acceleration at i_max */
+#define MON_ACCEL_MARGIN 2.0f
+#define MON_EVAL_STEPS 8u     /* witnesses judged every 8 periods (3 kHz at 24 kHz) */ /* disturbance limit: 2 x the thrust acceleration at i_max */
 
 static float lp_coef(float tau_s, float dt_s) { return 1.0f - expf(-dt_s / tau_s); }
 
@@ -130,6 +131,7 @@ void fw_mon_run_start(fw_mon_t *m) {
   m->e_q_f = 0.0f;
   m->r_d_f = m->r_q_f = m->ictrl_f = 0.0f;
   m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
+  m->eval_k = 0u;
 }
 
 fw_fault_t fw_mon_motion(const fw_mon_t *m, float e_start_max_V) {
@@ -163,53 +165,61 @@ fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in) {
     m->r_q_f += m->a_slow * (r_q - m->r_q_f);
   }
 
-  if (in->running) {
-    /* HF angle */
+  if (!in->running) {
+    m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
+    m->eval_k = 0u;
+  } else {
+    /* filters every period (cheap) */
     if (in->hf_valid) {
       m->e_d_f += m->a_hf * (in->e_hf_dq_A[0] - m->e_d_f);
       m->e_q_f += m->a_hf * (in->e_hf_dq_A[1] - m->e_q_f);
     }
-    if (m->e_ref_A > 0.0f) {
-      float g = (m->rho + 1.0f) / m->e_ref_A;
-      float c2 = m->e_d_f * g - m->rho;
-      float s2 = m->e_q_f * g;
-      m->angle_hf_rad = 0.5f * fabsf(atan2f(s2, c2));
-    }
-    m->t_hf = persist(m->t_hf, m->angle_hf_rad > m->angle_max_rad, dt);
-
-    /* back-EMF residual */
-    float e_hat = fabsf(in->omega_hat_radps) * m->psi_f_Wb;
-    float e_meas = sqrtf(m->r_d_f * m->r_d_f + m->r_q_f * m->r_q_f);
-    m->e_bemf_V = e_meas;
-    bool bad = false;
-    if (e_hat > m->bemf_min_V || e_meas > m->bemf_min_V) {
-      if (e_hat * MON_BEMF_RATIO < e_meas || e_meas * MON_BEMF_RATIO < e_hat) {
-        bad = true;
-        m->angle_bemf_rad = FW_PI_F32; /* magnitude disagrees: no angle to speak of */
-      } else {
-        float ang = atan2f(-m->r_d_f, m->r_q_f);
-        if (in->omega_hat_radps < 0.0f) {
-          ang = fw_wrap_pi_f32(ang + FW_PI_F32);
-        }
-        m->angle_bemf_rad = fabsf(ang);
-        bad = m->angle_bemf_rad > m->bemf_max_rad;
-      }
-    } else {
-      m->angle_bemf_rad = 0.0f;
-    }
-    m->t_bemf = persist(m->t_bemf, bad, dt);
-
-    /* acceleration plausibility */
-    m->t_accel = persist(m->t_accel,
-                         m->accel_max > 0.0f && fabsf(in->accel_dist_radps2) > m->accel_max, dt);
-
-    /* current control */
     float ed = in->i_dq_ref_A[0] - in->i_dq_A[0];
     float eq = in->i_dq_ref_A[1] - in->i_dq_A[1];
-    m->ictrl_f += m->a_slow * (sqrtf(ed * ed + eq * eq) - m->ictrl_f);
-    m->t_ctrl = persist(m->t_ctrl, m->ictrl_f > m->i_ctrl_max_A, dt);
-  } else {
-    m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
+    m->ictrl_f += m->a_slow * (ed * ed + eq * eq - m->ictrl_f); /* mean-square error */
+    /* judgements (atan2, sqrt) once every MON_EVAL_STEPS periods: the filters
+     * are far slower than that, the detection budget is 20 ms */
+    if (++m->eval_k >= MON_EVAL_STEPS) {
+      m->eval_k = 0u;
+      const float dte = dt * (float)MON_EVAL_STEPS;
+      /* HF angle */
+      if (m->e_ref_A > 0.0f) {
+        float g = (m->rho + 1.0f) / m->e_ref_A;
+        float c2 = m->e_d_f * g - m->rho;
+        float s2 = m->e_q_f * g;
+        m->angle_hf_rad = 0.5f * fabsf(atan2f(s2, c2));
+      }
+      m->t_hf = persist(m->t_hf, m->angle_hf_rad > m->angle_max_rad, dte);
+
+      /* back-EMF residual */
+      float e_hat = fabsf(in->omega_hat_radps) * m->psi_f_Wb;
+      float e_meas = sqrtf(m->r_d_f * m->r_d_f + m->r_q_f * m->r_q_f);
+      m->e_bemf_V = e_meas;
+      bool bad = false;
+      if (e_hat > m->bemf_min_V || e_meas > m->bemf_min_V) {
+        if (e_hat * MON_BEMF_RATIO < e_meas || e_meas * MON_BEMF_RATIO < e_hat) {
+          bad = true;
+          m->angle_bemf_rad = FW_PI_F32; /* magnitude disagrees: no angle to speak of */
+        } else {
+          float ang = atan2f(-m->r_d_f, m->r_q_f);
+          if (in->omega_hat_radps < 0.0f) {
+            ang = fw_wrap_pi_f32(ang + FW_PI_F32);
+          }
+          m->angle_bemf_rad = fabsf(ang);
+          bad = m->angle_bemf_rad > m->bemf_max_rad;
+        }
+      } else {
+        m->angle_bemf_rad = 0.0f;
+      }
+      m->t_bemf = persist(m->t_bemf, bad, dte);
+
+      /* acceleration plausibility */
+      m->t_accel = persist(
+          m->t_accel, m->accel_max > 0.0f && fabsf(in->accel_dist_radps2) > m->accel_max, dte);
+
+      /* current control */
+      m->t_ctrl = persist(m->t_ctrl, m->ictrl_f > m->i_ctrl_max_A * m->i_ctrl_max_A, dte);
+    }
   }
 
   if (m->t_sum >= m->detect_s) {

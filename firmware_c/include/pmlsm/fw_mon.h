@@ -16,12 +16,13 @@
  * | back-EMF | voltage-equation residual in the estimated frame: its angle and magnitude against omega^ psi_f | mon_bemf_max_rad, ratio 0.5..2 | EST_BEMF_MISMATCH |
  * | acceleration | observer disturbance vs the acceleration the drive can produce | 2 pll_accel_per_A i_max_A | EST_ACCEL_IMPLAUSIBLE |
  * | current sum | low-passed |i_a + i_b + i_c| | i_sum_max_A | CURRENT_SENSOR_SUM |
- * | current control | low-passed |i_dq_ref - i_dq| | 0.5 i_max_A | CURRENT_CONTROL |
+ * | current control | low-passed |i_dq_ref - i_dq|^2 | (0.5 i_max_A)^2 | CURRENT_CONTROL |
  * | standstill offset | per-phase mean with PWM off | i_offset_max_A | CURRENT_SENSOR_OFFSET |
  * | saliency | eigenvalues of the 2x2 HF admittance measured at standstill | saliency_min, configured saliency -+ mon_sal_tol | SALIENCY_MISMATCH |
  * | motion at enable | |u_dq| needed to hold zero current = |omega| psi_f | start_speed_max_mps | MOVING_AT_ENABLE |
  *
- * Each running witness must exceed its limit for mon_detect_time_s in a row.
+ * Each running witness must exceed its limit for mon_detect_time_s in a row;
+ * the filters run every period, the judgements every 8 periods.
  */
 #ifndef PMLSM_FW_MON_H
 #define PMLSM_FW_MON_H
@@ -76,6 +77,7 @@ typedef struct {
   float sal_meas, L_small_meas_H, L_large_meas_H, sal_axis_rad;
   /* persistence timers */
   float t_hf, t_bemf, t_accel, t_sum, t_ctrl;
+  uint32_t eval_k;    /**< periods since the last judgement */
 } fw_mon_t;
 
 /** Copy thresholds and parameters from the configuration; forget what was learnt. */
