@@ -262,6 +262,7 @@ def _declare(lib: C.CDLL) -> None:
         "fw_set_id_ref": (C.c_int, [V, _f]),
         "fw_set_extractor": (C.c_int, [V, C.c_int]),
         "fw_fault_code": (C.c_int, [V]),
+        "fw_raise_fault": (None, [V, C.c_int]),
         "fw_step": (None, [V, P(FwInputs), P(FwOutputs)]),
         "fw_step_adc": (None, [V, P(FwAdcInputs), P(FwOutputs)]),
         "fw_get_snapshot": (None, [V, P(FwSnapshot)]),

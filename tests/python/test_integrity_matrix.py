@@ -67,3 +67,53 @@ def test_nominal_accuracy_with_the_monitor() -> None:
     r = run_case(CASES[0], 0)
     assert r["fault"] is None and r["rms_rad"] < 0.02 and r["max_rad"] < 0.1, r
     assert np.isfinite(r["rms_rad"])
+
+
+def _run_at_speed(motor: str, v_mps: float, fw: dict, action, t_act: float = 0.8):
+    """Run up to v_mps, apply ``action(sim)`` at t_act, return (t, pwm_on, v_true)."""
+    from sim_fallback import SIM_REF_SPEED, Sim
+    from sim_fallback._motors import load_motor
+
+    mot = load_motor(motor)
+    with Sim(mot, seed=2, fw=fw) as sim:
+        sim.set_schedule(SIM_REF_SPEED, {"t_s": [0.0, 0.15, 0.6], "value": [0.0, 0.0, v_mps],
+                                         "ramp": True}, mot.mps_to_radps_e(1.0))
+        sim.enable("speed")
+        ch = ["t_s", "duty_abc", "v_mps", "fault_code"]
+        a = sim.advance(int(t_act / sim.dt_s), channels=ch)
+        assert not np.any(a["fault_code"]), hex(int(a["fault_code"].max()))
+        action(sim)
+        b = sim.advance(int(0.3 / sim.dt_s), channels=ch)
+    return b["t_s"] - t_act, ~np.isnan(b["duty_abc"][:, 0]), b["v_mps"], a["v_mps"][-1]
+
+
+@pytest.mark.parametrize("v_mps", [0.3, 2.0])
+def test_heartbeat_fault_brakes_within_bound(v_mps: float) -> None:
+    """CiA 402 fault reaction 'quick stop ramp' for a lost supervisor: the
+    drive brakes under control, and the PWM is off within fault_brake_time_s
+    (80 ms) at any speed, so consumer time + 100 ms holds."""
+    t, on, v, v0 = _run_at_speed("iron_core_linear", v_mps, {},
+                                 lambda s: s._L.fw_raise_fault(s.firmware.handle, 0x8130))
+    assert abs(v0 - v_mps) < 0.1 * v_mps  # really at speed (truth)
+    off = float(t[np.argmax(~on)])
+    assert 0.0 <= off <= 0.080 + 1.5 / 24000, off
+    assert np.all(~on[np.argmax(~on):])  # and stays off
+    assert abs(v[np.argmax(~on)]) < abs(v0)  # it did brake while it could
+
+
+def test_fault_reaction_switch_off_option() -> None:
+    """0x605E = 0 (switch off): the same fault switches the PWM off at once."""
+    t, on, _, _ = _run_at_speed("iron_core_linear", 0.3, {"fault_reaction_option": 0},
+                                lambda s: s._L.fw_raise_fault(s.firmware.handle, 0x8130))
+    assert float(t[np.argmax(~on)]) <= 1.5 / 24000
+
+
+@pytest.mark.parametrize("option,bound_s", [(0, 1.5 / 24000), (2, 0.5 + 1.5 / 24000)])
+def test_quick_stop_option(option: int, bound_s: float) -> None:
+    """0x605A: 0 disables the drive at once; 2 brakes, bounded by quick_stop_time_s."""
+    t, on, v, v0 = _run_at_speed("paper_salient", 0.3, {"quick_stop_option": option},
+                                 lambda s: s.firmware.controlword(0x02))
+    off = float(t[np.argmax(~on)]) if np.any(~on) else None
+    assert off is not None and off <= bound_s, off
+    if option == 2:
+        assert off > 0.002 and abs(v[np.argmax(~on)]) < 0.5 * abs(v0)  # braked first
