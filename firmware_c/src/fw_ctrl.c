@@ -752,9 +752,12 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   if (c->phase != FW_START_IDLE) {
     fw_mon_compensate(&c->mon, safe.i_abc_A); /* offsets learnt at standstill */
   }
+  /* monitor inputs: every field is written before fw_mon_update reads it
+   * (no memset on the hot path) */
   fw_mon_in_t mi;
-  memset(&mi, 0, sizeof(mi));
-  memcpy(mi.i_abc_A, safe.i_abc_A, sizeof(mi.i_abc_A));
+  mi.i_abc_A[0] = safe.i_abc_A[0];
+  mi.i_abc_A[1] = safe.i_abc_A[1];
+  mi.i_abc_A[2] = safe.i_abc_A[2];
   fw_vec2_f32_t i_ab = fw_clarke_f32(safe.i_abc_A[0], safe.i_abc_A[1], safe.i_abc_A[2]);
 
   /* Fault reaction: brake under control first, or switch off now (latch_fault). */
@@ -771,6 +774,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     fw_mon_learn_offsets(&c->mon, safe.i_abc_A);
     c->i2t_A2s -= c->cfg.i_rated_A * c->cfg.i_rated_A * dt; /* cools down */
     c->i2t_A2s = c->i2t_A2s > 0.0f ? c->i2t_A2s : 0.0f;
+    memset(&mi.e_hf_dq_A, 0, sizeof(mi) - offsetof(fw_mon_in_t, e_hf_dq_A));
     fw_fault_t mf = fw_mon_update(&c->mon, &mi); /* current sum with PWM off */
     if (mf != FW_FAULT_NONE) {
       latch_fault(c, mf);
