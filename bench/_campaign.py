@@ -393,9 +393,11 @@ def run_campaign(c: Campaign, out: Path, scheduler: str | None = None,
                 cluster = None
             else:
                 import os
+                import logging
                 cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
                                        threads_per_worker=1, processes=True,
-                                       dashboard_address=None, host="127.0.0.1")
+                                       dashboard_address=None, host="127.0.0.1",
+                                       silence_logs=logging.ERROR)
                 client = Client(cluster)
             try:
                 n_workers = max(1, len(client.scheduler_info().get("workers", {})) or 1)
@@ -457,3 +459,90 @@ def judge(c: Campaign, res: dict[str, np.ndarray]) -> list[dict[str, Any]]:
 def replay_command(c: Campaign, run: int) -> str:
     """The one command that reruns a single run of a campaign."""
     return f"bench campaign {c.path} --replay {run}"
+
+
+# ---- command line ------------------------------------------------------------
+
+
+def add_parser(sub: Any) -> None:
+    """``bench campaign`` on the bench's subcommand parser."""
+    p = sub.add_parser(
+        "campaign", help="run a campaign of simulated-drive runs (Dask), report distributions",
+        description="Run every run of a campaign file not yet in its results (resumable), "
+                    "on a local Dask cluster of all cores, an existing scheduler "
+                    "(--scheduler) or serially; then write report.html beside the Parquet "
+                    "results. Exit 0 when every limit holds, 1 when one fails, 2 for a bad "
+                    "file or argument, 130 when interrupted (finished runs are kept).")
+    p.add_argument("file", help="campaign YAML (see campaigns/)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler, e.g. tcp://host:8786")
+    p.add_argument("--workers", type=int, metavar="N", help="local cluster size (default: cores)")
+    p.add_argument("--serial", action="store_true", help="no Dask: a plain loop in this process")
+    p.add_argument("--out", default="runs/campaigns", help="results root (default %(default)s)")
+    p.add_argument("--replay", type=int, metavar="RUN", help="rerun one run alone and print it")
+    p.add_argument("--compare", metavar="DIR", help="results folder of another campaign to "
+                                                    "overlay in the report")
+
+
+def cmd(args: Any) -> int:
+    """Run ``bench campaign``; returns the exit code."""
+    import sys
+
+    try:
+        from sim_fallback._sim import METRIC_NAMES
+        c = load_campaign(args.file, METRIC_NAMES)
+    except CampaignError as e:
+        print(f"bench: {e}", file=sys.stderr)
+        return 2
+    if args.workers is not None and not 1 <= args.workers <= 1024:
+        print(f"bench: --workers {args.workers}: allowed 1..1024", file=sys.stderr)
+        return 2
+    runs = c.runs()
+    if args.replay is not None:
+        if not 0 <= args.replay < len(runs):
+            print(f"bench: --replay {args.replay}: campaign {c.name} has runs 0.."
+                  f"{len(runs) - 1}", file=sys.stderr)
+            return 2
+        base = dict(c.base)
+        base["_scales"] = {a.target: a.kind == "scale" for a in c.axes}
+        row = run_one(base, runs[args.replay], c.metrics)
+        print(json.dumps({k: v for k, v in row.items() if k != "traceback"}, indent=1))
+        return 0 if row["error"] is None else 1
+    other = Path(args.compare) if args.compare else None
+    if other is not None and not any(other.glob("part-*.parquet")):
+        print(f"bench: --compare {other}: no campaign results (part-*.parquet) there",
+              file=sys.stderr)
+        return 2
+    from tqdm import tqdm
+    bar = tqdm(total=len(runs), unit="run", desc=c.name, file=sys.stderr)
+    last = [0]
+
+    def progress(done: int, total: int, elapsed: float) -> None:
+        if bar.total != total:
+            bar.reset(total=total)
+        bar.update(done - last[0])
+        last[0] = done
+
+    interrupted = False
+    try:
+        rdir = run_campaign(c, Path(args.out), scheduler=args.scheduler, workers=args.workers,
+                            serial=args.serial, progress=progress)
+    except KeyboardInterrupt:
+        interrupted = True
+        rdir = results_dir(c, Path(args.out))
+    except OSError as e:
+        print(f"bench: campaign {c.name}: {e}", file=sys.stderr)
+        return 3
+    finally:
+        bar.close()
+    from bench._campaign_report import write_report
+    res = load_results(rdir)
+    report = write_report(c, rdir, other)
+    verdicts = judge(c, res)
+    for v in verdicts:
+        print(f"{'pass' if v['ok'] else 'FAIL'}  {v['stat']}({v['metric']}) = {v['value']:.4g}"
+              f"  limits [{v['min']}, {v['max']}]")
+    print(f"{len(res.get('run', []))} runs in {rdir}; report {report}")
+    if interrupted:
+        print("bench: interrupted; run the same command again to resume", file=sys.stderr)
+        return 130
+    return 0 if all(v["ok"] for v in verdicts) else 1

@@ -141,6 +141,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "and EMCY messages; --reset sends a fault reset.")
     p.add_argument("--reset", action="store_true", help="fault reset (controlword bit 7)")
     _conn_args(p)
+    from bench import _campaign
+    _campaign.add_parser(sub)
     return ap
 
 
@@ -424,6 +426,12 @@ def cmd_faults(args: argparse.Namespace) -> int:
         conn.close()
 
 
+def _campaign_cmd(args: argparse.Namespace) -> int:
+    from bench._campaign import cmd
+
+    return cmd(args)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``bench`` console script."""
     ap = build_parser()
@@ -437,7 +445,8 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     _sigterm_as_interrupt()
     handlers = {"run": cmd_run, "validate": cmd_validate, "live": cmd_live, "info": cmd_info,
-                "param": cmd_param, "config": cmd_config, "faults": cmd_faults}
+                "param": cmd_param, "config": cmd_config, "faults": cmd_faults,
+                "campaign": _campaign_cmd}
     try:
         return handlers[args.cmd](args)
     except KeyboardInterrupt:

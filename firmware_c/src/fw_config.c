@@ -145,7 +145,7 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->fault_brake_time_s = 0.08f; /* heartbeat loss: PWM off within consumer time + 80 ms */
   cfg->mon_angle_max_rad = 0.5f;
   cfg->mon_detect_time_s = 0.01f;
-  cfg->mon_sal_tol = 0.5f;
+  cfg->mon_sal_tol = 1.0f; /* measured saliency within a factor 2 of the configured */
   cfg->mon_bemf_max_rad = 0.6f;
   cfg->mon_bemf_min_V = 5.0f;
   cfg->i_sum_max_A = 1.0f;

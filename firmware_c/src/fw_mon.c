@@ -114,7 +114,10 @@ fw_fault_t fw_mon_saliency(fw_mon_t *m, const fw_config_t *cfg, float y_dd, floa
   const float L_lo = q_larger ? cfg->L_d_H : cfg->L_q_H;
   const float L_hi = q_larger ? cfg->L_q_H : cfg->L_d_H;
   const float sal_cfg = L_hi / L_lo - 1.0f;
-  if (m->sal_meas < cfg->saliency_min || fabsf(m->sal_meas / sal_cfg - 1.0f) > cfg->mon_sal_tol) {
+  /* measured and configured saliency must agree within a factor (1 + tol) */
+  const float ratio = m->sal_meas / sal_cfg;
+  const float f = 1.0f + cfg->mon_sal_tol;
+  if (m->sal_meas < cfg->saliency_min || ratio > f || ratio * f < 1.0f) {
     return FW_FAULT_SALIENCY_MISMATCH;
   }
   if (fabsf(m->sal_axis_rad) > m->angle_max_rad) {

@@ -70,10 +70,13 @@ static void test_saliency_refusals(void) {
   /* not salient (configured 1.5) */
   TT_CHECK(saliency_at(&m, &cfg, 0.012, 0.012, 0.3) == FW_FAULT_SALIENCY_MISMATCH);
   TT_CHECK_NEAR(m.sal_meas, 0.0, 1e-4);
-  /* salient, but far less than configured: 1.1 vs 1.5 (|0.1/0.5 - 1| > 0.5) */
+  /* salient, but far less than configured: 1.1 vs 1.5 (0.1 / 0.5 is beyond a factor 2) */
   TT_CHECK(saliency_at(&m, &cfg, 0.012, 0.0132, 0.0) == FW_FAULT_SALIENCY_MISMATCH);
-  /* within tolerance: 1.3 vs 1.5 */
+  /* within tolerance: 1.3 vs 1.5 (factor 1.67) and 1.9 vs 1.5 (factor 1.8) */
   TT_CHECK(saliency_at(&m, &cfg, 0.012, 0.0156, 0.0) == FW_FAULT_NONE);
+  TT_CHECK(saliency_at(&m, &cfg, 0.012, 0.0228, 0.0) == FW_FAULT_NONE);
+  /* too salient: 2.2 vs 1.5 (factor 2.4) */
+  TT_CHECK(saliency_at(&m, &cfg, 0.012, 0.0264, 0.0) == FW_FAULT_SALIENCY_MISMATCH);
   /* no response on one axis (open circuit) */
   TT_CHECK(fw_mon_saliency(&m, &cfg, 0.1f, 0.0f, 0.0f, 0.0f, (float)(Ts * U)) ==
            FW_FAULT_SALIENCY_MISMATCH);

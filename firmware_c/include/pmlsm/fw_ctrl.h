@@ -201,7 +201,7 @@ typedef struct {
   /* integrity monitor (fw_mon.h) */
   float mon_angle_max_rad;  /**< HF-derived |angle error| limit */
   float mon_detect_time_s;  /**< a witness must exceed its limit this long to fault */
-  float mon_sal_tol;        /**< measured/configured saliency must be within 1 -+ tol */
+  float mon_sal_tol;        /**< measured saliency within a factor (1 + tol) of the configured */
   float mon_bemf_max_rad;   /**< back-EMF residual angle limit */
   float mon_bemf_min_V;     /**< back-EMF witness active above this |e| */
   float i_sum_max_A;        /**< limit on the filtered |i_a + i_b + i_c| */

@@ -18,7 +18,7 @@
  * | current sum | low-passed |i_a + i_b + i_c| | i_sum_max_A | CURRENT_SENSOR_SUM |
  * | current control | low-passed |i_dq_ref - i_dq|^2 | (0.5 i_max_A)^2 | CURRENT_CONTROL |
  * | standstill offset | per-phase mean with PWM off | i_offset_max_A | CURRENT_SENSOR_OFFSET |
- * | saliency | eigenvalues of the 2x2 HF admittance measured at standstill | saliency_min, configured saliency -+ mon_sal_tol | SALIENCY_MISMATCH |
+ * | saliency | eigenvalues of the 2x2 HF admittance measured at standstill | saliency_min, configured saliency within a factor 1 + mon_sal_tol | SALIENCY_MISMATCH |
  * | motion at enable | |u_dq| needed to hold zero current = |omega| psi_f | start_speed_max_mps | MOVING_AT_ENABLE |
  *
  * Each running witness must exceed its limit for mon_detect_time_s in a row;
