@@ -37,6 +37,9 @@ import numpy as np
 import yaml
 
 SCENARIOS = ("load_step", "speed_reversal", "startup", "fault_case")
+#: Metrics of a fault_case run (sim_fallback._faults.run_case), beside the drive metrics.
+FAULT_CASE_METRICS = ("blind_max_s", "rms_rad", "max_rad", "t_fault_s", "pwm_off_after_s",
+                      "verdict_ok")
 METHODS = ("grid", "random", "lhs")
 STATS = ("mean", "max", "min", "p50", "p90", "p95", "p99", "fail_fraction")
 
@@ -53,19 +56,20 @@ class Axis:
 
     target: str
     kind: str
-    spec: list[float]
+    spec: list[Any]
 
-    def value(self, u: float) -> float:
+    def value(self, u: float) -> Any:
         """Map u in [0, 1) to this axis's value."""
         if self.kind == "values":
-            return float(self.spec[min(int(u * len(self.spec)), len(self.spec) - 1)])
+            v = self.spec[min(int(u * len(self.spec)), len(self.spec) - 1)]
+            return v if isinstance(v, str) else float(v)
         lo, hi = self.spec
         v = lo + (hi - lo) * u
         return float(int(v)) if self.target == "seed" else float(v)
 
-    def grid(self) -> list[float]:
+    def grid(self) -> list[Any]:
         if self.kind == "values":
-            return [float(x) for x in self.spec]
+            return [x if isinstance(x, str) else float(x) for x in self.spec]
         lo, hi = self.spec
         if self.target == "seed":
             return [float(x) for x in range(int(lo), int(hi))]
@@ -169,10 +173,11 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
     sc = base.get("scenario", "load_step")
     if sc not in SCENARIOS:
         err(bnode, "base.scenario", f"{sc!r} not one of {', '.join(SCENARIOS)}")
+    case_names: list[str] = []
     if sc == "fault_case":
         from sim_fallback._faults import CASES
-        names = [c.name for c in CASES]
-        if base.get("case") not in names:
+        names = case_names = [c.name for c in CASES]
+        if "case" not in data.get("axes", {}) and base.get("case") not in names:
             err(bnode, "base.case", f"{base.get('case')!r} is not a fault case ({len(names)} "
                 "listed in docs/fault_matrix.md)")
     samp = data.get("sampling", {"method": "grid"})
@@ -195,10 +200,23 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
     for tgt, spec in raw_axes.items():
         node = _find(anode, str(tgt)) if isinstance(anode, yaml.MappingNode) else anode
         fld = f"axes.{tgt}"
+        if tgt == "case":  # rows of the fault-injection matrix
+            vals = spec.get("values") if isinstance(spec, dict) else None
+            vals = case_names if vals == "all" else vals
+            if sc != "fault_case":
+                err(node, fld, "a case axis needs base.scenario: fault_case")
+            elif not isinstance(vals, list) or not vals or any(v not in case_names
+                                                               for v in vals):
+                err(node, fld, "values: all, or a list of fault-case names "
+                    "(docs/fault_matrix.md)")
+            else:
+                axes.append(Axis("case", "values", list(vals)))
+            continue
         ok_target = (tgt in ("seed", "noise", "x0_m") or str(tgt).startswith("plant.")
                      or str(tgt).startswith("fw."))
         if not ok_target:
-            err(node, fld, "target must be seed, noise, x0_m, plant.<field> or fw.<field>")
+            err(node, fld, "target must be seed, noise, x0_m, case, plant.<field> or "
+                "fw.<field>")
             continue
         if not isinstance(spec, dict) or len(spec) != 1:
             err(node, fld, "need exactly one of values: [...], range: [lo, hi], "
@@ -224,6 +242,8 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
     metrics = data.get("metrics", [])
     mnode = _find(root, "metrics")
     known = set(metric_names) if metric_names is not None else None
+    if known is not None and sc == "fault_case":
+        known |= set(FAULT_CASE_METRICS)
     if not isinstance(metrics, list) or not metrics:
         err(mnode, "metrics", "need a non-empty list of metric names")
         metrics = []
@@ -286,7 +306,7 @@ def run_chunk(base: dict[str, Any], chunk: list[dict[str, Any]],
 def _split(params: dict[str, Any]) -> tuple[dict[str, float], dict[str, float], dict[str, Any]]:
     plant = {k[6:]: v for k, v in params.items() if k.startswith("plant.")}
     fw = {k[3:]: v for k, v in params.items() if k.startswith("fw.")}
-    rest = {k: v for k, v in params.items() if "." not in k and k != "run"}
+    rest = {k: v for k, v in params.items() if "." not in k and k not in ("run", "case")}
     return plant, fw, rest
 
 
@@ -300,12 +320,14 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
     scales = base.get("_scales", {})
     if base.get("scenario") == "fault_case":
         from sim_fallback._faults import CASES, run_case
-        case = next(c for c in CASES if c.name == base["case"])
+        name = params.get("case", base.get("case"))
+        case = next(c for c in CASES if c.name == name)
         r = run_case(case, seed)
-        out = {"fault": int(r["fault"] or 0), "verdict": bool(r["verdict"]),
-               "blind_max_s": r["blind_max_s"]}
-        for m in metrics:
-            out[m] = float(r.get(m) if r.get(m) is not None else float("nan"))
+        out = {k: r[k] for k in ("case", "doc", "fault_name", "why")}
+        out.update(fault=int(r["fault"] or 0), verdict_ok=float(bool(r["verdict"])))
+        for m in FAULT_CASE_METRICS:
+            if m != "verdict_ok":
+                out[m] = float(r[m]) if r.get(m) is not None else float("nan")
         return out
     motor = load_motor(base.get("motor", "paper_salient"))
     # scale axes multiply the nominal value (motor plant / derived configuration)
@@ -392,8 +414,8 @@ def run_campaign(c: Campaign, out: Path, scheduler: str | None = None,
                 client = Client(scheduler)
                 cluster = None
             else:
-                import os
                 import logging
+                import os
                 cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
                                        threads_per_worker=1, processes=True,
                                        dashboard_address=None, host="127.0.0.1",

@@ -76,7 +76,7 @@ def render(c: Campaign, rdir: Path, other: Path | None = None, worst: int = 10) 
         parts.append(to_html(fig, full_html=False, include_plotlyjs=first))
         first = False
         for ax in c.axes:
-            x = np.array([p.get(ax.target, np.nan) for p in params], dtype=float)
+            x = [p.get(ax.target) for p in params]  # numbers, or case names
             sc = go.Figure(go.Scatter(x=x, y=vals, mode="markers", name=m,
                                       text=[f"run {p['run']}" for p in params]))
             sc.update_layout(title=f"{m} against {ax.target} ({ax.kind})",

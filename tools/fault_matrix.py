@@ -1,26 +1,33 @@
 """Run the fault-injection matrix and write docs/fault_matrix.json and .md.
 
-Usage: python tools/fault_matrix.py [--seeds 0 1]
+Usage: python tools/fault_matrix.py [--serial]
 
-Data first (JSON), then the markdown table rendered from it. The same cases
-are tests (tests/python/test_integrity_matrix.py).
+The matrix is a campaign (campaigns/fault_matrix.yaml: every case of
+sim_fallback/_faults.py, two seeds), run on a local Dask cluster (or serially);
+the Parquet results become docs/fault_matrix.json, and the markdown table is
+rendered from that data. The same cases are tests
+(tests/python/test_integrity_matrix.py).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
+import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from sim_fallback._faults import BLIND_ERR_RAD, BLIND_TIME_S, CASES, run_case  # noqa: E402
+from bench._campaign import load_campaign, load_results, run_campaign  # noqa: E402
+from sim_fallback._faults import BLIND_ERR_RAD, BLIND_TIME_S, FAULT_NAMES  # noqa: E402
+from sim_fallback._sim import METRIC_NAMES  # noqa: E402
 
 
 def _ms(x: float | None) -> str:
-    return "–" if x is None else f"{x * 1e3:.1f}"
+    return "–" if x is None or not math.isfinite(x) else f"{x * 1e3:.1f}"
 
 
 def render(rows: list[dict]) -> str:
@@ -46,11 +53,12 @@ def render(rows: list[dict]) -> str:
     ]
     for r in rows:
         outcome = r["fault_name"] or "tracks"
-        track = "–" if r["rms_rad"] is None else f"{r['rms_rad']:.4f} / {r['max_rad']:.3f}"
+        track = ("–" if not math.isfinite(r["rms_rad"])
+                 else f"{r['rms_rad']:.4f} / {r['max_rad']:.3f}")
         out.append(f"| {r['case']} | {r['doc']} | {r['seed']} | {outcome} | "
                    f"{_ms(r['t_fault_s'])} | {_ms(r['pwm_off_after_s'])} | "
                    f"{_ms(r['blind_max_s'])} | {track} | "
-                   f"{'pass' if r['verdict'] else 'FAIL: ' + r['why']} |")
+                   f"{'pass' if r['verdict_ok'] else 'FAIL: ' + r['why']} |")
     out += ["", "Communication cases (heartbeat loss at speed, NMT reset while enabled, lost",
             "RPDOs) run through the CANopen stack in `tests/python/test_comm_safety.py`.", ""]
     return "\n".join(out)
@@ -58,12 +66,28 @@ def render(rows: list[dict]) -> str:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    ap.add_argument("--serial", action="store_true", help="no Dask: a plain loop")
     a = ap.parse_args()
-    rows = [run_case(c, s) for c in CASES for s in a.seeds]
+    c = load_campaign(ROOT / "campaigns/fault_matrix.yaml", METRIC_NAMES)
+    with tempfile.TemporaryDirectory() as tmp:
+        res = load_results(run_campaign(c, Path(tmp), serial=a.serial))
+    keys = ("case", "doc", "fault", "fault_name", "t_fault_s", "pwm_off_after_s",
+            "blind_max_s", "rms_rad", "max_rad", "verdict_ok", "why", "error")
+    rows = []
+    for k in range(len(res["run"])):
+        params = json.loads(res["params"][k])
+        row = {key: (res[key][k] if key in res else None) for key in keys}
+        row["seed"] = int(params["seed"])
+        row["run"] = int(res["run"][k])
+        rows.append(row)
+    rows.sort(key=lambda r: r["run"])
+    for r in rows:
+        if r["error"]:
+            raise SystemExit(f"fault_matrix: run {r['run']} failed: {r['error']}")
+        r["fault_name"] = FAULT_NAMES.get(int(r["fault"])) if r["fault"] else None
     (ROOT / "docs/fault_matrix.json").write_text(json.dumps(rows, indent=1) + "\n")
     (ROOT / "docs/fault_matrix.md").write_text(render(rows))
-    bad = [r for r in rows if not r["verdict"]]
+    bad = [r for r in rows if not r["verdict_ok"]]
     print(f"{len(rows)} runs, {len(bad)} failing; wrote docs/fault_matrix.md")
     return 1 if bad else 0
 
