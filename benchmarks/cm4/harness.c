@@ -17,6 +17,15 @@
  *                           -singlestep`; the script counts the instructions
  *                           executed between fw_step's entry and its return
  *                           to replay_batch().
+ *   harness replay TRACE OUT  processor-in-the-loop: read a trace (magic
+ *                           "PILT", n steps, n events, sizeof(fw_config_t),
+ *                           the configuration, events {step, kind, value}
+ *                           and n fw_inputs_t recorded from a closed-loop
+ *                           simulation), run fw_init + the events + fw_step
+ *                           over the inputs and write per step {duty_abc[3],
+ *                           theta_hat, fault, pwm} to OUT. Built for the host
+ *                           and for the M4 from the same sources, so the two
+ *                           outputs can be compared (benchmarks/pil.py).
  *
  * The plant runs in double (soft-float on the M4) but only in `warm`, which
  * is not traced. The firmware core is float32-only.
@@ -51,7 +60,79 @@ static int in_run(const fw_ctrl_t *c) {
   return c->phase == FW_START_RUN && fw_fault_code(c) == FW_FAULT_NONE;
 }
 
+/* ---- processor-in-the-loop replay ---------------------------------------- */
+
+#define PIL_MAX_EVENTS 64
+enum { PIL_EV_CONTROLWORD = 0, PIL_EV_MODE = 1, PIL_EV_SPEED_REF = 2, PIL_EV_IQ_REF = 3 };
+
+typedef struct {
+  uint32_t step, kind;
+  float value;
+} pil_event_t;
+
+typedef struct {
+  float duty_abc[3];
+  float theta_hat_rad;
+  uint16_t fault;
+  uint8_t pwm_enable, cia402_state;
+} pil_out_t;
+
+static pil_event_t g_ev[PIL_MAX_EVENTS];
+static pil_out_t g_out[N_REC];
+
+static int pil_replay(const char *trace, const char *outpath) {
+  FILE *f = fopen(trace, "rb");
+  if (f == NULL) {
+    printf("PIL: cannot open %s\n", trace);
+    return 1;
+  }
+  uint32_t hdr[4];
+  fw_config_t cfg;
+  int ok = fread(hdr, sizeof hdr, 1, f) == 1 && hdr[0] == 0x544C4950u /* "PILT" */ &&
+           hdr[1] <= N_REC && hdr[2] <= PIL_MAX_EVENTS && hdr[3] == sizeof(fw_config_t) &&
+           fread(&cfg, sizeof cfg, 1, f) == 1 &&
+           fread(g_ev, sizeof g_ev[0], hdr[2], f) == hdr[2] &&
+           fread(g_rec, sizeof g_rec[0], hdr[1], f) == hdr[1];
+  fclose(f);
+  if (!ok) {
+    printf("PIL: bad trace %s (sizeof(fw_config_t) here %u)\n", trace, (unsigned)sizeof cfg);
+    return 1;
+  }
+  fw_init(&g_c, &cfg);
+  uint32_t e = 0;
+  for (uint32_t k = 0; k < hdr[1]; k++) {
+    for (; e < hdr[2] && g_ev[e].step == k; e++) {
+      switch (g_ev[e].kind) {
+      case PIL_EV_CONTROLWORD: (void)fw_controlword(&g_c, (uint16_t)g_ev[e].value); break;
+      case PIL_EV_MODE: (void)fw_set_mode(&g_c, (fw_mode_t)(int)g_ev[e].value); break;
+      case PIL_EV_SPEED_REF: (void)fw_set_speed_ref(&g_c, g_ev[e].value); break;
+      default: (void)fw_set_iq_ref(&g_c, g_ev[e].value); break;
+      }
+    }
+    fw_outputs_t out;
+    fw_snapshot_t snap;
+    fw_step(&g_c, &g_rec[k], &out);
+    fw_get_snapshot(&g_c, &snap);
+    memcpy(g_out[k].duty_abc, out.duty_abc, sizeof out.duty_abc);
+    g_out[k].theta_hat_rad = snap.theta_hat_rad;
+    g_out[k].fault = snap.fault_code;
+    g_out[k].pwm_enable = out.pwm_enable;
+    g_out[k].cia402_state = snap.cia402_state;
+  }
+  FILE *o = fopen(outpath, "wb");
+  if (o == NULL || fwrite(g_out, sizeof g_out[0], hdr[1], o) != hdr[1]) {
+    printf("PIL: cannot write %s\n", outpath);
+    return 1;
+  }
+  fclose(o);
+  printf("PIL: replay ok steps=%u fault=0x%04x\n", (unsigned)hdr[1], (unsigned)fw_fault_code(&g_c));
+  return 0;
+}
+
 int main(int argc, char **argv) {
+  if (argc >= 4 && strcmp(argv[1], "replay") == 0) {
+    return pil_replay(argv[2], argv[3]);
+  }
   if (argc >= 4 && strcmp(argv[1], "warm") == 0) {
     int n = atoi(argv[3]);
     if (n < 1 || n > N_MAX) n = N_MAX;
@@ -113,6 +194,7 @@ int main(int argc, char **argv) {
            batch, all_run ? "yes" : "NO", (int)g_c.phase, (unsigned)fw_fault_code(&g_c));
     return all_run ? 0 : 1;
   }
-  printf("usage: harness warm STATE N [force|speed] | harness count STATE BATCH NB\n");
+  printf("usage: harness warm STATE N [force|speed] | harness count STATE BATCH NB | "
+         "harness replay TRACE OUT\n");
   return 2;
 }
