@@ -43,6 +43,7 @@ FW_CONFIG_FIELDS: list[tuple[str, type]] = [
     ("mon_angle_max_rad", _f), ("mon_detect_time_s", _f), ("mon_sal_tol", _f),
     ("mon_bemf_max_rad", _f), ("mon_bemf_min_V", _f), ("i_sum_max_A", _f),
     ("i_offset_max_A", _f), ("start_speed_max_mps", _f),
+    ("bemf_e_on_V", _f), ("bemf_e_off_V", _f), ("bemf_inj_share", _f),
 ]
 
 
@@ -91,6 +92,7 @@ class FwSnapshot(C.Structure):
         ("u_dc_V", _f), ("duty_abc", _f * 3),
         ("mon_angle_hf_rad", _f), ("mon_angle_bemf_rad", _f), ("mon_e_bemf_V", _f),
         ("mon_i_sum_A", _f), ("sal_meas", _f), ("L_small_meas_H", _f), ("L_large_meas_H", _f),
+        ("bemf_err_rad", _f), ("inj_scale", _f), ("bemf_active", _u8),
     ]
 
     def as_dict(self) -> dict:

@@ -78,6 +78,9 @@ static const fw_config_field_t k_fields[] = {
     F32(i_sum_max_A, "A", 1e-3f, 500.0f),
     F32(i_offset_max_A, "A", 1e-3f, 500.0f),
     F32(start_speed_max_mps, "m/s", 1e-3f, 100.0f),
+    F32(bemf_e_on_V, "V", 0.0f, 1000.0f),
+    F32(bemf_e_off_V, "V", 0.0f, 1000.0f),
+    F32(bemf_inj_share, "", 0.05f, 1.0f),
 };
 
 #define K_NFIELDS (sizeof(k_fields) / sizeof(k_fields[0]))
@@ -151,6 +154,9 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->i_sum_max_A = 1.0f;
   cfg->i_offset_max_A = 1.0f;
   cfg->start_speed_max_mps = 0.05f;
+  cfg->bemf_e_on_V = 10.0f; /* paper motor: 55 rad/s el. = 131 r/min, above the paper's speeds */
+  cfg->bemf_e_off_V = 7.0f;
+  cfg->bemf_inj_share = 0.25f;
 }
 
 size_t fw_config_field_count(void) { return K_NFIELDS; }
@@ -225,6 +231,10 @@ fw_status_t fw_config_check(const fw_config_t *cfg, fw_config_issue_t *issue) {
   if (cfg->sogi_k_adapt_min > cfg->sogi_k_adapt_max) {
     return report(issue, FW_ERR_INCONSISTENT, "sogi_k_adapt_min", cfg->sogi_k_adapt_min,
                   FW_SOGI_K_MIN, cfg->sogi_k_adapt_max);
+  }
+  if (cfg->bemf_e_on_V > 0.0f && cfg->bemf_e_off_V >= cfg->bemf_e_on_V) {
+    return report(issue, FW_ERR_INCONSISTENT, "bemf_e_off_V", cfg->bemf_e_off_V, 0.0f,
+                  cfg->bemf_e_on_V);
   }
   if (cfg->pll_kd > 0.0f && cfg->pll_kd >= cfg->pll_kp * cfg->pll_ki) {
     return report(issue, FW_ERR_INCONSISTENT, "pll_kd", cfg->pll_kd, 0.0f,

@@ -157,6 +157,7 @@ static void reset_dynamics(fw_ctrl_t *c) {
   c->sal_k = 0u;
   memset(c->u_dq_prev_V, 0, sizeof(c->u_dq_prev_V));
   c->follow_time_s = 0.0f;
+  fw_bemf_reset(&c->bemf);
 }
 
 static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
@@ -184,6 +185,7 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   c->w_follow_radps = fw_units_mps_to_radps_e(cfg, cfg->follow_err_mps);
   c->e_start_max_V = fw_units_mps_to_radps_e(cfg, cfg->start_speed_max_mps) * cfg->psi_f_Wb;
   fw_mon_init(&c->mon, cfg, c->dt_s);
+  fw_bemf_init(&c->bemf, cfg, c->dt_s);
   /* references set under the old limits must obey the new ones */
   c->speed_ref_radps_e =
       fw_clampf(c->speed_ref_radps_e, -cfg->speed_max_radps_e, cfg->speed_max_radps_e);
@@ -451,6 +453,8 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab) {
   }
   if (c->phase == FW_START_SALIENCY) {
     eps = 0.0f; /* injection moves to q^ during the check: hold the estimate */
+  } else if (c->bemf.active) {
+    eps = fw_bemf_error(&c->bemf, c->pll.w_i_radps); /* above injection speeds */
   }
   /* Low-passed *signed* error: its magnitude is the tracking error. The
    * per-sample eps carries ~0.04 rad of sensor noise, so a filtered |eps|
@@ -518,7 +522,7 @@ static void supervise_estimator(fw_ctrl_t *c) {
   if (c->phase_time_s < FW_HF_SUPERVISION_DELAY_S || c->ring_fill < c->n_inj) {
     return;
   }
-  if (cfg->u_inj_V > 0.0f && c->snap.hf_amp_A < c->hf_min_A) {
+  if (cfg->u_inj_V > 0.0f && c->snap.hf_amp_A < c->hf_min_A * c->bemf.inj_scale) {
     latch_fault(c, FW_FAULT_EST_HF_LOW);
     return;
   }
@@ -807,6 +811,11 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     i_f_ab = estimator_step(c, i_ab);
   }
   fw_vec2_f32_t i_dq = fw_park_f32(pulses ? i_ab : i_f_ab, sc);
+  if (c->phase == FW_START_RUN && !pulses) {
+    const float i_dq_arr[2] = {i_dq.x, i_dq.y};
+    fw_bemf_update(&c->bemf, c->u_dq_prev_V, i_dq_arr, c->pll.w_i_radps);
+    fw_bemf_schedule(&c->bemf, c->pll.w_i_radps, (uint8_t)(c->ring_fill == c->n_inj));
+  }
   if (pulses) {
     u_d_pulse = polarity_step(c, i_dq.x);
     if (c->phase == FW_START_RUN) {
@@ -900,8 +909,11 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   /* ---- integrity monitor and protections ---- */
   {
     const bool running = c->phase == FW_START_RUN;
-    mi.e_hf_dq_A[0] = e_raw.x;
-    mi.e_hf_dq_A[1] = e_raw.y;
+    const float inv_scale = 1.0f / c->bemf.inj_scale; /* inj_scale >= bemf_inj_share > 0 */
+    const bool scale_steady =
+        c->bemf.inj_scale >= 1.0f || c->bemf.inj_scale <= c->bemf.inj_share;
+    mi.e_hf_dq_A[0] = e_raw.x * inv_scale;
+    mi.e_hf_dq_A[1] = e_raw.y * inv_scale;
     mi.u_dq_V[0] = c->u_dq_prev_V[0];
     mi.u_dq_V[1] = c->u_dq_prev_V[1];
     mi.i_dq_A[0] = i_dq.x;
@@ -911,7 +923,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     mi.omega_hat_radps = c->pll.w_i_radps;
     mi.accel_dist_radps2 = c->accel_dist;
     mi.running = (uint8_t)running;
-    mi.hf_valid = (uint8_t)(running && !pulses && c->ring_fill == c->n_inj &&
+    mi.hf_valid = (uint8_t)(running && !pulses && scale_steady && c->ring_fill == c->n_inj &&
                             c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S &&
                             c->sign_hist[1] != 0.0f);
     mi.pwm_on = 1u;
@@ -945,8 +957,8 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   c->sign_hist[1] = c->sign_hist[0];
   c->sign_hist[0] = s;
   const bool inj_q = c->phase == FW_START_SALIENCY && c->sal_k >= sal_col_len;
-  fw_vec2_f32_t u_cmd = {u_dq.x + (inj_q ? 0.0f : s * cfg->u_inj_V),
-                         u_dq.y + (inj_q ? s * cfg->u_inj_V : 0.0f)};
+  const float u_inj = cfg->u_inj_V * c->bemf.inj_scale;
+  fw_vec2_f32_t u_cmd = {u_dq.x + (inj_q ? 0.0f : s * u_inj), u_dq.y + (inj_q ? s * u_inj : 0.0f)};
 
   /* ---- modulation: the voltage acts over [k+1, k+2] (update delay), so the
    * transform uses the angle 1.5 periods after sampling ---- */
@@ -961,7 +973,10 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   c->snap.i_dq_ref_A[1] = i_q_ref;
   c->snap.u_dq_V[0] = u_dq.x;
   c->snap.u_dq_V[1] = u_dq.y;
-  c->snap.u_inj_V = s * cfg->u_inj_V;
+  c->snap.u_inj_V = s * u_inj;
+  c->snap.inj_scale = c->bemf.inj_scale;
+  c->snap.bemf_active = c->bemf.active;
+  c->snap.bemf_err_rad = fw_bemf_error(&c->bemf, c->pll.w_i_radps);
   if (c->phase == FW_START_SALIENCY && ++c->sal_k == 2u * sal_col_len) {
     saliency_done(c);
     if (c->fault_hard) {

@@ -207,9 +207,14 @@ typedef struct {
   float i_sum_max_A;        /**< limit on the filtered |i_a + i_b + i_c| */
   float i_offset_max_A;     /**< limit on each standstill offset */
   float start_speed_max_mps;/**< refuse to enable above this mover speed */
+  /* back-EMF observer and handover (fw_bemf.h) */
+  float bemf_e_on_V;        /**< hand over to the back-EMF above |w^| psi_f = this (0: off) */
+  float bemf_e_off_V;       /**< back to injection below this (< bemf_e_on_V) */
+  float bemf_inj_share;     /**< injection kept on back-EMF, share of u_inj_V */
 } fw_config_t;
 
 #include "fw_mon.h"
+#include "fw_bemf.h"
 
 /** One configuration field, for validation messages, the OD and tools. */
 typedef struct {
@@ -293,6 +298,10 @@ typedef struct {
   float sal_meas;           /**< saliency measured at start-up (L_large / L_small - 1) */
   float L_small_meas_H;     /**< smaller inductance measured at start-up */
   float L_large_meas_H;     /**< larger inductance measured at start-up */
+  /* back-EMF observer (fw_bemf.h) */
+  float bemf_err_rad;       /**< angle error seen by the back-EMF */
+  float inj_scale;          /**< injection amplitude in use, share of u_inj_V */
+  uint8_t bemf_active;      /**< 1: the PLL tracks the back-EMF, 0: the HF response */
 } fw_snapshot_t;
 
 /**
@@ -359,6 +368,7 @@ typedef struct {
   uint32_t sal_k;
   /* integrity monitor and protections */
   fw_mon_t mon;
+  fw_bemf_t bemf;
   float u_dq_prev_V[2];   /**< fundamental voltage commanded last period (applied now) */
   float i2t_A2s;          /**< i^2 t above i_rated_A */
   float follow_time_s;    /**< time outside the following-error window */

@@ -1,0 +1,63 @@
+/**
+ * @file fw_bemf.h
+ * @brief Back-EMF observer and the handover between injection and back-EMF.
+ *
+ * Above injection speeds the back-EMF is large and clean: in the estimated
+ * frame the voltage equation leaves
+ *     e_d = u_d - R i_d - L_d di_d/dt + w^ L_q i_q = -E sin dtheta,
+ *     e_q = u_q - R i_q - L_q di_q/dt - w^ L_d i_d =  E cos dtheta,   E = w psi_f,
+ * so dtheta = atan2(-e_d, e_q) (plus pi for w < 0) is an angle error the PLL
+ * can track instead of the HF error. The handover has hysteresis on |w^| psi_f
+ * (bemf_e_on_V up, bemf_e_off_V down): going up, the PLL switches to the
+ * back-EMF error once the estimate has been above the band for 5 ms, then the
+ * injection ramps down to bemf_inj_share of u_inj_V (the HF witness of the
+ * integrity monitor keeps working on the reduced injection); going down, the
+ * injection ramps back up first and the PLL returns to the HF error once the
+ * extraction has settled. The PLL state is continuous through both, so the
+ * estimate does not jump.
+ *
+ * Included by fw_ctrl.h (needs fw_config_t).
+ */
+#ifndef PMLSM_FW_BEMF_H
+#define PMLSM_FW_BEMF_H
+
+#include <stdint.h>
+
+#ifndef PMLSM_FW_CTRL_H
+#error "include pmlsm/fw_ctrl.h"
+#endif
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Observer and handover state (caller-owned). */
+typedef struct {
+  float R_ohm, L_d_H, L_q_H, psi_f_Wb, dt_s, a_f;
+  float w_on, w_off;    /**< handover band, el. rad/s (w_on = 0: handover off) */
+  float inj_share;      /**< injection scale while on back-EMF */
+  float i_prev_A[2];
+  float e_d_f, e_q_f;   /**< filtered back-EMF in the estimated frame, V */
+  uint8_t active;       /**< PLL driven by the back-EMF error */
+  uint8_t going_up;     /**< injection ramping down (1) or up (0) */
+  float t_cond_s;       /**< time the switching condition has held */
+  float inj_scale;      /**< injection amplitude scale now (1 = full) */
+  float t_full_s;       /**< time since the injection is back at full */
+} fw_bemf_t;
+
+/** Parameters from the configuration; state cleared. */
+void fw_bemf_init(fw_bemf_t *b, const fw_config_t *cfg, float dt_s);
+/** Closed loop (re)starts: injection full, PLL on the HF error. */
+void fw_bemf_reset(fw_bemf_t *b);
+/** Filter the back-EMF from the applied voltage and the fundamental current. */
+void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat);
+/** Angle error dtheta seen by the back-EMF (rad, [-pi, pi)); 0 when |E| is too small. */
+float fw_bemf_error(const fw_bemf_t *b, float w_hat);
+/** Handover logic for this period; hf_settled: the HF path has a full period
+ *  of data at full injection. Updates active and inj_scale. */
+void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* PMLSM_FW_BEMF_H */

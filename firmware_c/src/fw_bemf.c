@@ -1,0 +1,89 @@
+/**
+ * @file fw_bemf.c
+ * @brief Back-EMF observer and the injection / back-EMF handover (fw_bemf.h).
+ */
+#include <math.h>
+#include <string.h>
+
+#include "pmlsm/fw_ctrl.h"
+
+#define BEMF_TAU_S 0.001f      /* back-EMF low-pass (a DC signal in the estimated frame) */
+#define BEMF_HOLD_S 0.005f     /* the switching condition must hold this long */
+#define BEMF_RAMP_S 0.010f     /* injection ramp time, full <-> share */
+#define BEMF_HF_SETTLE_S 0.002f /* HF path settling after the injection is back */
+
+void fw_bemf_init(fw_bemf_t *b, const fw_config_t *cfg, float dt_s) {
+  memset(b, 0, sizeof(*b));
+  b->R_ohm = cfg->R_ohm;
+  b->L_d_H = cfg->L_d_H;
+  b->L_q_H = cfg->L_q_H;
+  b->psi_f_Wb = cfg->psi_f_Wb;
+  b->dt_s = dt_s;
+  b->a_f = 1.0f - expf(-dt_s / BEMF_TAU_S);
+  b->w_on = cfg->bemf_e_on_V / cfg->psi_f_Wb;
+  b->w_off = cfg->bemf_e_off_V / cfg->psi_f_Wb;
+  b->inj_share = cfg->bemf_inj_share;
+  fw_bemf_reset(b);
+}
+
+void fw_bemf_reset(fw_bemf_t *b) {
+  b->active = 0u;
+  b->going_up = 0u;
+  b->t_cond_s = 0.0f;
+  b->inj_scale = 1.0f;
+  b->t_full_s = 0.0f;
+  b->e_d_f = b->e_q_f = 0.0f;
+  b->i_prev_A[0] = b->i_prev_A[1] = 0.0f;
+}
+
+void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat) {
+  const float inv_dt = 1.0f / b->dt_s;
+  float did = (i_dq_A[0] - b->i_prev_A[0]) * inv_dt;
+  float diq = (i_dq_A[1] - b->i_prev_A[1]) * inv_dt;
+  b->i_prev_A[0] = i_dq_A[0];
+  b->i_prev_A[1] = i_dq_A[1];
+  float e_d = u_dq_V[0] - b->R_ohm * i_dq_A[0] - b->L_d_H * did + w_hat * b->L_q_H * i_dq_A[1];
+  float e_q = u_dq_V[1] - b->R_ohm * i_dq_A[1] - b->L_q_H * diq - w_hat * b->L_d_H * i_dq_A[0];
+  b->e_d_f += b->a_f * (e_d - b->e_d_f);
+  b->e_q_f += b->a_f * (e_q - b->e_q_f);
+}
+
+float fw_bemf_error(const fw_bemf_t *b, float w_hat) {
+  float e2 = b->e_d_f * b->e_d_f + b->e_q_f * b->e_q_f;
+  float e_min = 0.5f * b->w_off * b->psi_f_Wb;
+  if (e2 < e_min * e_min) {
+    return 0.0f;
+  }
+  float ang = atan2f(-b->e_d_f, b->e_q_f);
+  return w_hat < 0.0f ? fw_wrap_pi_f32(ang + FW_PI_F32) : ang;
+}
+
+void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled) {
+  const float w = fabsf(w_hat);
+  const float step = b->dt_s / BEMF_RAMP_S * (1.0f - b->inj_share);
+  if (b->w_on <= 0.0f) {
+    return; /* handover off: injection only */
+  }
+  if (!b->active) {
+    b->t_cond_s = w > b->w_on ? b->t_cond_s + b->dt_s : 0.0f;
+    if (b->t_cond_s >= BEMF_HOLD_S) {
+      b->active = 1u; /* both estimates valid here: switch the PLL, then reduce injection */
+      b->going_up = 1u;
+      b->t_cond_s = 0.0f;
+    }
+  } else if (w < b->w_off) {
+    b->going_up = 0u; /* injection back first, PLL follows when the HF path has settled */
+  } else if (!b->going_up && w > b->w_on) {
+    b->going_up = 1u; /* changed its mind on the way down */
+  }
+  if (b->active && b->going_up) {
+    b->inj_scale = fmaxf(b->inj_share, b->inj_scale - step);
+    b->t_full_s = 0.0f;
+  } else {
+    b->inj_scale = fminf(1.0f, b->inj_scale + step);
+    b->t_full_s = b->inj_scale >= 1.0f ? b->t_full_s + b->dt_s : 0.0f;
+    if (b->active && b->t_full_s >= BEMF_HF_SETTLE_S && hf_settled) {
+      b->active = 0u;
+    }
+  }
+}
