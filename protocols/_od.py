@@ -78,6 +78,9 @@ class OdEntry:
         Size in bytes (maximum length for strings).
     fw_config : str | None
         fw_config_t field this entry mirrors.
+    scale : float
+        Wire value = field value x scale (integer objects that show a
+        fw_config_t field in wire units, e.g. 1e6 for m/s -> um/s); 1 otherwise.
     doc : str
         Description.
     """
@@ -97,6 +100,7 @@ class OdEntry:
     pdo: bool = False
     size: int = 0
     fw_config: str | None = None
+    scale: float = 1.0
     doc: str = ""
 
     @property
@@ -113,14 +117,26 @@ class OdEntry:
         return f"CO_OD_{self.index:04X}_{self.sub:02X}"
 
 
+@dataclass(frozen=True)
+class Fault:
+    """One fault code (``faults:`` section): EMCY error code, 0x603F, fw_fault_t."""
+
+    code: int
+    name: str
+    text: str
+    reaction: str
+
+
 @dataclass
 class ObjectDictionary:
-    """The expanded dictionary: device info, entries sorted by (index, sub), signals."""
+    """The expanded dictionary: device info, entries sorted by (index, sub), signals,
+    fault codes."""
 
     device: dict[str, Any]
     entries: list[OdEntry]
     signals: list[dict[str, str]]
     fw_config: dict[str, dict[str, float]] = field(default_factory=dict)
+    faults: list[Fault] = field(default_factory=list)
 
     def objects(self) -> dict[int, list[OdEntry]]:
         """Entries grouped by index, in order."""
@@ -165,18 +181,26 @@ def _entry(obj: dict[str, Any], sub: dict[str, Any], kind: str,
     if access not in ACCESS:
         raise OdError(f"{where}: access {access!r} not in {ACCESS}")
     fwc = sub.get("fw_config")
+    scale = float(sub.get("scale", 1.0))
     mn, mx, dflt = sub.get("min"), sub.get("max"), sub.get("default")
+    if scale != 1.0 and (fwc is None or typ not in INT_RANGE):
+        raise OdError(f"{where}: scale needs fw_config and an integer type")
     if fwc is not None:
         if fwc not in fw_limits:
             raise OdError(f"{where}: fw_config field {fwc!r} has no entry in the fw_config section")
         lim = fw_limits[fwc]
-        mn = lim["min"] if mn is None else mn
-        mx = lim["max"] if mx is None else mx
-        dflt = lim["default"] if dflt is None else dflt
-        if not sub.get("unit") and lim.get("unit"):
+        if typ in INT_RANGE:
+            lo, hi = INT_RANGE[typ]
+            # the wire range holds exactly the integers whose field value is allowed
+            mn = max(lo, scaled_bound(lim["min"], scale, up=True)) if mn is None else mn
+            mx = min(hi, scaled_bound(lim["max"], scale, up=False)) if mx is None else mx
+            dflt = round(float(lim["default"]) * scale) if dflt is None else dflt
+        else:
+            mn = lim["min"] if mn is None else mn
+            mx = lim["max"] if mx is None else mx
+            dflt = lim["default"] if dflt is None else dflt
+        if not sub.get("unit") and lim.get("unit") and scale == 1.0:
             sub = {**sub, "unit": lim["unit"]}
-        if typ != "REAL32":
-            mn, mx, dflt = int(mn), int(mx), int(dflt)
     default, rel = _parse_default(where, typ, dflt)
     if typ in INT_RANGE:
         lo, hi = INT_RANGE[typ]
@@ -201,8 +225,33 @@ def _entry(obj: dict[str, Any], sub: dict[str, Any], kind: str,
         index=index, sub=sub_i, name=name, object_name=str(obj["name"]), kind=kind,
         type=typ, access=access, unit=str(sub.get("unit", "") or ""), min=mn, max=mx,
         default=default, nodeid_relative=rel, pdo=bool(sub.get("pdo", False)),
-        size=size, fw_config=fwc, doc=str(sub.get("doc", "") or ""),
+        size=size, fw_config=fwc, scale=scale, doc=str(sub.get("doc", "") or ""),
     )
+
+
+def scaled_bound(v: float, scale: float, up: bool) -> int:
+    """Smallest (up) / largest integer n with n / scale inside the float32 limit v.
+
+    The firmware converts with a float32 division, so the bound is checked in
+    float32 too (1000 um/s / 1e6 must not fall below a 1e-3 m/s minimum).
+    """
+    import struct
+
+    def f32(x: float) -> float:
+        return struct.unpack("<f", struct.pack("<f", x))[0]
+
+    def inside(n: int) -> bool:
+        val = f32(f32(float(n)) / f32(scale))
+        return val >= lim if up else val <= lim
+
+    lim = f32(float(v))
+    step = 1 if up else -1
+    n = round(lim * scale)
+    while not inside(n):  # float32 rounding moves the boundary by an integer or so
+        n += step
+    while inside(n - step):
+        n -= step
+    return int(n)
 
 
 def _pdo_objects(pdos: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
@@ -219,6 +268,11 @@ def _pdo_objects(pdos: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
                  "default": p["cob_id"]},
                 {"sub": 2, "name": "Transmission type", "type": "UNSIGNED8", "access": "rw",
                  "default": p["trans_type"]},
+                {"sub": 5, "name": "Event timer", "type": "UNSIGNED16", "access": "rw",
+                 "unit": "ms", "default": p.get("event_timer", 0),
+                 "doc": "deadline: data not applied for this long (no frame, or no SYNC for "
+                        "a synchronous RPDO) raises fault 0x8250 RPDO_TIMEOUT while the drive "
+                        "is enabled; 0 = off; armed by the first PDO applied in OPERATIONAL"},
             ],
         })
     for n, p in enumerate(pdos.get("tpdo", [])):
@@ -303,5 +357,17 @@ def load(path: Path | str = OD_YAML) -> ObjectDictionary:
                 entries[i0] = OdEntry(**{**entries[i0].__dict__, "doc": str(obj["doc"])})
     entries.sort(key=lambda e: (e.index, e.sub))
     signals = list(data.get("signals", []))
+    faults: list[Fault] = []
+    for k, f in enumerate(data.get("faults", []) or []):
+        where = f"od.yaml faults[{k}]"
+        try:
+            flt = Fault(int(f["code"]), str(f["name"]), str(f["text"]), str(f["reaction"]))
+        except KeyError as e:
+            raise OdError(f"{where}: missing {e}") from None
+        if not re.fullmatch(r"[A-Z][A-Z0-9_]*", flt.name) or not 0 <= flt.code <= 0xFFFF:
+            raise OdError(f"{where}: name {flt.name!r} / code {flt.code:#x}")
+        if any(g.code == flt.code or g.name == flt.name for g in faults):
+            raise OdError(f"{where}: code or name {flt.name} defined twice")
+        faults.append(flt)
     return ObjectDictionary(device=dict(data["device"]), entries=entries, signals=signals,
-                            fw_config=fw_limits)
+                            fw_config=fw_limits, faults=faults)

@@ -12,12 +12,14 @@ Outputs (checked in; tests/python/test_protocol_od.py fails on drift):
 - firmware_c/comm/generated/co_od_table.h / .c   (C table, see co_od.h)
 - firmware_c/comm/generated/fw_serial_signals.h / .c (signal table, see fw_serial.h)
 - protocols/generated/pmlsm_drive.eds           (CiA 306 EDS for canopen.import_od)
+- protocols/generated/od_names.py               (fault codes and names, object indices)
 - docs/od_table.md                               (documentation)
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import struct
 import sys
 from pathlib import Path
@@ -126,7 +128,7 @@ def gen_c_source(od: ObjectDictionary) -> str:
     lines += ["};", "", "const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT] = {"]
     for e in od.entries:
         if e.fw_config:
-            lines.append(f"    {{{e.c_ident}, {_c_str(e.fw_config)}}},")
+            lines.append(f"    {{{e.c_ident}, {_c_str(e.fw_config)}, {_c_float(e.scale)}}},")
     lines += ["};", ""]
     return "\n".join(lines)
 
@@ -313,12 +315,71 @@ def gen_markdown(od: ObjectDictionary) -> str:
             f"{_md_num(e, e.min)} | {_md_num(e, e.max)} | {_md_num(e, e.default)} | "
             f"{'yes' if e.pdo else ''} | {doc.replace('|', '/')} |"
         )
+    lines += ["", "## Fault codes", "",
+              "EMCY error code, 0x603F and `fw_fault_t` (`FW_FAULT_<name>`); names and texts "
+              "for tools in `protocols/generated/od_names.py` (`FAULTS`).", "",
+              "| Code | Name | Meaning | Reaction |", "|---|---|---|---|"]
+    for f in od.faults:
+        lines.append(f"| 0x{f.code:04X} | {f.name} | {f.text.replace('|', '/')} | "
+                     f"{f.reaction.replace('|', '/')} |")
     lines += ["", "## Serial signals", "",
               "Ids used by the telemetry and trace frames (docs/protocols.md).", "",
               "| Id | Name | Unit | Snapshot member |", "|---|---|---|---|"]
     for i, s in enumerate(od.signals):
         lines.append(f"| {i} | {s['name']} | {s.get('unit', '')} | `{s['field']}` |")
     lines.append("")
+    return "\n".join(lines)
+
+
+def _py_ident(name: str) -> str:
+    s = re.sub(r"[^0-9A-Za-z]+", "_", name).strip("_").upper()
+    return s if not s[:1].isdigit() else "_" + s
+
+
+def gen_py_names(od: ObjectDictionary) -> str:
+    """Python module: fault codes/names/texts and object indices by name."""
+    q = '"' * 3
+    lines = [
+        f"{q}Fault codes and object names from protocols/od.yaml.",
+        "",
+        f"{HEADER}.",
+        "",
+        "FAULTS: fault code -> (name, text); FAULT_REACTIONS: code -> reaction;",
+        "FAULT_CODES: name -> code; INDEX_<OBJECT NAME>: object index;",
+        "ENTRIES: (index, sub) -> name (the EDS ParameterName).",
+        q,
+        "",
+        "# ruff: noqa: E501",
+        "from __future__ import annotations",
+        "",
+        "FAULTS: dict[int, tuple[str, str]] = {",
+    ]
+    for f in od.faults:
+        lines.append(f"    0x{f.code:04X}: ({f.name!r}, {f.text!r}),")
+    lines += ["}", "", "FAULT_REACTIONS: dict[int, str] = {"]
+    for f in od.faults:
+        lines.append(f"    0x{f.code:04X}: {f.reaction!r},")
+    lines += ["}", "", "FAULT_CODES: dict[str, int] = {name: code for code, (name, _) in "
+              "FAULTS.items()}", "", ""]
+    lines += [
+        "def fault_name(code: int) -> str:",
+        f'    {q}Name of a fault code ("NONE" for 0, "0x1234" when unknown).{q}',
+        "    if code == 0:",
+        '        return "NONE"',
+        '    return FAULTS[code][0] if code in FAULTS else f"0x{code:04X}"',
+        "",
+        "",
+    ]
+    seen: dict[str, int] = {}
+    for index, entries in od.objects().items():
+        ident = "INDEX_" + _py_ident(entries[0].object_name)
+        if seen.setdefault(ident, index) != index:
+            raise ValueError(f"two objects are named {ident}")
+        lines.append(f"{ident} = 0x{index:04X}")
+    lines += ["", "ENTRIES: dict[tuple[int, int], str] = {"]
+    for e in od.entries:
+        lines.append(f"    (0x{e.index:04X}, {e.sub}): {e.name!r},")
+    lines += ["}", ""]
     return "\n".join(lines)
 
 
@@ -332,14 +393,42 @@ def outputs(od: ObjectDictionary | None = None) -> dict[Path, str]:
         gen / "fw_serial_signals.h": gen_signals_header(od),
         gen / "fw_serial_signals.c": gen_signals_source(od),
         ROOT / "protocols" / "generated" / "pmlsm_drive.eds": gen_eds(od),
+        ROOT / "protocols" / "generated" / "od_names.py": gen_py_names(od),
         ROOT / "docs" / "od_table.md": gen_markdown(od),
     }
 
 
+_NUM = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?[fF]?")
+
+
+def _tokens(text: str) -> list[str | float]:
+    """Text split into numbers (float32 values) and everything else, so that two
+    spellings of one number (``0.1`` / ``1e-1`` / ``0.100000001f``) compare equal."""
+    out: list[str | float] = []
+    pos = 0
+    for m in _NUM.finditer(text):
+        if m.start() > pos:
+            out.append(text[pos:m.start()])
+        tok = m.group(0).rstrip("fF")
+        if tok.lstrip("+-").isdigit():
+            out.append(tok)  # integers (indices, COB-IDs, counts): exact
+        else:
+            out.append(_f32(float(tok)))
+        pos = m.end()
+    out.append(text[pos:])
+    return out
+
+
+def same_content(a: str, b: str) -> bool:
+    """Generated texts are equal, decimal fractions compared as float32 numbers."""
+    return a == b or _tokens(a) == _tokens(b)
+
+
 def drifted(od: ObjectDictionary | None = None) -> list[Path]:
-    """Generated files whose content differs from a fresh generation."""
+    """Generated files whose content differs from a fresh generation (numbers with
+    a fraction or exponent compared by value: another float printing is no drift)."""
     return [p for p, text in outputs(od).items()
-            if not p.exists() or p.read_text() != text]
+            if not p.exists() or not same_content(p.read_text(), text)]
 
 
 def _short_f32(x: float) -> str:
@@ -371,7 +460,7 @@ def sync_fw_config(exe: str, yaml_path: Path | None = None) -> None:
     lines = ["fw_config:"]
     for name, v in table.items():
         if name == "extractor" or float(v["max"]).is_integer() and name.endswith(
-                ("extractor", "_samples", "_pairs", "_count")):
+                ("extractor", "_samples", "_pairs", "_count", "_option")):
             nums = f"min: {int(v['min'])}, max: {int(v['max'])}, default: {int(v['default'])}"
         else:
             nums = (f"min: {_short_f32(v['min'])}, max: {_short_f32(v['max'])}, "

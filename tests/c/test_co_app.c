@@ -340,10 +340,12 @@ static void test_error_register_after_nmt_reset(void) {
   step_n(2);
   TT_CHECK(fw_fault_code(fw_app_ctrl(&g_app)) == FW_FAULT_EST_HF_LOW);
   TT_CHECK(sdo_read(0x1001, 0) == 0x81u);
-  uint8_t nmt2[2] = {0x81, 0x00}; /* reset node */
+  uint8_t nmt2[2] = {0x81, 0x00}; /* reset node: back to the boot state */
   rx(0, 2, nmt2);
   step_n(2);
-  TT_CHECK(sdo_read(0x1001, 0) == 0x81u);
+  TT_CHECK(fw_fault_code(fw_app_ctrl(&g_app)) == FW_FAULT_NONE);
+  TT_CHECK(sdo_read(0x1001, 0) == 0x00u);
+  TT_CHECK((sdo_read(0x6041, 0) & 0x4Fu) == 0x40u); /* switch on disabled */
 }
 
 int main(void) {

@@ -7,6 +7,7 @@
  * On failure it prints the `fw_config:` section od.yaml should have
  * (paste it, then run python -m protocols.generate).
  */
+#include <math.h>
 #include <string.h>
 
 #include "co_od_table.h"
@@ -32,13 +33,18 @@ static void print_yaml(void) {
   printf("fw_config:\n");
   for (uint32_t k = 0; k < CO_OD_CFG_COUNT; k++) {
     const fw_config_field_t *f = fw_config_field_find(co_od_cfg_links[k].field);
-    if (f == NULL) {
-      continue;
+    const co_od_entry_t *e = co_od_entry(co_od_cfg_links[k].pos);
+    if (f == NULL || e == NULL || e->type != (f->is_u32 ? e->type : CO_TYPE_REAL32) ||
+        co_od_cfg_links[k].scale != 1.0f || (f->is_u32 && e->min_i < 0)) {
+      continue; /* the views in wire units repeat a field */
     }
     printf("  %s: {min: %.9g, max: %.9g, default: %.9g, unit: \"%s\"}\n", f->name,
            (double)f->min, (double)f->max, (double)cfg_value(&cfg, f), f->unit);
   }
 }
+
+static void check_scaled(const co_od_cfg_link_t *l, const co_od_entry_t *e,
+                         const fw_config_field_t *f, float dflt);
 
 static void test_limits_and_defaults(void) {
   fw_config_t cfg;
@@ -63,12 +69,64 @@ static void test_limits_and_defaults(void) {
       if (e->min_f != f->min || e->max_f != f->max || e->def_f != dflt) {
         printf("  drift: 0x%04X:%u %s\n", e->index, e->sub, l->field);
       }
-    } else {
-      TT_CHECK(f->is_u32);
+    } else if (l->scale == 1.0f && f->is_u32 && e->min_i >= 0) {
+      /* an integer field shown as is (e.g. 0x2000 extractor) */
       TT_CHECK_NEAR((double)e->min_i, f->min, 0.0);
       TT_CHECK_NEAR((double)e->max_i, f->max, 0.0);
       TT_CHECK_NEAR((double)e->def_i, dflt, 0.0);
+    } else {
+      check_scaled(l, e, f, dflt);
     }
+  }
+}
+
+/* Inclusive range of an integer OD type. */
+static void type_range(uint8_t type, int64_t *lo, int64_t *hi) {
+  switch (type) {
+  case CO_TYPE_I8: *lo = INT8_MIN; *hi = INT8_MAX; break;
+  case CO_TYPE_I16: *lo = INT16_MIN; *hi = INT16_MAX; break;
+  case CO_TYPE_I32: *lo = INT32_MIN; *hi = INT32_MAX; break;
+  case CO_TYPE_U8: *lo = 0; *hi = UINT8_MAX; break;
+  case CO_TYPE_U16: *lo = 0; *hi = UINT16_MAX; break;
+  default: *lo = 0; *hi = UINT32_MAX; break;
+  }
+}
+
+/* The field value the application derives from wire value n (fw_app.c: a
+ * float32 division by the scale). */
+static float to_field(int64_t n, float scale) { return (float)n / scale; }
+
+/*
+ * A CiA 402 object that shows a field in wire units (value x scale, e.g.
+ * 0x6080 um/s for v_max_mps): its limits hold exactly the wire values whose
+ * field value the core accepts: the limit maps inside the field's range and
+ * the next integer outside, unless the limit is the type's own (then the core
+ * refuses with 0x06090030; used for 0x605A/0x605E, whose reserved codes are
+ * "invalid value" rather than "too high"). The default is the field default.
+ */
+static void check_scaled(const co_od_cfg_link_t *l, const co_od_entry_t *e,
+                         const fw_config_field_t *f, float dflt) {
+  int64_t lo, hi;
+  type_range(e->type, &lo, &hi);
+  TT_CHECK(e->type != CO_TYPE_REAL32 && l->scale > 0.0f);
+  if (e->min_i > lo) {
+    TT_CHECK(to_field(e->min_i, l->scale) >= f->min);
+    TT_CHECK(to_field(e->min_i - 1, l->scale) < f->min);
+  } else {
+    TT_CHECK(e->min_i == lo);
+  }
+  if (e->max_i < hi) {
+    TT_CHECK(to_field(e->max_i, l->scale) <= f->max);
+    TT_CHECK(to_field(e->max_i + 1, l->scale) > f->max);
+  } else {
+    TT_CHECK(e->max_i == hi);
+    /* the type's limit: the field's largest value must not be cut off */
+    TT_CHECK((double)f->max * (double)l->scale >= (double)hi ||
+             to_field(hi, l->scale) >= f->max);
+  }
+  TT_CHECK_NEAR((double)e->def_i, (double)dflt * (double)l->scale, 0.5);
+  if (e->def_i != (int64_t)llround((double)dflt * (double)l->scale)) {
+    printf("  drift: 0x%04X:%u %s (scale %g)\n", e->index, e->sub, l->field, (double)l->scale);
   }
 }
 

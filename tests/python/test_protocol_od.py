@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import configparser
 import logging
+import re
 import struct
 import warnings
 from pathlib import Path
@@ -14,7 +15,7 @@ import pytest
 import yaml
 
 from protocols import generate
-from protocols._od import OdError, load
+from protocols._od import INT_RANGE, OdError, load
 
 EDS = Path(generate.ROOT) / "protocols" / "generated" / "pmlsm_drive.eds"
 NODE_ID = 5
@@ -109,10 +110,123 @@ def test_required_objects_present(od):
 def test_config_objects_carry_fw_config_limits(od):
     raw = yaml.safe_load(Path(generate.ROOT, "protocols", "od.yaml").read_text())
     lim = raw["fw_config"]
-    linked = [e for e in od.entries if e.fw_config]
-    assert len(linked) >= 20
+    linked = [e for e in od.entries if e.fw_config and e.type == "REAL32"]
+    assert len(linked) >= 40
     for e in linked:
         assert e.min == lim[e.fw_config]["min"] and e.max == lim[e.fw_config]["max"]
+        assert e.default == lim[e.fw_config]["default"]
+    # every fw_config field of the section is reachable over the bus
+    assert set(lim) <= {e.fw_config for e in od.entries if e.fw_config}
+
+
+@pytest.mark.parametrize("index,sub,field,scale", [
+    (0x6080, 0, "v_max_mps", 1e6), (0x6065, 0, "follow_err_mps", 1e6),
+    (0x6066, 0, "follow_err_time_s", 1e3), (0x607D, 1, "pos_limit_min_m", 1e6),
+    (0x607D, 2, "pos_limit_max_m", 1e6)])
+def test_cia402_views_in_wire_units(od, index, sub, field, scale):
+    """0x6080/0x6065/0x6066/0x607D show fw_config fields in um/s, ms, um: the wire
+    limits are exactly the integers the firmware's float32 conversion accepts."""
+    e = od.find(index, sub)
+    lim = od.fw_config[field]
+    lo, hi = INT_RANGE[e.type]
+    assert e.fw_config == field and e.scale == scale
+    assert e.unit == {1e6: "um/s" if "mps" in field else "um", 1e3: "ms"}[scale]
+
+    def fld(n: int) -> float:
+        return _f32(_f32(float(n)) / _f32(scale))
+
+    if e.min > lo:
+        assert fld(e.min) >= _f32(lim["min"]) > fld(e.min - 1)
+    else:
+        assert lim["min"] * scale <= lo
+    if e.max < hi:
+        assert fld(e.max) <= _f32(lim["max"]) < fld(e.max + 1)
+    else:
+        assert lim["max"] * scale >= hi
+    assert e.default == round(lim["default"] * scale)
+
+
+def test_option_codes_are_cia402_int16(od):
+    for index, field in ((0x605A, "quick_stop_option"), (0x605E, "fault_reaction_option")):
+        e = od.find(index)
+        assert (e.type, e.access, e.fw_config) == ("INTEGER16", "rw", field)
+        assert e.default == od.fw_config[field]["default"] == 2  # quick stop ramp
+
+
+def _c_fault_enum() -> dict[int, str]:
+    """fw_fault_t parsed from the C header: code -> name without FW_FAULT_."""
+    text = Path(generate.ROOT, "firmware_c", "include", "pmlsm", "fw_ctrl.h").read_text()
+    body = re.search(r"typedef enum \{(.*?)\}\s*fw_fault_t;", text, re.S)
+    assert body, "fw_fault_t not found in fw_ctrl.h"
+    code = re.sub(r"/\*.*?\*/", "", body.group(1), flags=re.S)
+    out: dict[int, str] = {}
+    for m in re.finditer(r"FW_FAULT_(\w+)\s*=\s*(0[xX][0-9A-Fa-f]+|\d+)", code):
+        out[int(m.group(2), 0)] = m.group(1)
+    assert len(out) == code.count("FW_FAULT_"), "an enumerator without an explicit value"
+    return out
+
+
+def test_fault_list_matches_the_c_enum(od):
+    c = _c_fault_enum()
+    assert c.pop(0) == "NONE"
+    y = {f.code: f.name for f in od.faults}
+    assert len(y) >= 20
+    only_yaml = {k: v for k, v in y.items() if k not in c}
+    if only_yaml == {0x8250: "RPDO_TIMEOUT"} and c == {
+            k: v for k, v in y.items() if k != 0x8250}:
+        pytest.xfail("fw_fault_t lacks FW_FAULT_RPDO_TIMEOUT = 0x8250 (raised by fw_app; "
+                     "the core owner adds the enum line)")
+    assert c == y
+
+
+def test_fault_enum_parser_sees_a_difference(od):
+    """The comparison above can fail: a renamed enumerator is caught."""
+    c = _c_fault_enum()
+    assert c[0x8130] == "HEARTBEAT_LOST"
+    y = {f.code: f.name for f in od.faults}
+    assert y[0x8130] == "HEARTBEAT_LOST" and y[0x8400] == "OVERSPEED"
+    assert {**y, 0x8130: "HB_LOST"} != {k: v for k, v in c.items() if k}
+
+
+def test_generated_names_module(od):
+    from protocols.generated import od_names
+
+    assert od_names.FAULTS == {f.code: (f.name, f.text) for f in od.faults}
+    assert od_names.fault_name(0x8130) == "HEARTBEAT_LOST"
+    assert od_names.fault_name(0) == "NONE" and od_names.fault_name(0x1234) == "0x1234"
+    assert od_names.FAULT_CODES["OVERSPEED"] == 0x8400
+    assert od_names.INDEX_MAX_MOTOR_SPEED == 0x6080
+    assert od_names.INDEX_SOFTWARE_POSITION_LIMIT == 0x607D
+    assert od_names.ENTRIES[(0x1400, 5)] == "Event timer"
+    md = Path(generate.ROOT, "docs", "od_table.md").read_text()
+    for f in od.faults:
+        assert f"| 0x{f.code:04X} | {f.name} |" in md
+
+
+def test_drift_check_compares_numbers_as_numbers():
+    """Generated files are compared with numbers as float32 values: another
+    printing of the same number is not drift, another number is."""
+    a = "{0x6080u, 1.0e-3f, 0.1, 3000000}"
+    assert generate.same_content(a, "{0x6080u, 0.001f, 1e-1, 3000000}")
+    assert generate.same_content(a, "{0x6080u, 0.0010000000474974513f, 0.100000001, 3000000}")
+    assert not generate.same_content(a, "{0x6080u, 0.002f, 0.1, 3000000}")
+    assert not generate.same_content(a, "{0x6080u, 1.0e-3f, 0.1, 3000001}")
+    assert not generate.same_content(a, "{0x6081u, 1.0e-3f, 0.1, 3000000}")
+    assert not generate.same_content(a, "{0x6080u, 1.0e-3f, 0.1, 3000000} ")
+
+
+def test_drift_is_detected(tmp_path, monkeypatch):
+    """drifted() reports a generated file whose numbers changed."""
+    outs = generate.outputs()
+    p = generate.ROOT / "firmware_c" / "comm" / "generated" / "co_od_table.c"
+    changed = outs[p].replace("0.9580000042915344f", "0.9590000042915344f", 1)
+    assert changed != outs[p]
+    fake = tmp_path / "co_od_table.c"
+    fake.write_text(changed)
+    monkeypatch.setattr(generate, "outputs", lambda od=None: {fake: outs[p]})
+    assert generate.drifted() == [fake]
+    fake.write_text(outs[p].replace("0.9580000042915344f", "9.58e-1f", 1))
+    assert generate.drifted() == []
 
 
 def test_bad_yaml_is_reported_with_the_field(tmp_path):

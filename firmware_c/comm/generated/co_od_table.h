@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 214u
-#define CO_OD_RAM_SIZE 706u
+#define CO_OD_COUNT 246u
+#define CO_OD_RAM_SIZE 811u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -28,206 +28,238 @@
 #define CO_OD_1400_00 15u /* RPDO1 communication parameter: Highest sub-index supported */
 #define CO_OD_1400_01 16u /* RPDO1 communication parameter: COB-ID */
 #define CO_OD_1400_02 17u /* RPDO1 communication parameter: Transmission type */
-#define CO_OD_1401_00 18u /* RPDO2 communication parameter: Highest sub-index supported */
-#define CO_OD_1401_01 19u /* RPDO2 communication parameter: COB-ID */
-#define CO_OD_1401_02 20u /* RPDO2 communication parameter: Transmission type */
-#define CO_OD_1402_00 21u /* RPDO3 communication parameter: Highest sub-index supported */
-#define CO_OD_1402_01 22u /* RPDO3 communication parameter: COB-ID */
-#define CO_OD_1402_02 23u /* RPDO3 communication parameter: Transmission type */
-#define CO_OD_1403_00 24u /* RPDO4 communication parameter: Highest sub-index supported */
-#define CO_OD_1403_01 25u /* RPDO4 communication parameter: COB-ID */
-#define CO_OD_1403_02 26u /* RPDO4 communication parameter: Transmission type */
-#define CO_OD_1600_00 27u /* RPDO1 mapping parameter: Number of mapped objects */
-#define CO_OD_1600_01 28u /* RPDO1 mapping parameter: Mapped object 1 */
-#define CO_OD_1600_02 29u /* RPDO1 mapping parameter: Mapped object 2 */
-#define CO_OD_1600_03 30u /* RPDO1 mapping parameter: Mapped object 3 */
-#define CO_OD_1600_04 31u /* RPDO1 mapping parameter: Mapped object 4 */
-#define CO_OD_1600_05 32u /* RPDO1 mapping parameter: Mapped object 5 */
-#define CO_OD_1600_06 33u /* RPDO1 mapping parameter: Mapped object 6 */
-#define CO_OD_1600_07 34u /* RPDO1 mapping parameter: Mapped object 7 */
-#define CO_OD_1600_08 35u /* RPDO1 mapping parameter: Mapped object 8 */
-#define CO_OD_1601_00 36u /* RPDO2 mapping parameter: Number of mapped objects */
-#define CO_OD_1601_01 37u /* RPDO2 mapping parameter: Mapped object 1 */
-#define CO_OD_1601_02 38u /* RPDO2 mapping parameter: Mapped object 2 */
-#define CO_OD_1601_03 39u /* RPDO2 mapping parameter: Mapped object 3 */
-#define CO_OD_1601_04 40u /* RPDO2 mapping parameter: Mapped object 4 */
-#define CO_OD_1601_05 41u /* RPDO2 mapping parameter: Mapped object 5 */
-#define CO_OD_1601_06 42u /* RPDO2 mapping parameter: Mapped object 6 */
-#define CO_OD_1601_07 43u /* RPDO2 mapping parameter: Mapped object 7 */
-#define CO_OD_1601_08 44u /* RPDO2 mapping parameter: Mapped object 8 */
-#define CO_OD_1602_00 45u /* RPDO3 mapping parameter: Number of mapped objects */
-#define CO_OD_1602_01 46u /* RPDO3 mapping parameter: Mapped object 1 */
-#define CO_OD_1602_02 47u /* RPDO3 mapping parameter: Mapped object 2 */
-#define CO_OD_1602_03 48u /* RPDO3 mapping parameter: Mapped object 3 */
-#define CO_OD_1602_04 49u /* RPDO3 mapping parameter: Mapped object 4 */
-#define CO_OD_1602_05 50u /* RPDO3 mapping parameter: Mapped object 5 */
-#define CO_OD_1602_06 51u /* RPDO3 mapping parameter: Mapped object 6 */
-#define CO_OD_1602_07 52u /* RPDO3 mapping parameter: Mapped object 7 */
-#define CO_OD_1602_08 53u /* RPDO3 mapping parameter: Mapped object 8 */
-#define CO_OD_1603_00 54u /* RPDO4 mapping parameter: Number of mapped objects */
-#define CO_OD_1603_01 55u /* RPDO4 mapping parameter: Mapped object 1 */
-#define CO_OD_1603_02 56u /* RPDO4 mapping parameter: Mapped object 2 */
-#define CO_OD_1603_03 57u /* RPDO4 mapping parameter: Mapped object 3 */
-#define CO_OD_1603_04 58u /* RPDO4 mapping parameter: Mapped object 4 */
-#define CO_OD_1603_05 59u /* RPDO4 mapping parameter: Mapped object 5 */
-#define CO_OD_1603_06 60u /* RPDO4 mapping parameter: Mapped object 6 */
-#define CO_OD_1603_07 61u /* RPDO4 mapping parameter: Mapped object 7 */
-#define CO_OD_1603_08 62u /* RPDO4 mapping parameter: Mapped object 8 */
-#define CO_OD_1800_00 63u /* TPDO1 communication parameter: Highest sub-index supported */
-#define CO_OD_1800_01 64u /* TPDO1 communication parameter: COB-ID */
-#define CO_OD_1800_02 65u /* TPDO1 communication parameter: Transmission type */
-#define CO_OD_1800_03 66u /* TPDO1 communication parameter: Inhibit time */
-#define CO_OD_1800_05 67u /* TPDO1 communication parameter: Event timer */
-#define CO_OD_1801_00 68u /* TPDO2 communication parameter: Highest sub-index supported */
-#define CO_OD_1801_01 69u /* TPDO2 communication parameter: COB-ID */
-#define CO_OD_1801_02 70u /* TPDO2 communication parameter: Transmission type */
-#define CO_OD_1801_03 71u /* TPDO2 communication parameter: Inhibit time */
-#define CO_OD_1801_05 72u /* TPDO2 communication parameter: Event timer */
-#define CO_OD_1802_00 73u /* TPDO3 communication parameter: Highest sub-index supported */
-#define CO_OD_1802_01 74u /* TPDO3 communication parameter: COB-ID */
-#define CO_OD_1802_02 75u /* TPDO3 communication parameter: Transmission type */
-#define CO_OD_1802_03 76u /* TPDO3 communication parameter: Inhibit time */
-#define CO_OD_1802_05 77u /* TPDO3 communication parameter: Event timer */
-#define CO_OD_1803_00 78u /* TPDO4 communication parameter: Highest sub-index supported */
-#define CO_OD_1803_01 79u /* TPDO4 communication parameter: COB-ID */
-#define CO_OD_1803_02 80u /* TPDO4 communication parameter: Transmission type */
-#define CO_OD_1803_03 81u /* TPDO4 communication parameter: Inhibit time */
-#define CO_OD_1803_05 82u /* TPDO4 communication parameter: Event timer */
-#define CO_OD_1A00_00 83u /* TPDO1 mapping parameter: Number of mapped objects */
-#define CO_OD_1A00_01 84u /* TPDO1 mapping parameter: Mapped object 1 */
-#define CO_OD_1A00_02 85u /* TPDO1 mapping parameter: Mapped object 2 */
-#define CO_OD_1A00_03 86u /* TPDO1 mapping parameter: Mapped object 3 */
-#define CO_OD_1A00_04 87u /* TPDO1 mapping parameter: Mapped object 4 */
-#define CO_OD_1A00_05 88u /* TPDO1 mapping parameter: Mapped object 5 */
-#define CO_OD_1A00_06 89u /* TPDO1 mapping parameter: Mapped object 6 */
-#define CO_OD_1A00_07 90u /* TPDO1 mapping parameter: Mapped object 7 */
-#define CO_OD_1A00_08 91u /* TPDO1 mapping parameter: Mapped object 8 */
-#define CO_OD_1A01_00 92u /* TPDO2 mapping parameter: Number of mapped objects */
-#define CO_OD_1A01_01 93u /* TPDO2 mapping parameter: Mapped object 1 */
-#define CO_OD_1A01_02 94u /* TPDO2 mapping parameter: Mapped object 2 */
-#define CO_OD_1A01_03 95u /* TPDO2 mapping parameter: Mapped object 3 */
-#define CO_OD_1A01_04 96u /* TPDO2 mapping parameter: Mapped object 4 */
-#define CO_OD_1A01_05 97u /* TPDO2 mapping parameter: Mapped object 5 */
-#define CO_OD_1A01_06 98u /* TPDO2 mapping parameter: Mapped object 6 */
-#define CO_OD_1A01_07 99u /* TPDO2 mapping parameter: Mapped object 7 */
-#define CO_OD_1A01_08 100u /* TPDO2 mapping parameter: Mapped object 8 */
-#define CO_OD_1A02_00 101u /* TPDO3 mapping parameter: Number of mapped objects */
-#define CO_OD_1A02_01 102u /* TPDO3 mapping parameter: Mapped object 1 */
-#define CO_OD_1A02_02 103u /* TPDO3 mapping parameter: Mapped object 2 */
-#define CO_OD_1A02_03 104u /* TPDO3 mapping parameter: Mapped object 3 */
-#define CO_OD_1A02_04 105u /* TPDO3 mapping parameter: Mapped object 4 */
-#define CO_OD_1A02_05 106u /* TPDO3 mapping parameter: Mapped object 5 */
-#define CO_OD_1A02_06 107u /* TPDO3 mapping parameter: Mapped object 6 */
-#define CO_OD_1A02_07 108u /* TPDO3 mapping parameter: Mapped object 7 */
-#define CO_OD_1A02_08 109u /* TPDO3 mapping parameter: Mapped object 8 */
-#define CO_OD_1A03_00 110u /* TPDO4 mapping parameter: Number of mapped objects */
-#define CO_OD_1A03_01 111u /* TPDO4 mapping parameter: Mapped object 1 */
-#define CO_OD_1A03_02 112u /* TPDO4 mapping parameter: Mapped object 2 */
-#define CO_OD_1A03_03 113u /* TPDO4 mapping parameter: Mapped object 3 */
-#define CO_OD_1A03_04 114u /* TPDO4 mapping parameter: Mapped object 4 */
-#define CO_OD_1A03_05 115u /* TPDO4 mapping parameter: Mapped object 5 */
-#define CO_OD_1A03_06 116u /* TPDO4 mapping parameter: Mapped object 6 */
-#define CO_OD_1A03_07 117u /* TPDO4 mapping parameter: Mapped object 7 */
-#define CO_OD_1A03_08 118u /* TPDO4 mapping parameter: Mapped object 8 */
-#define CO_OD_2000_00 119u /* HF extractor: HF extractor */
-#define CO_OD_2001_00 120u /* SOGI k: SOGI k */
-#define CO_OD_2002_00 121u /* Adaptive SOGI enable: Adaptive SOGI enable */
-#define CO_OD_2003_00 122u /* Adaptive SOGI: Highest sub-index supported */
-#define CO_OD_2003_01 123u /* Adaptive SOGI: k max */
-#define CO_OD_2003_02 124u /* Adaptive SOGI: k min */
-#define CO_OD_2003_03 125u /* Adaptive SOGI: Error at k max */
-#define CO_OD_2010_00 126u /* Injection: Highest sub-index supported */
-#define CO_OD_2010_01 127u /* Injection: Amplitude */
-#define CO_OD_2010_02 128u /* Injection: Frequency */
-#define CO_OD_2011_00 129u /* PLL gains: Highest sub-index supported */
-#define CO_OD_2011_01 130u /* PLL gains: kp */
-#define CO_OD_2011_02 131u /* PLL gains: ki */
-#define CO_OD_2011_03 132u /* PLL gains: kd */
-#define CO_OD_2011_04 133u /* PLL gains: Acceleration feed-forward */
-#define CO_OD_2011_05 134u /* PLL gains: Bandwidth scale when locked */
-#define CO_OD_2020_00 135u /* Estimator: Highest sub-index supported */
-#define CO_OD_2020_01 136u /* Estimator: Estimated angle */
-#define CO_OD_2020_02 137u /* Estimator: Estimated speed */
-#define CO_OD_2020_03 138u /* Estimator: Estimated linear speed */
-#define CO_OD_2020_04 139u /* Estimator: PLL error */
-#define CO_OD_2020_05 140u /* Estimator: HF amplitude */
-#define CO_OD_2020_06 141u /* Estimator: Filtered PLL error */
-#define CO_OD_2020_07 142u /* Estimator: SOGI k in use */
-#define CO_OD_2020_08 143u /* Estimator: Start-up phase */
-#define CO_OD_2020_09 144u /* Estimator: Disturbance acceleration */
-#define CO_OD_2030_00 145u /* Fault history: Highest sub-index supported */
-#define CO_OD_2030_01 146u /* Fault history: Fault 1 */
-#define CO_OD_2030_02 147u /* Fault history: Fault 2 */
-#define CO_OD_2030_03 148u /* Fault history: Fault 3 */
-#define CO_OD_2030_04 149u /* Fault history: Fault 4 */
-#define CO_OD_2030_05 150u /* Fault history: Fault 5 */
-#define CO_OD_2030_06 151u /* Fault history: Fault 6 */
-#define CO_OD_2030_07 152u /* Fault history: Fault 7 */
-#define CO_OD_2030_08 153u /* Fault history: Fault 8 */
-#define CO_OD_2040_00 154u /* Firmware version: Firmware version */
-#define CO_OD_2041_00 155u /* Build id: Build id */
-#define CO_OD_2042_00 156u /* Device tag: Device tag */
-#define CO_OD_2050_00 157u /* Drive configuration: Highest sub-index supported */
-#define CO_OD_2050_01 158u /* Drive configuration: PWM frequency */
-#define CO_OD_2050_02 159u /* Drive configuration: Phase resistance */
-#define CO_OD_2050_03 160u /* Drive configuration: L_d */
-#define CO_OD_2050_04 161u /* Drive configuration: L_q */
-#define CO_OD_2050_05 162u /* Drive configuration: PM flux linkage */
-#define CO_OD_2050_06 163u /* Drive configuration: Pole pitch */
-#define CO_OD_2050_07 164u /* Drive configuration: DC undervoltage trip */
-#define CO_OD_2050_08 165u /* Drive configuration: DC overvoltage trip */
-#define CO_OD_2050_09 166u /* Drive configuration: Overcurrent trip */
-#define CO_OD_2050_0A 167u /* Drive configuration: Current limit */
-#define CO_OD_2050_0B 168u /* Drive configuration: Speed limit */
-#define CO_OD_2050_0C 169u /* Drive configuration: Current loop kp */
-#define CO_OD_2050_0D 170u /* Drive configuration: Current loop ki */
-#define CO_OD_2050_0E 171u /* Drive configuration: Speed loop kp */
-#define CO_OD_2050_0F 172u /* Drive configuration: Speed loop ki */
-#define CO_OD_2050_10 173u /* Drive configuration: Speed filter */
-#define CO_OD_2050_11 174u /* Drive configuration: Saliency minimum */
-#define CO_OD_2050_12 175u /* Drive configuration: Quick stop time */
-#define CO_OD_2060_00 176u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 177u /* Telemetry: Decimation */
-#define CO_OD_2060_02 178u /* Telemetry: Signal count */
-#define CO_OD_2060_03 179u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 180u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 181u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 182u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 183u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 184u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 185u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 186u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 187u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 188u /* Trace: Command */
-#define CO_OD_2070_02 189u /* Trace: State */
-#define CO_OD_2070_03 190u /* Trace: Trigger signal */
-#define CO_OD_2070_04 191u /* Trace: Trigger level */
-#define CO_OD_2070_05 192u /* Trace: Trigger edge */
-#define CO_OD_2070_06 193u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 194u /* Trace: Signal count */
-#define CO_OD_2070_08 195u /* Trace: Signal 1 */
-#define CO_OD_2070_09 196u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 197u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 198u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 199u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 200u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 201u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 202u /* Trace: Signal 8 */
-#define CO_OD_603F_00 203u /* Error code: Error code */
-#define CO_OD_6040_00 204u /* Controlword: Controlword */
-#define CO_OD_6041_00 205u /* Statusword: Statusword */
-#define CO_OD_6060_00 206u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 207u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 208u /* Position actual value: Position actual value */
-#define CO_OD_606C_00 209u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 210u /* Target torque: Target torque */
-#define CO_OD_6077_00 211u /* Torque actual value: Torque actual value */
-#define CO_OD_60FF_00 212u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 213u /* Supported drive modes: Supported drive modes */
+#define CO_OD_1400_05 18u /* RPDO1 communication parameter: Event timer */
+#define CO_OD_1401_00 19u /* RPDO2 communication parameter: Highest sub-index supported */
+#define CO_OD_1401_01 20u /* RPDO2 communication parameter: COB-ID */
+#define CO_OD_1401_02 21u /* RPDO2 communication parameter: Transmission type */
+#define CO_OD_1401_05 22u /* RPDO2 communication parameter: Event timer */
+#define CO_OD_1402_00 23u /* RPDO3 communication parameter: Highest sub-index supported */
+#define CO_OD_1402_01 24u /* RPDO3 communication parameter: COB-ID */
+#define CO_OD_1402_02 25u /* RPDO3 communication parameter: Transmission type */
+#define CO_OD_1402_05 26u /* RPDO3 communication parameter: Event timer */
+#define CO_OD_1403_00 27u /* RPDO4 communication parameter: Highest sub-index supported */
+#define CO_OD_1403_01 28u /* RPDO4 communication parameter: COB-ID */
+#define CO_OD_1403_02 29u /* RPDO4 communication parameter: Transmission type */
+#define CO_OD_1403_05 30u /* RPDO4 communication parameter: Event timer */
+#define CO_OD_1600_00 31u /* RPDO1 mapping parameter: Number of mapped objects */
+#define CO_OD_1600_01 32u /* RPDO1 mapping parameter: Mapped object 1 */
+#define CO_OD_1600_02 33u /* RPDO1 mapping parameter: Mapped object 2 */
+#define CO_OD_1600_03 34u /* RPDO1 mapping parameter: Mapped object 3 */
+#define CO_OD_1600_04 35u /* RPDO1 mapping parameter: Mapped object 4 */
+#define CO_OD_1600_05 36u /* RPDO1 mapping parameter: Mapped object 5 */
+#define CO_OD_1600_06 37u /* RPDO1 mapping parameter: Mapped object 6 */
+#define CO_OD_1600_07 38u /* RPDO1 mapping parameter: Mapped object 7 */
+#define CO_OD_1600_08 39u /* RPDO1 mapping parameter: Mapped object 8 */
+#define CO_OD_1601_00 40u /* RPDO2 mapping parameter: Number of mapped objects */
+#define CO_OD_1601_01 41u /* RPDO2 mapping parameter: Mapped object 1 */
+#define CO_OD_1601_02 42u /* RPDO2 mapping parameter: Mapped object 2 */
+#define CO_OD_1601_03 43u /* RPDO2 mapping parameter: Mapped object 3 */
+#define CO_OD_1601_04 44u /* RPDO2 mapping parameter: Mapped object 4 */
+#define CO_OD_1601_05 45u /* RPDO2 mapping parameter: Mapped object 5 */
+#define CO_OD_1601_06 46u /* RPDO2 mapping parameter: Mapped object 6 */
+#define CO_OD_1601_07 47u /* RPDO2 mapping parameter: Mapped object 7 */
+#define CO_OD_1601_08 48u /* RPDO2 mapping parameter: Mapped object 8 */
+#define CO_OD_1602_00 49u /* RPDO3 mapping parameter: Number of mapped objects */
+#define CO_OD_1602_01 50u /* RPDO3 mapping parameter: Mapped object 1 */
+#define CO_OD_1602_02 51u /* RPDO3 mapping parameter: Mapped object 2 */
+#define CO_OD_1602_03 52u /* RPDO3 mapping parameter: Mapped object 3 */
+#define CO_OD_1602_04 53u /* RPDO3 mapping parameter: Mapped object 4 */
+#define CO_OD_1602_05 54u /* RPDO3 mapping parameter: Mapped object 5 */
+#define CO_OD_1602_06 55u /* RPDO3 mapping parameter: Mapped object 6 */
+#define CO_OD_1602_07 56u /* RPDO3 mapping parameter: Mapped object 7 */
+#define CO_OD_1602_08 57u /* RPDO3 mapping parameter: Mapped object 8 */
+#define CO_OD_1603_00 58u /* RPDO4 mapping parameter: Number of mapped objects */
+#define CO_OD_1603_01 59u /* RPDO4 mapping parameter: Mapped object 1 */
+#define CO_OD_1603_02 60u /* RPDO4 mapping parameter: Mapped object 2 */
+#define CO_OD_1603_03 61u /* RPDO4 mapping parameter: Mapped object 3 */
+#define CO_OD_1603_04 62u /* RPDO4 mapping parameter: Mapped object 4 */
+#define CO_OD_1603_05 63u /* RPDO4 mapping parameter: Mapped object 5 */
+#define CO_OD_1603_06 64u /* RPDO4 mapping parameter: Mapped object 6 */
+#define CO_OD_1603_07 65u /* RPDO4 mapping parameter: Mapped object 7 */
+#define CO_OD_1603_08 66u /* RPDO4 mapping parameter: Mapped object 8 */
+#define CO_OD_1800_00 67u /* TPDO1 communication parameter: Highest sub-index supported */
+#define CO_OD_1800_01 68u /* TPDO1 communication parameter: COB-ID */
+#define CO_OD_1800_02 69u /* TPDO1 communication parameter: Transmission type */
+#define CO_OD_1800_03 70u /* TPDO1 communication parameter: Inhibit time */
+#define CO_OD_1800_05 71u /* TPDO1 communication parameter: Event timer */
+#define CO_OD_1801_00 72u /* TPDO2 communication parameter: Highest sub-index supported */
+#define CO_OD_1801_01 73u /* TPDO2 communication parameter: COB-ID */
+#define CO_OD_1801_02 74u /* TPDO2 communication parameter: Transmission type */
+#define CO_OD_1801_03 75u /* TPDO2 communication parameter: Inhibit time */
+#define CO_OD_1801_05 76u /* TPDO2 communication parameter: Event timer */
+#define CO_OD_1802_00 77u /* TPDO3 communication parameter: Highest sub-index supported */
+#define CO_OD_1802_01 78u /* TPDO3 communication parameter: COB-ID */
+#define CO_OD_1802_02 79u /* TPDO3 communication parameter: Transmission type */
+#define CO_OD_1802_03 80u /* TPDO3 communication parameter: Inhibit time */
+#define CO_OD_1802_05 81u /* TPDO3 communication parameter: Event timer */
+#define CO_OD_1803_00 82u /* TPDO4 communication parameter: Highest sub-index supported */
+#define CO_OD_1803_01 83u /* TPDO4 communication parameter: COB-ID */
+#define CO_OD_1803_02 84u /* TPDO4 communication parameter: Transmission type */
+#define CO_OD_1803_03 85u /* TPDO4 communication parameter: Inhibit time */
+#define CO_OD_1803_05 86u /* TPDO4 communication parameter: Event timer */
+#define CO_OD_1A00_00 87u /* TPDO1 mapping parameter: Number of mapped objects */
+#define CO_OD_1A00_01 88u /* TPDO1 mapping parameter: Mapped object 1 */
+#define CO_OD_1A00_02 89u /* TPDO1 mapping parameter: Mapped object 2 */
+#define CO_OD_1A00_03 90u /* TPDO1 mapping parameter: Mapped object 3 */
+#define CO_OD_1A00_04 91u /* TPDO1 mapping parameter: Mapped object 4 */
+#define CO_OD_1A00_05 92u /* TPDO1 mapping parameter: Mapped object 5 */
+#define CO_OD_1A00_06 93u /* TPDO1 mapping parameter: Mapped object 6 */
+#define CO_OD_1A00_07 94u /* TPDO1 mapping parameter: Mapped object 7 */
+#define CO_OD_1A00_08 95u /* TPDO1 mapping parameter: Mapped object 8 */
+#define CO_OD_1A01_00 96u /* TPDO2 mapping parameter: Number of mapped objects */
+#define CO_OD_1A01_01 97u /* TPDO2 mapping parameter: Mapped object 1 */
+#define CO_OD_1A01_02 98u /* TPDO2 mapping parameter: Mapped object 2 */
+#define CO_OD_1A01_03 99u /* TPDO2 mapping parameter: Mapped object 3 */
+#define CO_OD_1A01_04 100u /* TPDO2 mapping parameter: Mapped object 4 */
+#define CO_OD_1A01_05 101u /* TPDO2 mapping parameter: Mapped object 5 */
+#define CO_OD_1A01_06 102u /* TPDO2 mapping parameter: Mapped object 6 */
+#define CO_OD_1A01_07 103u /* TPDO2 mapping parameter: Mapped object 7 */
+#define CO_OD_1A01_08 104u /* TPDO2 mapping parameter: Mapped object 8 */
+#define CO_OD_1A02_00 105u /* TPDO3 mapping parameter: Number of mapped objects */
+#define CO_OD_1A02_01 106u /* TPDO3 mapping parameter: Mapped object 1 */
+#define CO_OD_1A02_02 107u /* TPDO3 mapping parameter: Mapped object 2 */
+#define CO_OD_1A02_03 108u /* TPDO3 mapping parameter: Mapped object 3 */
+#define CO_OD_1A02_04 109u /* TPDO3 mapping parameter: Mapped object 4 */
+#define CO_OD_1A02_05 110u /* TPDO3 mapping parameter: Mapped object 5 */
+#define CO_OD_1A02_06 111u /* TPDO3 mapping parameter: Mapped object 6 */
+#define CO_OD_1A02_07 112u /* TPDO3 mapping parameter: Mapped object 7 */
+#define CO_OD_1A02_08 113u /* TPDO3 mapping parameter: Mapped object 8 */
+#define CO_OD_1A03_00 114u /* TPDO4 mapping parameter: Number of mapped objects */
+#define CO_OD_1A03_01 115u /* TPDO4 mapping parameter: Mapped object 1 */
+#define CO_OD_1A03_02 116u /* TPDO4 mapping parameter: Mapped object 2 */
+#define CO_OD_1A03_03 117u /* TPDO4 mapping parameter: Mapped object 3 */
+#define CO_OD_1A03_04 118u /* TPDO4 mapping parameter: Mapped object 4 */
+#define CO_OD_1A03_05 119u /* TPDO4 mapping parameter: Mapped object 5 */
+#define CO_OD_1A03_06 120u /* TPDO4 mapping parameter: Mapped object 6 */
+#define CO_OD_1A03_07 121u /* TPDO4 mapping parameter: Mapped object 7 */
+#define CO_OD_1A03_08 122u /* TPDO4 mapping parameter: Mapped object 8 */
+#define CO_OD_2000_00 123u /* HF extractor: HF extractor */
+#define CO_OD_2001_00 124u /* SOGI k: SOGI k */
+#define CO_OD_2002_00 125u /* Adaptive SOGI enable: Adaptive SOGI enable */
+#define CO_OD_2003_00 126u /* Adaptive SOGI: Highest sub-index supported */
+#define CO_OD_2003_01 127u /* Adaptive SOGI: k max */
+#define CO_OD_2003_02 128u /* Adaptive SOGI: k min */
+#define CO_OD_2003_03 129u /* Adaptive SOGI: Error at k max */
+#define CO_OD_2010_00 130u /* Injection: Highest sub-index supported */
+#define CO_OD_2010_01 131u /* Injection: Amplitude */
+#define CO_OD_2010_02 132u /* Injection: Frequency */
+#define CO_OD_2011_00 133u /* PLL gains: Highest sub-index supported */
+#define CO_OD_2011_01 134u /* PLL gains: kp */
+#define CO_OD_2011_02 135u /* PLL gains: ki */
+#define CO_OD_2011_03 136u /* PLL gains: kd */
+#define CO_OD_2011_04 137u /* PLL gains: Acceleration feed-forward */
+#define CO_OD_2011_05 138u /* PLL gains: Bandwidth scale when locked */
+#define CO_OD_2020_00 139u /* Estimator: Highest sub-index supported */
+#define CO_OD_2020_01 140u /* Estimator: Estimated angle */
+#define CO_OD_2020_02 141u /* Estimator: Estimated speed */
+#define CO_OD_2020_03 142u /* Estimator: Estimated linear speed */
+#define CO_OD_2020_04 143u /* Estimator: PLL error */
+#define CO_OD_2020_05 144u /* Estimator: HF amplitude */
+#define CO_OD_2020_06 145u /* Estimator: Filtered PLL error */
+#define CO_OD_2020_07 146u /* Estimator: SOGI k in use */
+#define CO_OD_2020_08 147u /* Estimator: Start-up phase */
+#define CO_OD_2020_09 148u /* Estimator: Disturbance acceleration */
+#define CO_OD_2030_00 149u /* Fault history: Highest sub-index supported */
+#define CO_OD_2030_01 150u /* Fault history: Fault 1 */
+#define CO_OD_2030_02 151u /* Fault history: Fault 2 */
+#define CO_OD_2030_03 152u /* Fault history: Fault 3 */
+#define CO_OD_2030_04 153u /* Fault history: Fault 4 */
+#define CO_OD_2030_05 154u /* Fault history: Fault 5 */
+#define CO_OD_2030_06 155u /* Fault history: Fault 6 */
+#define CO_OD_2030_07 156u /* Fault history: Fault 7 */
+#define CO_OD_2030_08 157u /* Fault history: Fault 8 */
+#define CO_OD_2040_00 158u /* Firmware version: Firmware version */
+#define CO_OD_2041_00 159u /* Build id: Build id */
+#define CO_OD_2042_00 160u /* Device tag: Device tag */
+#define CO_OD_2050_00 161u /* Drive configuration: Highest sub-index supported */
+#define CO_OD_2050_01 162u /* Drive configuration: PWM frequency */
+#define CO_OD_2050_02 163u /* Drive configuration: Phase resistance */
+#define CO_OD_2050_03 164u /* Drive configuration: L_d */
+#define CO_OD_2050_04 165u /* Drive configuration: L_q */
+#define CO_OD_2050_05 166u /* Drive configuration: PM flux linkage */
+#define CO_OD_2050_06 167u /* Drive configuration: Pole pitch */
+#define CO_OD_2050_07 168u /* Drive configuration: DC undervoltage trip */
+#define CO_OD_2050_08 169u /* Drive configuration: DC overvoltage trip */
+#define CO_OD_2050_09 170u /* Drive configuration: Overcurrent trip */
+#define CO_OD_2050_0A 171u /* Drive configuration: Current limit */
+#define CO_OD_2050_0B 172u /* Drive configuration: Speed limit */
+#define CO_OD_2050_0C 173u /* Drive configuration: Current loop kp */
+#define CO_OD_2050_0D 174u /* Drive configuration: Current loop ki */
+#define CO_OD_2050_0E 175u /* Drive configuration: Speed loop kp */
+#define CO_OD_2050_0F 176u /* Drive configuration: Speed loop ki */
+#define CO_OD_2050_10 177u /* Drive configuration: Speed filter */
+#define CO_OD_2050_11 178u /* Drive configuration: Saliency minimum */
+#define CO_OD_2050_12 179u /* Drive configuration: Quick stop time */
+#define CO_OD_2051_00 180u /* Protections: Highest sub-index supported */
+#define CO_OD_2051_01 181u /* Protections: Max speed */
+#define CO_OD_2051_02 182u /* Protections: Position limit min */
+#define CO_OD_2051_03 183u /* Protections: Position limit max */
+#define CO_OD_2051_04 184u /* Protections: Following error window */
+#define CO_OD_2051_05 185u /* Protections: Following error time */
+#define CO_OD_2051_06 186u /* Protections: Rated current */
+#define CO_OD_2051_07 187u /* Protections: i2t time */
+#define CO_OD_2051_08 188u /* Protections: Quick stop option */
+#define CO_OD_2051_09 189u /* Protections: Fault reaction option */
+#define CO_OD_2051_0A 190u /* Protections: Fault braking time */
+#define CO_OD_2052_00 191u /* Integrity monitor: Highest sub-index supported */
+#define CO_OD_2052_01 192u /* Integrity monitor: HF angle limit */
+#define CO_OD_2052_02 193u /* Integrity monitor: Detection time */
+#define CO_OD_2052_03 194u /* Integrity monitor: Saliency tolerance */
+#define CO_OD_2052_04 195u /* Integrity monitor: Back-EMF angle limit */
+#define CO_OD_2052_05 196u /* Integrity monitor: Back-EMF minimum */
+#define CO_OD_2052_06 197u /* Integrity monitor: Current sum limit */
+#define CO_OD_2052_07 198u /* Integrity monitor: Current offset limit */
+#define CO_OD_2052_08 199u /* Integrity monitor: Start speed limit */
+#define CO_OD_2060_00 200u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 201u /* Telemetry: Decimation */
+#define CO_OD_2060_02 202u /* Telemetry: Signal count */
+#define CO_OD_2060_03 203u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 204u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 205u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 206u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 207u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 208u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 209u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 210u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 211u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 212u /* Trace: Command */
+#define CO_OD_2070_02 213u /* Trace: State */
+#define CO_OD_2070_03 214u /* Trace: Trigger signal */
+#define CO_OD_2070_04 215u /* Trace: Trigger level */
+#define CO_OD_2070_05 216u /* Trace: Trigger edge */
+#define CO_OD_2070_06 217u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 218u /* Trace: Signal count */
+#define CO_OD_2070_08 219u /* Trace: Signal 1 */
+#define CO_OD_2070_09 220u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 221u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 222u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 223u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 224u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 225u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 226u /* Trace: Signal 8 */
+#define CO_OD_603F_00 227u /* Error code: Error code */
+#define CO_OD_6040_00 228u /* Controlword: Controlword */
+#define CO_OD_6041_00 229u /* Statusword: Statusword */
+#define CO_OD_605A_00 230u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 231u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 232u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 233u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 234u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 235u /* Following error window: Following error window */
+#define CO_OD_6066_00 236u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 237u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 238u /* Target torque: Target torque */
+#define CO_OD_6077_00 239u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 240u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 241u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 242u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 243u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 244u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 245u /* Supported drive modes: Supported drive modes */
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 30u
+#define CO_OD_CFG_COUNT 55u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 

@@ -130,6 +130,13 @@ co_nmt_state_t co_node_nmt(const co_node_t *node) {
 static void co_set_nmt(co_node_t *node, co_nmt_state_t st) {
   if (node->nmt != st) {
     node->nmt = st;
+    if (st == CO_NMT_OPERATIONAL) {
+      /* RPDO deadlines restart with the first PDO applied in OPERATIONAL */
+      for (uint8_t n = 0u; n < CO_OD_NR_RPDO; n++) {
+        node->rpdo[n].watched = 0u;
+        node->rpdo[n].timed_out = 0u;
+      }
+    }
     co_event(node, CO_EV_NMT, (uint32_t)st);
   }
 }
@@ -246,11 +253,50 @@ static co_abort_t co_check_map_entry(uint32_t m, bool rx) {
   return CO_ABORT_NONE;
 }
 
+/** CiA 301 rules for 0x1014 (EMCY COB-ID) and 0x1016 (heartbeat consumers). */
+static co_abort_t co_check_comm_write(const co_node_t *node, uint16_t index, uint8_t sub,
+                                      uint32_t v) {
+  if (index == 0x1014u) {
+    uint32_t cur = co_get(node, 0x1014u, 0u);
+    if ((v & 0x7FFFF800u) != 0u || ((v & CO_COB_INVALID) == 0u && (v & 0x7FFu) == 0u)) {
+      return CO_ABORT_VALUE_RANGE; /* 29-bit id, reserved bits, id 0 */
+    }
+    /* while the EMCY is valid (bit 31 = 0) bits 0-29 may not change:
+       first write it invalid (same id), then the new id */
+    if ((cur & CO_COB_INVALID) == 0u && (v & 0x3FFFFFFFu) != (cur & 0x3FFFFFFFu)) {
+      return CO_ABORT_VALUE_RANGE;
+    }
+    return CO_ABORT_NONE;
+  }
+  if (index == 0x1016u && sub >= 1u && sub <= CO_HB_CONSUMERS) {
+    uint8_t nid = (uint8_t)(v >> 16);
+    if ((v & 0xFF000000u) != 0u) {
+      return CO_ABORT_VALUE_RANGE; /* bits 24-31 reserved */
+    }
+    if ((v & 0xFFFFu) == 0u || nid == 0u) {
+      return CO_ABORT_NONE; /* an unused entry */
+    }
+    if (nid > 127u) {
+      return CO_ABORT_VALUE_RANGE;
+    }
+    for (uint8_t k = 1u; k <= CO_HB_CONSUMERS; k++) {
+      uint32_t other = co_get(node, 0x1016u, k);
+      if (k != sub && (other & 0xFFFFu) != 0u && (uint8_t)(other >> 16) == nid) {
+        return CO_ABORT_PARAM_INCOMPAT; /* one entry per node id */
+      }
+    }
+  }
+  return CO_ABORT_NONE;
+}
+
 static co_abort_t co_check_pdo_write(const co_node_t *node, uint16_t index, uint8_t sub,
                                      const uint8_t *data, size_t len) {
   uint32_t v = co_le_get(data, len > 4u ? 4u : len);
   if (index == 0x1005u && (v & 0x60000000u) != 0u) {
     return CO_ABORT_VALUE_RANGE; /* SYNC producer / 29-bit id: not supported */
+  }
+  if (index == 0x1014u || index == 0x1016u) {
+    return co_check_comm_write(node, index, sub, v);
   }
   if (co_is_rpdo_comm(index) || co_is_tpdo_comm(index)) {
     uint32_t cur = co_get(node, index, 1u);
@@ -581,6 +627,7 @@ static void co_sdo_frame(co_node_t *node, const fw_can_frame_t *f) {
 
 static void co_rpdo_apply(co_node_t *node, uint8_t n, const uint8_t *data, uint8_t dlc) {
   uint16_t map = (uint16_t)(0x1600u + n);
+  co_rpdo_rt_t *rt = &node->rpdo[n];
   uint32_t count = co_get(node, map, 0u);
   uint32_t bit = 0u;
   if (count > 8u) {
@@ -606,6 +653,10 @@ static void co_rpdo_apply(co_node_t *node, uint8_t n, const uint8_t *data, uint8
     }
     bit += nbytes * 8u;
   }
+  /* deadline (0x1400+n:5): fresh data was applied */
+  rt->watched = 1u;
+  rt->timed_out = 0u;
+  rt->applied_us = node->now_us;
   co_event(node, CO_EV_RPDO, n);
 }
 
@@ -727,6 +778,46 @@ static void co_hb_frame(co_node_t *node, const fw_can_frame_t *f) {
   }
 }
 
+/** Consumer timeouts: called after the received frames and again before
+ *  transmitting, so a timeout is seen in the control period it happens. */
+static void co_hb_check(co_node_t *node, uint32_t now_us) {
+  for (uint8_t k = 0u; k < CO_HB_CONSUMERS; k++) {
+    uint32_t cfg = co_get(node, 0x1016u, (uint8_t)(k + 1u));
+    co_hb_rt_t *hb = &node->hb[k];
+    if ((cfg & 0xFFFFu) == 0u || !hb->active || hb->lost) {
+      continue;
+    }
+    if (co_elapsed(now_us, hb->last_us, (cfg & 0xFFFFu) * 1000u)) {
+      hb->lost = 1u;
+      co_event(node, CO_EV_HB_LOST, (cfg >> 16) & 0xFFu);
+    }
+  }
+}
+
+/** RPDO deadline monitoring (CiA 301 RPDO event timer, 0x1400+n:5, ms):
+ *  data not applied for that long (no frame, or no SYNC for a synchronous
+ *  RPDO) is reported once. Off when 0, for an invalid PDO and outside
+ *  OPERATIONAL; armed by the first application. */
+static void co_rpdo_check(co_node_t *node, uint32_t now_us) {
+  if (node->nmt != CO_NMT_OPERATIONAL) {
+    return;
+  }
+  for (uint8_t n = 0u; n < CO_OD_NR_RPDO; n++) {
+    co_rpdo_rt_t *rt = &node->rpdo[n];
+    uint16_t comm = (uint16_t)(0x1400u + n);
+    uint32_t ms = co_get(node, comm, 5u);
+    if (ms == 0u || !rt->watched || rt->timed_out ||
+        (co_get(node, comm, 1u) & CO_COB_INVALID) != 0u) {
+      continue;
+    }
+    if (co_elapsed(now_us, rt->applied_us, ms * 1000u)) {
+      rt->timed_out = 1u;
+      node->count.rpdo_timeouts++;
+      co_event(node, CO_EV_RPDO_TIMEOUT, n);
+    }
+  }
+}
+
 /* ---- process ---------------------------------------------------------------- */
 
 co_status_t co_node_rx_isr(co_node_t *node, const fw_can_frame_t *frame) {
@@ -770,6 +861,8 @@ void co_node_process_rx(co_node_t *node, uint32_t now_us) {
       (void)co_rpdo_frame(node, &f);
     }
   }
+  co_hb_check(node, now_us);
+  co_rpdo_check(node, now_us);
 }
 
 void co_node_process_tx(co_node_t *node, uint32_t now_us) {
@@ -788,18 +881,8 @@ void co_node_process_tx(co_node_t *node, uint32_t now_us) {
     node->hb_last_us = now_us;
     co_send(node, (uint16_t)(CO_COB_HB + node->node_id), 1u, &st);
   }
-  /* heartbeat consumer */
-  for (uint8_t k = 0u; k < CO_HB_CONSUMERS; k++) {
-    uint32_t cfg = co_get(node, 0x1016u, (uint8_t)(k + 1u));
-    co_hb_rt_t *hb = &node->hb[k];
-    if ((cfg & 0xFFFFu) == 0u || !hb->active || hb->lost) {
-      continue;
-    }
-    if (co_elapsed(now_us, hb->last_us, (cfg & 0xFFFFu) * 1000u)) {
-      hb->lost = 1u;
-      co_event(node, CO_EV_HB_LOST, (cfg >> 16) & 0xFFu);
-    }
-  }
+  co_hb_check(node, now_us);
+  co_rpdo_check(node, now_us);
   /* event-driven TPDOs */
   if (node->nmt != CO_NMT_OPERATIONAL) {
     return;

@@ -13,6 +13,9 @@
 
 #define FW_APP_MODE_CSV 9
 #define FW_APP_MODE_CST 10
+/* CiA 301 "RPDO timeout" (communication error); raised by the application.
+ * Not (yet) a member of fw_fault_t: the core latches any code. */
+#define FW_APP_FAULT_RPDO_TIMEOUT ((fw_fault_t)0x8250)
 
 /* ---- helpers ------------------------------------------------------------- */
 
@@ -80,27 +83,55 @@ static const co_od_cfg_link_t *fw_app_cfg_link(uint16_t index, uint8_t sub) {
   return NULL;
 }
 
-/** Mirror the core's configuration into the OD. */
+/** Field value as float (uint32 fields converted). */
+static float fw_app_field_get(const fw_config_t *cfg, const fw_config_field_t *f) {
+  const uint8_t *base = (const uint8_t *)cfg + f->offset;
+  if (f->is_u32) {
+    uint32_t u;
+    memcpy(&u, base, sizeof u);
+    return (float)u;
+  }
+  float x;
+  memcpy(&x, base, sizeof x);
+  return x;
+}
+
+/** Mirror the core's configuration into the OD (SI objects and the CiA 402
+ *  objects that show a field in wire units: value x scale, rounded and held
+ *  inside the entry's range). */
 static void fw_app_sync_cfg_to_od(fw_app_t *app) {
   const fw_config_t *cfg = fw_get_config(&app->ctrl);
   if (cfg == NULL) {
     return;
   }
   for (uint32_t k = 0u; k < CO_OD_CFG_COUNT; k++) {
-    const fw_config_field_t *f = fw_config_field_find(co_od_cfg_links[k].field);
-    const co_od_entry_t *e = co_od_entry(co_od_cfg_links[k].pos);
+    const co_od_cfg_link_t *l = &co_od_cfg_links[k];
+    const fw_config_field_t *f = fw_config_field_find(l->field);
+    const co_od_entry_t *e = co_od_entry(l->pos);
     if (f == NULL || e == NULL) {
       continue;
     }
-    const uint8_t *base = (const uint8_t *)cfg + f->offset;
-    if (f->is_u32) {
-      uint32_t v;
-      memcpy(&v, base, sizeof v);
-      co_node_set_u32(&app->node, co_od_cfg_links[k].pos, v);
+    if (e->type == CO_TYPE_REAL32) {
+      co_node_set_f32(&app->node, l->pos, fw_app_field_get(cfg, f));
+      continue;
+    }
+    if (f->is_u32 && l->scale == 1.0f) {
+      uint32_t u;
+      memcpy(&u, (const uint8_t *)cfg + f->offset, sizeof u);
+      co_node_set_u32(&app->node, l->pos, u);
+      continue;
+    }
+    float w = fw_app_field_get(cfg, f) * l->scale;
+    if (w < (float)e->min_i) {
+      w = (float)e->min_i;
+    }
+    if (w > (float)e->max_i) {
+      w = (float)e->max_i;
+    }
+    if (e->type == CO_TYPE_U32) {
+      co_node_set_u32(&app->node, l->pos, w >= 4294967040.0f ? UINT32_MAX : (uint32_t)lrintf(w));
     } else {
-      float v;
-      memcpy(&v, base, sizeof v);
-      co_node_set_f32(&app->node, co_od_cfg_links[k].pos, v);
+      co_node_set_i32(&app->node, l->pos, fw_app_sat_i32(w));
     }
   }
   co_node_set_u32(&app->node, CO_OD_2002_00,
@@ -199,26 +230,71 @@ static co_abort_t fw_app_on_write(void *ctx, uint16_t index, uint8_t sub, const 
   const co_od_cfg_link_t *link = fw_app_cfg_link(index, sub);
   if (link != NULL) {
     const fw_config_field_t *f = fw_config_field_find(link->field);
+    const co_od_entry_t *e = co_od_entry(link->pos);
     const fw_config_t *cur = fw_get_config(&app->ctrl);
-    if (f == NULL || cur == NULL) {
+    if (f == NULL || e == NULL || cur == NULL) {
       return CO_ABORT_APP;
     }
     fw_config_t cfg = *cur;
     uint8_t *base = (uint8_t *)&cfg + f->offset;
-    if (f->is_u32) {
-      memcpy(base, &v, sizeof v);
-    } else {
+    if (e->type == CO_TYPE_REAL32) {
       float x;
       memcpy(&x, &v, sizeof x);
+      if (f->is_u32) {
+        return CO_ABORT_APP; /* no such link is generated */
+      }
       memcpy(base, &x, sizeof x);
+    } else {
+      /* integer wire value (signed types sign-extended) -> field / scale */
+      bool is_signed = e->type == CO_TYPE_I8 || e->type == CO_TYPE_I16 || e->type == CO_TYPE_I32;
+      bool negative = is_signed && e->size >= 1u && e->size <= 4u &&
+                      (v & (1u << (8u * e->size - 1u))) != 0u;
+      if (negative && e->size < 4u) {
+        v |= ~((1u << (8u * e->size)) - 1u); /* sign-extend to 32 bits */
+      }
+      if (f->is_u32) {
+        if (negative || link->scale != 1.0f) {
+          return CO_ABORT_VALUE_RANGE; /* e.g. a negative (manufacturer) option code */
+        }
+        memcpy(base, &v, sizeof v);
+      } else {
+        float w = is_signed ? (float)(int32_t)v : (float)v;
+        float x = w / link->scale;
+        memcpy(base, &x, sizeof x);
+      }
     }
     fw_config_issue_t issue;
     fw_status_t st = fw_set_config(&app->ctrl, &cfg, &issue);
-    /* FW_ERR_SALIENCY: the core stored the configuration (enabling will
-       raise FW_FAULT_SALIENCY_TOO_LOW), so the OD must show it too */
-    return st == FW_ERR_SALIENCY ? CO_ABORT_NONE : fw_app_status_abort(st);
+    if (st == FW_OK || st == FW_ERR_SALIENCY) {
+      /* FW_ERR_SALIENCY: the core stored the configuration (enabling will
+         raise FW_FAULT_SALIENCY_TOO_LOW), so the OD must show it too. The
+         other views of the field (SI object / CiA 402 object) follow. */
+      fw_app_sync_cfg_to_od(app);
+      return CO_ABORT_NONE;
+    }
+    return fw_app_status_abort(st);
   }
   return CO_ABORT_NONE;
+}
+
+/** Power stage off at once for NMT stop / reset communication: CiA 402
+ *  "disable voltage" (OPERATION ENABLED, QUICK STOP ACTIVE -> SWITCH ON
+ *  DISABLED), applied before this period's fw_step. A controlword received
+ *  earlier in the same batch is dropped. A running fault reaction keeps its
+ *  bounded braking (fault_brake_time_s). */
+static void fw_app_power_off(fw_app_t *app) {
+  app->cw_pending = 0u;
+  (void)fw_controlword(&app->ctrl, 0x0000u);
+}
+
+/** NMT reset node: the application restarts as after power-up, with the
+ *  configuration given to fw_app_init (a real drive loads it from its
+ *  non-volatile memory; 0x1010 store parameters is not implemented). */
+static void fw_app_reboot(fw_app_t *app) {
+  (void)fw_init(&app->ctrl, &app->boot_cfg);
+  app->cw_pending = 0u;
+  app->mode_applied = -1;
+  app->last_fault = 0u; /* a restarted node has nothing to reset: no EMCY */
 }
 
 static void fw_app_on_event(void *ctx, co_event_t ev, uint32_t arg) {
@@ -232,11 +308,29 @@ static void fw_app_on_event(void *ctx, co_event_t ev, uint32_t arg) {
     app->count.hb_lost++;
     fw_raise_fault(&app->ctrl, FW_FAULT_HEARTBEAT_LOST);
     break;
+  case CO_EV_RPDO_TIMEOUT:
+    app->count.rpdo_timeouts++;
+    if (fw_state(&app->ctrl) == FW_CIA402_OPERATION_ENABLED) {
+      fw_raise_fault(&app->ctrl, FW_APP_FAULT_RPDO_TIMEOUT);
+    }
+    break;
+  case CO_EV_NMT:
+    if (arg == (uint32_t)CO_NMT_STOPPED) {
+      fw_app_power_off(app);
+    }
+    break;
   case CO_EV_RESET_NODE:
   case CO_EV_RESET_COMM:
+    if (ev == CO_EV_RESET_NODE) {
+      fw_app_reboot(app);
+    } else {
+      fw_app_power_off(app);
+    }
     /* the OD went back to its defaults: show the core's real state again */
     fw_app_sync_static_od(app);
     co_node_set_u32(&app->node, CO_OD_1001_00, fw_app_error_register(app->last_fault));
+    co_node_set_u32(&app->node, CO_OD_6041_00, fw_statusword(&app->ctrl));
+    co_node_set_u32(&app->node, CO_OD_603F_00, (uint32_t)fw_fault_code(&app->ctrl));
     break;
   default:
     break;
@@ -292,6 +386,7 @@ fw_status_t fw_app_init(fw_app_t *app, const fw_config_t *cfg, uint8_t node_id) 
   }
   memset(app, 0, sizeof *app);
   app->mode_applied = -1;
+  app->boot_cfg = *cfg;
   fw_status_t st = fw_init(&app->ctrl, cfg);
   const fw_config_t *used = fw_get_config(&app->ctrl);
   float f = used != NULL ? used->f_pwm_Hz : 0.0f;
@@ -448,11 +543,21 @@ void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
   uint32_t now = app->now_us;
   co_node_process_rx(&app->node, now);
   fw_app_apply_commands(app);
-  /* a fault reset does not clear a heartbeat that is still missing */
+  /* a fault reset does not clear a heartbeat that is still missing, nor an
+     RPDO deadline that is still missed (once enabled again) */
   if (fw_fault_code(&app->ctrl) == FW_FAULT_NONE) {
     for (uint32_t k = 0u; k < CO_HB_CONSUMERS; k++) {
       if (app->node.hb[k].lost) {
         fw_raise_fault(&app->ctrl, FW_FAULT_HEARTBEAT_LOST);
+        break;
+      }
+    }
+  }
+  if (fw_fault_code(&app->ctrl) == FW_FAULT_NONE &&
+      fw_state(&app->ctrl) == FW_CIA402_OPERATION_ENABLED) {
+    for (uint32_t k = 0u; k < CO_OD_NR_RPDO; k++) {
+      if (app->node.rpdo[k].timed_out) {
+        fw_raise_fault(&app->ctrl, FW_APP_FAULT_RPDO_TIMEOUT);
         break;
       }
     }

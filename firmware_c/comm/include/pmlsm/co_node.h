@@ -65,7 +65,9 @@ typedef enum {
   CO_EV_HB_LOST = 4,    /**< arg: node id whose heartbeat timed out */
   CO_EV_HB_RESUMED = 5, /**< arg: node id heard again */
   CO_EV_SYNC = 6,       /**< a SYNC was processed */
-  CO_EV_RPDO = 7        /**< arg: RPDO number 0..3 whose data was applied */
+  CO_EV_RPDO = 7,       /**< arg: RPDO number 0..3 whose data was applied */
+  CO_EV_RPDO_TIMEOUT = 8 /**< arg: RPDO number 0..3 not applied within its event
+                              timer (0x1400+n:5); once, until it is applied again */
 } co_event_t;
 
 /**
@@ -115,6 +117,10 @@ typedef struct {
   uint8_t pending; /**< synchronous RPDO received, applied at the next SYNC */
   uint8_t dlc;
   uint8_t data[8];
+  uint8_t watched;   /**< deadline monitoring armed (applied once since OPERATIONAL
+                          or since the communication parameters were written) */
+  uint8_t timed_out; /**< CO_EV_RPDO_TIMEOUT reported, cleared when applied again */
+  uint32_t applied_us; /**< time the data was last applied */
 } co_rpdo_rt_t;
 
 typedef struct {
@@ -138,6 +144,7 @@ typedef struct {
   uint32_t tx_frames;
   uint32_t sdo_aborts;     /**< aborts sent */
   uint32_t rpdo_errors;    /**< RPDO too short or a mapped write refused */
+  uint32_t rpdo_timeouts;  /**< RPDO event-timer deadlines missed */
   uint32_t emcy_sent;
 } co_counters_t;
 

@@ -55,6 +55,7 @@ typedef enum {
   CO_ABORT_NO_OBJECT = 0x06020000u,       /**< object does not exist */
   CO_ABORT_NO_MAP = 0x06040041u,          /**< object cannot be mapped to the PDO */
   CO_ABORT_MAP_LEN = 0x06040042u,         /**< mapped objects exceed the PDO length */
+  CO_ABORT_PARAM_INCOMPAT = 0x06040043u,  /**< general parameter incompatibility */
   CO_ABORT_TYPE_LEN = 0x06070010u,        /**< data type / length mismatch */
   CO_ABORT_NO_SUB = 0x06090011u,          /**< sub-index does not exist */
   CO_ABORT_VALUE_RANGE = 0x06090030u,     /**< invalid value (e.g. NaN) */
@@ -84,6 +85,8 @@ typedef struct {
 typedef struct {
   uint16_t pos;      /**< table position */
   const char *field; /**< fw_config_t field name */
+  float scale;       /**< integer entries: wire value = field value x scale
+                          (e.g. 1e6 for m/s shown in um/s); 1 otherwise */
 } co_od_cfg_link_t;
 
 /** Result of a lookup. */

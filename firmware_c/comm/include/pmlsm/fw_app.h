@@ -24,7 +24,13 @@
  * back to the OD; a new fault sends an EMCY (and its reset an EMCY 0x0000);
  * telemetry and trace frames are queued on the UART; TPDOs and heartbeat
  * are produced. Time is step_count / f_pwm_Hz. A lost supervisor heartbeat
- * (0x1016) raises FW_FAULT_HEARTBEAT_LOST through fw_raise_fault().
+ * (0x1016) raises FW_FAULT_HEARTBEAT_LOST through fw_raise_fault(); a missed
+ * RPDO deadline (0x1400+n:5) while OPERATION ENABLED raises 0x8250.
+ *
+ * NMT and the power stage: NMT stop and reset communication switch the
+ * power stage off in the same control period (CiA 402 "disable voltage":
+ * SWITCH ON DISABLED); reset node restarts the core as after fw_app_init
+ * (same configuration, no fault, SWITCH ON DISABLED).
  */
 #ifndef PMLSM_FW_APP_H
 #define PMLSM_FW_APP_H
@@ -55,11 +61,13 @@ typedef struct {
   uint32_t uart_dropped; /**< frames that did not fit the UART ring */
   uint32_t emcy;
   uint32_t hb_lost;
+  uint32_t rpdo_timeouts; /**< RPDO event-timer deadlines missed (0x1400+n:5) */
 } fw_app_counters_t;
 
 /** The drive application. Treat the members as private. */
 typedef struct {
   fw_ctrl_t ctrl;
+  fw_config_t boot_cfg; /**< configuration of fw_app_init, restored by NMT reset node */
   co_node_t node;
   fw_serial_link_t link;
   fw_trace_t trace;
