@@ -36,6 +36,16 @@ void fw_bemf_reset(fw_bemf_t *b) {
   b->i_prev_A[0] = b->i_prev_A[1] = 0.0f;
 }
 
+void fw_bemf_catch(fw_bemf_t *b, float w0, const float i_dq_A[2]) {
+  fw_bemf_reset(b);
+  b->active = 1u;
+  b->going_up = 1u;
+  b->e_d_f = 0.0f;
+  b->e_q_f = w0 * b->psi_f_Wb; /* signed: e_q = w psi_f cos(dtheta) */
+  b->i_prev_A[0] = i_dq_A[0];
+  b->i_prev_A[1] = i_dq_A[1];
+}
+
 void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat) {
   const float inv_dt = 1.0f / b->dt_s;
   float did = (i_dq_A[0] - b->i_prev_A[0]) * inv_dt;

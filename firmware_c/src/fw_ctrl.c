@@ -40,6 +40,10 @@
 /* Motion check during the alignment starts after this time (current loop and
  * monitor filter settled). */
 #define FW_MOTION_CHECK_S 0.015f
+/* Flying start: the back-EMF vector is watched from this time in the alignment
+ * until FW_MOTION_CHECK_S, through a low-pass of this time constant. */
+#define FW_FLY_WINDOW_S 0.010f
+#define FW_FLY_TAU_S 0.0005f
 /* Voltage headroom kept for injection when limiting the current PIs. */
 #define FW_PI_VOLTAGE_SHARE 0.9f
 
@@ -158,6 +162,11 @@ static void reset_dynamics(fw_ctrl_t *c) {
   memset(c->u_dq_prev_V, 0, sizeof(c->u_dq_prev_V));
   c->follow_time_s = 0.0f;
   fw_bemf_reset(&c->bemf);
+  memset(c->u_ab_prev_V, 0, sizeof(c->u_ab_prev_V));
+  memset(c->i_f_ab_prev_A, 0, sizeof(c->i_f_ab_prev_A));
+  memset(c->fly_e_ab_V, 0, sizeof(c->fly_e_ab_V));
+  c->fly_rot_rad = 0.0f;
+  c->flying = 0u;
 }
 
 static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
@@ -659,6 +668,61 @@ static fw_fault_t protect(fw_ctrl_t *c, fw_vec2_f32_t i_dq, bool quick_stop) {
   return FW_FAULT_NONE;
 }
 
+/**
+ * While aligning, follow the back-EMF in the stationary frame,
+ * e_ab = u_ab - R i_ab - L di_ab/dt (low-passed), and its rotation over the
+ * observation window: magnitude and direction of a moving mover.
+ */
+static void fly_observe(fw_ctrl_t *c, fw_vec2_f32_t i_f_ab) {
+  const fw_config_t *cfg = &c->cfg;
+  const float L = 0.5f * (cfg->L_d_H + cfg->L_q_H);
+  const float inv_dt = 1.0f / c->dt_s;
+  float ea = c->u_ab_prev_V[0] - cfg->R_ohm * i_f_ab.x - L * (i_f_ab.x - c->i_f_ab_prev_A[0]) * inv_dt;
+  float eb = c->u_ab_prev_V[1] - cfg->R_ohm * i_f_ab.y - L * (i_f_ab.y - c->i_f_ab_prev_A[1]) * inv_dt;
+  c->i_f_ab_prev_A[0] = i_f_ab.x;
+  c->i_f_ab_prev_A[1] = i_f_ab.y;
+  const float a = 1.0f - expf(-c->dt_s / FW_FLY_TAU_S);
+  float pa = c->fly_e_ab_V[0], pb = c->fly_e_ab_V[1];
+  c->fly_e_ab_V[0] += a * (ea - pa);
+  c->fly_e_ab_V[1] += a * (eb - pb);
+  if (c->phase_time_s >= FW_FLY_WINDOW_S) {
+    /* angle step between successive filtered vectors (cross / dot) */
+    float cr = pa * c->fly_e_ab_V[1] - pb * c->fly_e_ab_V[0];
+    float dt = pa * c->fly_e_ab_V[0] + pb * c->fly_e_ab_V[1];
+    c->fly_rot_rad += atan2f(cr, dt);
+  }
+}
+
+/**
+ * Motion at enable: catch the mover with the back-EMF observer when its
+ * back-EMF is large enough to be tracked (flying start), else refuse.
+ * Returns FW_FAULT_NONE when caught.
+ */
+static fw_fault_t fly_catch(fw_ctrl_t *c) {
+  const fw_config_t *cfg = &c->cfg;
+  const float ea = c->fly_e_ab_V[0], eb = c->fly_e_ab_V[1];
+  const float E = sqrtf(ea * ea + eb * eb);
+  if (!(c->bemf.w_on > 0.0f) || E < cfg->bemf_e_off_V || fabsf(c->fly_rot_rad) < 0.05f) {
+    return FW_FAULT_MOVING_AT_ENABLE; /* too slow for the back-EMF, too fast for injection */
+  }
+  const float w0 = (c->fly_rot_rad > 0.0f ? 1.0f : -1.0f) * E / cfg->psi_f_Wb;
+  /* e_ab = w psi_f (-sin theta, cos theta); the filter lags by about w tau */
+  float th = atan2f(-ea, eb) + (w0 < 0.0f ? FW_PI_F32 : 0.0f) + w0 * FW_FLY_TAU_S;
+  th = fw_wrap_pi_f32(th);
+  fw_pll_reset_f32(&c->pll, th, w0);
+  c->theta_prev = th;
+  c->omega_f = w0;
+  c->accel_dist = 0.0f;
+  c->pi_spd.integ = 0.0f;
+  c->phase = FW_START_RUN;
+  c->phase_time_s = 0.0f;
+  c->flying = 1u;
+  const float i0[2] = {0.0f, 0.0f};
+  fw_bemf_catch(&c->bemf, w0, i0);
+  fw_mon_run_start(&c->mon); /* no standstill saliency check: the HF witness stays off */
+  return FW_FAULT_NONE;
+}
+
 /** End of the standstill saliency check: judge, then go on to the polarity test. */
 static void saliency_done(fw_ctrl_t *c) {
   const float n_avg = (float)((FW_SAL_PERIODS - 1u) * c->n_inj);
@@ -832,8 +896,12 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   /* During the alignment the zero-current loop holds i = 0: the voltage it
    * needs is the back-EMF of a moving mover (judged once the loop and the
    * monitor's filter have settled, and again at the end). */
-  if (c->phase == FW_START_ALIGN && c->phase_time_s >= FW_MOTION_CHECK_S) {
-    fw_fault_t mf = fw_mon_motion(&c->mon, c->e_start_max_V);
+  if (c->phase == FW_START_ALIGN) {
+    fly_observe(c, i_f_ab);
+  }
+  if (c->phase == FW_START_ALIGN && c->phase_time_s >= FW_MOTION_CHECK_S &&
+      fw_mon_motion(&c->mon, c->e_start_max_V) != FW_FAULT_NONE) {
+    fw_fault_t mf = fly_catch(c); /* moving: catch it on the back-EMF, or refuse */
     if (mf != FW_FAULT_NONE) {
       latch_fault(c, mf);
     }
@@ -964,6 +1032,11 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
    * transform uses the angle 1.5 periods after sampling ---- */
   fw_sincos_f32_t sc_out = fw_sincos_f32(theta_k + 1.5f * c->pll.w_hat_radps * dt);
   fw_vec2_f32_t u_ab = fw_inv_park_f32(u_cmd, sc_out);
+  if (c->phase == FW_START_ALIGN) { /* fundamental only, for the flying-start observer */
+    fw_vec2_f32_t u_f = fw_inv_park_f32(u_dq, sc_out);
+    c->u_ab_prev_V[0] = u_f.x;
+    c->u_ab_prev_V[1] = u_f.y;
+  }
   (void)fw_svpwm_f32(u_ab, safe.u_dc_V, out->duty_abc, NULL);
   out->pwm_enable = 1u;
 
@@ -976,6 +1049,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   c->snap.u_inj_V = s * u_inj;
   c->snap.inj_scale = c->bemf.inj_scale;
   c->snap.bemf_active = c->bemf.active;
+  c->snap.flying_start = c->flying;
   c->snap.bemf_err_rad = fw_bemf_error(&c->bemf, c->pll.w_i_radps);
   if (c->phase == FW_START_SALIENCY && ++c->sal_k == 2u * sal_col_len) {
     saliency_done(c);

@@ -26,7 +26,8 @@ def test_case_holds_the_invariant(case: FaultCase) -> None:
 def test_expected_faults_are_the_named_ones() -> None:
     """The cases built to show one witness end in that witness's fault."""
     by_name = {c.name: c for c in CASES}
-    for name, code in [("saliency_absent", 0xFF07), ("enable_moving_0.94mps", 0xFF08),
+    for name, code in [("saliency_absent", 0xFF07), ("enable_moving_0.12mps", 0xFF08),
+                       ("enable_moving_0.94mps_no_bemf", 0xFF08),
                        ("sensor_offset_a_1.2A_learnt", 0xFF06), ("dc_sag_120V", 0x3220),
                        ("position_limit", 0x8612)]:
         r = run_case(by_name[name], 0)

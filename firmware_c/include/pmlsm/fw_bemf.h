@@ -53,6 +53,9 @@ void fw_bemf_reset(fw_bemf_t *b);
 void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat);
 /** Angle error dtheta seen by the back-EMF (rad, [-pi, pi)); 0 when |E| is too small. */
 float fw_bemf_error(const fw_bemf_t *b, float w_hat);
+/** Flying start: the PLL is set on a moving mover at speed w0 (el. rad/s):
+ *  the observer starts locked at |E| = |w0| psi_f, injection ramps down. */
+void fw_bemf_catch(fw_bemf_t *b, float w0, const float i_dq_A[2]);
 /** Handover logic for this period; hf_settled: the HF path has a full period
  *  of data at full injection. Updates active and inj_scale. */
 void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled);

@@ -302,6 +302,7 @@ typedef struct {
   float bemf_err_rad;       /**< angle error seen by the back-EMF */
   float inj_scale;          /**< injection amplitude in use, share of u_inj_V */
   uint8_t bemf_active;      /**< 1: the PLL tracks the back-EMF, 0: the HF response */
+  uint8_t flying_start;     /**< 1: closed loop was entered on a moving mover */
 } fw_snapshot_t;
 
 /**
@@ -369,6 +370,12 @@ typedef struct {
   /* integrity monitor and protections */
   fw_mon_t mon;
   fw_bemf_t bemf;
+  /* flying start: back-EMF in the stationary frame while aligning */
+  float u_ab_prev_V[2];   /**< fundamental alpha/beta voltage commanded last period */
+  float i_f_ab_prev_A[2];
+  float fly_e_ab_V[2];    /**< low-passed alpha/beta back-EMF */
+  float fly_rot_rad;      /**< rotation of that vector over the observation window */
+  uint8_t flying;         /**< 1: this run started on a moving mover (no saliency check) */
   float u_dq_prev_V[2];   /**< fundamental voltage commanded last period (applied now) */
   float i2t_A2s;          /**< i^2 t above i_rated_A */
   float follow_time_s;    /**< time outside the following-error window */
