@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from protocols.generated.od_names import FAULT_REACTIONS, FAULTS
+
 from ._motors import fw_config, load_motor
 from ._sim import SIM_REF_LOAD, SIM_REF_SPEED, Sim, wrap_pi
 
@@ -31,17 +33,9 @@ BLIND_TIME_S = 0.020
 PWM_OFF_HARD_S = 2.0 / 24000.0  # the period the fault is found in, plus the update delay
 CHUNK = 24  # control periods per chunk (1 ms at 24 kHz): event resolution
 
-FAULT_NAMES = {
-    0x2310: "OVERCURRENT", 0x2350: "I2T", 0x3210: "DC_OVERVOLTAGE",
-    0x3220: "DC_UNDERVOLTAGE", 0x5210: "INPUT_INVALID", 0x5220: "ADC_RANGE",
-    0x6320: "CONFIG_INVALID", 0x8130: "HEARTBEAT_LOST", 0x8400: "OVERSPEED",
-    0x8611: "FOLLOWING_ERROR", 0x8612: "POSITION_LIMIT", 0xFF01: "EST_HF_LOW",
-    0xFF02: "EST_PLL_ERROR", 0xFF03: "SALIENCY_TOO_LOW", 0xFF04: "POLARITY_UNDETERMINED",
-    0xFF05: "CURRENT_SENSOR_SUM", 0xFF06: "CURRENT_SENSOR_OFFSET",
-    0xFF07: "SALIENCY_MISMATCH", 0xFF08: "MOVING_AT_ENABLE", 0xFF09: "EST_HF_ANGLE",
-    0xFF0A: "EST_BEMF_MISMATCH", 0xFF0B: "EST_ACCEL_IMPLAUSIBLE", 0xFF0C: "CURRENT_CONTROL",
-}
-BRAKING_FAULTS = {0x8130, 0x8612, 0x2350}
+#: Fault names and reactions come from protocols/od.yaml (generated module).
+FAULT_NAMES = {code: name for code, (name, _) in FAULTS.items()}
+BRAKING_FAULTS = {code for code, r in FAULT_REACTIONS.items() if r.startswith("brakes")}
 
 
 @dataclass

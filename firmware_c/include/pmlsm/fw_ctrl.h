@@ -87,6 +87,7 @@ typedef enum {
   FW_FAULT_ADC_RANGE = 0x5220,          /**< ADC count outside [0, adc_max] */
   FW_FAULT_CONFIG_INVALID = 0x6320,     /**< enable requested with a bad config */
   FW_FAULT_HEARTBEAT_LOST = 0x8130,     /**< supervisor heartbeat lost (CANopen) */
+  FW_FAULT_RPDO_TIMEOUT = 0x8250,       /**< RPDO not received within its event timer (CANopen) */
   FW_FAULT_EST_HF_LOW = 0xFF01,         /**< HF response too small: loss of lock */
   FW_FAULT_EST_PLL_ERROR = 0xFF02,      /**< PLL error persistently large */
   FW_FAULT_SALIENCY_TOO_LOW = 0xFF03,   /**< |Lq-Ld|/Ld < saliency_min: refused */
