@@ -22,9 +22,11 @@ import ctypes as C
 import logging
 import threading
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import can
+import numpy as np
 
 from . import _clib
 
@@ -219,21 +221,43 @@ class DriveBridge:
         if n:
             self.uart += buf.raw[:n]
 
-    def advance(self, n_steps: int) -> None:
-        """Run n_steps control periods now, exchanging frames every chunk."""
+    def advance(self, n_steps: int, channels: Sequence[str] | None = None,
+                ) -> dict[str, np.ndarray]:
+        """Run n_steps control periods now, exchanging frames every chunk.
+
+        Frames sent to the drive before the call are processed in its first
+        control period. With ``channels`` (names of ``sim_fallback``'s record,
+        e.g. ``t_s``, ``duty_abc`` (NaN while the PWM is off), ``v_mps``,
+        ``fault_code``) every period is recorded and returned, plus ``step``
+        (the drive's control period index); without a plant only ``step``,
+        ``pwm_enable`` and ``duty_abc`` exist.
+        """
+        parts: list[dict[str, np.ndarray]] = []
         with self._lock:
             left = n_steps
             while left > 0:
                 k = min(left, self.chunk_steps)
                 self._flush_rx()
+                rec: dict[str, np.ndarray] = {}
                 if self.sim is not None:
-                    self.sim.advance(k, decimation=k, channels=[])
+                    rec = self.sim.advance(k, decimation=1 if channels else k,
+                                           channels=list(channels or []))
                 else:
-                    for _ in range(k):
+                    pwm, duty = np.zeros(k, np.uint8), np.zeros((k, 3))
+                    for j in range(k):
                         self._L.fw_app_step(self._app, C.byref(self._in), C.byref(self._out))
+                        pwm[j] = self._out.pwm_enable
+                        duty[j] = self._out.duty_abc[:] if pwm[j] else [np.nan] * 3
+                    rec = {"pwm_enable": pwm, "duty_abc": duty}
+                if channels:
+                    rec["step"] = np.arange(self.steps, self.steps + k, dtype=np.int64)
+                    parts.append(rec)
                 self.steps += k
                 self._flush_tx()
                 left -= k
+        if not parts:
+            return {}
+        return {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
 
     def state(self) -> dict[str, float]:
         """True plant state (truth, for test assertions), {} without a plant."""
