@@ -348,6 +348,74 @@ static void test_error_register_after_nmt_reset(void) {
   TT_CHECK((sdo_read(0x6041, 0) & 0x4Fu) == 0x40u); /* switch on disabled */
 }
 
+/* CiA 402 objects shown in wire units are views of fw_config fields: the
+ * conversion, the SI mirror (0x2051) and the refusals. */
+static void test_cia402_protection_objects(void) {
+  setup();
+  const fw_config_t *c = fw_get_config(fw_app_ctrl(&g_app));
+  TT_CHECK(sdo_read(0x6080, 0) == 3000000u); /* default v_max 3 m/s */
+  TT_CHECK(sdo_write(0x6080, 0, 1234567u, 4) == 0);
+  TT_CHECK_NEAR(c->v_max_mps, 1.234567, 1e-7);
+  float f;
+  uint32_t raw = sdo_read(0x2051, 1);
+  memcpy(&f, &raw, sizeof f);
+  TT_CHECK_NEAR(f, 1.234567, 1e-7); /* the SI view follows */
+  f = 2.5f;
+  memcpy(&raw, &f, sizeof raw);
+  TT_CHECK(sdo_write(0x2051, 1, raw, 4) == 0);
+  TT_CHECK(sdo_read(0x6080, 0) == 2500000u); /* and the other way round */
+  TT_CHECK(sdo_write(0x6080, 0, 999u, 4) == 0x06090032u); /* below 1 mm/s */
+  TT_CHECK(sdo_write(0x6065, 0, 200000u, 4) == 0);
+  TT_CHECK_NEAR(c->follow_err_mps, 0.2, 1e-7);
+  TT_CHECK(sdo_write(0x6066, 0, 250u, 2) == 0);
+  TT_CHECK_NEAR(c->follow_err_time_s, 0.25, 1e-7);
+  TT_CHECK(sdo_write(0x6066, 0, 0u, 2) == 0x06090032u);
+  TT_CHECK(sdo_write(0x607D, 1, (uint32_t)-150000, 4) == 0); /* -0.15 m */
+  TT_CHECK(sdo_write(0x607D, 2, 2500000u, 4) == 0);
+  TT_CHECK_NEAR(c->pos_limit_min_m, -0.15, 1e-7);
+  TT_CHECK_NEAR(c->pos_limit_max_m, 2.5, 1e-7);
+  TT_CHECK(sdo_read(0x607D, 1) == (uint32_t)-150000);
+  /* option codes: 0..2 taken, CiA 402 codes not supported (3..8, 5/6 "stay in
+   * quick stop") and negative (manufacturer) codes refused as invalid values */
+  TT_CHECK(sdo_read(0x605A, 0) == 2u);
+  TT_CHECK(sdo_write(0x605A, 0, 0u, 2) == 0);
+  TT_CHECK(c->quick_stop_option == 0u);
+  TT_CHECK(sdo_write(0x605A, 0, 5u, 2) == 0x06090030u);
+  TT_CHECK(sdo_write(0x605A, 0, 6u, 2) == 0x06090030u);
+  TT_CHECK(sdo_write(0x605A, 0, 0xFFFFu, 2) == 0x06090030u); /* -1 */
+  TT_CHECK(c->quick_stop_option == 0u);
+  TT_CHECK(sdo_read(0x2051, 8) == 0u);
+  TT_CHECK(sdo_write(0x605E, 0, 1u, 2) == 0);
+  TT_CHECK(c->fault_reaction_option == 1u && sdo_read(0x2051, 9) == 1u);
+  TT_CHECK(sdo_write(0x605E, 0, 3u, 2) == 0x06090030u);
+  TT_CHECK(sdo_read(0x605E, 0) == 1u);
+  /* refused while the power stage is on */
+  sdo_write(0x6040, 0, 0x06, 2);
+  sdo_write(0x6040, 0, 0x07, 2);
+  sdo_write(0x6040, 0, 0x0F, 2);
+  step_n(10);
+  TT_CHECK(sdo_write(0x6080, 0, 2000000u, 4) == 0x08000022u);
+  TT_CHECK(sdo_read(0x6080, 0) == 2500000u);
+}
+
+/* NMT stop while OPERATION ENABLED: the PWM is off in the control period
+ * that processes the command. */
+static void test_nmt_stop_switches_off(void) {
+  setup();
+  uint8_t start[2] = {0x01, 0x00};
+  rx(0, 2, start);
+  sdo_write(0x6040, 0, 0x06, 2);
+  sdo_write(0x6040, 0, 0x07, 2);
+  sdo_write(0x6040, 0, 0x0F, 2);
+  step_n(100);
+  TT_CHECK(g_out.pwm_enable == 1u);
+  uint8_t stop[2] = {0x02, NID};
+  rx(0, 2, stop);
+  step_n(1);
+  TT_CHECK(g_out.pwm_enable == 0u);
+  TT_CHECK(fw_state(fw_app_ctrl(&g_app)) == FW_CIA402_SWITCH_ON_DISABLED);
+}
+
 int main(void) {
   TT_RUN(test_init_and_identity);
   TT_RUN(test_cia402_walk_over_sdo);
@@ -359,5 +427,7 @@ int main(void) {
   TT_RUN(test_heartbeat_fault_retrips_while_lost);
   TT_RUN(test_time_base_survives_step_wrap);
   TT_RUN(test_error_register_after_nmt_reset);
+  TT_RUN(test_cia402_protection_objects);
+  TT_RUN(test_nmt_stop_switches_off);
   return TT_SUMMARY();
 }

@@ -18,6 +18,8 @@ typedef struct {
   int hb_resumed;
   int rpdo;
   int resets;
+  int rpdo_timeout;
+  uint32_t rpdo_timeout_arg;
   uint32_t refuse_index; /* write hook refuses this index */
 } hooks_t;
 
@@ -38,6 +40,10 @@ static void on_event(void *ctx, co_event_t ev, uint32_t arg) {
   if (ev == CO_EV_HB_RESUMED) h->hb_resumed++;
   if (ev == CO_EV_RPDO) h->rpdo++;
   if (ev == CO_EV_RESET_NODE) h->resets++;
+  if (ev == CO_EV_RPDO_TIMEOUT) {
+    h->rpdo_timeout++;
+    h->rpdo_timeout_arg = arg;
+  }
 }
 
 static void drain(void) {
@@ -466,6 +472,105 @@ static void test_heartbeat(void) {
   TT_CHECK(g_hooks.hb_lost == 2);
 }
 
+/* CiA 301: 0x1014 bits 0-29 fixed while valid; 0x1016 one entry per node id. */
+static void test_comm_write_rules(void) {
+  setup();
+  uint32_t emcy = 0x80u + NID;
+  TT_CHECK(sdo_write(0x1014, 0, emcy, 4) == 0);
+  TT_CHECK(sdo_write(0x1014, 0, emcy + 1u, 4) == 0x06090030u);
+  TT_CHECK(sdo_write(0x1014, 0, 0x80000000u | (emcy + 1u), 4) == 0x06090030u);
+  TT_CHECK(sdo_write(0x1014, 0, 0x20000000u | emcy, 4) == 0x06090030u);
+  TT_CHECK(co_node_get_u32(&g_node, CO_OD_1014_00) == emcy);
+  TT_CHECK(sdo_write(0x1014, 0, 0x80000000u | emcy, 4) == 0);
+  TT_CHECK(sdo_write(0x1014, 0, 0x80000000u | 0x91u, 4) == 0);
+  TT_CHECK(sdo_write(0x1014, 0, 0x91u, 4) == 0);
+  TT_CHECK(sdo_write(0x1014, 0, 0u, 4) == 0x06090030u); /* valid id 0 */
+  TT_CHECK(co_node_emcy(&g_node, 0x8130, 0x11, NULL) == CO_OK);
+  TT_CHECK(count_id(0x91u, NULL) == 1); /* the new COB-ID is used */
+  TT_CHECK(sdo_write(0x1016, 1, (0x7Eu << 16) | 200u, 4) == 0);
+  TT_CHECK(sdo_write(0x1016, 2, (0x7Eu << 16) | 300u, 4) == 0x06040043u);
+  TT_CHECK(co_node_get_u32(&g_node, CO_OD_1016_02) == 0u);
+  TT_CHECK(sdo_write(0x1016, 2, 0x7Eu << 16, 4) == 0);       /* unused entry */
+  TT_CHECK(sdo_write(0x1016, 2, (0x10u << 16) | 300u, 4) == 0);
+  TT_CHECK(sdo_write(0x1016, 1, (0x10u << 16) | 100u, 4) == 0x06040043u);
+  TT_CHECK(sdo_write(0x1016, 1, (0x7Eu << 16) | 250u, 4) == 0); /* same entry */
+  TT_CHECK(sdo_write(0x1016, 1, (0x80u << 16) | 250u, 4) == 0x06090030u); /* id > 127 */
+}
+
+/* A heartbeat timeout is reported by process_rx already (before the
+ * application's control step), not only by process_tx. */
+static void test_heartbeat_timeout_seen_in_rx(void) {
+  setup();
+  TT_CHECK(sdo_write(0x1016, 1, (1u << 16) | 50u, 4) == 0);
+  uint8_t st = 0x05;
+  rx(0x701, 1, &st);
+  co_node_process_rx(&g_node, 1000000);
+  co_node_process_rx(&g_node, 1049999);
+  TT_CHECK(g_hooks.hb_lost == 0);
+  co_node_process_rx(&g_node, 1050000);
+  TT_CHECK(g_hooks.hb_lost == 1);
+}
+
+/* RPDO event timer 0x1400:5 as a deadline: armed by the first applied RPDO
+ * in OPERATIONAL, reported once, re-armed by fresh data; for a synchronous
+ * RPDO the deadline counts applications (SYNC), not receptions. */
+static void test_rpdo_deadline(void) {
+  uint8_t d[6] = {0x0F, 0x00, 0x10, 0x00, 0x00, 0x00};
+  setup();
+  TT_CHECK(sdo_write(0x1400, 5, 20u, 2) == 0);
+  nmt(0x01);
+  co_node_process_rx(&g_node, 100000); /* not armed before the first RPDO */
+  TT_CHECK(g_hooks.rpdo_timeout == 0);
+  rx(0x205, 6, d);
+  co_node_process_rx(&g_node, 200000);
+  TT_CHECK(g_hooks.rpdo == 1);
+  co_node_process_rx(&g_node, 219999);
+  co_node_process_tx(&g_node, 219999);
+  TT_CHECK(g_hooks.rpdo_timeout == 0);
+  co_node_process_rx(&g_node, 220000);
+  TT_CHECK(g_hooks.rpdo_timeout == 1 && g_hooks.rpdo_timeout_arg == 0u);
+  co_node_process_tx(&g_node, 300000);
+  TT_CHECK(g_hooks.rpdo_timeout == 1); /* once */
+  TT_CHECK(g_node.count.rpdo_timeouts == 1u);
+  rx(0x205, 6, d); /* fresh data re-arms */
+  co_node_process_rx(&g_node, 310000);
+  co_node_process_rx(&g_node, 329000);
+  TT_CHECK(g_hooks.rpdo_timeout == 1);
+  co_node_process_rx(&g_node, 330000);
+  TT_CHECK(g_hooks.rpdo_timeout == 2);
+  /* too short: not applied, does not feed the deadline */
+  rx(0x205, 6, d);
+  co_node_process_rx(&g_node, 400000);
+  rx(0x205, 2, d);
+  co_node_process_rx(&g_node, 415000);
+  co_node_process_rx(&g_node, 420000);
+  TT_CHECK(g_hooks.rpdo_timeout == 3);
+  /* synchronous RPDO: received every 5 ms but no SYNC -> deadline */
+  TT_CHECK(sdo_write(0x1400, 2, 1u, 1) == 0); /* re-configured: disarmed */
+  rx(0x205, 6, d);
+  rx(0x080, 0, NULL);
+  co_node_process_rx(&g_node, 500000);
+  int before = g_hooks.rpdo_timeout;
+  for (uint32_t t = 505000u; t <= 540000u; t += 5000u) {
+    rx(0x205, 6, d);
+    co_node_process_rx(&g_node, t);
+  }
+  TT_CHECK(g_hooks.rpdo_timeout == before + 1);
+  /* outside OPERATIONAL nothing is watched; entering it disarms */
+  nmt(0x80);
+  co_node_process_rx(&g_node, 900000);
+  nmt(0x01);
+  co_node_process_rx(&g_node, 990000);
+  TT_CHECK(g_hooks.rpdo_timeout == before + 1);
+  /* 0 = off */
+  TT_CHECK(sdo_write(0x1400, 5, 0u, 2) == 0);
+  TT_CHECK(sdo_write(0x1400, 2, 255u, 1) == 0);
+  rx(0x205, 6, d);
+  co_node_process_rx(&g_node, 1000000);
+  co_node_process_rx(&g_node, 5000000);
+  TT_CHECK(g_hooks.rpdo_timeout == before + 1);
+}
+
 static void test_emcy_and_queues(void) {
   fw_can_frame_t f;
   setup();
@@ -519,6 +624,9 @@ int main(void) {
   TT_RUN(test_pdo_remap_and_rpdo);
   TT_RUN(test_tpdo);
   TT_RUN(test_heartbeat);
+  TT_RUN(test_comm_write_rules);
+  TT_RUN(test_heartbeat_timeout_seen_in_rx);
+  TT_RUN(test_rpdo_deadline);
   TT_RUN(test_emcy_and_queues);
   return TT_SUMMARY();
 }
