@@ -44,6 +44,8 @@ FW_CONFIG_FIELDS: list[tuple[str, type]] = [
     ("mon_bemf_max_rad", _f), ("mon_bemf_min_V", _f), ("i_sum_max_A", _f),
     ("i_offset_max_A", _f), ("start_speed_max_mps", _f),
     ("bemf_e_on_V", _f), ("bemf_e_off_V", _f), ("bemf_inj_share", _f),
+    ("mass_kg", _f), ("visc_Ns_per_m", _f), ("coulomb_N", _f), ("cur_bw_radps", _f),
+    ("spd_bw_radps", _f), ("gains_auto", _u32),
 ]
 
 
@@ -251,6 +253,7 @@ def _declare(lib: C.CDLL) -> None:
         # firmware core (whole archive linked into the sim library)
         "fw_config_default": (None, [P(FwConfig)]),
         "fw_config_check": (C.c_int, [P(FwConfig), P(FwConfigIssue)]),
+        "fw_config_derive": (None, [P(FwConfig)]),
         "fw_config_field_count": (C.c_size_t, []),
         "fw_config_field": (P(FwConfigField), [C.c_size_t]),
         "fw_init": (C.c_int, [V, P(FwConfig)]),

@@ -81,6 +81,12 @@ static const fw_config_field_t k_fields[] = {
     F32(bemf_e_on_V, "V", 0.0f, 1000.0f),
     F32(bemf_e_off_V, "V", 0.0f, 1000.0f),
     F32(bemf_inj_share, "", 0.05f, 1.0f),
+    F32(mass_kg, "kg", 1e-3f, 1e5f),
+    F32(visc_Ns_per_m, "N s/m", 0.0f, 1e6f),
+    F32(coulomb_N, "N", 0.0f, 1e6f),
+    F32(cur_bw_radps, "rad/s", 1.0f, 1e5f),
+    F32(spd_bw_radps, "rad/s", 0.1f, 1e4f),
+    U32(gains_auto, "", 0.0f, 1.0f),
 };
 
 #define K_NFIELDS (sizeof(k_fields) / sizeof(k_fields[0]))
@@ -157,6 +163,27 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->bemf_e_on_V = 10.0f; /* paper motor: 55 rad/s el. = 131 r/min, above the paper's speeds */
   cfg->bemf_e_off_V = 7.0f;
   cfg->bemf_inj_share = 0.25f;
+  /* paper Table 1 as a linear machine: J = 0.03 kg m^2 over r = p tau / pi */
+  cfg->mass_kg = 32.13f;
+  cfg->visc_Ns_per_m = 8.57f; /* 0.008 N m s/rad / r^2 */
+  cfg->coulomb_N = 49.1f;     /* 1.5 N m / r */
+  cfg->cur_bw_radps = 1100.0f;
+  cfg->spd_bw_radps = 35.0f;  /* the paper's speed PI on this mass */
+  cfg->gains_auto = 0u;       /* defaults keep the paper's explicit gains */
+}
+
+void fw_config_derive(fw_config_t *cfg) {
+  if (cfg == NULL || cfg->gains_auto == 0u || !(cfg->pole_pitch_m > 0.0f) ||
+      !(cfg->mass_kg > 0.0f)) {
+    return; /* the range check reports bad fields */
+  }
+  const float k_e = FW_PI_F32 / cfg->pole_pitch_m; /* el. rad per m */
+  const float K_F = 1.5f * k_e * cfg->psi_f_Wb;    /* N per A of i_q */
+  cfg->cur_kp_V_per_A = cfg->L_d_H * cfg->cur_bw_radps;
+  cfg->cur_ki_V_per_As = cfg->R_ohm * cfg->cur_bw_radps;
+  cfg->spd_kp_A_per_radps = cfg->mass_kg * cfg->spd_bw_radps / K_F / k_e;
+  cfg->spd_ki_A_per_rad = cfg->spd_kp_A_per_radps * cfg->spd_bw_radps / 6.0f;
+  cfg->pll_accel_per_A = k_e * K_F / cfg->mass_kg;
 }
 
 size_t fw_config_field_count(void) { return K_NFIELDS; }

@@ -223,6 +223,12 @@ fw_status_t fw_init(fw_ctrl_t *ctrl, const fw_config_t *cfg) {
   memset(ctrl, 0, sizeof(*ctrl));
   fw_cia402_init(&ctrl->sm);
   fw_config_issue_t issue;
+  fw_config_t derived;
+  if (cfg != NULL) {
+    derived = *cfg;
+    fw_config_derive(&derived); /* gains from the physical description, if asked */
+    cfg = &derived;
+  }
   fw_status_t st = fw_config_check(cfg, &issue);
   if (st == FW_OK || st == FW_ERR_SALIENCY) {
     apply_config(ctrl, cfg, st);
@@ -244,9 +250,11 @@ fw_status_t fw_set_config(fw_ctrl_t *ctrl, const fw_config_t *cfg, fw_config_iss
   if (fw_cia402_power_enabled(ctrl->sm.state)) {
     return FW_ERR_STATE;
   }
-  fw_status_t st = fw_config_check(cfg, issue);
+  fw_config_t derived = *cfg;
+  fw_config_derive(&derived); /* gains from the physical description, if asked */
+  fw_status_t st = fw_config_check(&derived, issue);
   if (st == FW_OK || st == FW_ERR_SALIENCY) {
-    apply_config(ctrl, cfg, st);
+    apply_config(ctrl, &derived, st);
   }
   return st;
 }

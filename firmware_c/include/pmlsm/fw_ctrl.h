@@ -212,6 +212,14 @@ typedef struct {
   float bemf_e_on_V;        /**< hand over to the back-EMF above |w^| psi_f = this (0: off) */
   float bemf_e_off_V;       /**< back to injection below this (< bemf_e_on_V) */
   float bemf_inj_share;     /**< injection kept on back-EMF, share of u_inj_V */
+  /* physical description and bandwidths: gains derived in the drive (fw_config_derive) */
+  float mass_kg;            /**< mover plus load mass */
+  float visc_Ns_per_m;      /**< viscous friction */
+  float coulomb_N;          /**< Coulomb (kinetic) friction */
+  float cur_bw_radps;       /**< current-loop bandwidth (paper: 1100 rad/s) */
+  float spd_bw_radps;       /**< speed-loop bandwidth */
+  uint32_t gains_auto;      /**< 1: current/speed PI and pll_accel_per_A derived from the above;
+                                 0: the explicit gain fields are used as given */
 } fw_config_t;
 
 #include "fw_mon.h"
@@ -402,6 +410,17 @@ typedef struct {
  * injection; see docs/method-notes). 24 kHz PWM, 3 kHz injection.
  */
 void fw_config_default(fw_config_t *cfg);
+
+/**
+ * Derive the gains from the physical description when gains_auto is set:
+ *   K_F = 1.5 (pi/tau) psi_f (N/A),
+ *   cur_kp = L_d w_c, cur_ki = R w_c (w_c = cur_bw_radps),
+ *   spd_kp = m w_s / K_F * tau / pi (A per el. rad/s), spd_ki = spd_kp w_s / 6,
+ *   pll_accel_per_A = (pi/tau) K_F / m (el. rad/s^2 per A).
+ * fw_init and fw_set_config apply it, so the stored configuration (and the
+ * object dictionary) shows the gains in use. No-op when gains_auto is 0.
+ */
+void fw_config_derive(fw_config_t *cfg);
 
 /** Range and consistency check. Saliency below saliency_min -> FW_ERR_SALIENCY. */
 fw_status_t fw_config_check(const fw_config_t *cfg, fw_config_issue_t *issue);
