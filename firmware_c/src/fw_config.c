@@ -157,7 +157,7 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->mon_sal_tol = 1.0f; /* measured saliency within a factor 2 of the configured */
   cfg->mon_bemf_max_rad = 0.6f;
   cfg->mon_bemf_min_V = 5.0f;
-  cfg->i_sum_max_A = 1.0f;
+  cfg->i_sum_max_A = 0.2f; /* plus 3 % of |i_a| + |i_b| + |i_c| (fw_mon.c) */
   cfg->i_offset_max_A = 1.0f;
   cfg->start_speed_max_mps = 0.05f;
   cfg->bemf_e_on_V = 10.0f; /* paper motor: 55 rad/s el. = 131 r/min, above the paper's speeds */

@@ -32,7 +32,8 @@
 #define MON_BEMF_RATIO 2.0f   /* |r| / (|w^| psi_f) must lie in [1/2, 2] */
 #define MON_CTRL_SHARE 0.5f   /* current-error limit as a share of i_max_A */
 #define MON_ACCEL_MARGIN 2.0f
-#define MON_EVAL_STEPS 8u     /* witnesses judged every 8 periods (3 kHz at 24 kHz) */ /* disturbance limit: 2 x the thrust acceleration at i_max */
+#define MON_EVAL_STEPS 8u
+#define MON_SUM_SHARE 0.03f   /* current-sum limit grows by this share of sum |i_k| */     /* witnesses judged every 8 periods (3 kHz at 24 kHz) */ /* disturbance limit: 2 x the thrust acceleration at i_max */
 
 static float lp_coef(float tau_s, float dt_s) { return 1.0f - expf(-dt_s / tau_s); }
 
@@ -149,7 +150,12 @@ fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in) {
    * sum is an offset: the per-phase offset check at enable names it). */
   float isum = fabsf(in->i_abc_A[0] + in->i_abc_A[1] + in->i_abc_A[2]);
   m->isum_f += m->a_slow * (isum - m->isum_f);
-  m->t_sum = persist(m->t_sum, in->pwm_on && m->isum_f > m->i_sum_max_A, dt);
+  /* limit: a floor plus a share of the phase current amplitude (a gain error g on
+   * one phase gives a sum of about 0.64 g |i|) */
+  float imag = fabsf(in->i_abc_A[0]) + fabsf(in->i_abc_A[1]) + fabsf(in->i_abc_A[2]);
+  m->imag_f += m->a_slow * (imag - m->imag_f); /* mean of the three = 4/pi |i|_peak / ... */
+  m->t_sum = persist(m->t_sum,
+                     in->pwm_on && m->isum_f > m->i_sum_max_A + MON_SUM_SHARE * m->imag_f, dt);
 
   if (in->pwm_on) {
     m->off_time_s = 0.0f;

@@ -199,7 +199,7 @@ const co_od_entry_t co_od_table[CO_OD_COUNT] = {
     {0x2052u, 0x03u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 704u, 0, 0, 0, 0.05000000074505806f, 10.0f, 1.0f, 0, "Saliency tolerance"},
     {0x2052u, 0x04u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 708u, 0, 0, 0, 0.05000000074505806f, 3.200000047683716f, 0.6000000238418579f, 0, "Back-EMF angle limit"},
     {0x2052u, 0x05u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 712u, 0, 0, 0, 0.10000000149011612f, 1000.0f, 5.0f, 0, "Back-EMF minimum"},
-    {0x2052u, 0x06u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 716u, 0, 0, 0, 0.0010000000474974513f, 500.0f, 1.0f, 0, "Current sum limit"},
+    {0x2052u, 0x06u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 716u, 0, 0, 0, 0.0010000000474974513f, 500.0f, 0.20000000298023224f, 0, "Current sum limit"},
     {0x2052u, 0x07u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 720u, 0, 0, 0, 0.0010000000474974513f, 500.0f, 1.0f, 0, "Current offset limit"},
     {0x2052u, 0x08u, CO_TYPE_REAL32, CO_ACC_R | CO_ACC_W, 0u, 4u, 724u, 0, 0, 0, 0.0010000000474974513f, 100.0f, 0.05000000074505806f, 0, "Start speed limit"},
     {0x2060u, 0x00u, CO_TYPE_U8, CO_ACC_R | CO_ACC_CONST, 0u, 1u, 728u, INT64_C(0), INT64_C(255), INT64_C(10), 0.0f, 0.0f, 0.0f, 0, "Highest sub-index supported"},

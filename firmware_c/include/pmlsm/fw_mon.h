@@ -69,6 +69,7 @@ typedef struct {
   float r_d_f, r_q_f;
   float i_prev_A[2];  /**< last fundamental current (for L di/dt) */
   float isum_f, ictrl_f;
+  float imag_f;       /**< low-passed |i_a| + |i_b| + |i_c| */
   float off_f[3];
   float off_time_s;   /**< time with PWM off (offset learning starts after 50 ms) */
   float offset_A[3];  /**< offsets in use (latched at enable) */
