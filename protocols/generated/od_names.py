@@ -113,6 +113,8 @@ INDEX_DEVICE_TAG = 0x2042
 INDEX_DRIVE_CONFIGURATION = 0x2050
 INDEX_PROTECTIONS = 0x2051
 INDEX_INTEGRITY_MONITOR = 0x2052
+INDEX_BACK_EMF_OBSERVER = 0x2053
+INDEX_MACHINE_AND_LOOP_BANDWIDTHS = 0x2054
 INDEX_TELEMETRY = 0x2060
 INDEX_TRACE = 0x2070
 INDEX_ERROR_CODE = 0x603F
@@ -334,6 +336,17 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2052, 6): 'Current sum limit',
     (0x2052, 7): 'Current offset limit',
     (0x2052, 8): 'Start speed limit',
+    (0x2053, 0): 'Highest sub-index supported',
+    (0x2053, 1): 'Handover up',
+    (0x2053, 2): 'Handover down',
+    (0x2053, 3): 'Injection share',
+    (0x2054, 0): 'Highest sub-index supported',
+    (0x2054, 1): 'Mover mass',
+    (0x2054, 2): 'Viscous friction',
+    (0x2054, 3): 'Coulomb friction',
+    (0x2054, 4): 'Current loop bandwidth',
+    (0x2054, 5): 'Speed loop bandwidth',
+    (0x2054, 6): 'Gains automatic',
     (0x2060, 0): 'Highest sub-index supported',
     (0x2060, 1): 'Decimation',
     (0x2060, 2): 'Signal count',

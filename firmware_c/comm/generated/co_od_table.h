@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 246u
-#define CO_OD_RAM_SIZE 811u
+#define CO_OD_COUNT 257u
+#define CO_OD_RAM_SIZE 849u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -210,56 +210,67 @@
 #define CO_OD_2052_06 197u /* Integrity monitor: Current sum limit */
 #define CO_OD_2052_07 198u /* Integrity monitor: Current offset limit */
 #define CO_OD_2052_08 199u /* Integrity monitor: Start speed limit */
-#define CO_OD_2060_00 200u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 201u /* Telemetry: Decimation */
-#define CO_OD_2060_02 202u /* Telemetry: Signal count */
-#define CO_OD_2060_03 203u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 204u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 205u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 206u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 207u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 208u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 209u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 210u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 211u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 212u /* Trace: Command */
-#define CO_OD_2070_02 213u /* Trace: State */
-#define CO_OD_2070_03 214u /* Trace: Trigger signal */
-#define CO_OD_2070_04 215u /* Trace: Trigger level */
-#define CO_OD_2070_05 216u /* Trace: Trigger edge */
-#define CO_OD_2070_06 217u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 218u /* Trace: Signal count */
-#define CO_OD_2070_08 219u /* Trace: Signal 1 */
-#define CO_OD_2070_09 220u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 221u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 222u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 223u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 224u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 225u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 226u /* Trace: Signal 8 */
-#define CO_OD_603F_00 227u /* Error code: Error code */
-#define CO_OD_6040_00 228u /* Controlword: Controlword */
-#define CO_OD_6041_00 229u /* Statusword: Statusword */
-#define CO_OD_605A_00 230u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 231u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 232u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 233u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 234u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 235u /* Following error window: Following error window */
-#define CO_OD_6066_00 236u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 237u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 238u /* Target torque: Target torque */
-#define CO_OD_6077_00 239u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 240u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 241u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 242u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 243u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 244u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 245u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2053_00 200u /* Back-EMF observer: Highest sub-index supported */
+#define CO_OD_2053_01 201u /* Back-EMF observer: Handover up */
+#define CO_OD_2053_02 202u /* Back-EMF observer: Handover down */
+#define CO_OD_2053_03 203u /* Back-EMF observer: Injection share */
+#define CO_OD_2054_00 204u /* Machine and loop bandwidths: Highest sub-index supported */
+#define CO_OD_2054_01 205u /* Machine and loop bandwidths: Mover mass */
+#define CO_OD_2054_02 206u /* Machine and loop bandwidths: Viscous friction */
+#define CO_OD_2054_03 207u /* Machine and loop bandwidths: Coulomb friction */
+#define CO_OD_2054_04 208u /* Machine and loop bandwidths: Current loop bandwidth */
+#define CO_OD_2054_05 209u /* Machine and loop bandwidths: Speed loop bandwidth */
+#define CO_OD_2054_06 210u /* Machine and loop bandwidths: Gains automatic */
+#define CO_OD_2060_00 211u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 212u /* Telemetry: Decimation */
+#define CO_OD_2060_02 213u /* Telemetry: Signal count */
+#define CO_OD_2060_03 214u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 215u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 216u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 217u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 218u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 219u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 220u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 221u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 222u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 223u /* Trace: Command */
+#define CO_OD_2070_02 224u /* Trace: State */
+#define CO_OD_2070_03 225u /* Trace: Trigger signal */
+#define CO_OD_2070_04 226u /* Trace: Trigger level */
+#define CO_OD_2070_05 227u /* Trace: Trigger edge */
+#define CO_OD_2070_06 228u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 229u /* Trace: Signal count */
+#define CO_OD_2070_08 230u /* Trace: Signal 1 */
+#define CO_OD_2070_09 231u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 232u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 233u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 234u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 235u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 236u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 237u /* Trace: Signal 8 */
+#define CO_OD_603F_00 238u /* Error code: Error code */
+#define CO_OD_6040_00 239u /* Controlword: Controlword */
+#define CO_OD_6041_00 240u /* Statusword: Statusword */
+#define CO_OD_605A_00 241u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 242u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 243u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 244u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 245u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 246u /* Following error window: Following error window */
+#define CO_OD_6066_00 247u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 248u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 249u /* Target torque: Target torque */
+#define CO_OD_6077_00 250u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 251u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 252u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 253u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 254u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 255u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 256u /* Supported drive modes: Supported drive modes */
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 55u
+#define CO_OD_CFG_COUNT 64u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 
