@@ -405,32 +405,36 @@ static void test_fault_hf_low(void) {
   TT_CHECK(out.pwm_enable == 0u);
 }
 
-static void test_fault_pll_error(void) {
-  /* PLL too weak to follow: after start-up at the right angle, the true
-   * angle jumps by 0.7 rad and the error stays large. */
-  fw_config_t cfg;
-  fw_config_default(&cfg);
-  cfg.pll_kp = 0.0f;
-  cfg.pll_ki = 0.0f;
-  cfg.pll_kd = 0.0f;
-  fw_ctrl_t c;
+/* Start up at the right angle with the PLL gains at zero (too weak to follow),
+ * then jump the true angle by 0.7 rad and run until a fault; returns the step
+ * of the fault (-1: none within 0.3 s). */
+static int pll_error_case(fw_config_t *cfg, fw_ctrl_t *c, fw_outputs_t *out) {
+  cfg->pll_kp = 0.0f;
+  cfg->pll_ki = 0.0f;
+  cfg->pll_kd = 0.0f;
   plant_t p;
-  fw_outputs_t out;
-  run_to_operation_cfg(&c, &p, &out, &cfg, 0.0, 0.12);
-  TT_CHECK(c.phase == FW_START_RUN);
-  TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
+  run_to_operation_cfg(c, &p, out, cfg, 0.0, 0.12);
+  TT_CHECK(c->phase == FW_START_RUN);
+  TT_CHECK(fw_fault_code(c) == FW_FAULT_NONE);
   p.theta = 0.7;
-  int k_fault = -1;
   for (int k = 0; k < (int)(0.3 * 24000); k++) {
-    loop_step(&c, &p, &out);
-    if (fw_fault_code(&c) != FW_FAULT_NONE) {
-      k_fault = k;
-      break;
+    loop_step(c, &p, out);
+    if (fw_fault_code(c) != FW_FAULT_NONE) {
+      return k;
     }
   }
+  return -1;
+}
+
+static void test_fault_pll_error(void) {
   /* The integrity monitor's HF angle witness sees the 0.7 rad error from the
    * raw HF response within its detection budget (<= 20 ms), long before the
    * PLL-error supervision (pll_err_time_s = 0.05 s) would. */
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  fw_ctrl_t c;
+  fw_outputs_t out;
+  int k_fault = pll_error_case(&cfg, &c, &out);
   TT_CHECK(fw_fault_code(&c) == FW_FAULT_EST_HF_ANGLE);
   TT_CHECK(k_fault > (int)(0.010 * 24000)); /* not before mon_detect_time_s */
   TT_CHECK(k_fault <= (int)(0.020 * 24000));
@@ -442,25 +446,11 @@ static void test_fault_pll_error_supervision_alone(void) {
    * the PLL-error supervision still trips on its own after pll_err_time_s. */
   fw_config_t cfg;
   fw_config_default(&cfg);
-  cfg.pll_kp = 0.0f;
-  cfg.pll_ki = 0.0f;
-  cfg.pll_kd = 0.0f;
   cfg.mon_angle_max_rad = 1.5f;
   cfg.mon_bemf_max_rad = 3.2f;
   fw_ctrl_t c;
-  plant_t p;
   fw_outputs_t out;
-  run_to_operation_cfg(&c, &p, &out, &cfg, 0.0, 0.12);
-  TT_CHECK(c.phase == FW_START_RUN);
-  p.theta = 0.7;
-  int k_fault = -1;
-  for (int k = 0; k < (int)(0.3 * 24000); k++) {
-    loop_step(&c, &p, &out);
-    if (fw_fault_code(&c) != FW_FAULT_NONE) {
-      k_fault = k;
-      break;
-    }
-  }
+  int k_fault = pll_error_case(&cfg, &c, &out);
   TT_CHECK(fw_fault_code(&c) == FW_FAULT_EST_PLL_ERROR);
   TT_CHECK(k_fault > (int)(0.05 * 24000)); /* not before pll_err_time_s */
 }
