@@ -456,11 +456,15 @@ def sync_fw_config(exe: str, yaml_path: Path | None = None) -> None:
     yaml_path = yaml_path or (ROOT / "protocols" / "od.yaml")
     out = subprocess.run([exe, "--yaml"], check=True, capture_output=True, text=True).stdout
     table = yaml.safe_load(out)["fw_config"]
+    old = (yaml.safe_load(yaml_path.read_text()) or {}).get("fw_config", {}) or {}
     width = max(len(k) for k in table) + 1
     lines = ["fw_config:"]
     for name, v in table.items():
-        if name == "extractor" or float(v["max"]).is_integer() and name.endswith(
-                ("extractor", "_samples", "_pairs", "_count", "_option")):
+        was_int = all(isinstance(old.get(name, {}).get(k), int)
+                      for k in ("min", "max", "default"))
+        if all(float(v[k]).is_integer() for k in ("min", "max", "default")) and (
+                was_int or name.endswith(("extractor", "_samples", "_pairs", "_count",
+                                          "_option", "_auto"))):
             nums = f"min: {int(v['min'])}, max: {int(v['max'])}, default: {int(v['default'])}"
         else:
             nums = (f"min: {_short_f32(v['min'])}, max: {_short_f32(v['max'])}, "

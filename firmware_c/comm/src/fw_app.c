@@ -13,9 +13,6 @@
 
 #define FW_APP_MODE_CSV 9
 #define FW_APP_MODE_CST 10
-/* CiA 301 "RPDO timeout" (communication error); raised by the application.
- * Not (yet) a member of fw_fault_t: the core latches any code. */
-#define FW_APP_FAULT_RPDO_TIMEOUT ((fw_fault_t)0x8250)
 
 /* ---- helpers ------------------------------------------------------------- */
 
@@ -311,7 +308,7 @@ static void fw_app_on_event(void *ctx, co_event_t ev, uint32_t arg) {
   case CO_EV_RPDO_TIMEOUT:
     app->count.rpdo_timeouts++;
     if (fw_state(&app->ctrl) == FW_CIA402_OPERATION_ENABLED) {
-      fw_raise_fault(&app->ctrl, FW_APP_FAULT_RPDO_TIMEOUT);
+      fw_raise_fault(&app->ctrl, FW_FAULT_RPDO_TIMEOUT);
     }
     break;
   case CO_EV_NMT:
@@ -557,7 +554,7 @@ void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
       fw_state(&app->ctrl) == FW_CIA402_OPERATION_ENABLED) {
     for (uint32_t k = 0u; k < CO_OD_NR_RPDO; k++) {
       if (app->node.rpdo[k].timed_out) {
-        fw_raise_fault(&app->ctrl, FW_APP_FAULT_RPDO_TIMEOUT);
+        fw_raise_fault(&app->ctrl, FW_FAULT_RPDO_TIMEOUT);
         break;
       }
     }
