@@ -20,6 +20,7 @@ void fw_bemf_init(fw_bemf_t *b, const fw_config_t *cfg, float dt_s) {
   b->psi_f_Wb = cfg->psi_f_Wb;
   b->dt_s = dt_s;
   b->a_f = 1.0f - expf(-dt_s / BEMF_TAU_S);
+  b->inv_dt = 1.0f / dt_s;
   b->w_on = cfg->bemf_e_on_V / cfg->psi_f_Wb;
   b->w_off = cfg->bemf_e_off_V / cfg->psi_f_Wb;
   b->inj_share = cfg->bemf_inj_share;
@@ -33,6 +34,7 @@ void fw_bemf_reset(fw_bemf_t *b) {
   b->inj_scale = 1.0f;
   b->t_full_s = 0.0f;
   b->e_d_f = b->e_q_f = 0.0f;
+  b->err_rad = 0.0f;
   b->i_prev_A[0] = b->i_prev_A[1] = 0.0f;
 }
 
@@ -47,35 +49,43 @@ void fw_bemf_catch(fw_bemf_t *b, float w0, const float i_dq_A[2]) {
 }
 
 void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat) {
-  const float inv_dt = 1.0f / b->dt_s;
-  float did = (i_dq_A[0] - b->i_prev_A[0]) * inv_dt;
-  float diq = (i_dq_A[1] - b->i_prev_A[1]) * inv_dt;
+  float did = (i_dq_A[0] - b->i_prev_A[0]) * b->inv_dt;
+  float diq = (i_dq_A[1] - b->i_prev_A[1]) * b->inv_dt;
   b->i_prev_A[0] = i_dq_A[0];
   b->i_prev_A[1] = i_dq_A[1];
+  if (!b->active && fabsf(w_hat) < 0.5f * b->w_off) {
+    b->e_d_f = b->e_q_f = 0.0f; /* far below the handover: nothing to observe */
+    b->err_rad = 0.0f;
+    return;
+  }
   float e_d = u_dq_V[0] - b->R_ohm * i_dq_A[0] - b->L_d_H * did + w_hat * b->L_q_H * i_dq_A[1];
   float e_q = u_dq_V[1] - b->R_ohm * i_dq_A[1] - b->L_q_H * diq - w_hat * b->L_d_H * i_dq_A[0];
   b->e_d_f += b->a_f * (e_d - b->e_d_f);
   b->e_q_f += b->a_f * (e_q - b->e_q_f);
-}
-
-float fw_bemf_error(const fw_bemf_t *b, float w_hat) {
+  /* the angle error for this period (used by the PLL and the snapshot) */
   float e2 = b->e_d_f * b->e_d_f + b->e_q_f * b->e_q_f;
   float e_min = 0.5f * b->w_off * b->psi_f_Wb;
   if (e2 < e_min * e_min) {
-    return 0.0f;
+    b->err_rad = 0.0f;
+  } else {
+    float ang = atan2f(-b->e_d_f, b->e_q_f);
+    b->err_rad = w_hat < 0.0f ? fw_wrap_pi_f32(ang + FW_PI_F32) : ang;
   }
-  float ang = atan2f(-b->e_d_f, b->e_q_f);
-  return w_hat < 0.0f ? fw_wrap_pi_f32(ang + FW_PI_F32) : ang;
 }
+
+float fw_bemf_error(const fw_bemf_t *b) { return b->err_rad; }
 
 void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled) {
   const float w = fabsf(w_hat);
-  const float step = b->dt_s / BEMF_RAMP_S * (1.0f - b->inj_share);
   if (b->w_on <= 0.0f) {
     return; /* handover off: injection only */
   }
   if (!b->active) {
-    b->t_cond_s = w > b->w_on ? b->t_cond_s + b->dt_s : 0.0f;
+    if (!(w > b->w_on)) {
+      b->t_cond_s = 0.0f;
+      return; /* on injection, at full amplitude (it is restored before leaving) */
+    }
+    b->t_cond_s += b->dt_s;
     if (b->t_cond_s >= BEMF_HOLD_S) {
       b->active = 1u; /* both estimates valid here: switch the PLL, then reduce injection */
       b->going_up = 1u;
@@ -86,6 +96,7 @@ void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled) {
   } else if (!b->going_up && w > b->w_on) {
     b->going_up = 1u; /* changed its mind on the way down */
   }
+  const float step = b->dt_s / BEMF_RAMP_S * (1.0f - b->inj_share);
   if (b->active && b->going_up) {
     b->inj_scale = fmaxf(b->inj_share, b->inj_scale - step);
     b->t_full_s = 0.0f;

@@ -471,7 +471,7 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab) {
   if (c->phase == FW_START_SALIENCY) {
     eps = 0.0f; /* injection moves to q^ during the check: hold the estimate */
   } else if (c->bemf.active) {
-    eps = fw_bemf_error(&c->bemf, c->pll.w_i_radps); /* above injection speeds */
+    eps = fw_bemf_error(&c->bemf); /* above injection speeds */
   }
   /* Low-passed *signed* error: its magnitude is the tracking error. The
    * per-sample eps carries ~0.04 rad of sensor noise, so a filtered |eps|
@@ -985,9 +985,11 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   /* ---- integrity monitor and protections ---- */
   {
     const bool running = c->phase == FW_START_RUN;
-    const float inv_scale = 1.0f / c->bemf.inj_scale; /* inj_scale >= bemf_inj_share > 0 */
-    const bool scale_steady =
-        c->bemf.inj_scale >= 1.0f || c->bemf.inj_scale <= c->bemf.inj_share;
+    const bool scale_full = c->bemf.inj_scale >= 1.0f;
+    const bool scale_steady = scale_full || c->bemf.inj_scale <= c->bemf.inj_share;
+    /* the HF witness judges the response per volt of injection: scale back (no
+     * division while the injection is full, the usual case) */
+    const float inv_scale = scale_full ? 1.0f : 1.0f / c->bemf.inj_scale;
     mi.e_hf_dq_A[0] = e_raw.x * inv_scale;
     mi.e_hf_dq_A[1] = e_raw.y * inv_scale;
     mi.u_dq_V[0] = c->u_dq_prev_V[0];
@@ -1058,7 +1060,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   c->snap.inj_scale = c->bemf.inj_scale;
   c->snap.bemf_active = c->bemf.active;
   c->snap.flying_start = c->flying;
-  c->snap.bemf_err_rad = fw_bemf_error(&c->bemf, c->pll.w_i_radps);
+  c->snap.bemf_err_rad = fw_bemf_error(&c->bemf);
   if (c->phase == FW_START_SALIENCY && ++c->sal_k == 2u * sal_col_len) {
     saliency_done(c);
     if (c->fault_hard) {
