@@ -473,8 +473,10 @@ def same_numbers(old: str, new: str) -> bool:
         return False
     a = [float(x) for x in _NUM.findall(old)]
     b = [float(x) for x in _NUM.findall(new)]
-    return len(a) == len(b) and all(
-        abs(x - y) <= CHECK_ATOL + CHECK_RTOL * max(abs(x), abs(y)) for x, y in zip(a, b, strict=True))
+    if len(a) != len(b):
+        return False
+    return all(abs(x - y) <= CHECK_ATOL + CHECK_RTOL * max(abs(x), abs(y))
+               for x, y in zip(a, b, strict=True))
 
 
 def main(argv: list[str] | None = None) -> int:
