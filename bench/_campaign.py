@@ -314,7 +314,7 @@ def _split(params: dict[str, Any]) -> tuple[dict[str, float], dict[str, float], 
 @functools.lru_cache(maxsize=16)
 def _motor_and_config(motor: str, extractor: str) -> tuple[Any, Any]:
     """Motor file and its nominal configuration, parsed once per worker process."""
-    from sim_fallback._motors import fw_config, load_motor
+    from sim_fallback import fw_config, load_motor
     mot = load_motor(motor)
     return mot, fw_config(mot, extractor)
 
@@ -519,7 +519,7 @@ def cmd(args: Any) -> int:
     import sys
 
     try:
-        from sim_fallback._sim import METRIC_NAMES
+        from sim_fallback.metrics import METRIC_NAMES
         c = load_campaign(args.file, METRIC_NAMES)
     except CampaignError as e:
         print(f"bench: {e}", file=sys.stderr)

@@ -266,8 +266,12 @@ class RunLogger:
             return {k: c.unit for k, c in self._channels.items()}
 
     def truth(self) -> dict[str, np.ndarray] | None:
-        """Truth + estimate channels in sequence time (None if no truth recorded)."""
-        from bench._metrics import TRUTH_CHANNELS
+        """Truth + estimate channels in sequence time (None if no true angle recorded).
+
+        Channels of :data:`sim_fallback.metrics.TRUTH_CHANNELS` that were not
+        recorded are left out (the metrics that need them are then NaN).
+        """
+        from sim_fallback.metrics import TRUTH_CHANNELS
 
         out: dict[str, np.ndarray] = {}
         t_ref = None
@@ -275,10 +279,11 @@ class RunLogger:
             for c in TRUTH_CHANNELS[1:]:
                 t, v = self.channel("sim." + c)
                 if t.size == 0:
-                    return None
+                    continue
                 out[c] = v
                 t_ref = t
-        assert t_ref is not None
+        if t_ref is None or "theta_e_rad" not in out:
+            return None
         out["t_s"] = t_ref - self.t_origin_s
         return out
 

@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from bench._metrics import wrap_pi
 from bench._runner import RunResult
 from bench._units import MotorUnits
+from sim_fallback.metrics import METRIC_DEFS, definitions_rows, wrap_pi
 
 
 def _clean(x: Any) -> Any:
@@ -32,12 +32,15 @@ def _clean(x: Any) -> Any:
 def summary(result: RunResult, extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """The ``--summary-json`` document: ``{"sequence", "passed", "metrics", ...}``.
 
-    Metrics that cannot be computed (no truth) are ``null``.
+    Metrics that cannot be computed (no truth) are ``null``; ``metric_windows_s``
+    gives the window each headline metric covers (definitions:
+    :mod:`sim_fallback.metrics`).
     """
     doc: dict[str, Any] = {
         "sequence": result.sequence,
         "passed": bool(result.passed),
         "metrics": _clean(dict(result.metrics)),
+        "metric_windows_s": _clean({k: list(w) for k, w in result.metric_windows.items()}),
         "expectations": [_clean({"name": e.name, "metric": e.metric, "measured": e.measured,
                                  "criterion": e.criterion, "window_s": list(e.window_s),
                                  "passed": e.passed, "paper": e.paper,
@@ -278,8 +281,18 @@ def write_html(path: Path, result: RunResult, plots: list[tuple[str, str]],
         f"<td>{'' if e.paper_met is None else ('yes' if e.paper_met else 'NO')}</td>"
         f"<td>{_fmt(e.message)}</td></tr>"
         for e in result.expectations)
-    metrics = "\n".join(f"<tr><td>{_fmt(k)}</td><td>{_fmt(v)}</td></tr>"
-                        for k, v in result.metrics.items())
+    def win(k: str) -> str:
+        w = result.metric_windows.get(k)
+        return "" if w is None else f"[{w[0]:g}, {w[1]:g}]"
+
+    metrics = "\n".join(
+        f"<tr><td>{_fmt(k)}</td><td>{_fmt(v)}</td>"
+        f"<td>{_fmt(METRIC_DEFS[k].unit if k in METRIC_DEFS else '')}</td><td>{win(k)}</td></tr>"
+        for k, v in result.metrics.items())
+    defs = definitions_rows()
+    defs_html = ("<tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in defs[0]) + "</tr>\n"
+                 + "\n".join("<tr>" + "".join(f"<td>{html.escape(v)}</td>" for v in r.values())
+                              + "</tr>" for r in defs))
     figs = "\n".join(f"<figure><img src='{html.escape(f)}' alt='{html.escape(c)}'>"
                      f"<figcaption>{html.escape(c)}</figcaption></figure>" for f, c in plots)
     drive = meta.get("drive", {})
@@ -312,8 +325,11 @@ img {{ max-width: 100%; }} figcaption {{ color: #555; font-size: 13px; }}
 <th>required</th><th>result</th><th>paper</th><th>paper reproduced</th><th>note</th></tr>
 {rows}
 </table>
-<h2>Metrics after the settle window</h2>
-<table>{metrics}</table>
+<h2>Metrics over their default windows</h2>
+<table><tr><th>metric</th><th>value</th><th>unit</th><th>window (s)</th></tr>
+{metrics}</table>
+<h2>Metric definitions</h2>
+<table>{defs_html}</table>
 <h2>Run</h2>
 <table>{info}</table>
 <h2>Plots</h2>

@@ -21,9 +21,9 @@ from typing import Any, Protocol
 import numpy as np
 
 from bench._load import LoadDevice, NoLoad
-from bench._metrics import compute_metrics
 from bench._sequence import Sequence, Step
 from bench._units import MotorUnits
+from sim_fallback.metrics import METRIC_NAMES, compute_metrics, default_window, run_metrics
 
 log = logging.getLogger("bench.runner")
 
@@ -99,7 +99,11 @@ class RunResult:
         Every expectation passed and nothing went wrong.
     expectations : list of ExpectResult
     metrics : dict
-        Metrics over ``[settle_s, end]`` (NaN when the truth is unavailable).
+        Every metric over its default window (:mod:`sim_fallback.metrics`:
+        ``[settle_s, end]``, the settling time ``[0, end]``); NaN when the
+        truth is unavailable.
+    metric_windows : dict
+        Metric name -> the window ``(t0_s, t1_s)`` its headline value covers.
     error : str or None
         Exception text if the run was aborted.
     aborted : bool
@@ -117,6 +121,7 @@ class RunResult:
     passed: bool = False
     expectations: list[ExpectResult] = field(default_factory=list)
     metrics: dict[str, float] = field(default_factory=dict)
+    metric_windows: dict[str, tuple[float, float]] = field(default_factory=dict)
     error: str | None = None
     aborted: bool = False
     safe_state: str = ""
@@ -307,14 +312,16 @@ class Runner:
     def _expect(self, step: Step, seq: Sequence) -> ExpectResult:
         p = step.params
         now = self.now()
-        t0, t1 = (float(v) for v in p.get("window_s", (seq.settle_s, now)))
+        t0, t1 = (float(v) for v in p.get("window_s",
+                                            default_window(p["metric"], seq.settle_s, now)))
         name = p.get("name") or f"{p['metric']}@[{t0:g},{t1:g}]s"
         truth = self.rec.truth()
         if truth is None:
             return ExpectResult(name, p["metric"], (t0, t1), float("nan"), False, _criterion(p),
                                 "metric unavailable: needs the true position (simulated drive "
                                 "or a reference encoder)", step.line)
-        m = compute_metrics(truth, self.units, t0, t1)[p["metric"]]
+        m = compute_metrics(truth, self.units.pole_pitch_m, self.units.pole_pairs, (t0, t1),
+                            (p["metric"],))[p["metric"]]
         ok = evaluate(p, m)
         msg = "" if ok else f"measured {m:.6g}, required {_criterion(p)}"
         paper = p.get("paper")
@@ -393,13 +400,11 @@ class Runner:
                 log.error("truth data unavailable: %s", e)
                 truth = None
             if truth is not None and len(truth.get("t_s", ())) > 0:
-                result.metrics = compute_metrics(truth, self.units, seq.settle_s,
-                                                 min(result.duration_s, seq.duration_s))
+                result.metrics, result.metric_windows = run_metrics(
+                    truth, self.units.pole_pitch_m, self.units.pole_pairs, seq.settle_s,
+                    min(result.duration_s, seq.duration_s))
             else:
-                result.metrics = dict.fromkeys(
-                    ("position_error_rms_rad", "position_error_max_rad",
-                     "position_error_rms_mm", "speed_error_max_rpm", "speed_error_max_mps",
-                     "settling_time_s"), float("nan"))
+                result.metrics = dict.fromkeys(METRIC_NAMES, float("nan"))
             result.passed = (not result.aborted and result.safe_state == "disabled"
                              and all(x.passed for x in result.expectations))
             result.wall_s = time.monotonic() - wall0

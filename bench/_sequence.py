@@ -32,16 +32,8 @@ import jsonschema
 import yaml
 
 from bench._units import FORCE_UNITS, SPEED_UNITS
+from sim_fallback.metrics import METRIC_NAMES
 
-#: Metric names shared with the simulated drive (sim_fallback, issue 3).
-METRIC_NAMES: tuple[str, ...] = (
-    "position_error_rms_rad",
-    "position_error_max_rad",
-    "position_error_rms_mm",
-    "speed_error_max_rpm",
-    "speed_error_max_mps",
-    "settling_time_s",
-)
 EXTRACTORS: tuple[str, ...] = ("pseudo", "sogi", "sogi_adaptive")
 OPS: tuple[str, ...] = ("<", "<=", ">", ">=")
 STEP_KINDS: tuple[str, ...] = (

@@ -55,7 +55,8 @@ log = logging.getLogger("bench.simdrive")
 SIM_CHANNELS: dict[str, str] = {
     "theta_e_rad": "rad", "omega_e_radps": "rad/s", "x_m": "m", "v_mps": "m/s",
     "force_N": "N", "load_N": "N", "i_d_A": "A", "i_q_A": "A",
-    "theta_hat_rad": "rad", "omega_hat_radps": "rad/s", "pll_err_rad": "rad",
+    "theta_hat_rad": "rad", "omega_hat_radps": "rad/s", "omega_f_radps": "rad/s",
+    "pll_err_rad": "rad",
     "hf_amp_A": "A", "sogi_k_eff": "", "i_dq_hat_A": "A", "speed_ref_radps_e": "rad/s",
     "cia402_state": "", "start_phase": "", "fault_code": "",
 }
@@ -149,8 +150,7 @@ class SimDrive(DriveBridge):
                  record_decimation: int = 1,
                  sink: Callable[[np.ndarray, dict[str, np.ndarray], dict[str, str]], None]
                  | None = None, noise: float = 1.0) -> None:
-        from sim_fallback import _lib
-        from sim_fallback._motors import load_motor
+        from sim_fallback import lib_path, load_motor
 
         # set before DriveBridge.__init__, which already calls _flush_tx (boot-up)
         self.channel = channel
@@ -189,7 +189,7 @@ class SimDrive(DriveBridge):
         self._L.fw_ctrl_sizeof.restype = C.c_size_t
         n_sim, n_app = int(self.sim._L.fw_ctrl_sizeof()), int(self._L.fw_ctrl_sizeof())
         if n_sim != n_app:
-            path = _lib.lib_path()
+            path = lib_path()
             super().close()
             bus.shutdown()
             raise LayoutMismatch(
@@ -323,7 +323,7 @@ class SimDrive(DriveBridge):
 
     # ---- the thread ---------------------------------------------------------------------
     def _apply_pending(self) -> None:
-        from sim_fallback._sim import SIM_REF_LOAD
+        from sim_fallback import SIM_REF_LOAD
 
         assert self.sim is not None
         while self._pending:

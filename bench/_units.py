@@ -87,7 +87,7 @@ def motor_units(motor: str | None) -> MotorUnits:
     if not motor:
         return PAPER_UNITS
     try:
-        from sim_fallback._motors import load_motor
+        from sim_fallback import load_motor
     except ImportError:  # pragma: no cover - bench-only install
         return PAPER_UNITS
     m = load_motor(motor)

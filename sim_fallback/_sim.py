@@ -9,7 +9,6 @@ schedule and returns a :class:`Result` with numpy arrays and metrics.
 from __future__ import annotations
 
 import ctypes as C
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,17 +19,10 @@ import numpy as np
 from . import _lib
 from ._firmware import Firmware
 from ._motors import Motor, extractor_id, fw_config, load_motor, plant_params
+from .metrics import METRIC_NAMES, TRUTH_CHANNELS, run_metrics, wrap_pi
 
 SIM_REF_SPEED, SIM_REF_FORCE, SIM_REF_LOAD = 0, 1, 2
 CHANNELS = [name for name, *_ in _lib.RECORD_CHANNELS]
-METRIC_NAMES = ("position_error_rms_rad", "position_error_max_rad", "position_error_rms_mm",
-                "speed_error_max_rpm", "speed_error_max_mps", "settling_time_s")
-
-
-def wrap_pi(x: np.ndarray) -> np.ndarray:
-    """Wrap angles (rad) into [-pi, pi)."""
-    return (np.asarray(x) + np.pi) % (2.0 * np.pi) - np.pi
-
 
 ScheduleLike = float | Sequence[tuple[float, float]] | dict[str, Any] | None
 
@@ -292,54 +284,6 @@ class Result:
         return wrap_pi(self.data["theta_e_rad"] - self.data["theta_hat_rad"])
 
 
-def compute_metrics(data: dict[str, np.ndarray], motor: Motor, settle_s: float = 0.15,
-                    settle_band_rad: float = 0.05, settle_avg_s: float = 1e-3,
-                    settle_hold_s: float = 0.05) -> dict[str, float]:
-    """Metrics with the project-wide names (electrical rad after ``settle_s``).
-
-    position error: wrapped theta_e - theta_hat; speed error: estimated minus
-    true speed (estimate vs truth, like the paper's figures), using the
-    filtered estimate ``omega_f_radps`` the drive reports and regulates on
-    (``omega_hat_radps``, the raw PLL integrator, if omega_f was not recorded);
-    settling_time_s: first time
-    after which the position error, averaged over ``settle_avg_s``, stays within
-    ``settle_band_rad`` until the end, for at least ``settle_hold_s`` (NaN if never).
-    """
-    t = data["t_s"]
-    e = wrap_pi(data["theta_e_rad"] - data["theta_hat_rad"])
-    w_est = data["omega_f_radps"] if "omega_f_radps" in data else data["omega_hat_radps"]
-    w_err = w_est - data["omega_e_radps"]
-    m = t >= settle_s
-    tau = motor.tau_m
-    nan = float("nan")
-    if not np.any(m):
-        rms = mx = sp = nan
-    else:
-        rms = float(np.sqrt(np.mean(e[m] ** 2)))
-        mx = float(np.max(np.abs(e[m])))
-        sp = float(np.max(np.abs(w_err[m])))
-    # settling: moving average of |e|, last exceedance
-    n_avg = max(1, int(round(settle_avg_s / max(t[1] - t[0], 1e-12)))) if t.size > 1 else 1
-    ea = np.convolve(np.abs(e), np.ones(n_avg) / n_avg, mode="same") if t.size else e
-    bad = np.nonzero(ea > settle_band_rad)[0]
-    if t.size == 0:
-        ts = nan
-    elif bad.size == 0:
-        ts = float(t[0])
-    elif bad[-1] + 1 >= t.size or t[-1] - t[bad[-1] + 1] < settle_hold_s:
-        ts = nan  # not (long enough) inside the band at the end of the run
-    else:
-        ts = float(t[bad[-1] + 1])
-    return {
-        "position_error_rms_rad": rms,
-        "position_error_max_rad": mx,
-        "position_error_rms_mm": rms * tau / math.pi * 1e3,
-        "speed_error_max_rpm": float(motor.radps_e_to_rpm(sp)),
-        "speed_error_max_mps": sp * tau / math.pi,
-        "settling_time_s": ts,
-    }
-
-
 def run_scenario(motor: str | Path | Motor = "paper_salient",
                  extractor: int | str = "sogi_adaptive",
                  speed_ref: ScheduleLike = 100.0, load: ScheduleLike = None,
@@ -385,8 +329,7 @@ def run_scenario(motor: str | Path | Motor = "paper_salient",
         sim.set_schedule(SIM_REF_LOAD, load, ld_scale)
         status = sim.enable(mode)
         n = int(round(t_end / sim.dt_s))
-        need = {"t_s", "theta_e_rad", "theta_hat_rad", "omega_hat_radps", "omega_f_radps",
-                "omega_e_radps", "fault_code", "start_phase"}
+        need = {*TRUTH_CHANNELS, "fault_code", "start_phase"}
         ch = None if channels is None else sorted(set(channels) | need)
         data = sim.advance(n, record_decimation, ch)
         fault = int(sim.firmware.fault_code())
@@ -401,9 +344,10 @@ def run_scenario(motor: str | Path | Motor = "paper_salient",
             reason = f"fault 0x{(fault or int(fc[fc != 0][0])):04X}"
         elif "start_phase" in data and not np.any(data["start_phase"] == 3):
             reason = "never reached closed loop (start_phase RUN)"
-        if reason is None:
-            metrics = compute_metrics(data, mot, settle_s)
-        else:
+        # the project's metric definitions (sim_fallback.metrics), default windows
+        metrics, windows = run_metrics(data, mot.tau_m, float(mot.pole_pairs), settle_s)
+        info["metric_windows_s"] = windows
+        if reason is not None:
             metrics = {k: float("nan") for k in METRIC_NAMES}
         info["invalid_reason"] = reason
         return Result(data=data, metrics=metrics, motor=mot, extractor=ex_name, seed=seed,

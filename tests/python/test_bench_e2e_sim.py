@@ -17,7 +17,7 @@ import can
 import numpy as np
 import pytest
 
-from bench import ParamError, open_sim, read_signals
+from bench import METRIC_NAMES, ParamError, open_sim, read_signals
 from bench.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -49,18 +49,18 @@ def test_paper_load_step_on_the_simulated_drive(tmp_path: Path) -> None:
     assert doc["sequence"] == "paper_load_step" and doc["safe_state"] == "disabled"
     assert not doc["aborted"]
     m = doc["metrics"]
-    assert set(m) == {"position_error_rms_rad", "position_error_max_rad",
-                      "position_error_rms_mm", "speed_error_max_rpm", "speed_error_max_mps",
-                      "settling_time_s"}
+    assert tuple(m) == METRIC_NAMES
+    assert doc["metric_windows_s"]["settling_time_s"][0] == 0.0
+    assert doc["metric_windows_s"]["speed_estimate_error_max_rpm"][0] == 0.15
     # the estimator tracks (whatever the paper limits say): not a fake, not lost
     assert 0 < m["position_error_rms_rad"] < 0.2
     assert m["position_error_rms_mm"] == pytest.approx(
         m["position_error_rms_rad"] * 24.0 / math.pi, rel=1e-6)
     assert doc["lost_frames"] == {"can": 0, "serial_telemetry": 0}
-    # JUnit: 3 expectations + run
+    # JUnit: 4 expectations + run
     suite = ET.parse(junit).getroot().find("testsuite")
     assert [c.get("name") for c in suite.findall("testcase")][-1] == "run"
-    assert len(suite.findall("testcase")) == 4
+    assert len(suite.findall("testcase")) == 5
     # run folder
     run = Path(doc["run_dir"])
     for f in ("can.blf", "signals.mf4", "meta.json", "events.jsonl", "report.html",
@@ -89,31 +89,32 @@ def test_paper_load_step_on_the_simulated_drive(tmp_path: Path) -> None:
     tt, tv, _ = sig["trace.load_step.pll_err_rad"]
     st, sv, _ = sig["sim.pll_err_rad"]
     assert tt.size == 1024
-    assert np.allclose(tv, np.interp(tt, st, sv), atol=1e-5)
+    k = np.clip(np.searchsorted(st, tt - 0.5 / 24000), 0, st.size - 1)  # nearest sample
+    assert np.max(np.abs(st[k] - tt)) < 0.1 / 24000
+    assert np.allclose(tv, sv[k], atol=1e-6)
     html = (run / "report.html").read_text()
     assert "paper_load_step" in html and "position_error_rms_rad" in html
+    assert "Metric definitions" in html and "omega_hat - omega_e" in html
+    # the capture placed before the load step covers it (0.49 s + 1024 samples at 24 kHz)
+    lt, lv, _ = sig["sim.load_N"]
+    t_step = lt[np.flatnonzero(np.abs(lv) > 1.0)[0]]
+    assert tt[0] < t_step < tt[-1]
 
 
-def test_bench_metrics_match_the_simulators_definitions(tmp_path: Path) -> None:
-    from bench import MotorUnits, compute_metrics
-    from sim_fallback._sim import compute_metrics as sim_metrics
+def test_simulator_api_metrics_are_the_shared_definitions() -> None:
+    """run_scenario's metrics are sim_fallback.metrics over the same windows, every field."""
+    from sim_fallback import run_scenario
+    from sim_fallback.metrics import compute_metrics
 
-    c = open_sim()
-    try:
-        mot = c.sim.motor
-    finally:
-        c.close()
-    rng = np.random.default_rng(0)
-    t = np.arange(0, 1, 1 / 24000)
-    th = 40 * t
-    data = {"t_s": t, "theta_e_rad": th, "theta_hat_rad": th + 0.01 * rng.standard_normal(t.size),
-            "omega_e_radps": np.full_like(t, 40.0),
-            "omega_hat_radps": 40 + rng.standard_normal(t.size)}
-    ref = sim_metrics(data, mot, settle_s=0.15)
-    ours = compute_metrics(data, MotorUnits(mot.tau_m, float(mot.pole_pairs)), 0.15, 1.0)
-    for k in ("position_error_rms_rad", "position_error_max_rad", "position_error_rms_mm",
-              "speed_error_max_rpm", "speed_error_max_mps"):
-        assert ours[k] == pytest.approx(ref[k], rel=1e-6), k
+    r = run_scenario(speed_ref=100.0, load=[(0.0, 0.0), (0.25, 1.0)], t_end=0.4, seed=3)
+    assert r.valid and tuple(r.metrics) == METRIC_NAMES
+    for k in METRIC_NAMES:
+        w = r.info["metric_windows_s"][k]
+        ref = compute_metrics(r.data, r.motor.tau_m, float(r.motor.pole_pairs), w, (k,))[k]
+        assert r.metrics[k] == pytest.approx(ref, rel=1e-12, nan_ok=True), k
+    # the two speed estimates differ, and each is reported under its own name
+    assert r.metrics["speed_estimate_error_max_rpm"] != r.metrics[
+        "speed_filtered_estimate_error_max_rpm"]
 
 
 def test_sigint_on_the_simulated_drive_disables_before_exit(tmp_path: Path) -> None:

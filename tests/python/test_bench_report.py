@@ -10,14 +10,15 @@ from pathlib import Path
 from bench import ExpectResult, RunResult, write_junit, write_summary_json
 
 METRICS = {"position_error_rms_rad": 0.008, "position_error_max_rad": 0.03,
-           "position_error_rms_mm": 0.06, "speed_error_max_rpm": 0.9,
-           "speed_error_max_mps": 0.003, "settling_time_s": math.nan}
+           "position_error_rms_mm": 0.06, "speed_estimate_error_max_rpm": 0.9,
+           "speed_estimate_error_max_mps": 0.003, "settling_time_s": math.nan}
 
 
 def _result(passed: bool = True, aborted: bool = False) -> RunResult:
     e1 = ExpectResult("rms", "position_error_rms_rad", (0.15, 1.0), 0.008, True, "<= 0.01",
                       line=20)
-    e2 = ExpectResult("speed", "speed_error_max_rpm", (0.15, 1.0), 3.5 if not passed else 0.9,
+    e2 = ExpectResult("speed", "speed_estimate_error_max_rpm", (0.15, 1.0),
+                      3.5 if not passed else 0.9,
                       passed, "<= 1", "" if passed else "measured 3.5, required <= 1", line=22)
     return RunResult("paper_load_step", passed=passed and not aborted, expectations=[e1, e2],
                      metrics=dict(METRICS), aborted=aborted,
@@ -64,9 +65,9 @@ def test_paper_claim_reported_beside_the_limit(tmp_path: Path) -> None:
     """A passing expectation whose paper value is not met says so everywhere."""
     from bench._runner import evaluate
 
-    p = {"metric": "speed_error_max_rpm", "op": "<=", "limit": 3.5, "paper": 1.0}
+    p = {"metric": "speed_estimate_error_max_rpm", "op": "<=", "limit": 3.5, "paper": 1.0}
     assert evaluate(p, 1.6) and not evaluate({**p, "limit": p["paper"]}, 1.6)
-    e = ExpectResult("speed", "speed_error_max_rpm", (0.6, 1.0), 1.6, True, "<= 3.5",
+    e = ExpectResult("speed", "speed_estimate_error_max_rpm", (0.6, 1.0), 1.6, True, "<= 3.5",
                      "paper's 1 not reproduced", line=30, paper=1.0, paper_met=False)
     r = RunResult("paper_load_step", passed=True, expectations=[e], metrics=dict(METRICS),
                   safe_state="disabled", duration_s=1.0, wall_s=1.0)

@@ -1,0 +1,298 @@
+"""The project's accuracy metrics: one definition, used everywhere.
+
+The bench (``bench run`` expectations, summaries, reports), the simulator API
+(:func:`sim_fallback.run_scenario`) and the paper reproduction all compute
+their figures here, so a name always means the same number.
+
+Why here: this module is public, depends on numpy only (no C library, no
+bench code), and ships in the same wheel as ``bench``; the bench imports it
+without reaching into private simulator modules, and the simulator does not
+depend on the bench.
+
+Every metric is defined once in :data:`METRICS` (signal, statistic, unit,
+default window). The table is rendered into the HTML report and docs by
+:func:`definitions_markdown` / :func:`definitions_rows`.
+
+Conventions
+-----------
+* Angles are electrical radians; ``theta_e = pi x / tau`` (tau: pole pitch).
+* Rotary-equivalent speed: ``n [r/min] = omega_e / p * 60 / (2 pi)`` with the
+  motor's pole pairs p (``r = p tau / pi``).
+* A window ``[t0, t1]`` (s) includes both ends. The *default* window of a
+  metric is ``[settle_s, end]`` (``"settled"``) or ``[0, end]``
+  (``"whole run"``; the settling time is measured from the window start).
+* A metric whose signals were not recorded, or whose window holds no sample,
+  is NaN.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Settling band on the averaged position error (rad electrical).
+SETTLE_BAND_RAD = 0.05
+#: Moving-average length applied to |position error| before the band test (s).
+SETTLE_AVG_S = 1e-3
+#: Minimum time the averaged error must stay in the band at the window end (s).
+SETTLE_HOLD_S = 0.05
+
+
+@dataclass(frozen=True)
+class MetricDef:
+    """Definition of one metric.
+
+    Attributes
+    ----------
+    name : str
+        Metric name (unit suffix included).
+    signal : str
+        The signal the statistic is taken of, as a formula over recorded
+        channels.
+    statistic : str
+        What is computed over the window.
+    unit : str
+        Unit of the value.
+    window : {"settled", "whole run"}
+        Default window: ``[settle_s, end]`` or ``[0, end]``.
+    channels : tuple of str
+        Recorded channels the metric needs (besides ``t_s``).
+    """
+
+    name: str
+    signal: str
+    statistic: str
+    unit: str
+    window: str
+    channels: tuple[str, ...]
+
+
+_POS = ("theta_e_rad", "theta_hat_rad")
+_EST = ("omega_e_radps", "omega_hat_radps")
+_FILT = ("omega_e_radps", "omega_f_radps")
+_TRK = ("omega_e_radps", "speed_ref_radps_e")
+
+#: The metric definitions (the order is the order of every result dict).
+METRICS: tuple[MetricDef, ...] = (
+    MetricDef("position_error_rms_rad",
+              "e = wrap(theta_e - theta_hat): true minus estimated electrical angle, "
+              "wrapped to [-pi, pi)", "RMS of e", "rad (electrical)", "settled", _POS),
+    MetricDef("position_error_max_rad", "e as above", "max |e|", "rad (electrical)",
+              "settled", _POS),
+    MetricDef("position_error_rms_mm", "e as above, as mover displacement e tau / pi",
+              "RMS", "mm", "settled", _POS),
+    MetricDef("speed_estimate_error_max_rpm",
+              "omega_hat - omega_e: the PLL's speed estimate (the drive reports it as "
+              "velocity actual value 0x606C) minus the true speed",
+              "max |.|", "r/min (rotary equivalent)", "settled", _EST),
+    MetricDef("speed_estimate_error_max_mps", "omega_hat - omega_e as above, as linear speed",
+              "max |.|", "m/s", "settled", _EST),
+    MetricDef("speed_filtered_estimate_error_max_rpm",
+              "omega_f - omega_e: the low-pass filtered speed estimate the speed loop "
+              "regulates on minus the true speed", "max |.|", "r/min (rotary equivalent)",
+              "settled", _FILT),
+    MetricDef("speed_tracking_error_max_rpm",
+              "omega_e - omega_ref: true speed minus the drive's speed reference "
+              "(speed mode; includes the transient after each reference change)",
+              "max |.|", "r/min (rotary equivalent)", "settled", _TRK),
+    MetricDef("settling_time_s",
+              f"|e| averaged over {SETTLE_AVG_S * 1e3:g} ms (centred moving average)",
+              f"time from the window start until it enters {SETTLE_BAND_RAD:g} rad and "
+              f"stays there to the window end; NaN if it never does or stays less than "
+              f"{SETTLE_HOLD_S * 1e3:g} ms", "s", "whole run", _POS),
+)
+
+#: Metric names in result order.
+METRIC_NAMES: tuple[str, ...] = tuple(m.name for m in METRICS)
+#: Definitions by name.
+METRIC_DEFS: dict[str, MetricDef] = {m.name: m for m in METRICS}
+#: Every channel some metric needs, ``t_s`` first (s, rad, rad/s electrical).
+TRUTH_CHANNELS: tuple[str, ...] = ("t_s",) + tuple(dict.fromkeys(
+    c for m in METRICS for c in m.channels))
+
+
+def wrap_pi(x: np.ndarray | float) -> np.ndarray:
+    """Wrap angles into [-pi, pi).
+
+    Parameters
+    ----------
+    x : array_like
+        Angles (rad).
+
+    Returns
+    -------
+    ndarray
+        Wrapped angles (rad).
+    """
+    return (np.asarray(x) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def default_window(name: str, settle_s: float, t_end_s: float) -> tuple[float, float]:
+    """Default window of a metric.
+
+    Parameters
+    ----------
+    name : str
+        Metric name (one of :data:`METRIC_NAMES`).
+    settle_s : float
+        End of the start-up (s).
+    t_end_s : float
+        End of the record or run (s).
+
+    Returns
+    -------
+    tuple of float
+        ``(t0_s, t1_s)``.
+    """
+    return (0.0 if METRIC_DEFS[name].window == "whole run" else settle_s), t_end_s
+
+
+def _settling_time(tw: np.ndarray, ew: np.ndarray, t0_s: float) -> float:
+    if tw.size == 0:
+        return math.nan
+    dt = float(np.median(np.diff(tw))) if tw.size > 1 else 1.0
+    n_avg = max(1, int(round(SETTLE_AVG_S / max(dt, 1e-12))))
+    ea = np.convolve(np.abs(ew), np.ones(n_avg) / n_avg, mode="same")
+    bad = np.nonzero(ea > SETTLE_BAND_RAD)[0]
+    first = 0 if bad.size == 0 else int(bad[-1]) + 1
+    if first >= tw.size or tw[-1] - tw[first] < SETTLE_HOLD_S - 0.5 * dt:
+        return math.nan
+    return float(tw[first] - t0_s)
+
+
+def compute_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pairs: float,
+                    window_s: tuple[float, float] | None = None,
+                    names: tuple[str, ...] | list[str] = METRIC_NAMES) -> dict[str, float]:
+    """Metrics of ``data`` over one window.
+
+    Parameters
+    ----------
+    data : mapping of str to ndarray
+        Recorded channels: ``t_s`` (s) and the channels of :data:`TRUTH_CHANNELS`
+        (rad, rad/s electrical). Missing channels make the metrics that need
+        them NaN.
+    pole_pitch_m : float
+        Pole pitch tau (m).
+    pole_pairs : float
+        Rotary-equivalent pole pairs p.
+    window_s : tuple of float, optional
+        ``(t0_s, t1_s)``, both included; the whole record if None.
+    names : sequence of str
+        Which metrics to compute (default: all, in :data:`METRIC_NAMES` order).
+
+    Returns
+    -------
+    dict
+        Metric name -> value in the unit of its definition.
+    """
+    unknown = [n for n in names if n not in METRIC_DEFS]
+    if unknown:
+        raise KeyError(f"unknown metrics {unknown}; known: {', '.join(METRIC_NAMES)}")
+    t = np.asarray(data["t_s"], dtype=float) if "t_s" in data else np.zeros(0)
+    if window_s is None:
+        t0, t1 = (float(t[0]), float(t[-1])) if t.size else (0.0, 0.0)
+    else:
+        t0, t1 = float(window_s[0]), float(window_s[1])
+    m = (t >= t0 - 1e-12) & (t <= t1 + 1e-12)
+    tw = t[m]
+    rpm_per_radps = 60.0 / (2.0 * math.pi * pole_pairs)
+    mps_per_radps = pole_pitch_m / math.pi
+
+    def sig(a: str, b: str) -> np.ndarray:
+        return np.asarray(data[a], dtype=float)[m] - np.asarray(data[b], dtype=float)[m]
+
+    def absmax(x: np.ndarray) -> float:
+        return float(np.max(np.abs(x)))
+
+    out: dict[str, float] = {}
+    e: np.ndarray | None = None
+    for name in names:
+        d = METRIC_DEFS[name]
+        if tw.size == 0 or any(c not in data for c in d.channels):
+            out[name] = math.nan
+            continue
+        if d.channels == _POS and e is None:
+            e = wrap_pi(sig("theta_e_rad", "theta_hat_rad"))
+        if name == "position_error_rms_rad":
+            v = float(np.sqrt(np.mean(e**2)))
+        elif name == "position_error_max_rad":
+            v = absmax(e)
+        elif name == "position_error_rms_mm":
+            v = float(np.sqrt(np.mean(e**2))) * mps_per_radps * 1e3
+        elif name == "speed_estimate_error_max_rpm":
+            v = absmax(sig("omega_hat_radps", "omega_e_radps")) * rpm_per_radps
+        elif name == "speed_estimate_error_max_mps":
+            v = absmax(sig("omega_hat_radps", "omega_e_radps")) * mps_per_radps
+        elif name == "speed_filtered_estimate_error_max_rpm":
+            v = absmax(sig("omega_f_radps", "omega_e_radps")) * rpm_per_radps
+        elif name == "speed_tracking_error_max_rpm":
+            v = absmax(sig("omega_e_radps", "speed_ref_radps_e")) * rpm_per_radps
+        else:  # settling_time_s
+            v = _settling_time(tw, e, t0)
+        out[name] = v
+    return out
+
+
+def run_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pairs: float,
+                settle_s: float, t_end_s: float | None = None
+                ) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
+    """Every metric over its default window (the headline figures of a run).
+
+    Parameters
+    ----------
+    data : mapping of str to ndarray
+        As for :func:`compute_metrics`.
+    pole_pitch_m, pole_pairs : float
+        Geometry (m, dimensionless).
+    settle_s : float
+        End of the start-up (s).
+    t_end_s : float, optional
+        End of the run (s); the last sample if None.
+
+    Returns
+    -------
+    metrics : dict
+        Metric name -> value.
+    windows : dict
+        Metric name -> the window it was computed over (s).
+    """
+    t = np.asarray(data.get("t_s", np.zeros(0)))
+    end = float(t_end_s) if t_end_s is not None else (float(t[-1]) if t.size else 0.0)
+    out: dict[str, float] = {}
+    windows: dict[str, tuple[float, float]] = {}
+    for name in METRIC_NAMES:
+        w = default_window(name, settle_s, end)
+        windows[name] = w
+        out.update(compute_metrics(data, pole_pitch_m, pole_pairs, w, (name,)))
+    return out, windows
+
+
+def definitions_rows() -> list[dict[str, str]]:
+    """The definitions as rows (name, signal, statistic, unit, default window).
+
+    Returns
+    -------
+    list of dict
+        One dict per metric, in :data:`METRIC_NAMES` order.
+    """
+    win = {"settled": "[settle_s, end]", "whole run": "[0, end]"}
+    return [{"metric": d.name, "signal": d.signal, "statistic": d.statistic, "unit": d.unit,
+             "default window (s)": win[d.window]} for d in METRICS]
+
+
+def definitions_markdown() -> str:
+    """The definitions as a Markdown table (docs and reports).
+
+    Returns
+    -------
+    str
+        Markdown table.
+    """
+    rows = definitions_rows()
+    cols = list(rows[0])
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    lines += ["| " + " | ".join(r[c].replace("|", "\\|") for c in cols) + " |" for r in rows]
+    return "\n".join(lines)
