@@ -13,7 +13,9 @@ Every error names the file, the field and the allowed range.
 
 from __future__ import annotations
 
+import ctypes as C
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,7 +31,96 @@ MOTOR_DIR = Path(__file__).resolve().parent / "motors"
 
 
 class MotorFileError(ValueError):
-    """A motor file is missing a field, has an unknown one or a value out of range."""
+    """A motor file is missing a field, has an unknown one or a value out of range.
+
+    ``str()`` is one line: ``file:line: field: message``.
+
+    Attributes
+    ----------
+    path : Path
+        The motor file.
+    field : str
+        ``section.key`` of the offending field ("" for the whole file).
+    line : int
+        1-based line of the field in the file (0 if it is not written there).
+    message : str
+        What is wrong, with the allowed range.
+    """
+
+    def __init__(self, path: Path, field: str, message: str, line: int = 0) -> None:
+        self.path, self.field, self.line, self.message = Path(path), field, line, message
+        where = f"{path}:{line}" if line else str(path)
+        super().__init__(f"{where}: {field or '<file>'}: {message}")
+
+
+_FW_NAMES = {"R_ohm", "L_d_H", "L_q_H", "psi_f_Wb", "pole_pitch_m", "pole_pairs", "f_pwm_Hz",
+             "i_max_A", "i_trip_A", "u_inj_V", "f_inj_Hz"}
+
+
+def firmware_field_ranges() -> dict[str, tuple[float, float, str]]:
+    """The firmware's own configuration table (``fw_config_field()``).
+
+    Returns
+    -------
+    dict
+        fw_config field name -> (min, max, unit), inclusive; empty when the
+        simulator library is not available.
+    """
+    global _FW_RANGES
+    if _FW_RANGES is None:
+        try:
+            L = _lib.lib()
+        except OSError:
+            return {}
+        out = {}
+        for i in range(int(L.fw_config_field_count())):
+            f = L.fw_config_field(i).contents
+            # float32 in C: 7 significant digits give back the written limit (1e-3, not
+            # 0.0010000000474974513)
+            out[f.name.decode()] = (float(f"{f.min:.7g}"), float(f"{f.max:.7g}"),
+                                    f.unit.decode())
+        _FW_RANGES = out
+    return _FW_RANGES
+
+
+_FW_RANGES: dict[str, tuple[float, float, str]] | None = None
+
+#: fw_status_t values (firmware_c/include/pmlsm/fw_ctrl.h).
+FW_STATUS = {0: "FW_OK", 1: "FW_ERR_NULL", 2: "FW_ERR_RANGE", 3: "FW_ERR_NOT_FINITE",
+             4: "FW_ERR_SALIENCY", 5: "FW_ERR_INCONSISTENT", 6: "FW_ERR_STATE"}
+
+
+def firmware_check(cfg: _lib.FwConfig) -> tuple[int, str]:
+    """Run the firmware's ``fw_config_check`` on a configuration.
+
+    Parameters
+    ----------
+    cfg : FwConfig
+        A ``fw_config_t`` mirror (e.g. from :func:`fw_config`).
+
+    Returns
+    -------
+    status : int
+        ``fw_status_t`` (0 = accepted, 4 = saliency too low for injection).
+    message : str
+        "" when accepted, else which field is refused, its value and range.
+    """
+    L = _lib.lib()
+    issue = _lib.FwConfigIssue()
+    st = int(L.fw_config_check(cfg, C.byref(issue)))
+    if st == 0:
+        return 0, ""
+    name = issue.field.decode() if issue.field else "?"
+    what = FW_STATUS.get(st, f"fw_status_t {st}")
+    if st == 4:
+        return st, (f"saliency (L_q - L_d)/L_d = {(cfg.L_q_H - cfg.L_d_H) / cfg.L_d_H:.3g} is "
+                    f"below the firmware's saliency_min {cfg.saliency_min:g}: the drive "
+                    "refuses HF injection (fault 0xFF03 SALIENCY_TOO_LOW)")
+    if st == 5:
+        return st, (f"{name} = {issue.value:g} is inconsistent with the other fields "
+                    f"(fw_config_check: {what})")
+    return st, f"{name} = {issue.value:g} refused ({what}); allowed range [{issue.min:g}, " \
+               f"{issue.max:g}]"
 
 
 # (section, key) -> (required, lo, hi, unit, default); lists are checked per element.
@@ -132,11 +223,29 @@ class Motor:
 
 
 def _err(path: Path, key: str, msg: str) -> MotorFileError:
-    return MotorFileError(f"{path}: field '{key}': {msg}")
+    return MotorFileError(path, key, msg)
+
+
+def _line_of(text: str, field: str) -> int:
+    """1-based line of ``section.key`` (or of ``[section]``) in TOML text, 0 if absent."""
+    sec, _, key = field.partition(".")
+    in_sec = False
+    for n, line in enumerate(text.splitlines(), 1):
+        s = line.strip()
+        if s.startswith("["):
+            in_sec = s.strip("[] ") == sec
+            if in_sec and not key:
+                return n
+        elif in_sec and key and re.match(rf"{re.escape(key)}\s*=", s):
+            return n
+    return 0
 
 
 def _get(path: Path, doc: dict, sec: str, key: str) -> Any:
     req, lo, hi, unit, default = _SCHEMA[(sec, key)]
+    if key in _FW_NAMES and key in firmware_field_ranges():
+        lo, hi, fw_unit = firmware_field_ranges()[key]  # the firmware's own limits
+        unit = fw_unit or unit
     name = f"{sec}.{key}"
     if key not in doc.get(sec, {}):
         if req:
@@ -168,12 +277,60 @@ def resolve_motor_path(motor: str | Path) -> Path:
 
 
 def load_motor(motor: str | Path) -> Motor:
-    """Load and validate a motor file; raises :class:`MotorFileError`."""
+    """Load and validate a motor file.
+
+    Ranges of the fields the firmware configuration shares (R, L, psi_f, pole
+    pitch, PWM frequency, currents, injection) are the firmware's own table
+    (:func:`firmware_field_ranges`), and the derived firmware configuration
+    must pass the firmware's ``fw_config_check`` (a saliency below the
+    firmware's minimum is allowed: the drive refuses injection at run time,
+    which the ``paper_table1`` motor shows).
+
+    Parameters
+    ----------
+    motor : str or Path
+        Name in ``sim_fallback/motors`` or a TOML path.
+
+    Returns
+    -------
+    Motor
+
+    Raises
+    ------
+    FileNotFoundError
+        No such motor (the message lists the known names).
+    MotorFileError
+        One line ``file:line: field: message`` naming the allowed range.
+    """
     path = resolve_motor_path(motor)
     try:
-        doc = tomllib.loads(path.read_text())
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise MotorFileError(path, "", f"not UTF-8 text (byte {e.object[e.start]:#04x} at "
+                                       f"offset {e.start})") from None
+    try:
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise MotorFileError(f"{path}: not valid TOML: {e}") from e
+        m = re.search(r"line (\d+)", str(e))
+        raise MotorFileError(path, "", f"not valid TOML: {e}",
+                             int(m.group(1)) if m else 0) from None
+    try:
+        mot = _build(path, doc)
+        st, msg = firmware_check(fw_config(mot)) if firmware_field_ranges() else (0, "")
+        if st not in (0, 4):
+            name = msg.partition(" ")[0]
+            sec = next((s for s, k in _SCHEMA if k == name), None)
+            raise MotorFileError(path, f"{sec}.{name}" if sec else f"(derived) {name}",
+                                 "the firmware refuses the configuration derived from this "
+                                 f"file: {msg}")
+        return mot
+    except MotorFileError as e:
+        if e.line or not e.field:
+            raise
+        raise MotorFileError(path, e.field, e.message, _line_of(text, e.field)) from None
+
+
+def _build(path: Path, doc: dict[str, Any]) -> Motor:
     # unknown sections / fields (typos) are errors
     known_secs = {s for s, _ in _SCHEMA} | {"motor"}
     for sec, body in doc.items():
@@ -227,6 +384,9 @@ def load_motor(motor: str | Path) -> Motor:
         F_s = float(g["static_friction_N"])
         F_c = F_s if g["coulomb_friction_N"] is None else float(g["coulomb_friction_N"])
         cog = float(g["cogging_N"])
+    if g["i_trip_A"] <= g["i_max_A"]:
+        raise _err(path, "controller.i_trip_A", f"{g['i_trip_A']} A must exceed "
+                   f"controller.i_max_A = {g['i_max_A']} A (the trip level is above the limit)")
     if F_c > F_s:
         raise _err(path, "mechanical.coulomb_friction", f"{F_c} N must be <= static {F_s} N")
     if g["udc_fullscale_V"] <= g["u_dc_V"]:

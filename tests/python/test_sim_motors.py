@@ -81,7 +81,43 @@ def test_bad_file_names_file_field_range(tmp_path, edit, field, needle):
     with pytest.raises(MotorFileError) as ei:
         load_motor(p)
     msg = str(ei.value)
-    assert str(p) in msg and f"'{field}'" in msg and needle in msg, msg
+    assert msg.startswith(f"{p}:") and f": {field}: " in msg and needle in msg, msg
+    assert "\n" not in msg
+    text = p.read_text().splitlines()
+    key = field.split(".")[1]
+    written = [n for n, line in enumerate(text, 1) if line.strip().startswith(key + " ")]
+    assert ei.value.line == (written[0] if written else 0), msg
+
+
+@pytest.mark.parametrize("extra, field, needle", [
+    # the firmware's own table (fw_config_field) gives u_inj_V >= 1 V: 0.5 V must not
+    # silently run on the firmware default
+    ("[controller]\nu_inj_V = 0.5\n", "controller.u_inj_V", "[1.0, 400.0] V"),
+    ("[controller]\ni_max_A = 20.0\ni_trip_A = 10.0\n", "controller.i_trip_A",
+     "must exceed controller.i_max_A"),
+    ("[controller]\nf_inj_Hz = 50.0\n", "controller.f_inj_Hz", "[100.0, 20000.0] Hz"),
+])
+def test_controller_fields_use_the_firmware_limits(tmp_path, extra, field, needle):
+    from sim_fallback._motors import firmware_field_ranges
+
+    p = _write(tmp_path, GOOD + "\n" + extra)
+    with pytest.raises(MotorFileError) as ei:
+        load_motor(p)
+    assert f": {field}: " in str(ei.value) and needle in str(ei.value), str(ei.value)
+    assert ei.value.line > 0
+    if "u_inj_V" in field:  # the limit is the firmware's, read from the C table
+        assert firmware_field_ranges()["u_inj_V"][:2] == (1.0, 400.0)
+
+
+def test_non_utf8_and_bad_toml_name_file_and_line(tmp_path):
+    p = tmp_path / "latin1.toml"
+    p.write_bytes(GOOD.encode() + b"\n# caf\xe9\n")
+    with pytest.raises(MotorFileError, match="not UTF-8"):
+        load_motor(p)
+    q = _write(tmp_path, GOOD + "\n[broken\n", "broken.toml")
+    with pytest.raises(MotorFileError) as ei:
+        load_motor(q)
+    assert "not valid TOML" in str(ei.value) and ei.value.line > 0
 
 
 def test_good_file_loads(tmp_path):
