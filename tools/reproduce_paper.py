@@ -782,13 +782,16 @@ def write_report(out: Path, st: Settings, cases: dict[tuple[str, str], CaseResul
         a(f"| start-up: settling time (1 ms-averaged error stays < 0.05 el. rad) | "
           f"{EX_LABEL[ex]} | {paper} | {ev['settling_time_s'].fmt(3)} s |")
     for ex in EXTRACTORS:
-        ev = c("startup", ex).events
-        a(f"| start-up: max \\|error\\| after settling, el. / mech. rad | {EX_LABEL[ex]} | "
-          f"0.051 rad | {ev['pos_max_after_settle'].fmt(3)} / "
-          f"{ev['pos_max_after_settle'].fmt(4, 1 / p)} |")
-    ps = w("load_step", "pseudo", "steady", "pos_rms").mean
-    ad = w("load_step", "sogi_adaptive", "steady", "pos_rms").mean
-    a(f"| load step: accuracy gain adaptive SOGI vs pseudo-filter (steady RMS) | | 75 % | "
+        # a fixed window after the paper's 0.15 s, not "after settling" (which would
+        # equal the settling band by construction)
+        sm = w("startup", ex, "steady", "pos_max")
+        a(f"| start-up: max \\|error\\| from 0.2 s to 0.5 s, el. / mech. rad | {EX_LABEL[ex]} | "
+          f"0.051 rad | {sm.fmt(3)} / {sm.fmt(4, 1 / p)} |")
+    # the paper's 75 % is the speed reversal's 0.01 vs 0.04 rad (figure amplitudes, so
+    # compared with the steady maximum) and its conclusion
+    ps = w("speed_reversal", "pseudo", "steady", "pos_max").mean
+    ad = w("speed_reversal", "sogi_adaptive", "steady", "pos_max").mean
+    a(f"| speed reversal: accuracy gain adaptive SOGI vs pseudo-filter (steady max) | | 75 % | "
       f"{(1 - ad / ps) * 100:+.0f} % |")
     a("")
     a("Paired differences of the steady RMS error (load step, last 0.3 s; the same seed gives "
