@@ -22,6 +22,7 @@ only to score it. Angles: electrical radians unless marked "mech."
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import re
 import sys
@@ -1165,6 +1166,32 @@ def discussion(cases: dict[tuple[str, str], CaseResult], sweeps: dict[str, list[
 # ---- main ---------------------------------------------------------------------------
 
 
+def reproduction_data(cases: dict[tuple[str, str], CaseResult],
+                      sweeps: dict[str, list[SweepPoint]]) -> dict[str, Any]:
+    """Every number of the reproduction's tables as data (means over seeds, and the faults),
+    written beside the markdown; tests compare a fresh run with it as numbers."""
+    def stats(d: dict[str, Stat]) -> dict[str, float | None]:
+        return {k: (None if not np.isfinite(v.mean) else v.mean) for k, v in d.items()}
+
+    out: dict[str, Any] = {"cases": {}, "sweeps": {}}
+    for (sc, ex), cr in cases.items():
+        out["cases"][f"{sc}/{ex}"] = {
+            "faults": sorted(int(f) for f in cr.faults),
+            "windows": {w: stats(m) for w, m in cr.windows.items()},
+            "events": stats(cr.events)}
+    for key, pts in sweeps.items():
+        out["sweeps"][key] = [{
+            "value": float(pt.value), "extractor": pt.extractor,
+            "faults": sorted(int(f) for f in pt.faults), "steady": stats(pt.steady),
+            "transient_max": stats({"v": pt.transient_max})["v"]} for pt in pts]
+    return out
+
+
+def write_data(path: Path, cases: dict[tuple[str, str], CaseResult],
+               sweeps: dict[str, list[SweepPoint]]) -> None:
+    path.write_text(json.dumps(reproduction_data(cases, sweeps), indent=1, sort_keys=True) + "\n")
+
+
 def reproduce(out: Path, st: Settings, log: Callable[[str], None] = print) -> Path:
     """Run everything and write ``out/reproduction.md`` and ``out/figures/*.png``."""
     t0 = time.time()
@@ -1188,6 +1215,7 @@ def reproduce(out: Path, st: Settings, log: Callable[[str], None] = print) -> Pa
     figs["sweeps"] = fig_sweeps(sweeps, st, figdir, st.dpi)
     if fig_table1(table1, figdir / "fig_table1_no_tracking.png", st.dpi):
         figs["table1"] = "fig_table1_no_tracking.png"
+    write_data(out / "reproduction.json", cases, sweeps)
     path = write_report(out, st, cases, sweeps, table1, floor, figs, time.time() - t0)
     log(f"wrote {path} and {len(list(figdir.glob('*.png')))} figures in {figdir} "
         f"({time.time() - t0:.1f} s)")
