@@ -86,6 +86,10 @@ class ParamError(DriveError):
     """A parameter read/write failed; the message explains the SDO abort code."""
 
 
+class ParamInputError(ParamError):
+    """A parameter name, value or backup file given by the user is wrong (nothing written)."""
+
+
 class Clock(Protocol):
     """Time base of a drive (s)."""
 
@@ -164,7 +168,9 @@ def param_table() -> dict[str, Param]:
     out: dict[str, Param] = {}
     for e in od.entries:
         lo, hi = e.min, e.max
-        if e.fw_config and e.fw_config in cfg:
+        if e.fw_config and e.fw_config in cfg and cfg[e.fw_config].get("unit", e.unit) == e.unit:
+            # the firmware's range applies where the object is in the firmware's unit
+            # (0x6080 carries v_max_mps in um/s: its own range)
             lo = cfg[e.fw_config].get("min", lo)
             hi = cfg[e.fw_config].get("max", hi)
         dotted = e.name if e.kind == "var" else f"{e.object_name}.{e.name}"
@@ -452,7 +458,7 @@ class Drive:
         except KeyError:
             near = sorted(k for k in self.params if name.lower() in k.lower())[:8]
             hint = f"; did you mean: {', '.join(near)}" if near else ""
-            raise ParamError(f"unknown parameter {name!r}{hint}") from None
+            raise ParamInputError(f"unknown parameter {name!r}{hint}") from None
 
     def write_raw(self, index: int, sub: int, value: Any) -> None:
         """SDO download with SDO aborts turned into :class:`ParamError`."""
@@ -499,7 +505,7 @@ class Drive:
         p = self.param(name)
         v = parse_value(value, p)
         if p.access in ("ro", "const"):
-            raise ParamError(f"{p.name} ({p.address}) is read-only")
+            raise ParamInputError(f"{p.name} ({p.address}) is read-only")
         try:
             self.write_raw(p.index, p.sub, v)
         except ParamError as e:
@@ -524,19 +530,78 @@ class Drive:
             out[p.name] = {"value": v, "unit": p.unit, "address": p.address}
         return out
 
-    def restore(self, cfg: dict[str, Any], progress: Callable[[str], None] | None = None
-                ) -> list[str]:
-        """Write a :meth:`backup` back; returns the errors (empty: all written)."""
-        errors = []
-        for name, ent in cfg.items():
-            v = ent["value"] if isinstance(ent, dict) else ent
+    def restore_plan(self, doc: Any, source: str = "backup") -> list[tuple[Param, Any]]:
+        """Check a backup document completely, before anything is written.
+
+        Parameters
+        ----------
+        doc : Any
+            The parsed backup (``{"drive": identity, "parameters": {...}}``).
+        source : str
+            File name for messages.
+
+        Returns
+        -------
+        list of (Param, value)
+            What to write, parsed and range-checked.
+
+        Raises
+        ------
+        ParamInputError
+            Not a backup, from another product or firmware version, or any
+            value unknown, read-only, of the wrong unit or out of range; the
+            message lists every problem (one per line).
+        """
+        if not isinstance(doc, dict) or not isinstance(doc.get("parameters"), dict):
+            raise ParamInputError(f"{source}: not a bench configuration backup (expected a JSON "
+                                  "object with 'drive' and 'parameters' from `bench config "
+                                  "backup`)")
+        problems: list[str] = []
+        ident = self.identity()
+        drv = doc.get("drive")
+        if not isinstance(drv, dict):
+            problems.append(f"{source}: drive: missing; cannot check product and firmware")
+        else:
+            for key in ("vendor_id", "product_code", "firmware_version"):
+                if drv.get(key) != ident[key]:
+                    problems.append(f"{source}: drive.{key}: backup has {drv.get(key)!r}, the "
+                                    f"connected drive {ident[key]!r}")
+        plan: list[tuple[Param, Any]] = []
+        for name, ent in doc["parameters"].items():
+            v = ent.get("value") if isinstance(ent, dict) else ent
             try:
-                self.set(name, v)
-                if progress:
-                    progress(name)
-            except ParamError as e:
-                errors.append(str(e))
-        return errors
+                # the address recorded by backup() is exact; names can be shared
+                addr = ent.get("address") if isinstance(ent, dict) else None
+                p = self.param(addr if isinstance(addr, str) else name)
+                if p.access in ("ro", "const"):
+                    raise ParamInputError(f"{p.name} ({p.address}) is read-only")
+                if isinstance(ent, dict) and ent.get("unit", p.unit) != p.unit:
+                    raise ParamInputError(f"{p.name}: unit {ent.get('unit')!r}, the parameter "
+                                          f"is in {p.unit!r}")
+                if isinstance(v, bool) or not isinstance(v, (int, float, str)):
+                    raise ParamInputError(f"{name}: value {v!r} is not a number")
+                plan.append((p, parse_value(v, p, check_range=True)))
+            except (ParamInputError, ParamError) as e:
+                problems.append(f"{source}: parameters.{name}: {e}")
+        if problems:
+            raise ParamInputError("\n".join(problems))
+        return plan
+
+    def restore(self, doc: Any, progress: Callable[[str], None] | None = None,
+                source: str = "backup") -> int:
+        """Write a :meth:`backup` back, all or nothing as far as checking goes.
+
+        Everything is checked first (:meth:`restore_plan`); only then are the
+        values written. Returns the number written; raises
+        :class:`ParamInputError` (nothing written) or :class:`ParamError` (the
+        drive refused a value it was expected to accept).
+        """
+        plan = self.restore_plan(doc, source)
+        for p, v in plan:
+            self.write_raw(p.index, p.sub, v)
+            if progress:
+                progress(p.name)
+        return len(plan)
 
     # ---- trace buffer (scope) ---------------------------------------------------------
     #: Trace storage of the firmware (FW_APP_TRACE_FLOATS: samples x signals).
@@ -603,8 +668,13 @@ class Drive:
         return self.state
 
 
-def parse_value(value: str | float | int, p: Param) -> Any:
-    """Parse ``"20"``, ``"20 V"``, ``"0x10"`` for a parameter; checks the unit."""
+def parse_value(value: str | float | int, p: Param, check_range: bool = False) -> Any:
+    """Parse ``"20"``, ``"20 V"``, ``"0x10"`` for a parameter.
+
+    Checks the unit and that the number is finite; with ``check_range`` also
+    the documented range (otherwise the drive is the judge: its SDO abort is
+    explained). Raises :class:`ParamInputError`.
+    """
     if isinstance(value, (int, float)):
         v: Any = value
     else:
@@ -612,7 +682,8 @@ def parse_value(value: str | float | int, p: Param) -> Any:
         num, _, unit = text.partition(" ")
         unit = unit.strip()
         if unit and p.unit and unit != p.unit:
-            raise ParamError(f"{p.name}: unit {unit!r} given, the parameter is in {p.unit!r}")
+            raise ParamInputError(f"{p.name}: unit {unit!r} given, the parameter is in "
+                                  f"{p.unit!r}")
         if p.type == "VISIBLE_STRING":
             return text
         try:
@@ -621,11 +692,17 @@ def parse_value(value: str | float | int, p: Param) -> Any:
             try:
                 v = float(num)
             except ValueError:
-                raise ParamError(f"{p.name}: {value!r} is not a number") from None
-    if p.type == "REAL32":
-        return float(v)
+                raise ParamInputError(f"{p.name}: {value!r} is not a number") from None
     if p.type == "VISIBLE_STRING":
         return str(v)
+    rng = f"allowed range [{p.min}, {p.max}] {p.unit}".rstrip()
+    if not math.isfinite(float(v)):
+        raise ParamInputError(f"{p.name} ({p.address}): {value!r} is not a finite number; {rng}")
+    if check_range and ((p.min is not None and float(v) < p.min)
+                        or (p.max is not None and float(v) > p.max)):
+        raise ParamInputError(f"{p.name} ({p.address}): {value!r} out of range; {rng}")
+    if p.type == "REAL32":
+        return float(v)
     if float(v) != int(v):
-        raise ParamError(f"{p.name} is an integer ({p.type}); got {value!r}")
+        raise ParamInputError(f"{p.name} is an integer ({p.type}); got {value!r}")
     return int(v)

@@ -24,6 +24,7 @@ message``.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -236,18 +237,71 @@ class Sequence:
 
 # ---- YAML with positions -------------------------------------------------------------
 
+#: Deepest nesting a sequence file may have (a real one has 4 levels).
+MAX_YAML_DEPTH = 32
+#: Longest a single wait / ramp / capture step may last (s), and a whole sequence.
+MAX_DURATION_S = 86400.0
+
+# YAML 1.2 floats: PyYAML's YAML 1.1 regex reads 1.0e3 and 1e3 as text
+_FLOAT_12 = re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+    |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+    |[-+]?\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+    |[-+]?\.(?:inf|Inf|INF)
+    |\.(?:nan|NaN|NAN))$""", re.X)
+
+
+class SequenceLoader(yaml.SafeLoader):
+    """Safe YAML loader for sequence files.
+
+    Rejects aliases (``*name``: no alias bombs) and nesting deeper than
+    :data:`MAX_YAML_DEPTH` with a positioned error, and reads YAML 1.2 floats
+    (``1.0e3``, ``1e3``) as numbers.
+    """
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent: Any, index: Any) -> Any:  # noqa: D102
+        if self.check_event(yaml.AliasEvent):
+            ev = self.peek_event()
+            raise yaml.composer.ComposerError(
+                None, None, f"alias '*{ev.anchor}' not allowed in sequence files (write the "
+                "value out)", ev.start_mark)
+        self._depth += 1
+        try:
+            if self._depth > MAX_YAML_DEPTH:
+                raise yaml.composer.ComposerError(
+                    None, None, f"nested deeper than {MAX_YAML_DEPTH} levels",
+                    self.peek_event().start_mark)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+SequenceLoader.yaml_implicit_resolvers = {
+    k: [r for r in v if r[0] != "tag:yaml.org,2002:float"]
+    for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+SequenceLoader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12,
+                                     list("-+0123456789."))
+
 
 def _compose(text: str, file: str) -> tuple[Any, dict[tuple[Any, ...], tuple[int, int]]]:
     try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        loader = SequenceLoader(text)
+        try:
+            node = loader.get_single_node()
+        finally:
+            loader.dispose()
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         line, col = (mark.line + 1, mark.column + 1) if mark else (0, 0)
-        raise SequenceError([Issue(file, line, col, "", f"not valid YAML: {e}")]) from e
+        what = " ".join(str(getattr(e, "problem", "") or e).split())
+        raise SequenceError([Issue(file, line, col, "", f"not valid YAML: {what}")]) from None
     if node is None:
         raise SequenceError([Issue(file, 1, 1, "", "empty file")])
     marks: dict[tuple[Any, ...], tuple[int, int]] = {}
-    loader = yaml.SafeLoader("")
+    loader = SequenceLoader("")
 
     def conv(n: yaml.Node, path: tuple[Any, ...]) -> Any:
         marks[path] = (n.start_mark.line + 1, n.start_mark.column + 1)
@@ -368,6 +422,137 @@ def _check_timing(seq: dict[str, Any], file: str,
     return issues, starts, t
 
 
+_ACTIONS = ("set_speed", "set_force", "ramp", "load_step", "load_ramp", "set_mode", "enable")
+
+
+def _nonfinite(doc: Any, path: tuple[Any, ...] = ()) -> list[tuple[tuple[Any, ...], float]]:
+    """Every NaN / inf number in a parsed document, with its path."""
+    if isinstance(doc, dict):
+        return [x for k, v in doc.items() for x in _nonfinite(v, path + (k,))]
+    if isinstance(doc, list):
+        return [x for i, v in enumerate(doc) for x in _nonfinite(v, path + (i,))]
+    if isinstance(doc, float) and not math.isfinite(doc):
+        return [(path, doc)]
+    return []
+
+
+def drive_envelope(motor: str) -> dict[str, float]:
+    """Limits a sequence must respect, from the motor file and the firmware's config.
+
+    Parameters
+    ----------
+    motor : str
+        Motor name or TOML path.
+
+    Returns
+    -------
+    dict
+        ``speed_max_mps`` (the firmware's speed limits ``v_max_mps`` and
+        ``speed_max_radps_e``), ``force_max_N`` (thrust at ``i_max_A``),
+        ``x_min_m`` / ``x_max_m`` (the firmware table's range of
+        ``pos_limit_*_m``), ``f_pwm_Hz``, ``radius_m``, ``pole_pitch_m``,
+        ``pole_pairs``.
+
+    Raises
+    ------
+    FileNotFoundError, MotorFileError
+        The motor cannot be loaded.
+    """
+    from sim_fallback import firmware_field_ranges, fw_config, load_motor
+
+    m = load_motor(motor)
+    cfg = fw_config(m)
+    lo, hi, _ = firmware_field_ranges().get("pos_limit_max_m", (-1e4, 1e4, "m"))
+    return {"speed_max_mps": min(float(cfg.v_max_mps),
+                                 float(cfg.speed_max_radps_e) * m.tau_m / math.pi),
+            "force_max_N": m.force_const_N_per_A * float(cfg.i_max_A),
+            "x_min_m": lo, "x_max_m": hi, "f_pwm_Hz": float(m.plant["f_pwm_Hz"]),
+            "radius_m": m.radius_m, "pole_pitch_m": m.tau_m,
+            "pole_pairs": float(m.pole_pairs)}
+
+
+def _check_values(doc: dict[str, Any], file: str, marks: dict[tuple[Any, ...], tuple[int, int]],
+                  starts: list[float], total: float) -> list[Issue]:
+    """Finite numbers, the drive's envelope, trace captures that fit and cover their event."""
+    issues: list[Issue] = []
+
+    def add(path: tuple[Any, ...], msg: str) -> None:
+        line, col = _mark(marks, path)
+        issues.append(Issue(file, line, col, _field(path), msg))
+
+    for path, v in _nonfinite(doc):
+        add(path, f"{v} is not a finite number")
+    if issues:
+        return issues
+    settle = float(doc.get("settle_s", 0.15))
+    if "settle_s" in doc and settle >= total > 0:
+        add(("settle_s",), f"{settle:g} s is not shorter than the sequence ({total:g} s); "
+                           f"allowed range [0, {total:g})")
+    try:
+        env = drive_envelope(doc["motor"])
+    except (OSError, ValueError) as e:
+        add(("motor",), " ".join(str(e).split()))
+        return issues
+    from bench._drive import Drive
+    from bench._units import MotorUnits
+
+    units = MotorUnits(env["pole_pitch_m"], env["pole_pairs"])
+    vmax, fmax = env["speed_max_mps"], env["force_max_N"]
+    x0 = doc.get("x0", 0.0)
+    if isinstance(x0, (int, float)) and not env["x_min_m"] <= x0 <= env["x_max_m"]:
+        add(("x0",), f"{x0:g} m outside the firmware's position range "
+                     f"[{env['x_min_m']:g}, {env['x_max_m']:g}] m")
+    steps = doc["steps"]
+    for i, step in enumerate(steps):
+        (kind, p), = step.items()
+        p = p or {}
+        for key in ("duration_s", "pre_s", "timeout_s", "step_s"):
+            if key in p and float(p[key]) > MAX_DURATION_S:
+                add(("steps", i, kind, key), f"{p[key]:g} s; allowed range (0, "
+                                             f"{MAX_DURATION_S:g}] s")
+        for key in ("value", "to"):
+            if key not in p or "unit" not in p:
+                continue
+            unit = p["unit"]
+            v = float(p[key])
+            if kind in ("set_speed",) or (kind == "ramp" and p.get("quantity") == "speed"):
+                if unit not in ("r/min", "rpm", "m/s", "mm/s"):
+                    continue
+                lim = vmax / units.speed_to_mps(1.0, unit)
+                if abs(v) > lim:
+                    add(("steps", i, kind, key), f"{v:g} {unit} exceeds the drive's speed "
+                                                 f"limit; allowed range [{-lim:.4g}, {lim:.4g}] "
+                                                 f"{unit}")
+            elif unit in ("N", "N*m", "N.m", "Nm", "N·m"):
+                lim = fmax / units.force_to_N(1.0, unit)
+                if abs(v) > lim:
+                    what = "load" if kind.startswith("load") else "force"
+                    add(("steps", i, kind, key), f"{v:g} {unit} {what} exceeds the thrust at "
+                                                 f"i_max_A; allowed range [{-lim:.4g}, "
+                                                 f"{lim:.4g}] {unit}")
+        if kind == "trace_capture":
+            n_sig = len(p.get("signals") or ["", "", "", ""])
+            buf_s = Drive.trace_capacity_floats // n_sig / env["f_pwm_Hz"]
+            pre, dur = float(p.get("pre_s", 0.0)), float(p["duration_s"])
+            if pre + dur > buf_s + 1e-12:
+                add(("steps", i, kind, "duration_s"),
+                    f"pre_s + duration_s = {pre + dur:g} s exceeds the drive's trace buffer: "
+                    f"{Drive.trace_capacity_floats // n_sig} samples of {n_sig} signals at "
+                    f"{env['f_pwm_Hz']:g} Hz = {buf_s:.4g} s")
+            nxt = next((j for j in range(i + 1, len(steps)) if next(iter(steps[j])) != "wait"),
+                       None)
+            if nxt is not None and next(iter(steps[nxt])) in _ACTIONS:
+                t_ev, t_c = starts[nxt], starts[i]
+                if not t_c - pre <= t_ev <= t_c + dur:
+                    ev = next(iter(steps[nxt]))
+                    add(("steps", i, kind), f"the capture covers [{t_c - pre:g}, {t_c + dur:g}] "
+                                            f"s but the '{ev}' it precedes (steps[{nxt}]) is at "
+                                            f"{t_ev:g} s; move it closer or lengthen it")
+    if not issues and total > MAX_DURATION_S:
+        add(("steps",), f"the sequence lasts {total:g} s; allowed up to {MAX_DURATION_S:g} s")
+    return issues
+
+
 def validate_sequence(text: str, file: str = "<string>") -> Sequence:
     """Parse and validate a sequence document.
 
@@ -424,6 +609,7 @@ def validate_sequence(text: str, file: str = "<string>") -> Sequence:
         uniq = [i for i in issues if not (str(i) in seen or seen.add(str(i)))]
         raise SequenceError(uniq)
     t_issues, starts, total = _check_timing(doc, file, marks)
+    t_issues += _check_values(doc, file, marks, starts, total)
     if t_issues:
         raise SequenceError(t_issues)
     steps = []
@@ -442,9 +628,16 @@ def load_sequence(path: str | Path) -> Sequence:
     """Load and validate a sequence file (see :func:`validate_sequence`)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        raw = p.read_bytes()
     except OSError as e:
-        raise SequenceError([Issue(str(p), 0, 0, "", f"cannot read: {e.strerror}")]) from e
+        raise SequenceError([Issue(str(p), 0, 0, "", f"cannot read: {e.strerror}")]) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = raw[:e.start].count(b"\n") + 1
+        col = e.start - (raw.rfind(b"\n", 0, e.start) + 1) + 1
+        raise SequenceError([Issue(str(p), line, col, "", f"not UTF-8 text (byte "
+                                   f"{raw[e.start]:#04x}); save the file as UTF-8")]) from None
     seq = validate_sequence(text, str(p))
     seq.path = p
     return seq

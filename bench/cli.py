@@ -1,8 +1,14 @@
 """Command-line entry point ``bench``.
 
 Exit codes: 0 success / all expectations passed, 1 an expectation failed,
-2 invalid sequence or usage, 3 drive or connection error, 130 interrupted
-(Ctrl-C / SIGTERM; the drive was brought to the safe state first).
+2 invalid input (sequence, motor file, parameter value, backup file, options;
+nothing was moved or written), 3 drive or connection error, 4 internal error
+(a bug: one line on stderr, the traceback in ``runs/bench_error_<time>.txt``
+or on stderr with ``BENCH_DEBUG=1``), 130 interrupted (Ctrl-C / SIGTERM; the
+drive was brought to the safe state first).
+
+A user's mistake never shows a traceback: it ends with one line per problem
+naming the file, line and field, or the parameter and its allowed range.
 """
 
 from __future__ import annotations
@@ -10,14 +16,29 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import signal
 import sys
+import time
+import traceback
 from pathlib import Path
 from typing import Any
 
 from bench import __version__
 
-EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_DRIVE, EXIT_INTERRUPT = 0, 1, 2, 3, 130
+EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_DRIVE, EXIT_INTERNAL, EXIT_INTERRUPT = 0, 1, 2, 3, 4, 130
+EXIT_CODES_TEXT = ("Exit codes: 0 ok, 1 expectation failed, 2 invalid input (sequence, motor "
+                   "file, parameter, backup, options; nothing moved or written), 3 drive/"
+                   "connection error, 4 internal error (traceback saved under runs/, or "
+                   "BENCH_DEBUG=1), 130 interrupted (drive disabled first).")
+
+
+class UserError(Exception):
+    """A mistake in the user's input: printed as ``bench: <message>``, exit ``code``."""
+
+    def __init__(self, message: str, code: int = EXIT_USAGE) -> None:
+        super().__init__(message)
+        self.code = code
 
 
 def _conn_args(p: argparse.ArgumentParser) -> None:
@@ -61,8 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="bench", description="HIL bench for the sensorless PMLSM drive: run test "
         "sequences, live telemetry, parameters, configuration and faults, on hardware or "
         "on the simulated drive.",
-        epilog="Exit codes: 0 ok, 1 expectation failed, 2 invalid input, 3 drive/connection "
-               "error, 130 interrupted (drive disabled first).")
+        epilog=EXIT_CODES_TEXT)
     ap.add_argument("--version", action="version", version=f"bench {__version__}")
     ap.add_argument("-v", "--verbose", action="count", default=0, help="more logging")
     sub = ap.add_subparsers(dest="cmd", metavar="COMMAND")
@@ -120,8 +140,13 @@ def build_parser() -> argparse.ArgumentParser:
     ps.add_argument("name")
     ps.add_argument("value")
     _conn_args(ps)
-    pl = psub.add_parser("list", help="list parameters", description="List the parameters.")
+    pl = psub.add_parser("list", help="list parameters with their values",
+                         description="List the parameters (address, name, access, unit, range) "
+                                     "with the drive's current values.")
     pl.add_argument("--all", action="store_true", help="include CiA 301 communication objects")
+    pl.add_argument("--offline", action="store_true",
+                    help="do not connect: the table from the object dictionary, no values")
+    _conn_args(pl)
 
     p = sub.add_parser("config", help="configuration backup / restore",
                        description="Back the drive's rw parameters up to a JSON file, or "
@@ -132,7 +157,9 @@ def build_parser() -> argparse.ArgumentParser:
     cb.add_argument("file")
     _conn_args(cb)
     cr = csub.add_parser("restore", help="write the configuration from FILE",
-                         description="Write the parameters in FILE (JSON from backup).")
+                         description="Write the parameters in FILE (JSON from backup). "
+                         "Everything is checked first (product, firmware version, every name, "
+                         "unit and range); if anything is wrong nothing is written (exit 2).")
     cr.add_argument("file")
     _conn_args(cr)
 
@@ -160,14 +187,64 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
     extractor = args.extractor or (seq.extractor if seq is not None else "sogi_adaptive")
     seed = args.seed if args.seed is not None else (seq.seed if seq is not None else 0)
     x0 = seq.x0 if seq is not None else 0.0
-    conn = connect(sim=args.sim, interface=args.interface, channel=args.channel,
-                   bitrate=args.bitrate, serial_url=args.serial, realtime=args.realtime,
-                   motor=motor, extractor=extractor, seed=seed, x0=x0, node_id=args.node_id,
-                   load_node=args.load_node)
     if args.sync_period_ms < 0:
-        raise SystemExit("bench: --sync-period-ms must be >= 0")
+        raise UserError(f"--sync-period-ms {args.sync_period_ms}: allowed range >= 0 (ms)")
+    if not 1 <= args.node_id <= 127:
+        raise UserError(f"--node-id {args.node_id}: allowed range [1, 127]")
+    if args.sim and args.serial:
+        raise UserError(f"--serial {args.serial} cannot be used with --sim (the simulated drive "
+                        "has its own in-process serial link); drop one of them")
+    if args.seed is not None and args.seed < 0:
+        raise UserError(f"--seed {args.seed}: allowed range >= 0")
+    where = f"--motor {motor}" if args.motor or seq is None else f"{seq.path}: motor"
+    refusal = _check_motor(motor, extractor, where, sim_only=args.sim)
+    try:
+        conn = connect(sim=args.sim, interface=args.interface, channel=args.channel,
+                       bitrate=args.bitrate, serial_url=args.serial, realtime=args.realtime,
+                       motor=motor, extractor=extractor, seed=seed, x0=x0,
+                       node_id=args.node_id, load_node=args.load_node)
+    except UserError:
+        raise
+    except Exception as e:  # noqa: BLE001 - the bus, the drive or the simulator library
+        if refusal and "fw_app_init" in str(e):  # fell back to the simulated drive
+            raise UserError(refusal + "; the simulated drive (fallback: no hardware found) "
+                            "cannot run this motor") from None
+        raise UserError(f"cannot connect: {' '.join(str(e).split())}", EXIT_DRIVE) from e
     conn.sync_period_ms = args.sync_period_ms
     return conn
+
+
+def _check_motor(motor: str, extractor: str, where: str, sim_only: bool) -> str | None:
+    """Load the motor file and run the firmware's configuration check on it.
+
+    Raises :class:`UserError` (exit 2) naming the file, line and field; a motor
+    whose saliency the firmware refuses is an error for the simulated drive
+    (``--sim``), which cannot start it. On hardware the motor file only gives
+    the geometry for unit conversions; the refusal text is returned for the
+    case where the bench falls back to the simulated drive.
+    """
+    try:
+        from sim_fallback import firmware_check, fw_config, load_motor
+    except ImportError:  # pragma: no cover - bench-only install: units fall back
+        return None
+    try:
+        m = load_motor(motor)
+    except FileNotFoundError as e:
+        raise UserError(f"{where}: {e}") from None
+    except ValueError as e:  # MotorFileError: file:line: field: message
+        raise UserError(str(e)) from None
+    try:
+        st, msg = firmware_check(fw_config(m, extractor))
+    except OSError:  # no simulator library: the hardware drive checks its own config
+        return None
+    if st == 4:
+        text = f"{where} ({m.path}): {msg}"
+        if sim_only:
+            raise UserError(text + "; the simulated drive cannot run this motor")
+        return text
+    if st != 0:
+        raise UserError(f"{where} ({m.path}): {msg}")
+    return None
 
 
 def _make_rerun(spec: list[str] | None, default_dir: Path, pole_pairs: float) -> Any:
@@ -200,9 +277,15 @@ def cmd_validate(args: argparse.Namespace) -> int:
             print(f"{f}: ok ({s.name}, {len(s.steps)} steps, {s.duration_s:g} s, "
                   f"{len(s.expectations)} expectations)")
         except SequenceError as e:
-            print(e, file=sys.stderr)
+            _print_issues(e)
             rc = EXIT_USAGE
     return rc
+
+
+def _print_issues(e: Any) -> None:
+    """One line per problem: ``file:line:column: field: message``."""
+    for i in e.issues:
+        print(i, file=sys.stderr)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -216,7 +299,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         try:
             seqs.append(load_sequence(f))
         except SequenceError as e:
-            print(e, file=sys.stderr)
+            _print_issues(e)
             bad = True
     if bad:
         return EXIT_USAGE
@@ -224,11 +307,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     summaries = []
     rc = EXIT_OK
     for seq in seqs:
-        try:
-            conn = _connect(args, seq)
-        except Exception as e:  # noqa: BLE001
-            print(f"bench: cannot connect: {e}", file=sys.stderr)
-            return EXIT_DRIVE
+        conn = _connect(args, seq)
         rerun = None
         try:
             rerun = _make_rerun(args.rerun, Path(args.runs), conn.units.pole_pairs)
@@ -283,8 +362,27 @@ def _print_result(r: Any, out: Any) -> None:
 
 
 def cmd_live(args: argparse.Namespace) -> int:
+    import math
+
     from bench._logging import run_dir_for
 
+    if not math.isfinite(args.speed):
+        raise UserError(f"--speed {args.speed}: not a finite number")
+    if not (math.isfinite(args.duration) and 0 <= args.duration <= 86400):
+        raise UserError(f"--duration {args.duration}: allowed range [0, 86400] s")
+    lim = None
+    try:
+        from bench._sequence import drive_envelope
+        from bench._units import MotorUnits
+
+        env = drive_envelope(args.motor or "paper_salient")
+        units = MotorUnits(env["pole_pitch_m"], env["pole_pairs"])
+        lim = env["speed_max_mps"] / units.speed_to_mps(1.0, args.unit)
+    except Exception:  # noqa: BLE001 - motor problems are reported by _connect
+        pass
+    if lim is not None and abs(args.speed) > lim:
+        raise UserError(f"--speed {args.speed:g} {args.unit}: allowed range [{-lim:.4g}, "
+                        f"{lim:.4g}] {args.unit} (the drive's speed limit)")
     conn = _connect(args)
     d = conn.drive
     out_dir = run_dir_for("live", "runs")
@@ -342,20 +440,32 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_param(args: argparse.Namespace) -> int:
-    from bench._drive import ParamError, param_table
+    from bench._drive import ParamError, ParamInputError, param_table
 
+    if args.action not in ("get", "set", "list"):
+        raise UserError("param: choose get, set or list (see bench param --help)")
     if args.action == "list":
-        seen = set()
-        for p in param_table().values():
-            if p.address in seen or (not args.all and 0x1000 <= p.index < 0x2000):
-                continue
-            seen.add(p.address)
-            rng = f"[{p.min}, {p.max}]" if p.min is not None or p.max is not None else ""
-            print(f"{p.address:>10}  {p.name:<34} {p.access:<5} {p.unit:<10} {rng}")
-        return EXIT_OK
-    if args.action not in ("get", "set"):
-        print("bench param: choose get, set or list (see --help)", file=sys.stderr)
-        return EXIT_USAGE
+        conn = None if args.offline else _connect(args)
+        try:
+            seen = set()
+            for p in param_table().values():
+                if p.address in seen or (not args.all and 0x1000 <= p.index < 0x2000):
+                    continue
+                seen.add(p.address)
+                rng = f"[{p.min}, {p.max}]" if p.min is not None or p.max is not None else ""
+                val = ""
+                if conn is not None and p.access in ("ro", "rw", "const"):
+                    try:
+                        v = conn.drive.read_raw(p.index, p.sub)
+                        val = f"{v:.6g}" if isinstance(v, float) else str(v)
+                    except (ParamError, KeyError) as e:
+                        val = f"<{' '.join(str(e).split())[:40]}>"
+                print(f"{p.address:>10}  {p.name:<34} {p.access:<5} {val:>14} {p.unit:<10} "
+                      f"{rng}".rstrip())
+            return EXIT_OK
+        finally:
+            if conn is not None:
+                conn.close()
     conn = _connect(args)
     try:
         d = conn.drive
@@ -366,19 +476,31 @@ def cmd_param(args: argparse.Namespace) -> int:
             v, p = d.get(args.name)
         print(f"{p.name} ({p.address}) = {v} {p.unit}".rstrip())
         return EXIT_OK
+    except ParamInputError as e:
+        raise UserError(str(e)) from None
     except ParamError as e:
-        print(f"bench: {e}", file=sys.stderr)
-        return EXIT_DRIVE
+        raise UserError(str(e), EXIT_DRIVE) from None
     finally:
         conn.close()
 
 
 def cmd_config(args: argparse.Namespace) -> int:
-    from bench._drive import ParamError
+    from bench._drive import ParamError, ParamInputError
 
     if args.action not in ("backup", "restore"):
-        print("bench config: choose backup or restore (see --help)", file=sys.stderr)
-        return EXIT_USAGE
+        raise UserError("config: choose backup or restore (see bench config --help)")
+    doc: Any = None
+    if args.action == "restore":  # read and parse the file before connecting
+        try:
+            text = Path(args.file).read_text(encoding="utf-8")
+        except OSError as e:
+            raise UserError(f"{args.file}: cannot read: {e.strerror}") from None
+        except UnicodeDecodeError as e:
+            raise UserError(f"{args.file}: not UTF-8 text (byte offset {e.start})") from None
+        try:
+            doc = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise UserError(f"{args.file}:{e.lineno}:{e.colno}: not valid JSON: {e.msg}") from None
     conn = _connect(args)
     try:
         d = conn.drive
@@ -388,16 +510,19 @@ def cmd_config(args: argparse.Namespace) -> int:
             Path(args.file).write_text(json.dumps(doc, indent=2) + "\n")
             print(f"bench: {len(doc['parameters'])} parameters -> {args.file}")
             return EXIT_OK
-        doc = json.loads(Path(args.file).read_text())
-        params = doc.get("parameters", doc)
-        errors = d.restore(params)
-        for e in errors:
-            print(f"bench: {e}", file=sys.stderr)
-        print(f"bench: restored {len(params) - len(errors)} of {len(params)} parameters")
-        return EXIT_OK if not errors else EXIT_DRIVE
-    except (ParamError, OSError, ValueError) as e:
-        print(f"bench: {e}", file=sys.stderr)
-        return EXIT_DRIVE
+        try:
+            n = d.restore(doc, source=args.file)
+        except ParamInputError as e:
+            for line in str(e).splitlines():
+                print(f"bench: {line}", file=sys.stderr)
+            print("bench: nothing written", file=sys.stderr)
+            return EXIT_USAGE
+        print(f"bench: restored {n} parameters from {args.file}")
+        return EXIT_OK
+    except ParamError as e:
+        raise UserError(str(e), EXIT_DRIVE) from None
+    except OSError as e:
+        raise UserError(f"{args.file}: {e.strerror}", EXIT_USAGE) from None
     finally:
         conn.close()
 
@@ -452,6 +577,32 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("bench: interrupted", file=sys.stderr)
         return EXIT_INTERRUPT
+    except UserError as e:
+        print(f"bench: {e}", file=sys.stderr)
+        return e.code
+    except Exception as e:  # noqa: BLE001 - last resort: one line, traceback kept
+        return _internal_error(e, getattr(args, "runs", "runs"))
+
+
+def _internal_error(e: BaseException, runs_root: str) -> int:
+    """An unexpected exception (a bug): one line, and where the traceback is."""
+    tb = traceback.format_exc()
+    what = " ".join(f"{type(e).__name__}: {e}".split())[:300]
+    if os.environ.get("BENCH_DEBUG"):
+        sys.stderr.write(tb)
+        print(f"bench: internal error: {what}", file=sys.stderr)
+        return EXIT_INTERNAL
+    where = "set BENCH_DEBUG=1 to print it"
+    try:
+        d = Path(runs_root)
+        d.mkdir(parents=True, exist_ok=True)
+        f = d / f"bench_error_{time.strftime('%Y%m%dT%H%M%S', time.gmtime())}.txt"
+        f.write_text(tb, encoding="utf-8")
+        where = f"traceback in {f} (BENCH_DEBUG=1 prints it)"
+    except OSError:
+        pass
+    print(f"bench: internal error: {what}; {where}", file=sys.stderr)
+    return EXIT_INTERNAL
 
 
 if __name__ == "__main__":

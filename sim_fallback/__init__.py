@@ -13,7 +13,16 @@ Metrics (one definition for the simulator, the bench and the reports):
 
 from ._firmware import Firmware
 from ._lib import FwConfig, FwSnapshot, SimPlantParams, lib_path
-from ._motors import MOTOR_DIR, Motor, MotorFileError, fw_config, load_motor, plant_params
+from ._motors import (
+    MOTOR_DIR,
+    Motor,
+    MotorFileError,
+    firmware_check,
+    firmware_field_ranges,
+    fw_config,
+    load_motor,
+    plant_params,
+)
 from ._sim import (
     CHANNELS,
     PAPER_SCENARIOS,
@@ -30,7 +39,7 @@ from .metrics import METRIC_DEFS, METRIC_NAMES, METRICS, compute_metrics, run_me
 __all__ = [
     "CHANNELS", "METRIC_DEFS", "METRIC_NAMES", "METRICS", "MOTOR_DIR", "PAPER_SCENARIOS",
     "SIM_REF_FORCE", "SIM_REF_LOAD", "SIM_REF_SPEED", "Firmware", "FwConfig", "FwSnapshot",
-    "Motor", "MotorFileError", "Result",
-    "Sim", "SimPlantParams", "compute_metrics", "fw_config", "load_motor", "lib_path",
+    "Motor", "MotorFileError", "Result", "Sim", "SimPlantParams", "compute_metrics",
+    "firmware_check", "firmware_field_ranges", "fw_config", "load_motor", "lib_path",
     "paper_scenario", "plant_params", "run_metrics", "run_scenario", "wrap_pi",
 ]
