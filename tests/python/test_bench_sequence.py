@@ -23,7 +23,7 @@ steps:
   - load_step: {value: 2.0, unit: N*m}
   - ramp: {quantity: speed, to: -100, unit: r/min, duration_s: 0.2}
   - load_ramp: {to: 0, unit: N, duration_s: 0.1}
-  - trace_capture: {name: cap, duration_s: 0.05}
+  - trace_capture: {name: cap, duration_s: 0.04}
   - expect: {metric: position_error_rms_rad, op: "<=", limit: 0.01, window_s: [0.15, 0.8]}
   - expect: {metric: settling_time_s, value: 0.1, tolerance: 0.05}
   - disable: {}
