@@ -132,8 +132,8 @@ def test_yaml_syntax_error_has_a_line(tmp_path: Path) -> None:
 
 
 def test_trace_signals_must_exist_in_the_object_dictionary() -> None:
-    text = GOOD.replace("trace_capture: {name: cap, duration_s: 0.05}",
-                        "trace_capture: {name: cap, duration_s: 0.05, signals: [pll_err_rad, "
+    text = GOOD.replace("trace_capture: {name: cap, duration_s: 0.04}",
+                        "trace_capture: {name: cap, duration_s: 0.04, signals: [pll_err_rad, "
                         "theta_true]}")
     (i,) = _issues(text)
     assert i.field == "steps[6].trace_capture.signals[1]" and "theta_true" in i.message
