@@ -49,19 +49,16 @@ void fw_bemf_catch(fw_bemf_t *b, float w0, const float i_dq_A[2]) {
 }
 
 void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat) {
-  float did = (i_dq_A[0] - b->i_prev_A[0]) * b->inv_dt;
-  float diq = (i_dq_A[1] - b->i_prev_A[1]) * b->inv_dt;
-  b->i_prev_A[0] = i_dq_A[0];
-  b->i_prev_A[1] = i_dq_A[1];
+  float e[2];
+  fw_bemf_residual(u_dq_V, i_dq_A, b->i_prev_A, b->inv_dt, w_hat, b->R_ohm, b->L_d_H,
+                   b->L_q_H, e);
   if (!b->active && fabsf(w_hat) < 0.5f * b->w_off) {
     b->e_d_f = b->e_q_f = 0.0f; /* far below the handover: nothing to observe */
     b->err_rad = 0.0f;
     return;
   }
-  float e_d = u_dq_V[0] - b->R_ohm * i_dq_A[0] - b->L_d_H * did + w_hat * b->L_q_H * i_dq_A[1];
-  float e_q = u_dq_V[1] - b->R_ohm * i_dq_A[1] - b->L_q_H * diq - w_hat * b->L_d_H * i_dq_A[0];
-  b->e_d_f += b->a_f * (e_d - b->e_d_f);
-  b->e_q_f += b->a_f * (e_q - b->e_q_f);
+  b->e_d_f += b->a_f * (e[0] - b->e_d_f);
+  b->e_q_f += b->a_f * (e[1] - b->e_q_f);
   /* the angle error for this period (used by the PLL and the snapshot) */
   float e2 = b->e_d_f * b->e_d_f + b->e_q_f * b->e_q_f;
   float e_min = 0.5f * b->w_off * b->psi_f_Wb;

@@ -42,6 +42,7 @@ static float persist(float t, bool over, float dt) { return over ? t + dt : 0.0f
 void fw_mon_init(fw_mon_t *m, const fw_config_t *cfg, float dt_s) {
   memset(m, 0, sizeof(*m));
   m->dt_s = dt_s;
+  m->inv_dt = 1.0f / dt_s;
   m->angle_max_rad = cfg->mon_angle_max_rad;
   m->bemf_max_rad = cfg->mon_bemf_max_rad;
   m->bemf_min_V = cfg->mon_bemf_min_V;
@@ -159,19 +160,12 @@ fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in) {
 
   if (in->pwm_on) {
     m->off_time_s = 0.0f;
-    const float w = in->omega_hat_radps;
     /* L di/dt as a per-sample difference: noisy alone, clean once low-passed */
-    const float inv_dt = 1.0f / dt;
-    float di_d = (in->i_dq_A[0] - m->i_prev_A[0]) * inv_dt;
-    float di_q = (in->i_dq_A[1] - m->i_prev_A[1]) * inv_dt;
-    m->i_prev_A[0] = in->i_dq_A[0];
-    m->i_prev_A[1] = in->i_dq_A[1];
-    float r_d = in->u_dq_V[0] - m->R_ohm * in->i_dq_A[0] - m->L_d_H * di_d +
-                w * m->L_q_H * in->i_dq_A[1];
-    float r_q = in->u_dq_V[1] - m->R_ohm * in->i_dq_A[1] - m->L_q_H * di_q -
-                w * m->L_d_H * in->i_dq_A[0];
-    m->r_d_f += m->a_slow * (r_d - m->r_d_f);
-    m->r_q_f += m->a_slow * (r_q - m->r_q_f);
+    float r[2];
+    fw_bemf_residual(in->u_dq_V, in->i_dq_A, m->i_prev_A, m->inv_dt, in->omega_hat_radps,
+                     m->R_ohm, m->L_d_H, m->L_q_H, r);
+    m->r_d_f += m->a_slow * (r[0] - m->r_d_f);
+    m->r_q_f += m->a_slow * (r[1] - m->r_q_f);
   }
 
   if (!in->running) {

@@ -47,6 +47,23 @@ typedef struct {
   float t_full_s;       /**< time since the injection is back at full */
 } fw_bemf_t;
 
+/**
+ * Voltage-equation residual in the estimated frame (the back-EMF when the
+ * frame is right): e = u - R i - L di/dt - w^ (-L_q i_q, L_d i_d), with
+ * di/dt as the difference to i_prev (updated here). One implementation for
+ * the observer and the integrity monitor's back-EMF witness.
+ */
+static inline void fw_bemf_residual(const float u_dq_V[2], const float i_dq_A[2],
+                                    float i_prev_A[2], float inv_dt, float w_hat, float R_ohm,
+                                    float L_d_H, float L_q_H, float e_dq_V[2]) {
+  const float did = (i_dq_A[0] - i_prev_A[0]) * inv_dt;
+  const float diq = (i_dq_A[1] - i_prev_A[1]) * inv_dt;
+  i_prev_A[0] = i_dq_A[0];
+  i_prev_A[1] = i_dq_A[1];
+  e_dq_V[0] = u_dq_V[0] - R_ohm * i_dq_A[0] - L_d_H * did + w_hat * L_q_H * i_dq_A[1];
+  e_dq_V[1] = u_dq_V[1] - R_ohm * i_dq_A[1] - L_q_H * diq - w_hat * L_d_H * i_dq_A[0];
+}
+
 /** Parameters from the configuration; state cleared. */
 void fw_bemf_init(fw_bemf_t *b, const fw_config_t *cfg, float dt_s);
 /** Closed loop (re)starts: injection full, PLL on the HF error. */

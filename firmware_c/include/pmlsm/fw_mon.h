@@ -56,7 +56,7 @@ typedef struct {
 /** Monitor state. Treat members as private; read results with fw_mon_*(). */
 typedef struct {
   /* configuration (copied at init) */
-  float dt_s;
+  float dt_s, inv_dt;
   float angle_max_rad, bemf_max_rad, bemf_min_V, detect_s;
   float i_sum_max_A, i_offset_max_A, i_ctrl_max_A, accel_max;
   float rho;          /**< (L_q + L_d) / (L_q - L_d) */
