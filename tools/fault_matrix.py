@@ -23,7 +23,7 @@ sys.path.insert(0, str(ROOT))
 
 from bench._campaign import load_campaign, load_results, run_campaign  # noqa: E402
 from sim_fallback._faults import BLIND_ERR_RAD, BLIND_TIME_S, FAULT_NAMES  # noqa: E402
-from sim_fallback._sim import METRIC_NAMES  # noqa: E402
+from sim_fallback.metrics import METRIC_NAMES  # noqa: E402
 
 
 def _ms(x: float | None) -> str:
