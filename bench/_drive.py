@@ -23,6 +23,8 @@ from typing import Any, Protocol
 import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
+from protocols.generated.od_names import FAULTS as _OD_FAULTS
+
 log = logging.getLogger("bench.drive")
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -56,25 +58,13 @@ SDO_ABORTS: dict[int, str] = {
     0x08000022: "data cannot be transferred in the present device state",
 }
 
-#: Fault codes (fw_fault_t in firmware_c/include/pmlsm/fw_ctrl.h).
-FAULTS: dict[int, str] = {
-    0x0000: "no fault",
-    0x2310: "overcurrent",
-    0x3210: "DC-link overvoltage",
-    0x3220: "DC-link undervoltage",
-    0x5210: "invalid input (NaN/inf)",
-    0x5220: "ADC count out of range",
-    0x6320: "configuration invalid",
-    0x8130: "supervisor heartbeat lost",
-    0xFF01: "HF response too small: estimator lost lock",
-    0xFF02: "PLL error persistently large",
-    0xFF03: "saliency too low: injection refused",
-    0xFF04: "magnet polarity undetermined",
-}
+#: Fault codes, names and texts: one source, protocols/od.yaml (generated module).
+FAULTS: dict[int, str] = {0x0000: "no fault",
+                          **{code: f"{name}: {text}" for code, (name, text) in _OD_FAULTS.items()}}
 
 
 def fault_text(code: int) -> str:
-    """Readable text of a drive fault code."""
+    """Readable text of a drive fault code (name and meaning from protocols/od.yaml)."""
     return f"0x{code:04X} {FAULTS.get(code, 'unknown fault')}"
 
 

@@ -128,7 +128,7 @@ def test_fault_on_enable_is_a_clear_error(rig) -> None:
     drive, fake = rig
     fake.raise_fault(0xFF03)
     seq = validate_sequence(HEAD + "  - enable: {}\n  - disable: {}\n")
-    with pytest.raises(Exception, match="0xFF03 saliency too low"):
+    with pytest.raises(Exception, match="0xFF03 SALIENCY_TOO_LOW"):
         Runner(drive, UNITS).run(seq)
 
 
