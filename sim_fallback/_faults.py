@@ -78,6 +78,7 @@ def _fw_overrides(case: FaultCase) -> dict[str, float]:
         other = fw_config(load_motor(case.fw_from_motor))
         for k in ("spd_kp_A_per_radps", "spd_ki_A_per_rad", "pll_accel_per_A"):
             out[k] = float(getattr(other, k))
+        out["gains_auto"] = 0  # explicit gains: the drive must not re-derive them
     if case.fw_scale:
         base = fw_config(mot)
         for k, f in case.fw_scale.items():

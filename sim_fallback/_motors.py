@@ -453,20 +453,24 @@ def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
     cfg.psi_f_Wb = pl["psi_f_Wb"]
     cfg.pole_pairs = p
     cfg.pole_pitch_m = pl["tau_m"]
-    cfg.cur_kp_V_per_A = pl["L_d0_H"] * 1100.0
-    cfg.cur_ki_V_per_As = pl["R_ohm"] * 1100.0
+    # the physical description; the drive derives the gains from it (fw_config_derive,
+    # one implementation in C for the simulator, this API and a drive set up over CANopen)
+    cfg.mass_kg = pl["mass_kg"]
+    cfg.visc_Ns_per_m = pl["b_visc_Ns_per_m"]
+    cfg.coulomb_N = pl["F_coulomb_N"]
+    cfg.cur_bw_radps = 1100.0  # the paper's current-loop rule: k_P = L_d 1100, k_I = R 1100
+    cfg.gains_auto = 1
     if motor.parameterization == "rotary":
+        # the paper's speed PI, 0.1 A/(r/min) and 0.6 A/(r/min s), kept as given
+        L.fw_config_derive(cfg)
+        cfg.gains_auto = 0
         cfg.spd_kp_A_per_radps = 0.1 * 60.0 / (2.0 * math.pi * p)
         cfg.spd_ki_A_per_rad = 0.6 * 60.0 / (2.0 * math.pi * p)
     else:
-        w_bw = motor.controller["speed_bw_radps"]
-        kp_lin = pl["mass_kg"] * w_bw / motor.force_const_N_per_A  # A per m/s
-        cfg.spd_kp_A_per_radps = kp_lin * pl["tau_m"] / math.pi
-        cfg.spd_ki_A_per_rad = cfg.spd_kp_A_per_radps * w_bw / 6.0
+        cfg.spd_bw_radps = motor.controller["speed_bw_radps"]
+        L.fw_config_derive(cfg)
     cfg.pll_kp = 86.6
     cfg.pll_ki = 5000.0
-    # PLL torque feed-forward: electrical rad/s^2 per A of i_q = (pi/tau) K_F / m
-    cfg.pll_accel_per_A = math.pi / pl["tau_m"] * motor.force_const_N_per_A / pl["mass_kg"]
     c = motor.controller
     cfg.i_max_A = c["i_max_A"]
     cfg.i_trip_A = c["i_trip_A"]
