@@ -9,20 +9,43 @@ Use :class:`Receiver` on a byte stream (e.g. a ``serial.Serial``'s reads):
 it returns decoded :class:`Frame` objects, rejects corrupt or truncated
 frames with a reason, and counts lost frames from gaps in ``seq``.
 :class:`TraceAssembler` rebuilds a trace-buffer upload into a numpy array.
+
+The data path uses the standard library's CRC-CCITT (``binascii.crc_hqx``,
+the same CRC-16/CCITT-FALSE with init 0xFFFF) and the ``cobs`` package's C
+codec; ``benchmarks/bench_serial.py`` compares them with the pure-Python
+versions they replaced, and ``tests/python/test_protocol_serial.py`` checks
+both against the firmware's C code.
+
+Payload parsers never trust a length field further than the firmware can
+send: :data:`MAX_SIGNALS` signals per frame or capture and :data:`TRACE_FLOATS`
+samples x signals per capture (the firmware's constants; a test fails when
+they drift). A malformed payload raises :class:`FrameError` (reason
+``payload``) from :func:`parse_telemetry`; :class:`TraceAssembler` counts and
+skips it.
 """
 
 from __future__ import annotations
 
+import binascii
+import math
 import struct
 from collections import Counter
 from dataclasses import dataclass, field
 from enum import IntEnum
 
 import numpy as np
+from cobs import cobs as _cobs
 
+#: Payload bytes per frame (FW_SERIAL_MAX_PAYLOAD in fw_serial.h).
 MAX_PAYLOAD = 240
 MAX_RAW = 3 + MAX_PAYLOAD + 2
 MAX_ENCODED = MAX_RAW + MAX_RAW // 254 + 2
+#: Signals per telemetry frame or trace capture (FW_SERIAL_MAX_SIGNALS in fw_serial.h).
+MAX_SIGNALS = 8
+#: Floats in the drive's trace buffer (FW_APP_TRACE_FLOATS in
+#: firmware_c/comm/include/pmlsm/fw_app.h): a capture of n signals holds at most
+#: ``TRACE_FLOATS // n`` samples. Use this constant instead of repeating the number.
+TRACE_FLOATS = 4096
 
 
 class FrameType(IntEnum):
@@ -35,68 +58,35 @@ class FrameType(IntEnum):
 
 
 class FrameError(ValueError):
-    """A frame was rejected. ``reason`` is one of cobs, short, crc, too_long."""
+    """A frame was rejected.
+
+    ``reason`` is one of cobs, short, crc, too_long (framing) or payload (a frame
+    with a valid CRC whose payload does not match its type's layout or bounds).
+    """
 
     def __init__(self, reason: str, detail: str = "") -> None:
         super().__init__(f"{reason}: {detail}" if detail else reason)
         self.reason = reason
 
 
-def crc16(data: bytes) -> int:
+def crc16(data: bytes | bytearray | memoryview) -> int:
     """CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF (``b"123456789"`` -> 0x29B1)."""
-    crc = 0xFFFF
-    for b in data:
-        crc ^= b << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
-    return crc
+    return binascii.crc_hqx(data, 0xFFFF)
 
 
-def cobs_encode(data: bytes) -> bytes:
+def cobs_encode(data: bytes | bytearray | memoryview) -> bytes:
     """COBS-encode (no delimiter); a full 254-byte block at the end gets no trailing code."""
-    out = bytearray([0])
-    code_pos, code = 0, 1
-    for i, b in enumerate(data):
-        if b == 0:
-            out[code_pos] = code
-            code_pos, code = len(out), 1
-            out.append(0)
-        else:
-            out.append(b)
-            code += 1
-            if code == 0xFF:
-                out[code_pos] = code
-                if i + 1 == len(data):
-                    return bytes(out)
-                code_pos, code = len(out), 1
-                out.append(0)
-    out[code_pos] = code
-    return bytes(out)
+    return _cobs.encode(data)
 
 
-def cobs_decode(data: bytes) -> bytes:
+def cobs_decode(data: bytes | bytearray | memoryview) -> bytes:
     """COBS-decode (input without the delimiter); raises :class:`FrameError` ("cobs")."""
     if not data:
         raise FrameError("cobs", "empty frame")
-    out = bytearray()
-    i = 0
-    n = len(data)
-    while i < n:
-        code = data[i]
-        i += 1
-        if code == 0:
-            raise FrameError("cobs", f"zero code byte at {i - 1}")
-        end = i + code - 1
-        if end > n:
-            raise FrameError("cobs", "truncated block")
-        block = data[i:end]
-        if 0 in block:
-            raise FrameError("cobs", "zero inside a block")
-        out += block
-        i = end
-        if code != 0xFF and i < n:
-            out.append(0)
-    return bytes(out)
+    try:
+        return _cobs.decode(data)
+    except _cobs.DecodeError as e:
+        raise FrameError("cobs", str(e)) from None
 
 
 @dataclass(frozen=True)
@@ -113,8 +103,8 @@ def encode_frame(ftype: int, seq: int, payload: bytes = b"") -> bytes:
     if len(payload) > MAX_PAYLOAD:
         raise ValueError(f"payload of {len(payload)} bytes > {MAX_PAYLOAD}")
     raw = struct.pack("<BH", ftype & 0xFF, seq & 0xFFFF) + bytes(payload)
-    raw += struct.pack("<H", crc16(raw))
-    return cobs_encode(raw) + b"\x00"
+    raw += struct.pack("<H", binascii.crc_hqx(raw, 0xFFFF))
+    return _cobs.encode(raw) + b"\x00"
 
 
 def decode_frame(frame: bytes) -> Frame:
@@ -127,8 +117,9 @@ def decode_frame(frame: bytes) -> Frame:
     if len(raw) > MAX_RAW:
         raise FrameError("too_long", f"{len(raw)} bytes decoded")
     (crc,) = struct.unpack_from("<H", raw, len(raw) - 2)
-    if crc16(raw[:-2]) != crc:
-        raise FrameError("crc", f"0x{crc:04X} != 0x{crc16(raw[:-2]):04X}")
+    calc = binascii.crc_hqx(memoryview(raw)[:-2], 0xFFFF)
+    if calc != crc:
+        raise FrameError("crc", f"0x{crc:04X} != 0x{calc:04X}")
     ftype, seq = struct.unpack_from("<BH", raw, 0)
     return Frame(ftype, seq, bytes(raw[3:-2]))
 
@@ -171,25 +162,29 @@ class Receiver:
     _overflow: bool = False
     _next_seq: int | None = None
 
-    def feed(self, data: bytes) -> list[Frame]:
+    def feed(self, data: bytes | bytearray | memoryview) -> list[Frame]:
         out: list[Frame] = []
-        for b in data:
-            if b != 0:
-                if len(self._buf) >= MAX_ENCODED:
-                    self._overflow = True
-                    self._buf.clear()
-                if not self._overflow:
-                    self._buf.append(b)
-                continue
-            if self._overflow:
-                self._overflow = False
+        parts = bytes(data).split(b"\x00")
+        last = len(parts) - 1
+        for k, part in enumerate(parts):
+            if self._overflow or len(self._buf) + len(part) > MAX_ENCODED:
+                # no delimiter within MAX_ENCODED bytes: discard up to the next one
                 self._buf.clear()
-                self._reject("too_long")
+                self._overflow = k == last
+                if k != last:
+                    self._reject("too_long")
                 continue
-            if not self._buf:
-                continue
-            chunk = bytes(self._buf)
-            self._buf.clear()
+            if k == last:  # not terminated yet
+                self._buf += part
+                break
+            if self._buf:
+                self._buf += part
+                chunk = bytes(self._buf)
+                self._buf.clear()
+            elif part:
+                chunk = part
+            else:
+                continue  # idle delimiters
             try:
                 fr = decode_frame(chunk)
             except FrameError as e:
@@ -224,12 +219,18 @@ class Telemetry:
 
 
 def parse_telemetry(payload: bytes) -> Telemetry:
-    """``step:u32 | n:u8 | ids[n] | f32[n]``."""
+    """``step:u32 | n:u8 | ids[n] | f32[n]`` with n <= :data:`MAX_SIGNALS`.
+
+    Raises :class:`FrameError` (reason ``payload``) when the payload does not
+    have exactly that layout.
+    """
     if len(payload) < 5:
-        raise FrameError("short", "telemetry payload")
+        raise FrameError("payload", f"telemetry of {len(payload)} bytes")
     step, n = struct.unpack_from("<IB", payload, 0)
+    if n > MAX_SIGNALS:
+        raise FrameError("payload", f"telemetry with {n} > {MAX_SIGNALS} signals")
     if len(payload) != 5 + 5 * n:
-        raise FrameError("short", f"telemetry with n={n} has {len(payload)} bytes")
+        raise FrameError("payload", f"telemetry with n={n} has {len(payload)} bytes")
     ids = tuple(payload[5:5 + n])
     values = struct.unpack_from(f"<{n}f", payload, 5 + n)
     return Telemetry(step, ids, tuple(float(v) for v in values))
@@ -275,54 +276,112 @@ class Trace:
         return (np.arange(self.samples.shape[0]) - self.pre_trigger) * self.dt_s
 
 
-class TraceAssembler:
-    """Collect TRACE_HEADER / TRACE_DATA / TRACE_END frames into a :class:`Trace`."""
+_TRACE_HEADER = struct.Struct("<IIIf")  # samples, pre_trigger, trigger_step, dt_s
+_TRACE_DATA = struct.Struct("<HIB")  # capture, first, count
+_TRACE_END = struct.Struct("<HI")  # capture, samples
 
-    def __init__(self) -> None:
-        self._hdr: dict | None = None
-        self._rows: dict[int, np.ndarray] = {}
+
+@dataclass
+class _Capture:
+    """The upload in progress (after its TRACE_HEADER)."""
+
+    cid: int
+    ids: tuple[int, ...]
+    pre: int
+    trig: int
+    dt: float
+    samples: np.ndarray
+    have: np.ndarray
+
+
+class TraceAssembler:
+    """Collect TRACE_HEADER / TRACE_DATA / TRACE_END frames into a :class:`Trace`.
+
+    :meth:`feed` never raises on what comes off the wire: a trace frame whose
+    payload does not match its layout or the firmware's bounds (at most
+    :data:`MAX_SIGNALS` signals and ``max_floats // n`` samples, chunks inside
+    the capture, END repeating the header's sample count) is counted in
+    ``errors["payload"]`` and skipped; DATA or END without a header of the same
+    capture (header lost, reader started mid-upload) in ``errors["orphan"]``.
+    Memory is bounded by ``max_floats`` (allocated at the header). Other frame
+    types are ignored.
+
+    Parameters
+    ----------
+    max_floats : int
+        Samples x signals the drive can capture (default :data:`TRACE_FLOATS`).
+    """
+
+    def __init__(self, max_floats: int = TRACE_FLOATS) -> None:
+        self.max_floats = int(max_floats)
+        self.frames_bad = 0
+        self.errors: Counter[str] = Counter()
+        self._cap: _Capture | None = None
 
     def feed(self, frame: Frame) -> Trace | None:
         """Returns the trace when its END frame arrives, else None."""
-        p = frame.payload
-        if frame.type == FrameType.TRACE_HEADER:
-            cid, n = struct.unpack_from("<HB", p, 0)
-            ids = tuple(p[3:3 + n])
-            total, pre, trig, dt = struct.unpack_from("<IIIf", p, 3 + n)
-            self._hdr = {"id": cid, "ids": ids, "total": total, "pre": pre,
-                         "trig": trig, "dt": float(dt)}
-            self._rows = {}
-        elif frame.type == FrameType.TRACE_DATA and self._hdr is not None:
-            cid, first, cnt = struct.unpack_from("<HIB", p, 0)
-            if cid != self._hdr["id"]:
-                return None
-            n = len(self._hdr["ids"])
-            vals = np.frombuffer(p, dtype="<f4", count=cnt * n, offset=7).reshape(cnt, n)
-            self._rows[first] = vals
-        elif frame.type == FrameType.TRACE_END and self._hdr is not None:
-            cid, total = struct.unpack_from("<HI", p, 0)
-            h = self._hdr
-            n = len(h["ids"])
-            samples = np.full((total, n), np.nan, dtype=np.float32)
-            have = np.zeros(total, dtype=bool)
-            for first, vals in self._rows.items():
-                end = min(first + vals.shape[0], total)
-                samples[first:end] = vals[: end - first]
-                have[first:end] = True
-            missing: list[tuple[int, int]] = []
-            k = 0
-            while k < total:
-                if not have[k]:
-                    j = k
-                    while j < total and not have[j]:
-                        j += 1
-                    missing.append((k, j - k))
-                    k = j
-                else:
-                    k += 1
-            self._hdr = None
-            return Trace(cid, h["ids"], samples, h["pre"], h["trig"], h["dt"], missing)
+        try:
+            if frame.type == FrameType.TRACE_HEADER:
+                self._cap = None
+                self._cap = self._header(frame.payload)
+            elif frame.type == FrameType.TRACE_DATA:
+                self._data(frame.payload)
+            elif frame.type == FrameType.TRACE_END:
+                return self._end(frame.payload)
+        except FrameError as e:
+            self.frames_bad += 1
+            self.errors[e.reason] += 1
         return None
+
+    def _header(self, p: bytes) -> _Capture:
+        # capture:u16 | n:u8 | ids[n] | samples:u32 | pre:u32 | trigger_step:u32 | dt:f32
+        if len(p) < 3:
+            raise FrameError("payload", f"trace header of {len(p)} bytes")
+        cid, n = struct.unpack_from("<HB", p, 0)
+        if not 1 <= n <= MAX_SIGNALS or len(p) != 3 + n + _TRACE_HEADER.size:
+            raise FrameError("payload", f"trace header with n={n} has {len(p)} bytes")
+        total, pre, trig, dt = _TRACE_HEADER.unpack_from(p, 3 + n)
+        if total > self.max_floats // n:
+            raise FrameError("payload", f"trace of {total} samples x {n} signals > "
+                             f"{self.max_floats} floats")
+        if pre > total or not math.isfinite(dt):
+            raise FrameError("payload", f"trace header pre={pre} of {total}, dt={dt}")
+        return _Capture(cid, tuple(p[3:3 + n]), pre, trig, float(dt),
+                        np.full((total, n), np.nan, dtype=np.float32),
+                        np.zeros(total, dtype=bool))
+
+    def _data(self, p: bytes) -> None:
+        # capture:u16 | first:u32 | count:u8 | count x n x f32
+        if len(p) < _TRACE_DATA.size:
+            raise FrameError("payload", f"trace data of {len(p)} bytes")
+        cid, first, cnt = _TRACE_DATA.unpack_from(p, 0)
+        cap = self._cap
+        if cap is None or cid != cap.cid:
+            raise FrameError("orphan", f"trace data of capture {cid}")
+        n = len(cap.ids)
+        if len(p) != _TRACE_DATA.size + 4 * n * cnt or first + cnt > cap.have.size:
+            raise FrameError("payload", f"trace data {first}+{cnt} of {cap.have.size} "
+                             f"samples in {len(p)} bytes")
+        vals = np.frombuffer(p, dtype="<f4", count=cnt * n, offset=_TRACE_DATA.size)
+        cap.samples[first:first + cnt] = vals.reshape(cnt, n)
+        cap.have[first:first + cnt] = True
+
+    def _end(self, p: bytes) -> Trace:
+        # capture:u16 | samples:u32
+        if len(p) != _TRACE_END.size:
+            raise FrameError("payload", f"trace end of {len(p)} bytes")
+        cid, total = _TRACE_END.unpack_from(p, 0)
+        cap = self._cap
+        if cap is None or cid != cap.cid:
+            raise FrameError("orphan", f"trace end of capture {cid}")
+        self._cap = None
+        if total != cap.have.size:
+            raise FrameError("payload", f"trace end says {total} samples, header "
+                             f"{cap.have.size}")
+        edges = np.diff(np.concatenate(([0], (~cap.have).view(np.int8), [0])))
+        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        missing = [(int(a), int(b - a)) for a, b in zip(starts, ends, strict=True)]
+        return Trace(cid, cap.ids, cap.samples, cap.pre, cap.trig, cap.dt, missing)
 
 
 def signal_names() -> list[str]:
