@@ -42,6 +42,9 @@ MAX_RAW = 3 + MAX_PAYLOAD + 2
 MAX_ENCODED = MAX_RAW + MAX_RAW // 254 + 2
 #: Signals per telemetry frame or trace capture (FW_SERIAL_MAX_SIGNALS in fw_serial.h).
 MAX_SIGNALS = 8
+#: Largest sequence gap (mod 2^16) counted as loss; a larger one is a sender restart
+#: (FW_SERIAL_RESTART_GAP in fw_serial.h).
+RESTART_GAP = 0x8000
 #: Floats in the drive's trace buffer (FW_APP_TRACE_FLOATS in
 #: firmware_c/comm/include/pmlsm/fw_app.h): a capture of n signals holds at most
 #: ``TRACE_FLOATS // n`` samples. Use this constant instead of repeating the number.
@@ -192,7 +195,7 @@ class Receiver:
                 continue
             if self._next_seq is not None and fr.seq != self._next_seq:
                 gap = (fr.seq - self._next_seq) & 0xFFFF
-                if gap > 0x8000:
+                if gap > RESTART_GAP:
                     self.restarts += 1  # behind the expected number: sender restarted
                 else:
                     self.frames_lost += gap

@@ -1,7 +1,7 @@
 /**
  * @file test_serial.c
  * @brief Serial link: CRC, COBS vectors, frames, corrupt/truncated frames,
- *        sequence-gap counting, telemetry payload, trace capture and upload.
+ *        sequence-gap and sender-restart counting, telemetry payload, trace capture and upload.
  */
 #include <string.h>
 
@@ -129,6 +129,50 @@ static void test_decoder_stream(void) {
   TT_CHECK(fw_serial_decoder_push(&dec, 0x00, &msg) == FW_SERIAL_ERR_TOO_LONG);
 }
 
+/* Counters after feeding frames with the given sequence numbers (one stream). */
+static void feed_seqs(fw_serial_decoder_t *dec, const uint16_t *seqs, size_t n) {
+  uint8_t wire[FW_SERIAL_MAX_ENCODED], p[1] = {'x'};
+  fw_serial_msg_t msg;
+  size_t len = 0;
+  fw_serial_decoder_init(dec);
+  for (size_t k = 0; k < n; k++) {
+    TT_CHECK(fw_serial_encode(FW_SERIAL_TYPE_TELEMETRY, seqs[k], p, 1, wire, sizeof wire, &len) ==
+             FW_SERIAL_OK);
+    for (size_t i = 0; i < len; i++) {
+      fw_serial_status_t st = fw_serial_decoder_push(dec, wire[i], &msg);
+      TT_CHECK(st == (i + 1 == len ? FW_SERIAL_OK : FW_SERIAL_INCOMPLETE));
+    }
+    TT_CHECK(msg.seq == seqs[k]);
+  }
+}
+
+/* Same vectors as test_receiver_sender_restart_is_not_loss in
+   tests/python/test_protocol_serial.py (which also runs this decoder on them). */
+static void test_decoder_restart(void) {
+  fw_serial_decoder_t dec;
+  /* drive reset: 100 -> 0 is one restart, not 65,435 lost; then 2 is lost */
+  const uint16_t reset[] = {100, 101, 102, 0, 1, 3};
+  feed_seqs(&dec, reset, 6);
+  TT_CHECK(dec.frames_ok == 6 && dec.frames_bad == 0);
+  TT_CHECK(dec.restarts == 1);
+  TT_CHECK(dec.frames_lost == 1);
+  /* a forward gap across the 16-bit wrap is loss: 0 and 1 */
+  const uint16_t wrap[] = {65534, 65535, 2};
+  feed_seqs(&dec, wrap, 3);
+  TT_CHECK(dec.restarts == 0 && dec.frames_lost == 2);
+  /* boundary: a gap of exactly 0x8000 is loss, one more is a restart */
+  const uint16_t half[] = {0, 0x8001};
+  feed_seqs(&dec, half, 2);
+  TT_CHECK(dec.restarts == 0 && dec.frames_lost == 0x8000u);
+  const uint16_t over[] = {0, 0x8002};
+  feed_seqs(&dec, over, 2);
+  TT_CHECK(dec.restarts == 1 && dec.frames_lost == 0);
+  /* a repeated frame (seq = next - 1) is a restart too, as in Python */
+  const uint16_t again[] = {7, 7};
+  feed_seqs(&dec, again, 2);
+  TT_CHECK(dec.restarts == 1 && dec.frames_lost == 0);
+}
+
 static void test_telemetry(void) {
   fw_snapshot_t s;
   memset(&s, 0, sizeof s);
@@ -224,6 +268,7 @@ int main(void) {
   TT_RUN(test_cobs_vectors);
   TT_RUN(test_frames);
   TT_RUN(test_decoder_stream);
+  TT_RUN(test_decoder_restart);
   TT_RUN(test_telemetry);
   TT_RUN(test_trace);
   return TT_SUMMARY();

@@ -238,7 +238,12 @@ fw_serial_status_t fw_serial_decoder_push(fw_serial_decoder_t *dec, uint8_t byte
     return st;
   }
   if (dec->have_seq && msg->seq != dec->next_seq) {
-    dec->frames_lost += (uint16_t)(msg->seq - dec->next_seq);
+    uint16_t gap = (uint16_t)(msg->seq - dec->next_seq);
+    if (gap > FW_SERIAL_RESTART_GAP) {
+      dec->restarts++; /* behind the expected number: the sender restarted */
+    } else {
+      dec->frames_lost += gap;
+    }
   }
   dec->have_seq = 1u;
   dec->next_seq = (uint16_t)(msg->seq + 1u);

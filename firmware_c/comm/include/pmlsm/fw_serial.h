@@ -9,7 +9,10 @@
  *
  * crc16 = CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no
  * xorout) over type, seq and payload. seq increments by one per frame sent
- * (mod 2^16) so that the receiver counts every lost frame.
+ * (mod 2^16) so that the receiver counts every lost frame. The decoder counts a
+ * forward gap (1..FW_SERIAL_RESTART_GAP modulo 2^16) as lost frames and a
+ * larger one, i.e. a jump backwards such as 100 -> 0 after a drive reset, as one
+ * sender restart (protocols/serial_link.py does the same).
  *
  * No malloc, no globals: the encoder, decoder and trace state are
  * caller-owned structs; the trace sample storage is a caller-owned array.
@@ -35,6 +38,8 @@ extern "C" {
 #define FW_SERIAL_MAX_ENCODED (FW_SERIAL_MAX_RAW + FW_SERIAL_MAX_RAW / 254u + 2u)
 /** Signals per telemetry frame or trace capture. */
 #define FW_SERIAL_MAX_SIGNALS 8u
+/** Largest sequence gap (mod 2^16) counted as loss; a larger one is a sender restart. */
+#define FW_SERIAL_RESTART_GAP 0x8000u
 
 typedef enum {
   FW_SERIAL_TYPE_TELEMETRY = 0x01,
@@ -72,7 +77,8 @@ typedef struct {
   uint16_t next_seq;
   uint32_t frames_ok;
   uint32_t frames_bad; /**< COBS/CRC/short/too long */
-  uint32_t frames_lost; /**< gaps in the sequence numbers */
+  uint32_t frames_lost; /**< forward gaps in the sequence numbers */
+  uint32_t restarts;    /**< backward jumps (gap > FW_SERIAL_RESTART_GAP): sender restarted */
 } fw_serial_decoder_t;
 
 /** Encoder state: the next sequence number. */
