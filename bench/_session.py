@@ -329,7 +329,15 @@ class PdoRecorder:
 
 
 class TelemetryReader(threading.Thread):
-    """Reads the serial telemetry link into the logger (``tel.<signal>``)."""
+    """Reads the serial telemetry link into the logger (``tel.<signal>``).
+
+    Survives the wire: a corrupt frame is counted by the :class:`Receiver`
+    (``frames_bad``), a frame with a valid CRC but a malformed payload in
+    ``payload_errors`` (telemetry) or by the :class:`TraceAssembler` (trace
+    frames), a frame of an unknown type in ``payload_errors["type"]``; each is
+    skipped and the reader goes on. Completed trace uploads are appended to
+    ``traces``. Only a failing port or logger ends the thread early (``error``).
+    """
 
     def __init__(self, port: Any, logger: RunLogger, f_pwm_Hz: float) -> None:
         super().__init__(name="bench-telemetry", daemon=True)
@@ -343,12 +351,15 @@ class TelemetryReader(threading.Thread):
         self.traces: list[Any] = []
         self.names = serial_link.signal_names()
         self.f_pwm_Hz = f_pwm_Hz
-        self._stop = threading.Event()
+        # not `_stop`: that name is threading.Thread's own method (join() calls it)
+        self._stop_event = threading.Event()
+        self.payload_errors: dict[str, int] = {}
         self.error: str | None = None
 
     def run(self) -> None:
+        sl = self.sl
         try:
-            while not self._stop.is_set():
+            while not self._stop_event.is_set():
                 data = self.port.read(4096)
                 if not data:
                     if getattr(self.port, "closed", False):
@@ -356,12 +367,20 @@ class TelemetryReader(threading.Thread):
                     continue
                 cols: dict[str, tuple[list[float], list[float]]] = {}
                 for fr in self.rx.feed(data):
-                    if fr.type != self.sl.FrameType.TELEMETRY:
+                    if fr.type != sl.FrameType.TELEMETRY:
+                        if fr.type not in (sl.FrameType.TRACE_HEADER, sl.FrameType.TRACE_DATA,
+                                           sl.FrameType.TRACE_END):
+                            self._count("type")
+                            continue
                         tr = self.asm.feed(fr)
                         if tr is not None:
                             self.traces.append(tr)
                         continue
-                    tel = self.sl.parse_telemetry(fr.payload)
+                    try:
+                        tel = sl.parse_telemetry(fr.payload)
+                    except sl.FrameError as e:
+                        self._count(e.reason)
+                        continue
                     t = tel.step / self.f_pwm_Hz
                     for i, v in zip(tel.ids, tel.values, strict=True):
                         name = self.names[i] if i < len(self.names) else f"sig{i}"
@@ -375,13 +394,18 @@ class TelemetryReader(threading.Thread):
             self.error = f"{type(e).__name__}: {e}"
             log.error("telemetry reader: %s", self.error)
 
+    def _count(self, reason: str) -> None:
+        self.payload_errors[reason] = self.payload_errors.get(reason, 0) + 1
+
     def stop(self) -> None:
-        self._stop.set()
+        self._stop_event.set()
 
     @property
     def stats(self) -> dict[str, int]:
+        """Frame counters: link (ok, bad, lost, restarts) and payloads skipped."""
         return {"frames_ok": self.rx.frames_ok, "frames_bad": self.rx.frames_bad,
-                "frames_lost": self.rx.frames_lost}
+                "frames_lost": self.rx.frames_lost, "restarts": self.rx.restarts,
+                "payload_bad": sum(self.payload_errors.values()) + self.asm.frames_bad}
 
 
 # ---- a complete run ---------------------------------------------------------------------
@@ -523,24 +547,35 @@ def _collect_trace(runner: Runner, drive: Drive, tel: TelemetryReader, logger: R
                    timeout_s: float = 1.0) -> None:
     """Upload the drive's last trace capture over the serial link into ``trace.*``.
 
-    The buffer holds one capture, so this is the last ``trace_capture`` step's.
-    Waiting uses the drive clock (the simulated drive keeps running for it).
+    The buffer holds one capture, so this is the last ``trace_capture`` step's:
+    only an upload completed after the command and with that step's signal ids
+    is taken (not an earlier one still in ``tel.traces``). Waiting uses the drive
+    clock (the simulated drive keeps running for it) and ends early when the
+    reader thread has stopped.
     """
     spec = runner.traces[-1]
+    want = tuple(spec.get("ids", ()))
+    n_before = len(tel.traces)
+
+    def received() -> list[Any]:
+        return [tr for tr in tel.traces[n_before:] if not want or tuple(tr.ids) == want]
+
     try:
         drive.trace_upload()
         t_end = drive.clock.now() + timeout_s
-        while not tel.traces and drive.clock.now() < t_end:
+        while not received() and tel.is_alive() and drive.clock.now() < t_end:
             drive.clock.sleep_until(drive.clock.now() + 0.02)
             time.sleep(0.005)  # let the reader thread catch up with the bytes
     except Exception as e:  # noqa: BLE001 - a measurement, not a safety matter
         logger.event(runner.now(), "trace_failed", {"name": spec["name"], "error": str(e)})
         return
-    if not tel.traces:
-        logger.event(runner.now(), "trace_failed", {"name": spec["name"],
-                                                    "error": "no upload received"})
+    got = received()
+    if not got:
+        why = "no upload received" if tel.is_alive() else f"telemetry reader stopped: {tel.error}"
+        logger.event(runner.now(), "trace_failed", {"name": spec["name"], "error": why,
+                                                    "link": tel.stats})
         return
-    tr = tel.traces[-1]
+    tr = got[-1]
     if getattr(drive.clock, "exact_steps", False):
         # simulated drive: its clock is control steps x dt, so the header's trigger step
         # places the capture exactly
