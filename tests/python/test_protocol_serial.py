@@ -192,15 +192,38 @@ def test_trace_upload_from_c_decoded_in_python(lib):
     assert trace.time_s()[40] == 0.0
 
 
-def test_receiver_sender_restart_is_not_loss():
+class Decoder(C.Structure):
+    """fw_serial_decoder_t (firmware_c/comm/include/pmlsm/fw_serial.h)."""
+
+    _fields_ = [("buf", C.c_uint8 * sl.MAX_ENCODED), ("len", C.c_size_t),
+                ("overflow", C.c_uint8), ("have_seq", C.c_uint8), ("next_seq", C.c_uint16),
+                ("frames_ok", C.c_uint32), ("frames_bad", C.c_uint32),
+                ("frames_lost", C.c_uint32), ("restarts", C.c_uint32)]
+
+
+#: (sequence numbers, restarts, lost): the vectors of test_decoder_restart in
+#: tests/c/test_serial.c
+RESTART_VECTORS = [
+    ((100, 101, 102, 0, 1, 3), 1, 1),  # drive reset: one restart, then seq 2 lost
+    ((65534, 65535, 2), 0, 2),  # forward across the 16-bit wrap: 0 and 1 lost
+    ((0, 0x8001), 0, 0x8000),  # a gap of exactly 0x8000 is loss
+    ((0, 0x8002), 1, 0),  # one more is a restart
+    ((7, 7), 1, 0),  # a repeated frame is behind the expected number
+]
+
+
+@pytest.mark.parametrize(("seqs", "restarts", "lost"), RESTART_VECTORS)
+def test_receiver_sender_restart_is_not_loss(lib, seqs, restarts, lost):
     """A drive reset restarts the sequence at 0: counted as a restart, not as
-    ~65000 lost frames; a forward gap across the 16-bit wrap is still loss."""
+    ~65000 lost frames; a forward gap across the 16-bit wrap is still loss. The
+    firmware's decoder counts the same."""
+    stream = b"".join(sl.encode_frame(sl.FrameType.TELEMETRY, s, b"x") for s in seqs)
     rx = sl.Receiver()
-    stream = b"".join(sl.encode_frame(sl.FrameType.TELEMETRY, s, b"x")
-                      for s in (1000, 1001, 1002, 0, 1, 3))
-    frames = rx.feed(stream)
-    assert [f.seq for f in frames] == [1000, 1001, 1002, 0, 1, 3]
-    assert rx.restarts == 1 and rx.frames_lost == 1  # only seq 2 after the restart
-    rx2 = sl.Receiver()
-    rx2.feed(b"".join(sl.encode_frame(sl.FrameType.TELEMETRY, s) for s in (65534, 65535, 2)))
-    assert rx2.frames_lost == 2 and rx2.restarts == 0  # 0 and 1 lost across the wrap
+    assert [f.seq for f in rx.feed(stream)] == list(seqs)
+    assert (rx.restarts, rx.frames_lost) == (restarts, lost)
+    dec, msg = Decoder(), Msg()
+    lib.fw_serial_decoder_init(C.byref(dec))
+    for b in stream:
+        lib.fw_serial_decoder_push(C.byref(dec), C.c_uint8(b), C.byref(msg))
+    assert (dec.frames_ok, dec.frames_bad) == (len(seqs), 0)
+    assert (dec.restarts, dec.frames_lost) == (restarts, lost)
