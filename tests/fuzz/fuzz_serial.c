@@ -2,8 +2,9 @@
  * @file fuzz_serial.c
  * @brief libFuzzer harness for the serial frame parser: the input as a byte
  *        stream into the decoder, and as one frame into fw_serial_decode.
- *        Every accepted frame must re-encode and decode to itself; COBS
- *        decode(encode(x)) == x for arbitrary x.
+ *        Every accepted frame must re-encode and decode to itself and move the
+ *        loss/restart counters as its sequence gap says; the counters add up to
+ *        the statuses returned; COBS decode(encode(x)) == x for arbitrary x.
  */
 #include <stdint.h>
 #include <stdlib.h>
@@ -88,11 +89,33 @@ static void fuzz_trace(const uint8_t *data, size_t size) {
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   fw_serial_decoder_t dec;
   fw_serial_msg_t msg;
+  uint32_t ok = 0u, bad = 0u;
   fw_serial_decoder_init(&dec);
   for (size_t i = 0; i < size; i++) {
-    if (fw_serial_decoder_push(&dec, data[i], &msg) == FW_SERIAL_OK) {
+    uint32_t lost0 = dec.frames_lost, restarts0 = dec.restarts;
+    uint16_t next0 = dec.next_seq;
+    uint8_t have0 = dec.have_seq;
+    fw_serial_status_t st = fw_serial_decoder_push(&dec, data[i], &msg);
+    if (st == FW_SERIAL_OK) {
       roundtrip(&msg);
+      ok++;
+      /* a frame is either in sequence, a forward gap (loss) or one restart */
+      uint16_t gap = (uint16_t)(msg.seq - next0);
+      uint32_t dl = dec.frames_lost - lost0, dr = dec.restarts - restarts0;
+      if (!have0 ? (dl != 0u || dr != 0u)
+                 : (gap <= FW_SERIAL_RESTART_GAP ? (dl != gap || dr != 0u)
+                                                 : (dl != 0u || dr != 1u))) {
+        abort();
+      }
+    } else if (st != FW_SERIAL_INCOMPLETE) {
+      bad++;
+      if (dec.frames_lost != lost0 || dec.restarts != restarts0) {
+        abort();
+      }
     }
+  }
+  if (dec.frames_ok != ok || dec.frames_bad != bad) {
+    abort();
   }
   if (fw_serial_decode(data, size, &msg) == FW_SERIAL_OK) {
     roundtrip(&msg);
