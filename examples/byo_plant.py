@@ -9,7 +9,11 @@ Simulink, a measured model): the firmware only needs the sampled phase
 currents (A) and the DC-link voltage (V) once per PWM period, and returns the
 duty cycles (0..1) to apply over the NEXT period.
 
-    python examples/byo_plant.py            # 0.5 s at 100 r/min, prints the error
+The drive is commanded in linear units (m/s, N): ``Firmware.set_speed_ref_mps``;
+force mode would use ``set_force_ref_N``. A configuration the firmware refuses
+raises ``sim_fallback.ConfigError`` naming the field, its value and its range.
+
+    python examples/byo_plant.py            # 0.5 s at 0.32 m/s, 65 N load at 0.35 s
 """
 
 from __future__ import annotations
@@ -47,7 +51,8 @@ class NumpyPlant:
         return np.array([i_a, -0.5 * i_a + 0.5 * math.sqrt(3) * i_b,
                          -0.5 * i_a - 0.5 * math.sqrt(3) * i_b])
 
-    def step(self, duty_abc: np.ndarray, on: bool, dt: float, n_sub: int = 8) -> None:
+    def step(self, duty_abc: np.ndarray, on: bool, dt: float, n_sub: int = 8,
+             load_N: float = 0.0) -> None:
         u = duty_abc * self.u_dc if on else np.full(3, self.u_dc / 2)
         u_a = 2 / 3 * (u[0] - 0.5 * u[1] - 0.5 * u[2])
         u_b = (u[1] - u[2]) / math.sqrt(3)
@@ -66,24 +71,25 @@ class NumpyPlant:
             F = 1.5 * self.k * (psi_d * i_q - self.L_q * i_q * i_d)
             self.i_dq += h * np.array([di_d, di_q])
             self.x += h * self.v
-            self.v += h * (F - self.b * self.v) / self.mass
+            self.v += h * (F - self.b * self.v - load_N) / self.mass
 
 
-def main(t_end: float = 0.5, n_rpm: float = 100.0, x0: float = 0.0073) -> dict[str, float]:
+def main(t_end: float = 0.5, v_mps: float = 0.32, load_N: float = 65.0, t_load: float = 0.35,
+         x0: float = 0.0073) -> dict[str, float]:
     motor = load_motor("paper_salient")
-    cfg = fw_config(motor, "sogi_adaptive")   # nominal parameters + paper gains
-    fw = Firmware(cfg)
+    cfg = fw_config(motor, "sogi_adaptive")   # nominal parameters + gains
+    fw = Firmware(cfg)                        # raises ConfigError on a refused field
     plant = NumpyPlant(x0=x0, u_dc=300.0)
     dt = 1.0 / cfg.f_pwm_Hz
     fw.enable("speed")
-    fw.set_speed_ref_rpm(n_rpm)
+    fw.set_speed_ref_mps(v_mps)
     duty, on = np.full(3, 0.5), False         # latched duties (one-period delay)
     rng = np.random.default_rng(0)
     err = []
     for k in range(int(t_end / dt)):
         i_meas = plant.phase_currents() + rng.normal(0.0, 0.012, 3)  # your ADC here
         new_duty, new_on = fw.step(i_meas, plant.u_dc)
-        plant.step(duty, on, dt)               # previous duties act over this period
+        plant.step(duty, on, dt, load_N=load_N if k * dt >= t_load else 0.0)  # previous duties
         duty, on = new_duty, new_on
         if k * dt > 0.3:
             snap = fw.snapshot()
@@ -91,7 +97,9 @@ def main(t_end: float = 0.5, n_rpm: float = 100.0, x0: float = 0.0073) -> dict[s
             err.append(e)
     err = np.asarray(err)
     out = {"position_error_rms_rad": float(np.sqrt(np.mean(err**2))),
-           "speed_rpm": float(plant.v * plant.k * 60 / (2 * math.pi * 4)),
+           "position_error_max_rad": float(np.max(np.abs(err))),
+           "speed_mps": float(plant.v),
+           "speed_rpm": float(plant.v * plant.k * 60 / (2 * math.pi * cfg.pole_pairs)),
            "fault_code": fw.fault_code()}
     return out
 

@@ -11,7 +11,7 @@ Metrics (one definition for the simulator, the bench and the reports):
 ``sim_fallback.metrics`` (public, numpy only). See docs/simulator.md.
 """
 
-from ._firmware import Firmware
+from ._firmware import ConfigError, Firmware, RefError, config_error
 from ._lib import FwConfig, FwSnapshot, SimPlantParams, lib_path
 from ._motors import (
     MOTOR_DIR,
@@ -37,7 +37,8 @@ from ._sim import (
 from .metrics import METRIC_DEFS, METRIC_NAMES, METRICS, compute_metrics, run_metrics, wrap_pi
 
 __all__ = [
-    "CHANNELS", "METRIC_DEFS", "METRIC_NAMES", "METRICS", "MOTOR_DIR", "PAPER_SCENARIOS",
+    "CHANNELS", "ConfigError", "RefError", "config_error", "METRIC_DEFS", "METRIC_NAMES",
+    "METRICS", "MOTOR_DIR", "PAPER_SCENARIOS",
     "SIM_REF_FORCE", "SIM_REF_LOAD", "SIM_REF_SPEED", "Firmware", "FwConfig", "FwSnapshot",
     "Motor", "MotorFileError", "Result", "Sim", "SimPlantParams", "compute_metrics",
     "firmware_check", "firmware_field_ranges", "fw_config", "load_motor", "lib_path",

@@ -11,12 +11,46 @@ from __future__ import annotations
 import ctypes as C
 import math
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from . import _lib
+
+
+class ConfigError(ValueError):
+    """The firmware refused a configuration (``fw_init``/``fw_config_check``).
+
+    Attributes: ``field`` (fw_config_t field name), ``value``, ``allowed``
+    ((min, max) or None when the field is inconsistent with others), ``status``
+    (fw_status_t).
+    """
+
+    def __init__(self, message: str, field: str, value: float,
+                 allowed: tuple[float, float] | None, status: int) -> None:
+        super().__init__(message)
+        self.field, self.value, self.allowed, self.status = field, value, allowed, status
+
+
+class RefError(ValueError):
+    """A reference the firmware refused (non-finite) or clamped (out of range)."""
+
+
+def config_error(cfg: _lib.FwConfig) -> ConfigError | None:
+    """``ConfigError`` describing why the firmware refuses ``cfg``, or None."""
+    from ._motors import firmware_check
+    L = _lib.lib()
+    issue = _lib.FwConfigIssue()
+    st = int(L.fw_config_check(cfg, C.byref(issue)))
+    if st == 0:
+        return None
+    _, msg = firmware_check(cfg)
+    field = issue.field.decode() if issue.field else "?"
+    # float32 limits: 7 significant digits give back the written value (1e-3)
+    allowed = ((float(f"{issue.min:.7g}"), float(f"{issue.max:.7g}")) if st in (2, 3, 5)
+               else None)
+    return ConfigError(msg, field, float(issue.value), allowed, st)
+
 
 CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION, CW_DISABLE_VOLTAGE = 0x06, 0x07, 0x0F, 0x00
 CW_FAULT_RESET = 0x80
@@ -28,24 +62,44 @@ class Firmware:
 
     Parameters
     ----------
-    cfg : FwConfig | str | Path | None
-        A ``fw_config_t`` mirror, a motor name/path (config derived with the
-        paper's gain rules) or None for ``fw_config_default``.
+    cfg : FwConfig | Motor | str | Path | None
+        A ``fw_config_t`` mirror, a :class:`Motor` or a motor name/path (config
+        from :func:`fw_config`, gains derived by the firmware) or None for
+        ``fw_config_default``.
     extractor : str | int
         Used when ``cfg`` is a motor.
+    strict : bool
+        True (default): a configuration the firmware refuses raises
+        :class:`ConfigError` naming the field, its value and the allowed range.
+        False: keep the refused drive (it stays in FAULT with the refusal's
+        fault code, as a real drive would boot); ``init_status`` tells why.
+    **overrides
+        ``fw_config_t`` fields to set (an unknown name raises ``KeyError``).
+
+    Raises
+    ------
+    ConfigError
+        When ``strict`` and the firmware refuses the configuration.
     """
 
-    def __init__(self, cfg: _lib.FwConfig | str | Path | None = None,
-                 extractor: int | str = "sogi_adaptive", **overrides: float) -> None:
+    def __init__(self, cfg: Any = None,
+                 extractor: int | str = "sogi_adaptive", strict: bool = True,
+                 **overrides: float) -> None:
         self._L = _lib.lib()
         if cfg is None:
             cfg = _lib.FwConfig()
             self._L.fw_config_default(cfg)
         elif not isinstance(cfg, _lib.FwConfig):
-            from ._motors import fw_config, load_motor
-            cfg = fw_config(load_motor(cfg), extractor)
+            from ._motors import Motor, fw_config, load_motor
+            cfg = fw_config(cfg if isinstance(cfg, Motor) else load_motor(cfg), extractor)
         for k, v in overrides.items():
+            if k not in _lib.FwConfig.field_names():
+                raise KeyError(f"unknown fw_config_t field '{k}'")
             setattr(cfg, k, v)
+        if strict:
+            err = config_error(cfg)
+            if err is not None:
+                raise err
         self.cfg = cfg
         self.handle = self._L.sim_fw_new()
         if not self.handle:
@@ -79,14 +133,49 @@ class Firmware:
         self.controlword(CW_SWITCH_ON)
         return self.controlword(CW_ENABLE_OPERATION)
 
+    @staticmethod
+    def _ref(status: int, name: str, value: float, unit: str) -> int:
+        if status == 3:  # FW_ERR_NOT_FINITE: nothing applied
+            raise RefError(f"{name} = {value!r} {unit} refused: must be a finite number")
+        return status
+
     def set_speed_ref_radps_e(self, w: float) -> int:
-        return int(self._L.fw_set_speed_ref(self.handle, w))
+        """Speed mode: electrical rad/s. Returns 0, or 2 (FW_ERR_RANGE) when the
+        firmware clamped it to +-speed_max_radps_e; raises :class:`RefError`
+        for NaN/inf (nothing applied)."""
+        return self._ref(int(self._L.fw_set_speed_ref(self.handle, w)), "speed reference", w,
+                         "rad/s el.")
 
     def set_speed_ref_rpm(self, n_rpm: float) -> int:
-        return self.set_speed_ref_radps_e(n_rpm * 2.0 * math.pi * self.cfg.pole_pairs / 60.0)
+        """Speed mode: rotary-equivalent r/min (see :meth:`set_speed_ref_radps_e`)."""
+        return self.set_speed_ref_radps_e(
+            self._L.fw_units_rpm_to_radps_e(C.byref(self.cfg), n_rpm))
+
+    def set_speed_ref_mps(self, v_mps: float) -> int:
+        """Speed mode: linear speed in m/s (w_e = pi v / tau)."""
+        return self.set_speed_ref_radps_e(
+            self._L.fw_units_mps_to_radps_e(C.byref(self.cfg), v_mps))
 
     def set_iq_ref_A(self, i_q: float) -> int:
-        return int(self._L.fw_set_iq_ref(self.handle, i_q))
+        """Force mode: q-axis current reference in A (clamped to +-i_max_A: 2)."""
+        return self._ref(int(self._L.fw_set_iq_ref(self.handle, i_q)), "i_q reference", i_q,
+                         "A")
+
+    def set_force_ref_N(self, force_N: float) -> int:
+        """Force mode: thrust in N, i_q = F / K_F with the firmware's
+        ``fw_units_force_per_A`` (K_F = 1.5 (pi/tau) psi_f)."""
+        return self._ref(int(self._L.fw_set_force_ref(self.handle, force_N)),
+                         "force reference", force_N, "N")
+
+    def set_torque_ref_Nm(self, torque_Nm: float) -> int:
+        """Force mode, rotary equivalent: T = F r with r = p tau / pi."""
+        r = self.cfg.pole_pairs * self.cfg.pole_pitch_m / math.pi
+        return self.set_force_ref_N(torque_Nm / r)
+
+    @property
+    def force_per_A(self) -> float:
+        """K_F in N/A (the firmware's nominal thrust constant)."""
+        return float(self._L.fw_units_force_per_A(C.byref(self.cfg)))
 
     def set_extractor(self, ex: int | str) -> int:
         from ._motors import extractor_id

@@ -57,6 +57,10 @@ class FwConfig(C.Structure):
     def as_dict(self) -> dict[str, float | int]:
         return {name: getattr(self, name) for name, _ in self._fields_}
 
+    @classmethod
+    def field_names(cls) -> frozenset[str]:
+        return frozenset(name for name, _ in cls._fields_)
+
 
 class FwInputs(C.Structure):
     """Mirror of ``fw_inputs_t`` (phase currents A, DC link V)."""
@@ -265,6 +269,11 @@ def _declare(lib: C.CDLL) -> None:
         "fw_set_speed_ref": (C.c_int, [V, _f]),
         "fw_set_iq_ref": (C.c_int, [V, _f]),
         "fw_set_id_ref": (C.c_int, [V, _f]),
+        "fw_set_force_ref": (C.c_int, [V, _f]),
+        "fw_units_mps_to_radps_e": (_f, [P(FwConfig), _f]),
+        "fw_units_radps_e_to_mps": (_f, [P(FwConfig), _f]),
+        "fw_units_rpm_to_radps_e": (_f, [P(FwConfig), _f]),
+        "fw_units_force_per_A": (_f, [P(FwConfig)]),
         "fw_set_extractor": (C.c_int, [V, C.c_int]),
         "fw_fault_code": (C.c_int, [V]),
         "fw_raise_fault": (None, [V, C.c_int]),

@@ -117,10 +117,13 @@ def firmware_check(cfg: _lib.FwConfig) -> tuple[int, str]:
                     f"below the firmware's saliency_min {cfg.saliency_min:g}: the drive "
                     "refuses HF injection (fault 0xFF03 SALIENCY_TOO_LOW)")
     if st == 5:
+        unit = firmware_field_ranges().get(name, (0.0, 0.0, ""))[2]
         return st, (f"{name} = {issue.value:g} is inconsistent with the other fields "
-                    f"(fw_config_check: {what})")
+                    f"({what}): allowed [{issue.min:.7g}, {issue.max:.7g}]"
+                    + (f" {unit}" if unit else "") + " given them")
+    unit = firmware_field_ranges().get(name, (0.0, 0.0, ""))[2]
     return st, f"{name} = {issue.value:g} refused ({what}); allowed range [{issue.min:g}, " \
-               f"{issue.max:g}]"
+               f"{issue.max:g}]" + (f" {unit}" if unit else "")
 
 
 # (section, key) -> (required, lo, hi, unit, default); lists are checked per element.
@@ -367,6 +370,9 @@ def _build(path: Path, doc: dict[str, Any]) -> Motor:
         F_s = float(g["static_friction_Nm"]) / r
         tc = g["coulomb_friction_Nm"]
         F_c = F_s if tc is None else float(tc) / r
+        if "static_friction_Nm" not in doc["mechanical"]:
+            F_s = F_c  # only the Coulomb (kinetic) level given: no extra breakaway
+        fric_keys = ("static_friction_Nm", "coulomb_friction_Nm", r)
         cog = float(g["cogging_Nm"]) / r
     else:
         if "mass_kg" not in doc["mechanical"]:
@@ -383,12 +389,18 @@ def _build(path: Path, doc: dict[str, Any]) -> Motor:
         b = float(g["viscous_Ns_per_m"])
         F_s = float(g["static_friction_N"])
         F_c = F_s if g["coulomb_friction_N"] is None else float(g["coulomb_friction_N"])
+        if "static_friction_N" not in doc["mechanical"]:
+            F_s = F_c  # only the Coulomb (kinetic) level given: no extra breakaway
+        fric_keys = ("static_friction_N", "coulomb_friction_N", 1.0)
         cog = float(g["cogging_N"])
     if g["i_trip_A"] <= g["i_max_A"]:
         raise _err(path, "controller.i_trip_A", f"{g['i_trip_A']} A must exceed "
                    f"controller.i_max_A = {g['i_max_A']} A (the trip level is above the limit)")
     if F_c > F_s:
-        raise _err(path, "mechanical.coulomb_friction", f"{F_c} N must be <= static {F_s} N")
+        k_s, k_c, scale = fric_keys
+        raise _err(path, f"mechanical.{k_c}",
+                   f"{F_c * scale:g} must be <= mechanical.{k_s} = {F_s * scale:g} (kinetic "
+                   "friction cannot exceed the breakaway level)")
     if g["udc_fullscale_V"] <= g["u_dc_V"]:
         raise _err(path, "sensing.udc_fullscale_V",
                    f"{g['udc_fullscale_V']} must exceed inverter.u_dc_V = {g['u_dc_V']}")

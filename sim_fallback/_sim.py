@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from . import _lib
-from ._firmware import Firmware
+from ._firmware import Firmware, config_error
 from ._motors import Motor, extractor_id, fw_config, load_motor, plant_params
 from .metrics import METRIC_NAMES, TRUTH_CHANNELS, run_metrics, wrap_pi
 
@@ -68,12 +68,16 @@ class Sim:
         ``sim_plant_params_t`` overrides (linear units).
     fw : dict
         ``fw_config_t`` overrides.
+    strict : bool
+        True: a configuration the firmware refuses raises
+        :class:`~sim_fallback.ConfigError` (field, value, allowed range).
+        False: the simulated drive boots refused, in FAULT, like a real drive.
     """
 
     def __init__(self, motor: str | Path | Motor = "paper_salient",
                  extractor: int | str = "sogi_adaptive", seed: int = 0, noise: float = 1.0,
                  x0_m: float = 0.0, plant: dict[str, Any] | None = None,
-                 fw: dict[str, float] | None = None) -> None:
+                 fw: dict[str, float] | None = None, strict: bool = True) -> None:
         self._L = _lib.lib()
         self.motor = motor if isinstance(motor, Motor) else load_motor(motor)
         ov = dict(plant or {})
@@ -91,7 +95,7 @@ class Sim:
             raise MemoryError("sim_new failed")
         self.dt_s = 1.0 / self.params.f_pwm_Hz
         self.cfg = fw_config(self.motor, extractor, **(fw or {}))
-        self.firmware = Firmware(self.cfg)
+        self.firmware = Firmware(self.cfg, strict=strict)
         self._port = _lib.SimController()
         self._L.sim_fw_port(self.firmware.handle, C.byref(self._port))
         self._L.sim_set_controller(self._h, C.byref(self._port))
@@ -315,7 +319,11 @@ def run_scenario(motor: str | Path | Motor = "paper_salient",
         x0 = float(x0_m)
     ex_name = {v: k for k, v in {"pseudo": 0, "sogi": 1, "sogi_adaptive": 2}.items()}[
         extractor_id(extractor)]
-    sim = Sim(mot, extractor=extractor, seed=seed, noise=noise, x0_m=x0, plant=plant, fw=fw)
+    # strict=False: a refused configuration is a result (the drive boots in
+    # FAULT), reported in info["invalid_reason"] with the field and its range.
+    sim = Sim(mot, extractor=extractor, seed=seed, noise=noise, x0_m=x0, plant=plant, fw=fw,
+              strict=False)
+    refused = config_error(sim.cfg)
     try:
         sp_scale = {"rpm": mot.rpm_to_radps_e(1.0), "mps": mot.mps_to_radps_e(1.0),
                     "radps_e": 1.0}[speed_unit]
@@ -340,7 +348,9 @@ def run_scenario(motor: str | Path | Motor = "paper_salient",
         # never reached closed loop, has no accuracy figures.
         fc = data["fault_code"]
         reason = None
-        if fault or (fc.size and np.any(fc != 0)):
+        if refused is not None:
+            reason = f"configuration refused: {refused}"
+        elif fault or (fc.size and np.any(fc != 0)):
             reason = f"fault 0x{(fault or int(fc[fc != 0][0])):04X}"
         elif "start_phase" in data and not np.any(data["start_phase"] == 3):
             reason = "never reached closed loop (start_phase RUN)"

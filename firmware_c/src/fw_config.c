@@ -140,7 +140,7 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->quick_stop_time_s = 0.5f;
   cfg->adc_A_per_count = 50.0f / 4096.0f; /* +/-25 A over 12 bits */
   cfg->adc_offset_counts = 2048.0f;
-  cfg->adc_V_per_count = 500.0f / 4095.0f;
+  cfg->adc_V_per_count = 500.0f / 4096.0f; /* 0..500 V, LSB = FS / 2^12 */
   cfg->adc_max_count = 4095u;
   cfg->v_max_mps = 3.0f;
   cfg->pos_limit_min_m = 0.0f; /* min >= max: software limits off */
@@ -178,7 +178,7 @@ void fw_config_derive(fw_config_t *cfg) {
     return; /* the range check reports bad fields */
   }
   const float k_e = FW_PI_F32 / cfg->pole_pitch_m; /* el. rad per m */
-  const float K_F = 1.5f * k_e * cfg->psi_f_Wb;    /* N per A of i_q */
+  const float K_F = fw_units_force_per_A(cfg);     /* N per A of i_q */
   cfg->cur_kp_V_per_A = cfg->L_d_H * cfg->cur_bw_radps;
   cfg->cur_ki_V_per_As = cfg->R_ohm * cfg->cur_bw_radps;
   cfg->spd_kp_A_per_radps = cfg->mass_kg * cfg->spd_bw_radps / K_F / k_e;

@@ -346,6 +346,13 @@ fw_status_t fw_set_iq_ref(fw_ctrl_t *ctrl, float i) {
   return ctrl ? set_clamped(&ctrl->i_q_ref_force_A, i, ctrl->cfg.i_max_A) : FW_ERR_NULL;
 }
 
+fw_status_t fw_set_force_ref(fw_ctrl_t *ctrl, float force_N) {
+  if (ctrl == NULL) return FW_ERR_NULL;
+  const float k_f = fw_units_force_per_A(&ctrl->cfg);
+  if (!(k_f > 0.0f) || !fw_isfinite_f32(force_N)) return FW_ERR_NOT_FINITE;
+  return fw_set_iq_ref(ctrl, force_N / k_f);
+}
+
 fw_status_t fw_set_id_ref(fw_ctrl_t *ctrl, float i) {
   return ctrl ? set_clamped(&ctrl->i_d_ref_A, i, ctrl->cfg.i_max_A) : FW_ERR_NULL;
 }
@@ -1108,7 +1115,7 @@ void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
   snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, ctrl->pll.w_i_radps);
   snap->sogi_k_eff = ctrl->sogi_a.k;
   snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
-  snap->force_hat_N = 1.5f * (FW_PI_F32 / cfg->pole_pitch_m) * cfg->psi_f_Wb * snap->i_dq_A[1];
+  snap->force_hat_N = fw_units_force_per_A(cfg) * snap->i_dq_A[1];
   snap->torque_hat_Nm = 1.5f * cfg->pole_pairs * cfg->psi_f_Wb * snap->i_dq_A[1];
   snap->statusword = fw_statusword(ctrl);
 }
@@ -1126,4 +1133,7 @@ float fw_units_rpm_to_radps_e(const fw_config_t *cfg, float n) {
 }
 float fw_units_radps_e_to_rpm(const fw_config_t *cfg, float w) {
   return w * 60.0f / (FW_TWO_PI_F32 * cfg->pole_pairs);
+}
+float fw_units_force_per_A(const fw_config_t *cfg) {
+  return 1.5f * (FW_PI_F32 / cfg->pole_pitch_m) * cfg->psi_f_Wb;
 }

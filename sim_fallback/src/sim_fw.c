@@ -25,10 +25,7 @@ void sim_fw_set_ref(void *ctx, sim_ref_kind_t kind, double value) {
   if (kind == SIM_REF_SPEED) {
     (void)fw_set_speed_ref(c, (float)value);
   } else if (kind == SIM_REF_FORCE) {
-    /* thrust -> i_q with the controller's nominal force constant */
-    const fw_config_t *cfg = fw_get_config(c);
-    const double kf = 1.5 * SIM_PI / (double)cfg->pole_pitch_m * (double)cfg->psi_f_Wb;
-    if (kf > 0.0) (void)fw_set_iq_ref(c, (float)(value / kf));
+    (void)fw_set_force_ref(c, (float)value); /* i_q from the controller's K_F */
   }
 }
 

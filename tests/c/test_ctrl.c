@@ -383,7 +383,7 @@ static void test_fault_adc_range(void) {
   fw_outputs_t out;
   fw_step_adc(&c, &adc, &out);
   TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
-  TT_CHECK_NEAR(c.snap.u_dc_V, 2457.0 * 500.0 / 4095.0, 1e-3);
+  TT_CHECK_NEAR(c.snap.u_dc_V, 2457.0 * 500.0 / 4096.0, 1e-3); /* same LSB rule as fw_config() */
   adc.i_abc_counts[0] = 5000u; /* beyond 12 bits */
   fw_step_adc(&c, &adc, &out);
   TT_CHECK(fw_fault_code(&c) == FW_FAULT_ADC_RANGE);
@@ -522,6 +522,16 @@ static void test_units_and_refs(void) {
   TT_CHECK(fw_set_extractor(&c, FW_EXTRACTOR_PSEUDO) == FW_OK);
   TT_CHECK(c.cfg.extractor == 0u);
   TT_CHECK(fw_ctrl_sizeof() == sizeof(fw_ctrl_t));
+  /* thrust constant K_F = 1.5 (pi / tau) psi_f, computed here in double */
+  const double k_f = 1.5 * M_PI / (double)cfg.pole_pitch_m * (double)cfg.psi_f_Wb;
+  TT_CHECK_NEAR(fw_units_force_per_A(&cfg), k_f, 1e-4 * k_f);
+  TT_CHECK(fw_set_force_ref(&c, (float)(2.0 * k_f)) == FW_OK);
+  TT_CHECK_NEAR(c.i_q_ref_force_A, 2.0, 1e-5);
+  TT_CHECK(fw_set_force_ref(&c, (float)(1.01 * k_f * cfg.i_max_A)) == FW_ERR_RANGE);
+  TT_CHECK_NEAR(c.i_q_ref_force_A, cfg.i_max_A, 1e-5);
+  TT_CHECK(fw_set_force_ref(&c, NAN) == FW_ERR_NOT_FINITE);
+  TT_CHECK_NEAR(c.i_q_ref_force_A, cfg.i_max_A, 1e-5); /* unchanged */
+  TT_CHECK(fw_set_force_ref(NULL, 1.0f) == FW_ERR_NULL);
 }
 
 /* Review: the unwrapped position must not lose float32 precision as it

@@ -38,3 +38,5 @@ def test_byo_example_tracks():
     assert out["fault_code"] == 0
     assert out["position_error_rms_rad"] < 0.1
     assert abs(out["speed_rpm"] - 100.0) < 20.0
+    # commanded in m/s (0.32 m/s = 100 r/min on this motor); 65 N load from 0.35 s
+    assert abs(out["speed_mps"] - 0.32) < 0.064

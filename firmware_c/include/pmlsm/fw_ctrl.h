@@ -465,6 +465,9 @@ fw_status_t fw_set_mode(fw_ctrl_t *ctrl, fw_mode_t mode);
 fw_status_t fw_set_speed_ref(fw_ctrl_t *ctrl, float omega_ref_radps_e);
 /** q-axis current reference for FORCE mode (clamped to i_max_A). */
 fw_status_t fw_set_iq_ref(fw_ctrl_t *ctrl, float i_q_ref_A);
+/** Force mode: thrust reference in N, converted with fw_units_force_per_A and
+ *  clamped like fw_set_iq_ref; FW_ERR_NOT_FINITE for NaN/inf or K_F <= 0. */
+fw_status_t fw_set_force_ref(fw_ctrl_t *ctrl, float force_N);
 /** d-axis current reference (clamped to i_max_A), default 0. */
 fw_status_t fw_set_id_ref(fw_ctrl_t *ctrl, float i_d_ref_A);
 /** Switch extractor at run time: the one-period averages restart and the
@@ -503,6 +506,9 @@ float fw_units_radps_e_to_mps(const fw_config_t *cfg, float w_radps_e);
 /** Rotary-equivalent r/min -> electrical rad/s: w_e = p 2 pi n / 60. */
 float fw_units_rpm_to_radps_e(const fw_config_t *cfg, float n_rpm);
 float fw_units_radps_e_to_rpm(const fw_config_t *cfg, float w_radps_e);
+/** Nominal thrust constant K_F = 1.5 (pi/tau) psi_f (N per A of i_q); the one
+ *  definition used by the gain derivation, force mode and the snapshot. */
+float fw_units_force_per_A(const fw_config_t *cfg);
 
 #ifdef __cplusplus
 }

@@ -1,0 +1,156 @@
+"""The simulated drive's Python API: a refused configuration raises and names the
+field, its value and the allowed range; setters in m/s and N agree with the
+analytic unit conversions (w_e = pi v / tau, K_F = 1.5 (pi/tau) psi_f); motor
+files with only a Coulomb friction level load; one DC-link ADC scaling rule."""
+
+import math
+
+import numpy as np
+import pytest
+
+import sim_fallback as sf
+from sim_fallback import _lib
+
+
+def test_out_of_range_field_raises_with_field_value_and_range():
+    with pytest.raises(sf.ConfigError) as ei:
+        sf.Firmware("iron_core_linear", R_ohm=-1.0)
+    e = ei.value
+    assert e.field == "R_ohm" and e.value == -1.0 and e.status == 2
+    lo, hi, unit = sf.firmware_field_ranges()["R_ohm"]
+    assert e.allowed == (lo, hi)
+    msg = str(e)
+    assert "R_ohm" in msg and "-1" in msg and f"{lo:g}" in msg and f"{hi:g}" in msg
+    assert unit in msg
+
+
+def test_non_finite_field_raises():
+    with pytest.raises(sf.ConfigError) as ei:
+        sf.Firmware("paper_salient", L_d_H=float("nan"))
+    assert ei.value.field == "L_d_H"
+
+
+def test_inconsistent_fields_name_the_field_and_the_range_the_others_allow():
+    with pytest.raises(sf.ConfigError) as ei:
+        sf.Firmware("iron_core_linear", i_trip_A=1.0)   # i_max_A (20 A) >= i_trip_A
+    e = ei.value
+    assert e.field == "i_max_A" and e.status == 5
+    assert e.allowed is not None and e.allowed[1] == pytest.approx(1.0)
+    assert "i_max_A = 20" in str(e)
+
+
+def test_saliency_refusal_explains_itself_and_is_a_result_in_run_scenario():
+    with pytest.raises(sf.ConfigError) as ei:
+        sf.Firmware("paper_table1")                        # L_q = L_d
+    assert ei.value.status == 4 and "saliency" in str(ei.value)
+    # the device view: the drive boots refused, the run is invalid with the reason
+    fw = sf.Firmware("paper_table1", strict=False)
+    assert fw.init_status == 4
+    res = sf.run_scenario("paper_table1", t_end=0.05)
+    assert not res.valid
+    assert res.info["invalid_reason"].startswith("configuration refused: saliency")
+
+
+def test_unknown_override_is_a_key_error_naming_it():
+    with pytest.raises(KeyError, match="R_ohmm"):
+        sf.Firmware("paper_salient", R_ohmm=1.0)
+
+
+def test_sim_raises_on_refused_configuration():
+    with pytest.raises(sf.ConfigError, match="psi_f_Wb"):
+        sf.Sim("iron_core_linear", fw={"psi_f_Wb": 0.0})
+
+
+def test_speed_setters_match_the_analytic_conversions():
+    mot = sf.load_motor("iron_core_linear")
+    fw = sf.Firmware(mot)
+    tau, p = fw.cfg.pole_pitch_m, fw.cfg.pole_pairs
+    assert fw.set_speed_ref_mps(0.5) == 0
+    w = fw.snapshot()["speed_ref_radps_e"]
+    assert w == pytest.approx(math.pi * 0.5 / tau, rel=1e-6)
+    assert fw.set_speed_ref_rpm(30.0) == 0
+    assert fw.snapshot()["speed_ref_radps_e"] == pytest.approx(30.0 * 2 * math.pi * p / 60,
+                                                               rel=1e-6)
+    # beyond the firmware's limit: clamped (status 2), not silently different
+    v_big = 1.01 * fw.cfg.speed_max_radps_e * tau / math.pi
+    assert fw.set_speed_ref_mps(v_big) == 2
+    assert fw.snapshot()["speed_ref_radps_e"] == pytest.approx(fw.cfg.speed_max_radps_e)
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf")])
+def test_non_finite_references_raise_and_change_nothing(bad):
+    fw = sf.Firmware("iron_core_linear")
+    fw.set_speed_ref_mps(0.2)
+    before = fw.snapshot()["speed_ref_radps_e"]
+    for setter in (fw.set_speed_ref_mps, fw.set_speed_ref_rpm, fw.set_force_ref_N,
+                   fw.set_iq_ref_A, fw.set_torque_ref_Nm):
+        with pytest.raises(sf.RefError, match="finite"):
+            setter(bad)
+    assert fw.snapshot()["speed_ref_radps_e"] == before
+
+
+def test_force_setter_uses_the_analytic_thrust_constant():
+    fw = sf.Firmware("iron_core_linear")
+    k_f = 1.5 * math.pi / fw.cfg.pole_pitch_m * fw.cfg.psi_f_Wb   # numpy-free reference
+    assert fw.force_per_A == pytest.approx(k_f, rel=1e-6)
+    i_max = fw.cfg.i_max_A
+    # the clamp sits exactly at F = K_F i_max: +-0.1 % around it tells K_F to 0.1 %
+    assert fw.set_force_ref_N(0.999 * k_f * i_max) == 0
+    assert fw.set_force_ref_N(1.001 * k_f * i_max) == 2
+    r = fw.cfg.pole_pairs * fw.cfg.pole_pitch_m / math.pi
+    assert fw.set_torque_ref_Nm(0.999 * k_f * i_max * r) == 0
+    assert fw.set_torque_ref_Nm(1.001 * k_f * i_max * r) == 2
+
+
+def test_force_mode_run_produces_the_commanded_thrust():
+    # simulator truth: a locked-in force-mode run's mean plant thrust ~ the command
+    res = sf.run_scenario("iron_core_linear", force_ref=[(0.0, 0.0), (0.2, 30.0)], t_end=0.3,
+                          noise=0.0, channels=["force_N"])
+    t, f = res.data["t_s"], res.data["force_N"]
+    late = (t > 0.25)
+    assert res.fault_code == 0
+    assert np.mean(f[late]) == pytest.approx(30.0, rel=0.05)
+
+
+def _motor_file(tmp_path, mech: str):
+    src = (sf.MOTOR_DIR / "iron_core_linear.toml").read_text()
+    lines, out, skip = src.splitlines(), [], False
+    for ln in lines:
+        if ln.strip().startswith("["):
+            skip = ln.strip() == "[mechanical]"
+            if skip:
+                out.append("[mechanical]")
+                out.extend(mech.strip().splitlines())
+                continue
+        if not skip:
+            out.append(ln)
+    p = tmp_path / "m.toml"
+    p.write_text("\n".join(out) + "\n")
+    return p
+
+
+def test_motor_file_with_only_coulomb_friction_loads(tmp_path):
+    p = _motor_file(tmp_path, 'pole_pitch_m = 0.016\nmass_kg = 5.0\ncoulomb_friction_N = 7.5\n')
+    mot = sf.load_motor(p)
+    assert mot.plant["F_coulomb_N"] == 7.5 and mot.plant["F_static_N"] == 7.5
+
+
+def test_coulomb_above_static_names_the_real_key(tmp_path):
+    p = _motor_file(tmp_path, 'pole_pitch_m = 0.016\nmass_kg = 5.0\n'
+                              'static_friction_N = 2.0\ncoulomb_friction_N = 7.5\n')
+    with pytest.raises(sf.MotorFileError) as ei:
+        sf.load_motor(p)
+    msg = str(ei.value)
+    assert "mechanical.coulomb_friction_N" in msg and "static_friction_N = 2" in msg
+
+
+def test_dc_link_scaling_is_one_rule():
+    """fw_config_default and fw_config() scale the DC-link ADC alike (FS / 2^bits)."""
+    default = _lib.FwConfig()
+    _lib.lib().fw_config_default(default)
+    cfg = sf.fw_config(sf.load_motor("paper_salient"))
+    pl = sf.load_motor("paper_salient").plant
+    assert pl["adc_bits"] == 12 and pl["udc_fullscale_V"] == 500.0
+    assert cfg.adc_V_per_count == pytest.approx(500.0 / 4096.0, rel=1e-7)
+    assert default.adc_V_per_count == pytest.approx(cfg.adc_V_per_count, rel=1e-7)
+    assert default.adc_A_per_count == pytest.approx(cfg.adc_A_per_count, rel=1e-7)
