@@ -594,15 +594,13 @@ class Drive:
         return len(plan)
 
     # ---- trace buffer (scope) ---------------------------------------------------------
-    #: Trace storage of the firmware (FW_APP_TRACE_FLOATS: samples x signals).
-    trace_capacity_floats = 4096
-
     def trace_capture(self, signals: list[str], pre_s: float, f_pwm_Hz: float) -> dict[str, Any]:
         """Arm the drive's trace buffer with ``signals`` and trigger it now.
 
         The capture runs at the full control rate; its length is the buffer
-        capacity divided by the number of signals (4096 / 4 = 1024 samples,
-        43 ms at 24 kHz). Returns what was configured and ``t_trigger_clock``,
+        capacity (``protocols.serial_link.TRACE_FLOATS``, from the firmware's
+        FW_APP_TRACE_FLOATS) divided by the number of signals (4096 / 4 = 1024
+        samples, 43 ms at 24 kHz). Returns what was configured and ``t_trigger_clock``,
         the drive-clock time (s) at which the trigger command was acknowledged.
         The data comes back over the serial link after :meth:`trace_upload`.
         """
@@ -610,7 +608,7 @@ class Drive:
 
         names = serial_link.signal_names()
         ids = [names.index(sig) for sig in signals]
-        per_sig = self.trace_capacity_floats // max(1, len(ids))
+        per_sig = serial_link.TRACE_FLOATS // max(1, len(ids))
         pre = min(int(round(pre_s * f_pwm_Hz)), per_sig // 2)
         self.write_raw(0x2070, 1, 0)  # stop
         self.write_raw(0x2070, 7, len(ids))

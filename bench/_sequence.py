@@ -493,7 +493,6 @@ def _check_values(doc: dict[str, Any], file: str, marks: dict[tuple[Any, ...], t
     except (OSError, ValueError) as e:
         add(("motor",), " ".join(str(e).split()))
         return issues
-    from bench._drive import Drive
     from bench._units import MotorUnits
 
     units = MotorUnits(env["pole_pitch_m"], env["pole_pairs"])
@@ -531,13 +530,14 @@ def _check_values(doc: dict[str, Any], file: str, marks: dict[tuple[Any, ...], t
                                                  f"i_max_A; allowed range [{-lim:.4g}, "
                                                  f"{lim:.4g}] {unit}")
         if kind == "trace_capture":
+            from protocols.serial_link import TRACE_FLOATS  # the firmware's buffer size
             n_sig = len(p.get("signals") or ["", "", "", ""])
-            buf_s = Drive.trace_capacity_floats // n_sig / env["f_pwm_Hz"]
+            buf_s = TRACE_FLOATS // n_sig / env["f_pwm_Hz"]
             pre, dur = float(p.get("pre_s", 0.0)), float(p["duration_s"])
             if pre + dur > buf_s + 1e-12:
                 add(("steps", i, kind, "duration_s"),
                     f"pre_s + duration_s = {pre + dur:g} s exceeds the drive's trace buffer: "
-                    f"{Drive.trace_capacity_floats // n_sig} samples of {n_sig} signals at "
+                    f"{TRACE_FLOATS // n_sig} samples of {n_sig} signals at "
                     f"{env['f_pwm_Hz']:g} Hz = {buf_s:.4g} s")
             nxt = next((j for j in range(i + 1, len(steps)) if next(iter(steps[j])) != "wait"),
                        None)
