@@ -13,11 +13,11 @@ simulator's truth is used by the tests only, to judge the result.
 3. L_d(i_d): the raw HF response along d^ (pseudo-filter extraction:
    E_d = T_s u_inj / L_dd) at five d-axis bias currents; L_d0, dL and I_sat of
    L_dd = L_d0 - dL tanh(i_d / I_sat) by least squares.
-4. psi_f: the speed loop runs the mover at +v and -v; psi_f = (u_q - R i_q)/w
-   from the two steady windows (offsets cancel in the difference).
-5. Mass and friction: thrust-current steps back and forth within the travel;
-   K_F i_q = m a + b v + F_c sgn(v), with v and a from local quadratic fits of
-   the position estimate, solved by least squares.
+4. psi_f: the speed loop follows a 3 Hz speed profile around +v and around -v;
+   u_q - R i_q - L_q di_q/dt = w (psi_f + L_d i_d) + c by least squares.
+5. Mass and friction from the same runs: K_F i_q = m a + b v + F_c sgn(v).
+   Both fits use the position estimate's derivatives (zero phase) and the same
+   Gaussian low-pass on both sides of each equation (see _fit_motion).
 """
 
 from __future__ import annotations
@@ -34,6 +34,10 @@ from ._sim import SIM_REF_FORCE, SIM_REF_SPEED, Sim
 #: Relaxed monitor settings while identifying an unknown motor: the saliency
 #: check must measure, not judge, and the start must not depend on guessed gains.
 IDENT_FW = {"mon_sal_tol": 10.0, "saliency_min": 0.05}
+
+#: Speed profile of the motion runs: relative amplitude and frequency (Hz) of the
+#: sinusoid around the mean speed.
+PROFILE = (0.6, 3.0)
 
 
 @dataclass
@@ -210,79 +214,128 @@ def identify(motor: Motor, seed: int = 0, travel_m: float = 0.3, n_starts: int =
         sim.enable("force")
         p.run(0.15)
 
-        # 4. psi_f: speed loop at +v and -v
-        v_test = min(0.3, 0.25 * travel_m / 0.4)
+        # 4 + 5. a speed profile in each direction: the speed loop follows a 3 Hz
+        # sinusoid around +v and around -v (the Coulomb term has one sign per run, the
+        # mover never sticks mid-run); the drive records its position estimate, the
+        # q-axis voltage it commands and the currents it measures, one sample per ms
         k_w = motor.mps_to_radps_e(1.0)
         p.L.fw_set_mode(p.h, 0)
-        win = {}
-        for sgn in (1.0, -1.0, 1.0):
-            sim.set_schedule(SIM_REF_SPEED, sgn * v_test, k_w)
-            p.run(0.25)
-            snaps = p.run(0.1)
-            win.setdefault(sgn, []).append((p.mean(snaps, "u_dq_V", 1), p.mean(snaps, "i_dq_A", 1),
-                                            p.mean(snaps, "omega_hat_radps")))
-        sim.set_schedule(SIM_REF_SPEED, 0.0, k_w)
-        p.run(0.3)
-        up = np.mean(win[1.0], axis=0)
-        dn = np.mean(win[-1.0], axis=0)
-        psi = ((up[0] - dn[0]) - R * (up[1] - dn[1])) / (up[2] - dn[2])
-        psi_single = [(w[0] - R * w[1]) / w[2] for w in win[1.0] + win[-1.0]]
-        res.values["psi_f_Wb"] = float(psi)
-        res.sigma["psi_f_Wb"] = float(np.std(psi_single))
-
-        # 5. mass and friction: the speed loop drives a sinusoidal speed profile in one
-        # direction, then in the other (the Coulomb term has one sign per run and the
-        # mover never sticks mid-run), the fit uses the thrust current it needed
-        K_F = 1.5 * math.pi / motor.tau_m * psi
         v_mid = min(0.5, travel_m / 1.6)
-        x_all, i_all, psi_rows = [], [], []
+        runs = []
         for sgn in (1.0, -1.0):
             t_pts = np.arange(0.0, 0.9001, 0.01)
-            prof = sgn * v_mid * (1.0 + 0.6 * np.sin(2 * math.pi * 3.0 * t_pts)) * np.minimum(
-                1.0, t_pts / 0.1)
+            prof = sgn * v_mid * (1.0 + PROFILE[0] * np.sin(2 * math.pi * PROFILE[1] * t_pts)
+                                  ) * np.minimum(1.0, t_pts / 0.1)
             t0 = sim.t_s
             sim.set_schedule(SIM_REF_SPEED, {"t_s": list(t0 + t_pts), "value": list(prof),
                                              "ramp": True}, k_w)
             snaps = p.run(0.9)
-            x_all.append(np.array([q["pos_hat_m"] for q in snaps]))
-            i_all.append(np.array([q["i_dq_A"][1] for q in snaps]))
-            psi_rows += [(q["omega_hat_radps"], q["u_dq_V"][1] - R * q["i_dq_A"][1])
-                         for q in snaps[100:]]
+            runs.append({k: np.array([q[key][j] if j is not None else q[key] for q in snaps])
+                         for k, key, j in (("x", "pos_hat_m", None), ("i_q", "i_dq_A", 1),
+                                           ("i_d", "i_dq_A", 0), ("u_q", "u_dq_V", 1))})
             sim.set_schedule(SIM_REF_SPEED, {"t_s": [sim.t_s, sim.t_s + 0.2],
                                              "value": [prof[-1], 0.0], "ramp": True}, k_w)
             p.run(0.45)  # back to rest under control
-    # psi_f again, from the whole speed range of both runs: u_q - R i_q = psi w + c
-    w_arr, y_arr = np.array(psi_rows).T
-    (psi_r, _c0), *_ = np.linalg.lstsq(np.vstack([w_arr, np.ones_like(w_arr)]).T, y_arr,
-                                       rcond=None)
-    # a second estimate (whole speed sweep, dynamics included) widens the uncertainty
-    res.log.append(f"psi_f from +-v windows {psi:.5f} Wb, from the speed sweep {psi_r:.5f} Wb")
-    res.sigma["psi_f_Wb"] = max(res.sigma["psi_f_Wb"], abs(psi_r - psi) / 2.0)
-    half = 15  # local quadratic fits over 31 ms
-    rows, rhs = [], []
-    t = (np.arange(-half, half + 1)) * 0.001
-    V = np.vstack([np.ones_like(t), t, 0.5 * t * t]).T
-    pinv = np.linalg.pinv(V)
-    for x, iq in zip(x_all, i_all, strict=True):
-        for k in range(half + 100, len(x) - half):  # after the initial ramp
-            c = pinv @ x[k - half:k + half + 1]
-            v, a = c[1], c[2]
-            if abs(v) < 0.05:
-                continue  # near standstill the Coulomb term's sign is undefined
-            rows.append([a, v, math.copysign(1.0, v)])
-            rhs.append(K_F * np.mean(iq[k - 2:k + 3]))
-    M, y = np.array(rows), np.array(rhs)
+    fit = _fit_motion(runs, dt=0.001, R=float(R), L_q=float(L_q_ss), L_d=float(L_d0),
+                      tau=motor.tau_m)
+    res.values.update(fit.values)
+    res.sigma.update(fit.sigma)
+    res.log += fit.log
+    return res
+
+
+def _gauss_kernels(dt: float, sigma_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A Gaussian low-pass g and its first and second derivatives, sampled at dt.
+
+    Filtering both sides of a linear model with the same g keeps the model exact
+    (g * (m a) = m (g'' * x)), while it removes what the model does not describe:
+    the position estimate's noise and the cogging ripple (tens of Hz), but keeps the
+    3 Hz excitation (attenuated by the same factor on both sides, so no bias)."""
+    n = int(math.ceil(4.0 * sigma_s / dt))
+    t = np.arange(-n, n + 1) * dt
+    g = np.exp(-0.5 * (t / sigma_s) ** 2)
+    g /= g.sum()
+    # correlation kernels (out[n] = sum_j x[n + j] k[j]): d/dt of g * x correlates x
+    # with -g'(t) = t g / sigma^2, d2/dt2 with g''(t) (even)
+    g1 = t / sigma_s**2 * g
+    g2 = (t**2 / sigma_s**4 - 1.0 / sigma_s**2) * g
+    # exact on polynomials with the sampled moments: x = t gives 1, x = t^2 / 2 gives 1
+    g1 /= float(np.sum(g1 * t))
+    g2 -= g2.mean()  # a constant gives 0
+    g2 /= float(np.sum(g2 * t**2 / 2.0))
+    return g, g1, g2
+
+
+@dataclass
+class _Fit:
+    values: dict[str, float]
+    sigma: dict[str, float]
+    log: list[str]
+
+
+def _fit_motion(runs: list[dict[str, np.ndarray]], dt: float, R: float, L_q: float,
+                L_d: float, tau: float, sigma_s: float = 0.02, skip_s: float = 0.1,
+                n_harm: int = 12) -> _Fit:
+    """psi_f, mass and friction from the speed-profile runs (drive signals only).
+
+    Voltage equation, q axis, filtered: u_q - R i_q - L_q di_q/dt = w (psi_f + L_d i_d)
+    Motion, filtered: K_F i_q = m a + b v + F_c sgn(v), K_F = 1.5 (pi / tau) psi_f
+    with v, a the derivatives of the filtered position estimate (zero phase: the
+    speed estimate of the observer lags during acceleration and biases both fits).
+    """
+    g, g1, g2 = _gauss_kernels(dt, sigma_s)
+    k_e = math.pi / tau
+
+    def conv(x: np.ndarray, k: np.ndarray) -> np.ndarray:
+        return np.correlate(x, k, mode="valid")
+
+    n_skip = int(round(skip_s / dt))
+    Y_psi, X_psi, rows, iq_f = [], [], [], []
+    for r in runs:
+        x, iq, id_, uq = r["x"], r["i_q"], r["i_d"], r["u_q"]
+        v, a = conv(x, g1), conv(x, g2)
+        iqf, idf, uqf = conv(iq, g), conv(id_, g), conv(uq, g)
+        diq = conv(iq, g1)
+        sl = slice(n_skip, None)                 # after the initial ramp
+        w = k_e * v[sl]
+        Y_psi.append(uqf[sl] - R * iqf[sl] - L_q * diq[sl] - w * L_d * idf[sl])
+        X_psi.append(np.vstack([w, np.ones_like(w)]).T)  # + a constant (offsets)
+        keep = np.abs(v[sl]) > 0.05                        # sgn(v) defined
+        sgn = np.sign(v[sl])[keep]
+        # cogging (and any other force periodic in the position): a Fourier series in
+        # the electrical angle pi x / tau, filtered like everything else. Left out, the
+        # cogging force is the fit's error term and correlated with the acceleration it
+        # causes, which biases the mass low.
+        th = k_e * x
+        harm = [conv(f(n * th), g)[sl][keep] for n in range(1, n_harm + 1)
+                for f in (np.sin, np.cos)]
+        rows.append(np.vstack([a[sl][keep], v[sl][keep], sgn, *harm]).T)
+        iq_f.append(iqf[sl][keep])
+    Xp, Yp = np.vstack(X_psi), np.concatenate(Y_psi)
+    (psi, c0), *_ = np.linalg.lstsq(Xp, Yp, rcond=None)
+    rp = Yp - Xp @ np.array([psi, c0])
+    # residuals are correlated over the filter's width: effective sample count
+    n_eff = max(len(Yp) * dt / (2.5 * sigma_s), 3.0)
+    cov_p = np.linalg.inv(Xp.T @ Xp) * float(np.var(rp)) * len(Yp) / n_eff
+    K_F = 1.5 * k_e * psi
+    M = np.vstack(rows)
+    y = K_F * np.concatenate(iq_f)
     coef, *_ = np.linalg.lstsq(M, y, rcond=None)
     r = y - M @ coef
-    cov = np.linalg.inv(M.T @ M) * float(np.var(r))
-    res.values["mass_kg"] = float(coef[0])
-    res.values["b_visc_Ns_per_m"] = float(coef[1])
-    res.values["F_coulomb_N"] = float(coef[2])
-    res.sigma["mass_kg"] = float(math.sqrt(cov[0, 0]))
-    res.sigma["b_visc_Ns_per_m"] = float(math.sqrt(cov[1, 1]))
-    res.sigma["F_coulomb_N"] = float(math.sqrt(cov[2, 2]))
-    res.log.append(f"mass/friction fit over {len(y)} samples, K_F = {K_F:.3f} N/A")
-    return res
+    n_eff = max(len(y) * dt / (2.5 * sigma_s), 4.0)
+    cov = np.linalg.inv(M.T @ M) * float(np.var(r)) * len(y) / n_eff
+    rel_psi = math.sqrt(cov_p[0, 0]) / abs(psi)
+    return _Fit(
+        values={"psi_f_Wb": float(psi), "mass_kg": float(coef[0]),
+                "b_visc_Ns_per_m": float(coef[1]), "F_coulomb_N": float(coef[2])},
+        # psi_f's relative uncertainty scales K_F and so every mechanical value
+        sigma={"psi_f_Wb": float(math.sqrt(cov_p[0, 0])),
+               "mass_kg": float(math.hypot(math.sqrt(cov[0, 0]), rel_psi * coef[0])),
+               "b_visc_Ns_per_m": float(math.hypot(math.sqrt(cov[1, 1]), rel_psi * coef[1])),
+               "F_coulomb_N": float(math.hypot(math.sqrt(cov[2, 2]), rel_psi * coef[2]))},
+        log=[f"psi_f {psi:.5f} Wb from {len(Yp)} samples (u_q offset {c0:+.3f} V); "
+             f"mass/friction fit over {len(y)} samples, K_F = {K_F:.3f} N/A; Gaussian "
+             f"filter sigma {sigma_s * 1e3:.0f} ms on both sides"])
 
 
 def truth_of(motor: Motor, plant: dict[str, Any] | None = None) -> dict[str, float]:

@@ -53,17 +53,44 @@ def test_randomized_motors_electrical_within_3_percent_or_a_named_fault():
     assert done >= 5, done
 
 
+def _mechanical_cases():
+    mot = load_motor("iron_core_linear")
+    cases = [(load_motor(n), None) for n in ("paper_salient", "iron_core_linear")]
+    return cases + [(mot, _random_plant(seed)) for seed in range(8)]
+
+
+def test_psi_f_mass_and_coulomb_friction():
+    """psi_f within 3 %, mass and Coulomb friction within 10 % on the shipped motors and
+    on every randomized motor the drive completes (the others stop on a named fault, see
+    above). Measured: psi_f within 0.6 %, mass -0.4 ... -7.4 %, Coulomb -0.6 ... -9.6 %;
+    before the matched filtering and the cogging terms: psi_f to -21 %, mass to -40 %."""
+    done = 0
+    for mot, plant in _mechanical_cases():
+        try:
+            r = identify(mot, plant=plant)
+        except RuntimeError as e:
+            assert plant is not None and "drive fault 0xFF" in str(e), e
+            continue
+        done += 1
+        err = r.rel_error(truth_of(mot, plant))
+        assert abs(err["psi_f_Wb"]) <= 0.03, (mot.name, plant, err["psi_f_Wb"])
+        assert abs(err["mass_kg"]) <= 0.10, (mot.name, plant, err["mass_kg"])
+        assert abs(err["F_coulomb_N"]) <= 0.10, (mot.name, plant, err["F_coulomb_N"])
+        # the stated one-sigma uncertainty must cover the error within 4 sigma
+        for k in ("psi_f_Wb", "mass_kg"):
+            truth = truth_of(mot, plant)[k]
+            assert abs(r.values[k] - truth) <= 4.0 * r.sigma[k] + 0.01 * truth, (k, r.sigma[k])
+    assert done >= 7, done
+
+
 @pytest.mark.xfail(strict=True, reason=(
-    "issue target not met yet: psi_f within 3 % and mass / viscous friction within 10 % "
-    "(measured: paper_salient psi_f -0.2 %, mass -5 %, viscous +75 %; iron_core_linear "
-    "psi_f +8 %, mass -11 %, viscous +17 %; randomized motors psi_f to -21 %, mass to "
-    "-40 %); see docs/identify.md"))
-def test_mechanical_targets():
-    for name in ("paper_salient", "iron_core_linear"):
-        mot = load_motor(name)
-        err = identify(mot).rel_error(truth_of(mot))
-        assert abs(err["psi_f_Wb"]) <= 0.03
-        assert abs(err["mass_kg"]) <= 0.10 and abs(err["b_visc_Ns_per_m"]) <= 0.10
+    "issue target not met yet: viscous friction within 10 % (measured +7 ... +69 %: the "
+    "speed profile spans 0.08-0.3 m/s within the 0.3 m travel, where b v is a few newtons "
+    "beside 15 N of Coulomb friction and 8 N of cogging); see docs/identify.md"))
+def test_viscous_friction_target():
+    for mot, plant in _mechanical_cases()[:2]:
+        err = identify(mot, plant=plant).rel_error(truth_of(mot, plant))
+        assert abs(err["b_visc_Ns_per_m"]) <= 0.10
 
 
 def test_motor_file_round_trip(tmp_path):
