@@ -1086,17 +1086,20 @@ void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
     return;
   }
   fw_inputs_t x;
-  const fw_config_t *cfg = &c->cfg;
-  bool bad = in->u_dc_counts > cfg->adc_max_count;
-  for (int i = 0; i < 3; i++) {
-    bad = bad || in->i_abc_counts[i] > cfg->adc_max_count;
-    x.i_abc_A[i] = ((float)in->i_abc_counts[i] - cfg->adc_offset_counts) * cfg->adc_A_per_count;
-  }
-  x.u_dc_V = (float)in->u_dc_counts * cfg->adc_V_per_count;
-  if (bad) {
+  if (!fw_adc_convert(&c->cfg, in, &x)) {
     latch_fault(c, FW_FAULT_ADC_RANGE);
   }
   fw_step(c, &x, out);
+}
+
+bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_inputs_t *in) {
+  bool ok = adc->u_dc_counts <= cfg->adc_max_count;
+  for (int i = 0; i < 3; i++) {
+    ok = ok && adc->i_abc_counts[i] <= cfg->adc_max_count;
+    in->i_abc_A[i] = ((float)adc->i_abc_counts[i] - cfg->adc_offset_counts) * cfg->adc_A_per_count;
+  }
+  in->u_dc_V = (float)adc->u_dc_counts * cfg->adc_V_per_count;
+  return ok;
 }
 
 void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {

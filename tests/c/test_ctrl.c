@@ -384,7 +384,12 @@ static void test_fault_adc_range(void) {
   fw_step_adc(&c, &adc, &out);
   TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
   TT_CHECK_NEAR(c.snap.u_dc_V, 2457.0 * 500.0 / 4096.0, 1e-3); /* same LSB rule as fw_config() */
+  fw_inputs_t x;
+  TT_CHECK(fw_adc_convert(&cfg, &adc, &x));
+  TT_CHECK_NEAR(x.i_abc_A[0], 0.0, 1e-6);
+  TT_CHECK_NEAR(x.u_dc_V, c.snap.u_dc_V, 1e-6);
   adc.i_abc_counts[0] = 5000u; /* beyond 12 bits */
+  TT_CHECK(!fw_adc_convert(&cfg, &adc, &x));
   fw_step_adc(&c, &adc, &out);
   TT_CHECK(fw_fault_code(&c) == FW_FAULT_ADC_RANGE);
 }

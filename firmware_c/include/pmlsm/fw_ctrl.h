@@ -492,6 +492,11 @@ void fw_step(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out);
 /** Same, from raw ADC counts scaled by the adc_* configuration. */
 void fw_step_adc(fw_ctrl_t *ctrl, const fw_adc_inputs_t *in, fw_outputs_t *out);
 
+/** The one ADC scaling: counts -> A and V with cfg->adc_* (also for callers that
+ *  step through another layer, e.g. fw_app_step). Returns false when a count is
+ *  above adc_max_count (the caller raises FW_FAULT_ADC_RANGE; fw_step_adc does). */
+bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_inputs_t *in);
+
 /** Copy of the internal signals after the last step. */
 void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap);
 

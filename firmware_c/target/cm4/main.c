@@ -23,11 +23,10 @@ void pwm_adc_irq_handler(void) {
   fw_inputs_t in;
   fw_outputs_t out;
   (void)fw_port_adc_read(&g_port, &adc);
-  const fw_config_t *cfg = fw_get_config(fw_app_ctrl(&g_app));
-  for (int i = 0; i < 3; i++) {
-    in.i_abc_A[i] = ((float)adc.i_abc_counts[i] - cfg->adc_offset_counts) * cfg->adc_A_per_count;
+  fw_ctrl_t *ctrl = fw_app_ctrl(&g_app);
+  if (!fw_adc_convert(fw_get_config(ctrl), &adc, &in)) { /* the core's one ADC scaling */
+    fw_raise_fault(ctrl, FW_FAULT_ADC_RANGE);
   }
-  in.u_dc_V = (float)adc.u_dc_counts * cfg->adc_V_per_count;
   fw_app_step(&g_app, &in, &out);
   fw_port_pwm_write(&g_port, out.duty_abc, out.pwm_enable != 0u);
   fw_can_frame_t f;
