@@ -61,14 +61,25 @@ def write_summary_json(path: str | Path, result: RunResult,
     Path(path).write_text(json.dumps(summary(result, extra), indent=2) + "\n")
 
 
-def write_junit(path: str | Path, results: list[RunResult]) -> None:
+def write_junit(path: str | Path, results: list[RunResult],
+                drive: dict[str, Any] | None = None) -> None:
     """JUnit XML: one testsuite per sequence, one testcase per expectation.
 
     A sequence that aborted (exception, Ctrl-C) or could not reach the safe
-    state gets an ``<error>`` testcase named ``run``.
+    state gets an ``<error>`` testcase named ``run``. ``drive`` (from
+    ``bench._session.drive_kind``) becomes testsuite properties ``drive``
+    (SIMULATED / HARDWARE), ``simulated`` and ``fallback``, so that a CI job
+    can tell a simulated pass from a hardware pass.
     """
     suites = ET.Element("testsuites")
     for r in results:
+        suite_props = None
+        if drive:
+            suite_props = ET.Element("properties")
+            for k in ("drive", "simulated", "fallback"):
+                v = drive.get(k)
+                ET.SubElement(suite_props, "property", name=k,
+                              value=str(v).lower() if isinstance(v, bool) else str(v))
         cases = []
         for e in r.expectations:
             tc = ET.Element("testcase", classname=f"bench.{r.sequence}", name=e.name,
@@ -96,6 +107,8 @@ def write_junit(path: str | Path, results: list[RunResult]) -> None:
         suite = ET.SubElement(suites, "testsuite", name=r.sequence, tests=str(len(cases)),
                               failures=str(n_fail), errors=str(n_err),
                               time=f"{r.wall_s:.3f}")
+        if suite_props is not None:
+            suite.append(suite_props)
         suite.extend(cases)
     ET.indent(suites)
     ET.ElementTree(suites).write(path, encoding="utf-8", xml_declaration=True)
@@ -268,6 +281,23 @@ def _fmt(v: Any) -> str:
     return html.escape(str(v))
 
 
+def _sim_banner(meta: dict[str, Any]) -> str:
+    """A banner that no reader can miss when the drive was simulated."""
+    info = meta.get("connection_info") or {}
+    if info.get("kind") != "sim":
+        return ""
+    why = ("FALLBACK: no drive hardware answered, the bench used the simulated drive. "
+           if info.get("fallback") else "")
+    return ('<p class="simbanner">SIMULATED DRIVE &mdash; ' + why +
+            "These results come from the simulator (plant + firmware), not from hardware. "
+            "Use --require-hardware to make a missing rig an error.</p>")
+
+
+def _sim_suffix(meta: dict[str, Any]) -> str:
+    info = meta.get("connection_info") or {}
+    return " (SIMULATED drive)" if info.get("kind") == "sim" else ""
+
+
 def write_html(path: Path, result: RunResult, plots: list[tuple[str, str]],
                meta: dict[str, Any], logstats: dict[str, Any]) -> None:
     """Self-contained HTML report (PNG files next to it)."""
@@ -316,9 +346,12 @@ tr.pass td:nth-child(6) {{ color: #070; font-weight: bold; }}
 tr.fail td {{ background: #fee; }} tr.fail td:nth-child(6) {{ color: #b00; font-weight: bold; }}
 .verdict {{ font-size: 1.4em; font-weight: bold; color: {'#070' if ok else '#b00'}; }}
 img {{ max-width: 100%; }} figcaption {{ color: #555; font-size: 13px; }}
+.simbanner {{ background: #ffe08a; border: 3px solid #c80; padding: 0.6em 1em;
+  font-weight: bold; font-size: 1.1em; }}
 </style></head><body>
 <h1>{html.escape(result.sequence)}</h1>
-<p class="verdict">{'PASSED' if ok else 'FAILED'}</p>
+{_sim_banner(meta)}
+<p class="verdict">{'PASSED' if ok else 'FAILED'}{_sim_suffix(meta)}</p>
 <p>{html.escape(str(meta.get('sequence', {}).get('description', '')))}</p>
 <h2>Expectations</h2>
 <table><tr><th>expectation</th><th>metric</th><th>window (s)</th><th>measured</th>

@@ -263,8 +263,14 @@ def connect(sim: bool = False, interface: str | None = None, channel: str | None
             realtime: bool = False, motor: str = "paper_salient",
             extractor: str = "sogi_adaptive", seed: int = 0, x0: float | str = 0.0,
             node_id: int = 1, load_node: int | None = None, record_decimation: int = 1,
-            say: Callable[[str], None] = _say) -> Connection:
-    """Hardware if available and not ``sim``; else the simulated drive (announced)."""
+            say: Callable[[str], None] = _say, require_hardware: bool = False) -> Connection:
+    """Hardware if available and not ``sim``; else the simulated drive (announced).
+
+    With ``require_hardware`` (a rig's CI job) a missing drive raises
+    :class:`NoHardware` instead of falling back. A fallback connection has
+    ``info["fallback"] = True``; the report, summary.json and JUnit say SIMULATED.
+    """
+    fallback = False
     if not sim:
         try:
             c = open_hardware(interface, channel, bitrate, node_id, load_node, motor,
@@ -272,15 +278,27 @@ def connect(sim: bool = False, interface: str | None = None, channel: str | None
             say(f"bench: connected to {c.description}")
             return c
         except NoHardware as e:
+            if require_hardware:
+                raise NoHardware(f"{e}; --require-hardware forbids the simulated "
+                                 "fallback") from None
             say(f"bench: no drive hardware found ({e}).")
             say("bench: FALLING BACK TO THE SIMULATED DRIVE - results are from a simulation, "
                 "not from hardware.")
+            fallback = True
     if load_node:
         say(f"bench: --load-node {load_node} ignored: the simulated drive applies the load "
             "force in its plant")
     c = open_sim(motor, extractor, seed, x0, realtime, node_id, record_decimation)
+    c.info["fallback"] = fallback
     say(f"bench: using the {c.description}")
     return c
+
+
+def drive_kind(conn: Connection) -> dict[str, Any]:
+    """What produced the results: ``{"drive": "SIMULATED"|"HARDWARE", "simulated": bool,
+    "fallback": bool}`` (summary.json, JUnit properties, report banner)."""
+    return {"drive": "SIMULATED" if conn.is_sim else "HARDWARE", "simulated": conn.is_sim,
+            "fallback": bool(conn.info.get("fallback", False))}
 
 
 # ---- decoding what comes over the wire --------------------------------------------------
@@ -528,18 +546,17 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
                        "logging": logstats})
     rep = None
     extra = {"run_dir": str(run_dir), "lost_frames": logstats["lost_frames"],
-             "receive_errors": logstats["receive_errors"],
-             "simulated": conn.is_sim}
+             "receive_errors": logstats["receive_errors"], **drive_kind(conn)}
     if report:
         plots = make_plots(logger, result, conn.units, run_dir)
         rep = run_dir / "report.html"
         write_html(rep, result, plots, logger.meta, logstats)
     write_summary_json(run_dir / "summary.json", result, extra)
-    write_junit(run_dir / "junit.xml", [result])
+    write_junit(run_dir / "junit.xml", [result], drive_kind(conn))
     if summary_json:
         write_summary_json(summary_json, result, extra)
     if junit:
-        write_junit(junit, [result])
+        write_junit(junit, [result], drive_kind(conn))
     return RunOutput(result, run_dir, logstats, rep, interrupted)
 
 

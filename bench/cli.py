@@ -45,6 +45,9 @@ def _conn_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("connection (hardware if found, else the simulated drive)")
     g.add_argument("--sim", action="store_true",
                    help="use the simulated drive (python-can virtual bus, same CANopen)")
+    g.add_argument("--require-hardware", action="store_true",
+                   help="fail with exit 3 when no drive answers instead of falling back to "
+                        "the simulated drive (for a rig's CI job)")
     g.add_argument("--interface", help="python-can interface: socketcan, pcan, slcan, kvaser, "
                                        "... (default: python-can configuration)")
     g.add_argument("--channel", help="python-can channel, e.g. can0, PCAN_USBBUS1, "
@@ -191,6 +194,8 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
         raise UserError(f"--sync-period-ms {args.sync_period_ms}: allowed range >= 0 (ms)")
     if not 1 <= args.node_id <= 127:
         raise UserError(f"--node-id {args.node_id}: allowed range [1, 127]")
+    if args.sim and getattr(args, "require_hardware", False):
+        raise UserError("--sim and --require-hardware contradict each other; drop one of them")
     if args.sim and args.serial:
         raise UserError(f"--serial {args.serial} cannot be used with --sim (the simulated drive "
                         "has its own in-process serial link); drop one of them")
@@ -202,7 +207,8 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
         conn = connect(sim=args.sim, interface=args.interface, channel=args.channel,
                        bitrate=args.bitrate, serial_url=args.serial, realtime=args.realtime,
                        motor=motor, extractor=extractor, seed=seed, x0=x0,
-                       node_id=args.node_id, load_node=args.load_node)
+                       node_id=args.node_id, load_node=args.load_node,
+                       require_hardware=getattr(args, "require_hardware", False))
     except UserError:
         raise
     except Exception as e:  # noqa: BLE001 - the bus, the drive or the simulator library
@@ -303,8 +309,11 @@ def cmd_run(args: argparse.Namespace) -> int:
             bad = True
     if bad:
         return EXIT_USAGE
+    from bench._session import drive_kind
+
     results = []
     summaries = []
+    kinds: list[dict[str, Any]] = []
     rc = EXIT_OK
     for seq in seqs:
         conn = _connect(args, seq)
@@ -319,10 +328,12 @@ def cmd_run(args: argparse.Namespace) -> int:
             conn.close()
         r = out.result
         results.append(r)
+        kind = drive_kind(conn)
+        kinds.append(kind)
         extra = {"run_dir": str(out.run_dir), "lost_frames": out.logstats["lost_frames"],
-                 "simulated": conn.is_sim}
+                 **kind}
         summaries.append(summary(r, extra))
-        _print_result(r, out)
+        _print_result(r, out, kind)
         if out.interrupted is not None:
             if isinstance(out.interrupted, KeyboardInterrupt):
                 print(f"bench: interrupted; drive safe state: {r.safe_state}", file=sys.stderr)
@@ -338,12 +349,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         doc: Any = summaries[0] if len(summaries) == 1 else summaries
         Path(args.summary_json).write_text(json.dumps(doc, indent=2) + "\n")
     if args.junit:
-        write_junit(args.junit, results)
+        write_junit(args.junit, results, kinds[0] if kinds else None)
     return rc
 
 
-def _print_result(r: Any, out: Any) -> None:
-    print(f"\n{r.sequence}: {'PASSED' if r.passed else 'FAILED'}  "
+def _print_result(r: Any, out: Any, kind: dict[str, Any] | None = None) -> None:
+    sim = ""
+    if kind and kind.get("simulated"):
+        sim = " [SIMULATED drive" + (", fallback: no hardware found]" if kind.get("fallback")
+                                     else "]")
+    print(f"\n{r.sequence}: {'PASSED' if r.passed else 'FAILED'}{sim}  "
           f"(sequence {r.duration_s:.3f} s, wall {r.wall_s:.2f} s)")
     for e in r.expectations:
         m = "n/a" if e.measured != e.measured else f"{e.measured:.5g}"

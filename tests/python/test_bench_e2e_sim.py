@@ -213,3 +213,59 @@ def test_simulated_runs_are_reproducible(tmp_path: Path) -> None:
             c.close()
         got.append((out.result.metrics, out.result.expectations[0].measured))
     assert got[0] == got[1]
+
+
+_SHORT = ("name: short\nmotor: paper_salient\nextractor: sogi_adaptive\nseed: 3\nsteps:\n"
+          "  - enable: {}\n  - set_speed: {value: 100, unit: r/min}\n"
+          "  - wait: {duration_s: 0.2}\n"
+          "  - expect: {metric: position_error_rms_rad, op: '<', limit: 1, "
+          "window_s: [0.1, 0.2]}\n  - disable: {}\n")
+
+
+def test_require_hardware_refuses_the_fallback(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """A rig's CI job: no drive answers -> exit 3 and one line, no simulated run."""
+    from bench import connect
+    from bench._session import NoHardware
+
+    with pytest.raises(NoHardware, match="--require-hardware"):
+        connect(interface="virtual", channel=f"empty-{tmp_path.name}", require_hardware=True,
+                say=lambda s: None)
+    seq = tmp_path / "short.yaml"
+    seq.write_text(_SHORT)
+    runs = tmp_path / "runs"
+    rc = main(["run", str(seq), "--interface", "virtual", "--channel", f"none-{tmp_path.name}",
+               "--require-hardware", "--runs", str(runs), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 3
+    assert len(err) == 1 and "--require-hardware forbids the simulated fallback" in err[0]
+    assert not runs.exists() or not any(runs.rglob("summary.json"))  # nothing ran
+    rc = main(["run", str(seq), "--sim", "--require-hardware", "--runs", str(runs)])
+    assert rc == 2 and "contradict" in capsys.readouterr().err
+
+
+def test_fallback_is_never_silent(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Fallback to the simulated drive: console, report banner, summary.json and JUnit all
+    say SIMULATED (and that it was a fallback); a --sim run says SIMULATED, no fallback."""
+    seq = tmp_path / "short.yaml"
+    seq.write_text(_SHORT)
+    for mode, args in (("fallback", ["--interface", "virtual", "--channel",
+                                     f"nobody-{tmp_path.name}"]), ("sim", ["--sim"])):
+        s, j, runs = tmp_path / f"{mode}.json", tmp_path / f"{mode}.xml", tmp_path / mode
+        rc = main(["run", str(seq), *args, "--summary-json", str(s), "--junit", str(j),
+                   "--runs", str(runs), "--no-progress"])
+        out = capsys.readouterr().out
+        assert rc == 0, out
+        fb = mode == "fallback"
+        doc = json.loads(s.read_text())
+        assert doc["drive"] == "SIMULATED" and doc["simulated"] is True
+        assert doc["fallback"] is fb
+        props = {p.get("name"): p.get("value") for p in
+                 ET.parse(j).getroot().find("testsuite").find("properties")}
+        assert props == {"drive": "SIMULATED", "simulated": "true", "fallback": str(fb).lower()}
+        assert ("[SIMULATED drive, fallback" in out) is fb and "[SIMULATED drive" in out
+        html = next(runs.rglob("report.html")).read_text()
+        assert 'class="simbanner"' in html and "SIMULATED DRIVE" in html
+        assert ("FALLBACK" in html) is fb
+        run_summary = json.loads(next(runs.rglob("summary.json")).read_text())
+        assert run_summary["drive"] == "SIMULATED" and run_summary["fallback"] is fb
