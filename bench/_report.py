@@ -125,126 +125,175 @@ def _decimate(t: np.ndarray, v: np.ndarray, n_max: int = 6000
     return t[::k], v[::k]
 
 
+#: The paper the reproduced claims come from (docs/method.md).
+PAPER_CITATION = ("Position Sensorless Control of Permanent Magnet Linear Synchronous Motor "
+                  "Based on SOGI High Frequency Square Wave Voltage Injection, Small & Special "
+                  "Electrical Machines, 2024 (02), pp. 59-63")
+
+_PASS, _FAIL, _TRACE = "#2ca02c", "#d62728", "#9467bd"
+
+
+def _enabled_window(logger: Any) -> tuple[float, float] | None:
+    """Sequence time from the first to the last statusword saying OPERATION ENABLED
+    (0x6041 & 0x6F == 0x27); None when the statusword was not recorded."""
+    t, v = logger.channel("pdo.statusword")
+    if t.size == 0:
+        return None
+    on = (v.astype(np.int64) & 0x6F) == 0x27
+    if not np.any(on):
+        return None
+    tt = t[on] - logger.t_origin_s
+    return float(tt[0]), float(tt[-1])
+
+
+def _lane(fig: Any, result: RunResult, logger: Any, row: int) -> None:
+    """Row ``row``: one labelled bar per expectation window (green pass, red fail) and
+    per trace capture (purple), so overlapping windows stay apart and are named."""
+    import plotly.graph_objects as go
+
+    shown: set[str] = set()
+    names = []
+    for e in result.expectations:
+        grp = "expectation window: pass" if e.passed else "expectation window: FAIL"
+        names.append(e.name)
+        meas = "n/a" if not math.isfinite(e.measured) else f"{e.measured:.4g}"
+        fig.add_trace(go.Scatter(
+            x=list(e.window_s), y=[e.name, e.name], mode="lines",
+            line={"color": _PASS if e.passed else _FAIL, "width": 9}, name=grp,
+            legendgroup=grp, showlegend=grp not in shown,
+            hovertext=f"{e.name}: measured {meas}, required {e.criterion}",
+            hoverinfo="text"), row=row, col=1)
+        shown.add(grp)
+    for w in logger.windows:
+        lab = f"trace '{w['name']}'"
+        names.append(lab)
+        fig.add_trace(go.Scatter(
+            x=[w["t0_s"], w["t1_s"]], y=[lab, lab], mode="lines",
+            line={"color": _TRACE, "width": 9}, name="trace capture", legendgroup="trace",
+            showlegend="trace" not in shown, hoverinfo="text",
+            hovertext=f"{lab}: {w['t0_s']:.4f}-{w['t1_s']:.4f} s"), row=row, col=1)
+        shown.add("trace")
+    fig.update_yaxes(categoryorder="array", categoryarray=names[::-1], row=row, col=1,
+                     tickfont={"size": 10})
+
+
+def _figure(rows: list[str], title: str, lane: bool, heights: list[float] | None = None
+            ) -> Any:
+    from plotly.subplots import make_subplots
+
+    n = len(rows) + (1 if lane else 0)
+    h = ([0.6] if lane else []) + (heights or [1.0] * len(rows))
+    fig = make_subplots(rows=n, cols=1, shared_xaxes=True, vertical_spacing=0.03,
+                        row_heights=h)
+    for i, r in enumerate(rows):
+        fig.update_yaxes(title_text=r, row=i + 1 + (1 if lane else 0), col=1)
+    fig.update_xaxes(title_text="sequence time (s)", row=n, col=1)
+    fig.update_layout(title={"text": title, "x": 0.0, "xanchor": "left", "y": 1.0,
+                             "yanchor": "top", "pad": {"t": 8}},
+                      height=200 + 190 * n, template="plotly_white",
+                      margin={"l": 70, "r": 20, "t": 110, "b": 40},
+                      legend={"orientation": "h", "y": 1.01, "yanchor": "bottom", "x": 0,
+                              "xanchor": "left"}, hovermode="x unified")
+    return fig
+
+
 def make_plots(logger: Any, result: RunResult, units: MotorUnits, out_dir: Path
                ) -> list[tuple[str, str]]:
-    """PNG plots of a run; returns ``[(file name, caption), ...]``."""
-    import matplotlib
+    """Interactive plots of a run (plotly); returns ``[(html <div>, caption), ...]``.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    The x range is cut to the time the drive was enabled (zoom out to see the rest),
+    every axis has its unit, and a first row names each expectation window and trace
+    capture. The page embeds plotly.js once (``write_html``): it works offline.
+    """
+    import plotly.graph_objects as go
+    from plotly.io import to_html
 
     t0 = logger.t_origin_s
     rpm = 60.0 / (2.0 * math.pi * units.pole_pairs)  # electrical rad/s -> r/min
+    en = _enabled_window(logger)
 
     def ch(name: str) -> tuple[np.ndarray, np.ndarray]:
         t, v = logger.channel(name)
         return t - t0, v
 
+    def line(fig: Any, row: int, t: np.ndarray, v: np.ndarray, name: str, **kw: Any) -> None:
+        a, b = _decimate(t, v)
+        fig.add_trace(go.Scatter(x=a, y=b, name=name, mode="lines", line={"width": 1.2},
+                                 **kw), row=row, col=1)
+
+    def done(fig: Any) -> str:
+        if en is not None:
+            fig.update_xaxes(range=[en[0], en[1]])
+        return to_html(fig, include_plotlyjs=False, full_html=False,
+                       config={"displaylogo": False, "responsive": True})
+
     plots: list[tuple[str, str]] = []
     truth = logger.truth()
-
-    def shade(ax: Any) -> None:
-        for e in result.expectations:
-            ax.axvspan(*e.window_s, color="tab:green" if e.passed else "tab:red", alpha=0.06)
-        for w in logger.windows:
-            ax.axvspan(w["t0_s"], w["t1_s"], color="tab:purple", alpha=0.08)
-
+    lane_done = False
     if truth is not None:
         t = truth["t_s"]
-        fig, axs = plt.subplots(4, 1, figsize=(10, 11), sharex=True)
-        a, b = _decimate(t, wrap_pi(truth["theta_e_rad"]))
-        axs[0].plot(a, b, lw=0.8, label="true theta_e")
-        a, b = _decimate(t, wrap_pi(truth["theta_hat_rad"]))
-        axs[0].plot(a, b, lw=0.8, ls="--", label="estimate theta_hat")
-        axs[0].set_ylabel("electrical angle (rad)")
-        axs[0].legend(loc="upper right")
+        fig = _figure(["electrical angle (rad)", "position error (rad el.)", "speed (r/min)",
+                       "force (N·m rotary equiv.)"], f"{result.sequence}: truth vs estimate",
+                      lane=True)
+        _lane(fig, result, logger, 1)
+        lane_done = True
+        line(fig, 2, t, wrap_pi(truth["theta_e_rad"]), "true angle")
+        line(fig, 2, t, wrap_pi(truth["theta_hat_rad"]), "estimated angle",
+             line_dash="dash")
         err = wrap_pi(truth["theta_e_rad"] - truth["theta_hat_rad"])
-        a, b = _decimate(t, err)
-        axs[1].plot(a, b, lw=0.6, color="tab:red")
-        axs[1].set_ylabel("position error (rad el.)")
-        lim = max(0.05, float(np.nanpercentile(np.abs(err[t > 0.1]), 99.5)) * 1.3) \
-            if np.any(t > 0.1) else 0.2
-        axs[1].set_ylim(-lim, lim)
-        a, b = _decimate(t, truth["omega_e_radps"] * rpm)
-        axs[2].plot(a, b, lw=0.8, label="true speed")
-        a, b = _decimate(t, truth["omega_hat_radps"] * rpm)
-        axs[2].plot(a, b, lw=0.8, ls="--", label="estimated speed")
+        line(fig, 3, t, err, "position error (true - estimate)", line_color=_FAIL)
+        sel = (t >= en[0] + 0.1) & (t <= en[1]) if en is not None else t > 0.1
+        if np.any(sel):  # the errors under test, not the spike after disable
+            lim = max(0.02, float(np.nanpercentile(np.abs(err[sel]), 99.5)) * 1.3)
+            fig.update_yaxes(range=[-lim, lim], row=3, col=1)
+        line(fig, 4, t, truth["omega_e_radps"] * rpm, "true speed")
+        line(fig, 4, t, truth["omega_hat_radps"] * rpm, "estimated speed", line_dash="dash")
         ts, vs = ch("sim.speed_ref_radps_e")
         if ts.size:
-            a, b = _decimate(ts, vs * rpm)
-            axs[2].plot(a, b, lw=0.8, color="k", alpha=0.5, label="reference")
-        axs[2].set_ylabel("speed (r/min)")
-        axs[2].legend(loc="upper right")
+            line(fig, 4, ts, vs * rpm, "speed reference", line_color="black")
         tl, vl = ch("sim.load_N")
         if tl.size:
-            a, b = _decimate(tl, vl * units.radius_m)
-            axs[3].plot(a, b, lw=0.8, color="tab:brown", label="load (N·m equiv.)")
+            line(fig, 5, tl, vl * units.radius_m, "load")
         tf, vf = ch("sim.force_N")
         if tf.size:
-            a, b = _decimate(tf, vf * units.radius_m)
-            axs[3].plot(a, b, lw=0.5, alpha=0.7, label="thrust (N·m equiv.)")
-        axs[3].set_ylabel("N·m (rotary equiv.)")
-        axs[3].set_xlabel("sequence time (s)")
-        axs[3].legend(loc="upper right")
-        for ax in axs:
-            shade(ax)
-            ax.grid(alpha=0.3)
-        fig.suptitle(f"{result.sequence}: truth vs estimate")
-        fig.tight_layout()
-        fig.savefig(out_dir / "overview.png", dpi=90)
-        plt.close(fig)
-        plots.append(("overview.png", "true vs estimated position and speed, position error, "
-                                      "load; shaded: expectation windows (green pass, red "
-                                      "fail), trace captures (purple)"))
+            line(fig, 5, tf, vf * units.radius_m, "thrust")
+        plots.append((done(fig), "true vs estimated position and speed (simulator truth), "
+                                 "position error, load; top row: expectation windows "
+                                 "(green pass, red fail) and trace captures (purple)"))
 
-    # estimator internals
     names = [("sim.i_dq_hat_A", "i_d / i_q (A)"), ("sim.pll_err_rad", "PLL error (rad)"),
-             ("sim.hf_amp_A", "HF amplitude (A)"), ("sim.sogi_k_eff", "SOGI k")]
+             ("sim.hf_amp_A", "HF amplitude (A)"), ("sim.sogi_k_eff", "SOGI gain k (-)")]
     have = [(n, lbl) for n, lbl in names if logger.channel(n)[0].size]
     if have:
-        fig, axs = plt.subplots(len(have), 1, figsize=(10, 2.4 * len(have)), sharex=True,
-                                squeeze=False)
-        for ax, (n, lbl) in zip(axs[:, 0], have, strict=True):
+        fig = _figure([lbl for _, lbl in have], "firmware internals", lane=False)
+        for i, (n, _lbl) in enumerate(have):
             t, v = ch(n)
             if v.ndim > 1:
                 for j, lab in enumerate(("i_d", "i_q")[: v.shape[1]]):
-                    a, b = _decimate(t, v[:, j])
-                    ax.plot(a, b, lw=0.6, label=lab)
-                ax.legend(loc="upper right")
+                    line(fig, i + 1, t, v[:, j], lab)
             else:
-                a, b = _decimate(t, v)
-                ax.plot(a, b, lw=0.6)
-            ax.set_ylabel(lbl)
-            ax.grid(alpha=0.3)
-            shade(ax)
-        axs[-1, 0].set_xlabel("sequence time (s)")
-        fig.tight_layout()
-        fig.savefig(out_dir / "estimator.png", dpi=90)
-        plt.close(fig)
-        plots.append(("estimator.png", "firmware internals (from the simulated drive's record)"))
+                line(fig, i + 1, t, v, n[4:])
+        plots.append((done(fig), "firmware internals (from the simulated drive's record)"))
 
-    # what came over the wire (TPDOs)
     wanted = ("pdo.statusword", "pdo.speed_hat_mps", "pdo.pos_hat_m", "pdo.force_hat_N",
               "pdo.error_code", "pdo.theta_hat_rad")
     have_ch = logger.channels()
     pdo = [(n, have_ch[n]) for n in wanted if n in have_ch]
     if pdo:
-        fig, axs = plt.subplots(len(pdo), 1, figsize=(10, 1.8 * len(pdo)), sharex=True,
-                                squeeze=False)
-        for ax, (n, u) in zip(axs[:, 0], pdo, strict=True):
+        fig = _figure([f"{n[4:]} ({u})" if u else n[4:] for n, u in pdo],
+                      "received over CAN (TPDOs)", lane=not lane_done)
+        if not lane_done:
+            _lane(fig, result, logger, 1)
+        off = 0 if lane_done else 1
+        for i, (n, _u) in enumerate(pdo):
             t, v = ch(n)
             a, b = _decimate(t, v)
-            ax.step(a, b, where="post", lw=0.7)
-            ax.set_ylabel(f"{n[4:]}\n({u})" if u else n[4:], fontsize=8)
-            ax.grid(alpha=0.3)
-        axs[-1, 0].set_xlabel("sequence time (s)")
-        fig.tight_layout()
-        fig.savefig(out_dir / "pdo.png", dpi=80)
-        plt.close(fig)
-        plots.append(("pdo.png", "signals decoded from the drive's TPDOs (what the bench "
+            fig.add_trace(go.Scatter(x=a, y=b, name=n[4:], mode="lines",
+                                     line={"shape": "hv", "width": 1.2}),
+                          row=i + 1 + off, col=1)
+        plots.append((done(fig), "signals decoded from the drive's TPDOs (what the bench "
                                  "receives over CAN)"))
 
-    # trace captures at full rate
     for w in logger.windows:
         sigs = w["signals"] or ["theta_hat_rad", "pll_err_rad"]
         drv = f"trace.{w['name']}."
@@ -252,32 +301,39 @@ def make_plots(logger: Any, result: RunResult, units: MotorUnits, out_dir: Path
                 or logger.channel(drv + s)[0].size]
         if not rows:
             continue
-        fig, axs = plt.subplots(len(rows), 1, figsize=(10, 2.0 * len(rows)), sharex=True,
-                                squeeze=False)
-        for ax, s in zip(axs[:, 0], rows, strict=True):
-            t, v = ch("sim." + s)
+        fig = _figure([f"{s} ({have_ch.get(drv + s) or have_ch.get('sim.' + s) or '-'})"
+                       for s in rows], f"trace capture '{w['name']}' (full control rate)",
+                      lane=False)
+        for i, sgl in enumerate(rows):
+            t, v = ch("sim." + sgl)
             m = (t >= w["t0_s"]) & (t <= w["t1_s"])
             if t.size:
-                ax.plot(t[m], v[m], lw=0.7, label="simulator record")
-            t, v = ch(drv + s)
+                line(fig, i + 1, t[m], v[m], f"{sgl}: simulator record",
+                     legendgroup="sim", showlegend=i == 0)
+            t, v = ch(drv + sgl)
             if t.size:
-                ax.plot(t, v, lw=0.7, ls="--", label="drive trace buffer (serial upload)")
-            ax.legend(loc="upper right", fontsize=7)
-            ax.set_ylabel(s, fontsize=8)
-            ax.grid(alpha=0.3)
-        axs[-1, 0].set_xlabel("sequence time (s)")
-        fig.suptitle(f"trace capture '{w['name']}' (full control rate)")
-        fig.tight_layout()
-        fname = f"trace_{w['name']}.png"
-        fig.savefig(out_dir / fname, dpi=90)
-        plt.close(fig)
-        plots.append((fname, f"trace capture {w['name']}: {w['t0_s']:.3f}-{w['t1_s']:.3f} s"))
+                line(fig, i + 1, t, v, f"{sgl}: drive trace buffer (serial upload)",
+                     line_dash="dash", legendgroup="drv", showlegend=i == 0)
+        fig.update_xaxes(range=[w["t0_s"], w["t1_s"]])
+        plots.append((to_html(fig, include_plotlyjs=False, full_html=False,
+                              config={"displaylogo": False}),
+                      f"trace capture {w['name']}: {w['t0_s']:.3f}-{w['t1_s']:.3f} s"))
     return plots
 
 
 def _fmt(v: Any) -> str:
+    """A table cell: numbers to 5 digits, None as a dash, dicts as ``key: value`` pairs
+    (never a Python repr)."""
+    if v is None:
+        return "&mdash;"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
     if isinstance(v, float):
         return "n/a" if not math.isfinite(v) else f"{v:.5g}"
+    if isinstance(v, dict):
+        return ", ".join(f"{html.escape(str(k))}: {_fmt(x)}" for k, x in v.items()) or "&mdash;"
+    if isinstance(v, (list, tuple)):
+        return ", ".join(_fmt(x) for x in v) or "&mdash;"
     return html.escape(str(v))
 
 
@@ -300,17 +356,29 @@ def _sim_suffix(meta: dict[str, Any]) -> str:
 
 def write_html(path: Path, result: RunResult, plots: list[tuple[str, str]],
                meta: dict[str, Any], logstats: dict[str, Any]) -> None:
-    """Self-contained HTML report (PNG files next to it)."""
+    """One self-contained HTML file: tables, interactive plots, plotly.js embedded once
+    (works offline, from file://)."""
+    from plotly.offline import get_plotlyjs
+
     ok = result.passed
+
+    def unit(metric: str) -> str:
+        return METRIC_DEFS[metric].unit if metric in METRIC_DEFS else ""
+
     rows = "\n".join(
         f"<tr class='{'pass' if e.passed else 'fail'}'><td>{_fmt(e.name)}</td>"
         f"<td>{_fmt(e.metric)}</td><td>[{e.window_s[0]:g}, {e.window_s[1]:g}]</td>"
-        f"<td>{_fmt(e.measured)}</td><td>{_fmt(e.criterion)}</td>"
+        f"<td>{_fmt(e.measured)}</td><td>{_fmt(e.criterion)}</td><td>{_fmt(unit(e.metric))}</td>"
         f"<td>{'PASS' if e.passed else 'FAIL'}</td>"
         f"<td>{'' if e.paper is None else _fmt(e.paper)}</td>"
         f"<td>{'' if e.paper_met is None else ('yes' if e.paper_met else 'NO')}</td>"
-        f"<td>{_fmt(e.message)}</td></tr>"
+        f"<td>{_fmt(e.doc)}{'<br>' if e.doc and e.message else ''}{_fmt(e.message)}</td></tr>"
         for e in result.expectations)
+    cite = ""
+    if any(e.paper is not None for e in result.expectations):
+        cite = ("<p class='cite'>paper: the value the reference paper claims, shown beside "
+                "what this bench holds (<i>required</i>); reproduced = the measurement also "
+                f"meets it. Reference: {html.escape(PAPER_CITATION)}.</p>")
     def win(k: str) -> str:
         w = result.metric_windows.get(k)
         return "" if w is None else f"[{w[0]:g}, {w[1]:g}]"
@@ -323,8 +391,8 @@ def write_html(path: Path, result: RunResult, plots: list[tuple[str, str]],
     defs_html = ("<tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in defs[0]) + "</tr>\n"
                  + "\n".join("<tr>" + "".join(f"<td>{html.escape(v)}</td>" for v in r.values())
                               + "</tr>" for r in defs))
-    figs = "\n".join(f"<figure><img src='{html.escape(f)}' alt='{html.escape(c)}'>"
-                     f"<figcaption>{html.escape(c)}</figcaption></figure>" for f, c in plots)
+    figs = "\n".join(f"<figure>{div}<figcaption>{html.escape(c)}</figcaption></figure>"
+                     for div, c in plots)
     drive = meta.get("drive", {})
     info = "\n".join(f"<tr><td>{_fmt(k)}</td><td>{_fmt(v)}</td></tr>" for k, v in {
         "connection": meta.get("connection"), "firmware": drive.get("firmware_version"),
@@ -339,25 +407,33 @@ def write_html(path: Path, result: RunResult, plots: list[tuple[str, str]],
     doc = f"""<!doctype html>
 <html><head><meta charset="utf-8"><title>{html.escape(result.sequence)} - bench report</title>
 <style>
-body {{ font-family: sans-serif; margin: 2em; max-width: 1100px; }}
+body {{ font-family: sans-serif; margin: 2em; max-width: 1300px; }}
 table {{ border-collapse: collapse; margin: 1em 0; }}
 td, th {{ border: 1px solid #ccc; padding: 3px 8px; font-size: 14px; }}
-tr.pass td:nth-child(6) {{ color: #070; font-weight: bold; }}
-tr.fail td {{ background: #fee; }} tr.fail td:nth-child(6) {{ color: #b00; font-weight: bold; }}
+tr.pass td:nth-child(7) {{ color: #070; font-weight: bold; }}
+tr.fail td {{ background: #fee; }} tr.fail td:nth-child(7) {{ color: #b00; font-weight: bold; }}
+.cite {{ color: #444; font-size: 13px; }}
 .verdict {{ font-size: 1.4em; font-weight: bold; color: {'#070' if ok else '#b00'}; }}
 img {{ max-width: 100%; }} figcaption {{ color: #555; font-size: 13px; }}
 .simbanner {{ background: #ffe08a; border: 3px solid #c80; padding: 0.6em 1em;
   font-weight: bold; font-size: 1.1em; }}
-</style></head><body>
+</style>
+<script type="text/javascript">{get_plotlyjs()}</script></head><body>
 <h1>{html.escape(result.sequence)}</h1>
 {_sim_banner(meta)}
 <p class="verdict">{'PASSED' if ok else 'FAILED'}{_sim_suffix(meta)}</p>
 <p>{html.escape(str(meta.get('sequence', {}).get('description', '')))}</p>
 <h2>Expectations</h2>
 <table><tr><th>expectation</th><th>metric</th><th>window (s)</th><th>measured</th>
-<th>required</th><th>result</th><th>paper</th><th>paper reproduced</th><th>note</th></tr>
+<th>required</th><th>unit</th><th>result</th><th>paper</th><th>paper reproduced</th>
+<th>what it checks</th></tr>
 {rows}
 </table>
+{cite}
+<h2>Plots</h2>
+<p class="cite">Zoom with the mouse (double-click resets), hover for values; the time axis
+starts cut to the time the drive was enabled.</p>
+{figs}
 <h2>Metrics over their default windows</h2>
 <table><tr><th>metric</th><th>value</th><th>unit</th><th>window (s)</th></tr>
 {metrics}</table>
@@ -365,8 +441,6 @@ img {{ max-width: 100%; }} figcaption {{ color: #555; font-size: 13px; }}
 <table>{defs_html}</table>
 <h2>Run</h2>
 <table>{info}</table>
-<h2>Plots</h2>
-{figs}
 </body></html>
 """
     path.write_text(doc, encoding="utf-8")

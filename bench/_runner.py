@@ -86,6 +86,7 @@ class ExpectResult:
     line: int = 0
     paper: float | None = None
     paper_met: bool | None = None
+    doc: str = ""
 
 
 @dataclass
@@ -319,7 +320,7 @@ class Runner:
         if truth is None:
             return ExpectResult(name, p["metric"], (t0, t1), float("nan"), False, _criterion(p),
                                 "metric unavailable: needs the true position (simulated drive "
-                                "or a reference encoder)", step.line)
+                                "or a reference encoder)", step.line, doc=str(p.get("doc", "")))
         m = compute_metrics(truth, self.units.pole_pitch_m, self.units.pole_pairs, (t0, t1),
                             (p["metric"],))[p["metric"]]
         ok = evaluate(p, m)
@@ -332,7 +333,7 @@ class Runner:
             if not paper_met:
                 msg = (msg + "; " if msg else "") + f"paper's {paper:g} not reproduced"
         return ExpectResult(name, p["metric"], (t0, t1), m, ok, _criterion(p), msg, step.line,
-                            paper, paper_met)
+                            paper, paper_met, str(p.get("doc", "")))
 
     # ---- safe state -------------------------------------------------------------------
     def safe_state(self) -> str:

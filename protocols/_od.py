@@ -312,10 +312,27 @@ def _pdo_objects(pdos: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
     return objs
 
 
+_PARSED: dict[tuple[str, int, int], Any] = {}
+
+
+def _parse(path: Path) -> Any:
+    """The YAML document of ``path``, parsed once per file version (path, mtime, size):
+    the bench loads the OD from several modules, and parsing is the expensive part.
+    Uses libyaml's C loader when PyYAML has it. Callers must not mutate the result
+    (``load`` only reads it)."""
+    st = path.stat()
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    if key not in _PARSED:
+        loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+        _PARSED.clear()  # one version per process is enough
+        _PARSED[key] = yaml.load(path.read_text(), Loader=loader)  # noqa: S506 - safe loader
+    return _PARSED[key]
+
+
 def load(path: Path | str = OD_YAML) -> ObjectDictionary:
     """Load and validate od.yaml; raises :class:`OdError` naming the field."""
     path = Path(path)
-    data = yaml.safe_load(path.read_text())
+    data = _parse(path)
     fw_limits = data.get("fw_config", {}) or {}
     objs = list(data["objects"]) + _pdo_objects(data.get("pdos", {}) or {})
     max_string = int(data["device"].get("max_string", 24))

@@ -64,7 +64,7 @@ def test_paper_load_step_on_the_simulated_drive(tmp_path: Path) -> None:
     # run folder
     run = Path(doc["run_dir"])
     for f in ("can.blf", "signals.mf4", "meta.json", "events.jsonl", "report.html",
-              "overview.png", "junit.xml", "summary.json"):
+              "junit.xml", "summary.json"):
         assert (run / f).is_file(), f
     meta = json.loads((run / "meta.json").read_text())
     assert meta["drive"]["firmware_version"] and meta["firmware_check"] == "matches the EDS"
