@@ -117,12 +117,25 @@ def write_junit(path: str | Path, results: list[RunResult],
 # ---- plots ----------------------------------------------------------------------------
 
 
-def _decimate(t: np.ndarray, v: np.ndarray, n_max: int = 6000
+def _decimate(t: np.ndarray, v: np.ndarray, n_max: int = 4000
               ) -> tuple[np.ndarray, np.ndarray]:
-    if t.size <= n_max:
+    """At most about ``n_max`` points: the min and the max of each of ``n_max / 2``
+    buckets in time order, so spikes and noise bands survive (plain striding hides
+    them)."""
+    t, v = np.asarray(t), np.asarray(v)
+    n_b = max(1, n_max // 2)
+    if t.size <= n_max or v.ndim != 1:
         return t, v
-    k = int(math.ceil(t.size / n_max))
-    return t[::k], v[::k]
+    k = t.size // n_b
+    m = k * n_b
+    blk = v[:m].astype(np.float64).reshape(n_b, k)
+    fin = np.isfinite(blk)
+    lo = np.argmin(np.where(fin, blk, np.inf), axis=1)
+    hi = np.argmax(np.where(fin, blk, -np.inf), axis=1)
+    base = np.arange(n_b) * k
+    idx = np.stack([base + np.minimum(lo, hi), base + np.maximum(lo, hi)], axis=1).ravel()
+    idx = np.concatenate([idx, np.arange(m, t.size)])
+    return t[idx], v[idx]
 
 
 #: The paper the reproduced claims come from (docs/method.md).
@@ -131,6 +144,9 @@ PAPER_CITATION = ("Position Sensorless Control of Permanent Magnet Linear Synchr
                   "Electrical Machines, 2024 (02), pp. 59-63")
 
 _PASS, _FAIL, _TRACE = "#2ca02c", "#d62728", "#9467bd"
+_TIME_AXIS = "sequence time (s)"
+#: line colours, restarted in every row so the first line of a row is always blue
+_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#17becf", "#8c564b", "#e377c2")
 
 
 def _enabled_window(logger: Any) -> tuple[float, float] | None:
@@ -146,68 +162,153 @@ def _enabled_window(logger: Any) -> tuple[float, float] | None:
     return float(tt[0]), float(tt[-1])
 
 
-def _lane(fig: Any, result: RunResult, logger: Any, row: int) -> None:
-    """Row ``row``: one labelled bar per expectation window (green pass, red fail) and
-    per trace capture (purple), so overlapping windows stay apart and are named."""
-    import plotly.graph_objects as go
-
-    shown: set[str] = set()
-    names = []
-    for e in result.expectations:
-        grp = "expectation window: pass" if e.passed else "expectation window: FAIL"
-        names.append(e.name)
-        meas = "n/a" if not math.isfinite(e.measured) else f"{e.measured:.4g}"
-        fig.add_trace(go.Scatter(
-            x=list(e.window_s), y=[e.name, e.name], mode="lines",
-            line={"color": _PASS if e.passed else _FAIL, "width": 9}, name=grp,
-            legendgroup=grp, showlegend=grp not in shown,
-            hovertext=f"{e.name}: measured {meas}, required {e.criterion}",
-            hoverinfo="text"), row=row, col=1)
-        shown.add(grp)
-    for w in logger.windows:
-        lab = f"trace '{w['name']}'"
-        names.append(lab)
-        fig.add_trace(go.Scatter(
-            x=[w["t0_s"], w["t1_s"]], y=[lab, lab], mode="lines",
-            line={"color": _TRACE, "width": 9}, name="trace capture", legendgroup="trace",
-            showlegend="trace" not in shown, hoverinfo="text",
-            hovertext=f"{lab}: {w['t0_s']:.4f}-{w['t1_s']:.4f} s"), row=row, col=1)
-        shown.add("trace")
-    fig.update_yaxes(categoryorder="array", categoryarray=names[::-1], row=row, col=1,
-                     tickfont={"size": 10})
+def _nums(a: Any) -> list[Any]:
+    """A float array as a short JSON list: about 7 significant digits of the array's
+    scale, NaN/inf as null (a gap in the line)."""
+    a = np.asarray(a, dtype=np.float64).ravel()
+    if a.size == 0:
+        return []
+    fin = np.isfinite(a)
+    big = float(np.max(np.abs(a[fin]))) if np.any(fin) else 1.0
+    dec = int(min(12, max(0, 6 - math.floor(math.log10(big))))) if big > 0 else 6
+    out = np.round(a, dec).tolist()
+    if not np.all(fin):
+        out = [x if f else None for x, f in zip(out, fin.tolist(), strict=True)]
+    return out
 
 
-def _figure(rows: list[str], title: str, lane: bool, heights: list[float] | None = None
-            ) -> Any:
-    from plotly.subplots import make_subplots
+class _Figure:
+    """A plotly figure as plain JSON (rows of stacked subplots sharing the time axis).
 
-    n = len(rows) + (1 if lane else 0)
-    h = ([0.6] if lane else []) + (heights or [1.0] * len(rows))
-    fig = make_subplots(rows=n, cols=1, shared_xaxes=True, vertical_spacing=0.03,
-                        row_heights=h)
-    for i, r in enumerate(rows):
-        fig.update_yaxes(title_text=r, row=i + 1 + (1 if lane else 0), col=1)
-    fig.update_xaxes(title_text="sequence time (s)", row=n, col=1)
-    fig.update_layout(title={"text": title, "x": 0.0, "xanchor": "left", "y": 1.0,
-                             "yanchor": "top", "pad": {"t": 8}},
-                      height=200 + 190 * n, template="plotly_white",
-                      margin={"l": 70, "r": 20, "t": 110, "b": 40},
-                      legend={"orientation": "h", "y": 1.01, "yanchor": "bottom", "x": 0,
-                              "xanchor": "left"}, hovermode="x unified")
-    return fig
+    Building the dicts directly instead of through ``plotly.graph_objects`` keeps the
+    report at a few tens of milliseconds; the browser does the rest (plotly.js).
+    """
+
+    def __init__(self, rows: list[str], title: str, lane: bool = False,
+                 x_range: tuple[float, float] | None = None) -> None:
+        self.lane = lane
+        labels = (["windows"] if lane else []) + rows
+        n = len(labels)
+        heights = ([0.55] if lane else []) + [1.0] * len(rows)
+        gap = 0.035
+        unit_h = (1.0 - gap * (n - 1)) / sum(heights)
+        self.data: list[dict[str, Any]] = []
+        self.layout: dict[str, Any] = {
+            "title": {"text": html.escape(title), "x": 0.0, "xanchor": "left",
+                      "xref": "container", "y": 1.0, "yref": "container", "yanchor": "top",
+                      "pad": {"t": 12, "l": 10}, "font": {"size": 16}},
+            "height": 150 + 175 * n + (25 if lane else 0),
+            "margin": {"l": 80, "r": 20, "t": 105, "b": 50},
+            "legend": {"orientation": "h", "y": 1.0, "yanchor": "bottom", "x": 0,
+                       "xanchor": "left", "font": {"size": 12}},
+            "hovermode": "x unified", "paper_bgcolor": "white", "plot_bgcolor": "white",
+        }
+        self._per_row: dict[int, int] = {}
+        top = 1.0
+        for i, lab in enumerate(labels):
+            k = "" if i == 0 else str(i + 1)
+            h = heights[i] * unit_h
+            last = i == n - 1
+            xa: dict[str, Any] = {}
+            if x_range is not None:
+                xa["range"] = [x_range[0], x_range[1]]
+            xa.update({"anchor": f"y{k}", "domain": [0, 1], "showticklabels": last,
+                       "gridcolor": "#e5e5e5", "zeroline": False, "ticks": "outside"})
+            if i:
+                xa["matches"] = "x"
+            if last:
+                xa["title"] = {"text": _TIME_AXIS}
+            ya: dict[str, Any] = {"anchor": f"x{k}", "domain": [max(0.0, top - h), top],
+                                  "gridcolor": "#e5e5e5", "zeroline": False,
+                                  "title": {"text": html.escape(lab), "font": {"size": 12}}}
+            if lane and i == 0:
+                ya.update({"type": "category", "title": {"text": ""}, "fixedrange": True,
+                           "tickfont": {"size": 11}, "automargin": True})
+            self.layout[f"xaxis{k}"] = xa
+            self.layout[f"yaxis{k}"] = ya
+            top -= h + gap
+        self.n = n
+
+    def axis(self, row: int) -> str:
+        """Axis suffix of data row ``row`` (1-based, not counting the lane)."""
+        i = row - 1 + (1 if self.lane else 0)
+        return "" if i == 0 else str(i + 1)
+
+    def line(self, row: int, t: np.ndarray, v: np.ndarray, name: str, color: str | None = None,
+             dash: str | None = None, shape: str | None = None, group: str | None = None,
+             showlegend: bool = True) -> None:
+        a, b = _decimate(t, v)
+        k = self.axis(row)
+        j = self._per_row.get(row, 0)
+        self._per_row[row] = j + 1
+        ln: dict[str, Any] = {"width": 1.3, "color": color or _COLORS[j % len(_COLORS)]}
+        if dash:
+            ln["dash"] = dash
+        if shape:
+            ln["shape"] = shape
+        tr: dict[str, Any] = {"type": "scatter", "mode": "lines", "x": _nums(a), "y": _nums(b),
+                              "name": name, "line": ln, "xaxis": f"x{k}", "yaxis": f"y{k}",
+                              "showlegend": showlegend}
+        if group:
+            tr["legendgroup"] = group
+        self.data.append(tr)
+
+    def y_range(self, row: int, lo: float, hi: float) -> None:
+        self.layout[f"yaxis{self.axis(row)}"]["range"] = [lo, hi]
+
+    def lanes(self, result: RunResult, windows: list[dict[str, Any]]) -> None:
+        """First row: one labelled bar per expectation window (green pass, red FAIL) and
+        per trace capture (purple); the legend names the colours."""
+        shown: set[str] = set()
+        names: list[str] = []
+        for e in result.expectations:
+            grp = "expectation window: pass" if e.passed else "expectation window: FAIL"
+            names.append(e.name)
+            meas = "n/a" if not math.isfinite(e.measured) else f"{e.measured:.4g}"
+            self.data.append({
+                "type": "scatter", "mode": "lines", "x": list(e.window_s),
+                "y": [e.name, e.name], "xaxis": "x", "yaxis": "y", "name": grp,
+                "legendgroup": grp, "showlegend": grp not in shown,
+                "line": {"color": _PASS if e.passed else _FAIL, "width": 10},
+                "hovertemplate": html.escape(f"{e.name}: measured {meas}, required "
+                                             f"{e.criterion}") + "<extra></extra>"})
+            shown.add(grp)
+        for w in windows:
+            lab = f"trace '{w['name']}'"
+            names.append(lab)
+            self.data.append({
+                "type": "scatter", "mode": "lines", "x": [w["t0_s"], w["t1_s"]],
+                "y": [lab, lab], "xaxis": "x", "yaxis": "y", "name": "trace capture",
+                "legendgroup": "trace", "showlegend": "trace" not in shown,
+                "line": {"color": _TRACE, "width": 10},
+                "hovertemplate": html.escape(f"{lab}: {w['t0_s']:.4f}-{w['t1_s']:.4f} s")
+                + "<extra></extra>"})
+            shown.add("trace")
+        self.layout["yaxis"].update({"categoryorder": "array",
+                                     "categoryarray": names[::-1]})
+        self.layout["height"] += 14 * max(0, len(names) - 3)
+
+    def div(self, div_id: str) -> str:
+        """``<div>`` + the script that draws it (plotly.js must be loaded before)."""
+        cfg = {"displaylogo": False, "responsive": True,
+               "toImageButtonOptions": {"format": "png", "filename": div_id}}
+        fig = json.dumps({"data": self.data, "layout": self.layout, "config": cfg},
+                         separators=(",", ":"), allow_nan=False)
+        return (f'<div id="{div_id}" class="plot" style="height:{self.layout["height"]}px">'
+                f'</div>\n<script>(function(){{var f={fig};'
+                f'Plotly.newPlot("{div_id}",f.data,f.layout,f.config);}})();</script>')
 
 
 def make_plots(logger: Any, result: RunResult, units: MotorUnits, out_dir: Path
                ) -> list[tuple[str, str]]:
-    """Interactive plots of a run (plotly); returns ``[(html <div>, caption), ...]``.
+    """Interactive plots of a run; returns ``[(html <div> + script, caption), ...]``.
 
-    The x range is cut to the time the drive was enabled (zoom out to see the rest),
-    every axis has its unit, and a first row names each expectation window and trace
-    capture. The page embeds plotly.js once (``write_html``): it works offline.
+    The x range is cut to the time the drive was enabled (zoom out or double-click to
+    see the rest), every axis has its unit, and a first row names each expectation
+    window and trace capture. plotly.js itself is embedded once by :func:`write_html`.
+    Also writes ``compare.js`` (decimated key signals) for the runs index's comparison
+    view.
     """
-    import plotly.graph_objects as go
-    from plotly.io import to_html
-
     t0 = logger.t_origin_s
     rpm = 60.0 / (2.0 * math.pi * units.pole_pairs)  # electrical rad/s -> r/min
     en = _enabled_window(logger)
@@ -216,109 +317,114 @@ def make_plots(logger: Any, result: RunResult, units: MotorUnits, out_dir: Path
         t, v = logger.channel(name)
         return t - t0, v
 
-    def line(fig: Any, row: int, t: np.ndarray, v: np.ndarray, name: str, **kw: Any) -> None:
-        a, b = _decimate(t, v)
-        fig.add_trace(go.Scatter(x=a, y=b, name=name, mode="lines", line={"width": 1.2},
-                                 **kw), row=row, col=1)
-
-    def done(fig: Any) -> str:
-        if en is not None:
-            fig.update_xaxes(range=[en[0], en[1]])
-        return to_html(fig, include_plotlyjs=False, full_html=False,
-                       config={"displaylogo": False, "responsive": True})
-
     plots: list[tuple[str, str]] = []
+    compare: dict[str, Any] = {}
     truth = logger.truth()
     lane_done = False
     if truth is not None:
         t = truth["t_s"]
-        fig = _figure(["electrical angle (rad)", "position error (rad el.)", "speed (r/min)",
+        fig = _Figure(["electrical angle (rad)", "position error (rad el.)", "speed (r/min)",
                        "force (N·m rotary equiv.)"], f"{result.sequence}: truth vs estimate",
-                      lane=True)
-        _lane(fig, result, logger, 1)
+                      lane=True, x_range=en)
+        fig.lanes(result, logger.windows)
         lane_done = True
-        line(fig, 2, t, wrap_pi(truth["theta_e_rad"]), "true angle")
-        line(fig, 2, t, wrap_pi(truth["theta_hat_rad"]), "estimated angle",
-             line_dash="dash")
+        fig.line(1, t, wrap_pi(truth["theta_e_rad"]), "true angle")
+        fig.line(1, t, wrap_pi(truth["theta_hat_rad"]), "estimated angle", dash="dash")
         err = wrap_pi(truth["theta_e_rad"] - truth["theta_hat_rad"])
-        line(fig, 3, t, err, "position error (true - estimate)", line_color=_FAIL)
+        fig.line(2, t, err, "position error (true - estimate)", color=_FAIL)
         sel = (t >= en[0] + 0.1) & (t <= en[1]) if en is not None else t > 0.1
         if np.any(sel):  # the errors under test, not the spike after disable
             lim = max(0.02, float(np.nanpercentile(np.abs(err[sel]), 99.5)) * 1.3)
-            fig.update_yaxes(range=[-lim, lim], row=3, col=1)
-        line(fig, 4, t, truth["omega_e_radps"] * rpm, "true speed")
-        line(fig, 4, t, truth["omega_hat_radps"] * rpm, "estimated speed", line_dash="dash")
+            fig.y_range(2, -lim, lim)
+        fig.line(3, t, truth["omega_e_radps"] * rpm, "true speed")
+        fig.line(3, t, truth["omega_hat_radps"] * rpm, "estimated speed", dash="dash")
         ts, vs = ch("sim.speed_ref_radps_e")
         if ts.size:
-            line(fig, 4, ts, vs * rpm, "speed reference", line_color="black")
+            fig.line(3, ts, vs * rpm, "speed reference", color="black")
         tl, vl = ch("sim.load_N")
         if tl.size:
-            line(fig, 5, tl, vl * units.radius_m, "load")
+            fig.line(4, tl, vl * units.radius_m, "load", color="#8c564b")
         tf, vf = ch("sim.force_N")
         if tf.size:
-            line(fig, 5, tf, vf * units.radius_m, "thrust")
-        plots.append((done(fig), "true vs estimated position and speed (simulator truth), "
-                                 "position error, load; top row: expectation windows "
-                                 "(green pass, red fail) and trace captures (purple)"))
+            fig.line(4, tf, vf * units.radius_m, "thrust")
+        plots.append((fig.div("plot-overview"),
+                      "true vs estimated position and speed (simulator truth), position "
+                      "error, load; top row: expectation windows (green pass, red fail) and "
+                      "trace captures (purple)"))
+        m = (t >= en[0]) & (t <= en[1]) if en is not None else np.ones(t.size, bool)
+        for key, v in (("position error (rad el.)", err),
+                       ("estimated speed (r/min)", truth["omega_hat_radps"] * rpm),
+                       ("true speed (r/min)", truth["omega_e_radps"] * rpm)):
+            a, b = _decimate(t[m], np.asarray(v)[m], 3000)
+            compare[key] = {"t": _nums(a), "y": _nums(b)}
 
     names = [("sim.i_dq_hat_A", "i_d / i_q (A)"), ("sim.pll_err_rad", "PLL error (rad)"),
              ("sim.hf_amp_A", "HF amplitude (A)"), ("sim.sogi_k_eff", "SOGI gain k (-)")]
     have = [(n, lbl) for n, lbl in names if logger.channel(n)[0].size]
     if have:
-        fig = _figure([lbl for _, lbl in have], "firmware internals", lane=False)
+        fig = _Figure([lbl for _, lbl in have], "firmware internals", x_range=en)
         for i, (n, _lbl) in enumerate(have):
             t, v = ch(n)
             if v.ndim > 1:
                 for j, lab in enumerate(("i_d", "i_q")[: v.shape[1]]):
-                    line(fig, i + 1, t, v[:, j], lab)
+                    fig.line(i + 1, t, v[:, j], lab)
             else:
-                line(fig, i + 1, t, v, n[4:])
-        plots.append((done(fig), "firmware internals (from the simulated drive's record)"))
+                fig.line(i + 1, t, v, n[4:])
+        plots.append((fig.div("plot-internals"),
+                      "firmware internals (from the simulated drive's record)"))
 
     wanted = ("pdo.statusword", "pdo.speed_hat_mps", "pdo.pos_hat_m", "pdo.force_hat_N",
               "pdo.error_code", "pdo.theta_hat_rad")
     have_ch = logger.channels()
     pdo = [(n, have_ch[n]) for n in wanted if n in have_ch]
     if pdo:
-        fig = _figure([f"{n[4:]} ({u})" if u else n[4:] for n, u in pdo],
-                      "received over CAN (TPDOs)", lane=not lane_done)
+        fig = _Figure([f"{n[4:]} ({u or '-'})" for n, u in pdo], "received over CAN (TPDOs)",
+                      lane=not lane_done, x_range=en)
         if not lane_done:
-            _lane(fig, result, logger, 1)
-        off = 0 if lane_done else 1
+            fig.lanes(result, logger.windows)
         for i, (n, _u) in enumerate(pdo):
             t, v = ch(n)
-            a, b = _decimate(t, v)
-            fig.add_trace(go.Scatter(x=a, y=b, name=n[4:], mode="lines",
-                                     line={"shape": "hv", "width": 1.2}),
-                          row=i + 1 + off, col=1)
-        plots.append((done(fig), "signals decoded from the drive's TPDOs (what the bench "
-                                 "receives over CAN)"))
+            fig.line(i + 1, t, v, n[4:], shape="hv")
+        plots.append((fig.div("plot-pdo"), "signals decoded from the drive's TPDOs (what "
+                                            "the bench receives over CAN)"))
 
-    for w in logger.windows:
+    for k, w in enumerate(logger.windows):
         sigs = w["signals"] or ["theta_hat_rad", "pll_err_rad"]
         drv = f"trace.{w['name']}."
         rows = [s for s in sigs if logger.channel("sim." + s)[0].size
                 or logger.channel(drv + s)[0].size]
         if not rows:
             continue
-        fig = _figure([f"{s} ({have_ch.get(drv + s) or have_ch.get('sim.' + s) or '-'})"
+        fig = _Figure([f"{s} ({have_ch.get(drv + s) or have_ch.get('sim.' + s) or '-'})"
                        for s in rows], f"trace capture '{w['name']}' (full control rate)",
-                      lane=False)
+                      x_range=(w["t0_s"], w["t1_s"]))
         for i, sgl in enumerate(rows):
             t, v = ch("sim." + sgl)
             m = (t >= w["t0_s"]) & (t <= w["t1_s"])
             if t.size:
-                line(fig, i + 1, t[m], v[m], f"{sgl}: simulator record",
-                     legendgroup="sim", showlegend=i == 0)
+                fig.line(i + 1, t[m], v[m], "simulator record", color="#1f77b4",
+                         group="sim", showlegend=i == 0)
             t, v = ch(drv + sgl)
             if t.size:
-                line(fig, i + 1, t, v, f"{sgl}: drive trace buffer (serial upload)",
-                     line_dash="dash", legendgroup="drv", showlegend=i == 0)
-        fig.update_xaxes(range=[w["t0_s"], w["t1_s"]])
-        plots.append((to_html(fig, include_plotlyjs=False, full_html=False,
-                              config={"displaylogo": False}),
+                fig.line(i + 1, t, v, "drive trace buffer (serial upload)", color="#ff7f0e",
+                         dash="dash", group="drv", showlegend=i == 0)
+        plots.append((fig.div(f"plot-trace-{k}"),
                       f"trace capture {w['name']}: {w['t0_s']:.3f}-{w['t1_s']:.3f} s"))
+    _write_compare_js(out_dir, result, en, compare)
     return plots
+
+
+def _write_compare_js(out_dir: Path, result: RunResult, en: tuple[float, float] | None,
+                      series: dict[str, Any]) -> None:
+    """``compare.js``: the key signals of this run for the runs index (a script, not JSON,
+    so that the index can load it from file:// where browsers refuse fetch())."""
+    doc = {"sequence": result.sequence, "enabled_s": list(en) if en else None,
+           "series": series}
+    key = json.dumps(Path(out_dir).name)
+    (Path(out_dir) / "compare.js").write_text(
+        "window.BENCH_RUNS = window.BENCH_RUNS || {};\n"
+        f"window.BENCH_RUNS[{key}] = {json.dumps(doc, separators=(',', ':'))};\n",
+        encoding="utf-8")
 
 
 def _fmt(v: Any) -> str:
