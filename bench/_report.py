@@ -550,3 +550,194 @@ starts cut to the time the drive was enabled.</p>
 </body></html>
 """
     path.write_text(doc, encoding="utf-8")
+
+
+# ---- runs index -----------------------------------------------------------------------
+
+#: metrics shown as columns of the runs index (all of them are in the comparison view)
+INDEX_METRICS = ("position_error_rms_rad", "position_error_max_rad",
+                 "speed_estimate_error_max_rpm", "speed_tracking_error_max_rpm",
+                 "settling_time_s")
+
+
+def _read_run(d: Path) -> dict[str, Any] | None:
+    """One run folder's entry for the index; None when it has no readable summary."""
+    try:
+        s = json.loads((d / "summary.json").read_text(encoding="utf-8"))
+        if not isinstance(s, dict) or "sequence" not in s:
+            return None
+    except (OSError, ValueError):
+        return None
+    try:
+        meta = json.loads((d / "meta.json").read_text(encoding="utf-8"))
+        if not isinstance(meta, dict):
+            meta = {}
+    except (OSError, ValueError):
+        meta = {}
+    seq = meta.get("sequence") if isinstance(meta.get("sequence"), dict) else {}
+    date = str(meta.get("created_utc") or "")
+    if not date:  # folder names start with the UTC time stamp: 20261123T024552_...
+        stamp = d.name.split("_", 1)[0]
+        date = (f"{stamp[0:4]}-{stamp[4:6]}-{stamp[6:8]} {stamp[9:11]}:{stamp[11:13]}:"
+                f"{stamp[13:15]}" if len(stamp) >= 15 and stamp[8:9] == "T" else "")
+    exps = [e for e in s.get("expectations") or [] if isinstance(e, dict)]
+    verdict = ("ABORTED" if s.get("aborted") else "PASSED" if s.get("passed") else "FAILED")
+    metrics = s.get("metrics") if isinstance(s.get("metrics"), dict) else {}
+    return {
+        "dir": d.name, "sequence": str(s.get("sequence")), "date": date.replace("T", " ")[:19],
+        "verdict": verdict, "drive": str(s.get("drive") or ("SIMULATED" if s.get("simulated")
+                                                             else "")),
+        "motor": seq.get("motor"), "extractor": seq.get("extractor"), "seed": seq.get("seed"),
+        "passed_exp": sum(1 for e in exps if e.get("passed")), "n_exp": len(exps),
+        "paper_not_reproduced": sum(1 for e in exps if e.get("paper_reproduced") is False),
+        "metrics": {k: v for k, v in metrics.items() if isinstance(v, (int, float))
+                    and not isinstance(v, bool)},
+        "error": s.get("error"),
+        "report": (d / "report.html").is_file(), "compare": (d / "compare.js").is_file(),
+    }
+
+
+def write_index(runs_root: str | Path) -> Path:
+    """Write ``<runs_root>/index.html``: every run (newest first) with sequence, date,
+    verdict and key metrics, and a comparison of the runs ticked (metrics side by side,
+    position error and speed overlaid). plotly.js is embedded once; each run's signals
+    come from its ``compare.js`` (loaded by a script tag, so it works from file://).
+
+    Raises FileNotFoundError when ``runs_root`` is not a directory.
+    """
+    root = Path(runs_root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: no such runs folder")
+    runs = [r for d in sorted(root.iterdir(), reverse=True) if d.is_dir()
+            for r in [_read_run(d)] if r is not None]
+    units = {k: METRIC_DEFS[k].unit for k in METRIC_DEFS}
+    names = [k for k in METRIC_DEFS if any(k in r["metrics"] for r in runs)]
+    names += sorted({k for r in runs for k in r["metrics"]} - set(names))
+
+    def cell(v: Any) -> str:
+        return "&mdash;" if v is None or v == "" else _fmt(v)
+
+    head = "".join(f"<th>{html.escape(k)}<br><span class='u'>"
+                   f"{html.escape(units.get(k, '') or '-')}</span></th>" for k in INDEX_METRICS)
+    rows = []
+    for r in runs:
+        link = (f"<a href='{html.escape(r['dir'])}/report.html'>{html.escape(r['dir'])}</a>"
+                if r["report"] else html.escape(r["dir"]))
+        cls = r["verdict"].lower()
+        exp = (f"{r['passed_exp']}/{r['n_exp']}"
+               + (f"<br><span class='u'>paper not reproduced: {r['paper_not_reproduced']}"
+                  "</span>" if r["paper_not_reproduced"] else ""))
+        met = "".join(f"<td class='num'>{cell(r['metrics'].get(k))}</td>"
+                      for k in INDEX_METRICS)
+        drive = f" <span class='sim'>{html.escape(r['drive'])}</span>" if r["drive"] else ""
+        tip = "" if r["compare"] else " title='no plot data (run from an older bench)'"
+        rows.append(
+            f"<tr><td><input type='checkbox' class='pick' value='{html.escape(r['dir'])}'"
+            f"{tip}>"
+            f"</td><td>{html.escape(r['sequence'])}</td><td>{html.escape(r['date'])}</td>"
+            f"<td class='{cls}'>{r['verdict']}{drive}</td><td>{exp}</td>{met}"
+            f"<td>{cell(r['motor'])}, {cell(r['extractor'])}, seed {cell(r['seed'])}</td>"
+            f"<td>{link}</td></tr>")
+    data = {"runs": {r["dir"]: {k: r[k] for k in ("sequence", "date", "verdict", "metrics",
+                                                   "compare", "drive")} for r in runs},
+            "metrics": names, "units": {k: units.get(k, "") for k in names}}
+    from plotly.offline import get_plotlyjs
+
+    body = ("\n".join(rows) if rows else
+            f"<tr><td colspan='{7 + len(INDEX_METRICS)}'>no runs yet</td></tr>")
+    doc = f"""<!doctype html>
+<html><head><meta charset="utf-8"><title>bench runs</title>
+<style>
+body {{ font-family: sans-serif; margin: 1.5em; }}
+table {{ border-collapse: collapse; margin: 1em 0; }}
+td, th {{ border: 1px solid #ccc; padding: 3px 6px; font-size: 13px; vertical-align: top; }}
+#runs td:nth-child(3) {{ white-space: nowrap; }}
+th {{ background: #f4f4f4; }} .u {{ font-weight: normal; color: #555; font-size: 12px; }}
+td.num {{ text-align: right; font-variant-numeric: tabular-nums; }}
+td.passed {{ color: #070; font-weight: bold; }} td.failed, td.aborted {{ color: #b00;
+  font-weight: bold; background: #fee; }}
+.sim {{ background: #ffe08a; color: #000; font-size: 11px; padding: 0 4px; font-weight: normal; }}
+button {{ font-size: 14px; padding: 4px 12px; }} .note {{ color: #555; font-size: 13px; }}
+</style>
+<script type="text/javascript">{get_plotlyjs()}</script></head><body>
+<h1>Bench runs</h1>
+<p class="note">{len(runs)} run(s) in {html.escape(str(root))}, newest first. Tick two or more
+runs and press <b>Compare</b>: the same metric side by side and the signals overlaid.
+Regenerate with <code>bench report index --runs {html.escape(str(root))}</code>.</p>
+<button id="cmp">Compare selected</button> <span id="msg" class="note"></span>
+<table id="runs"><tr><th></th><th>sequence</th><th>date (UTC)</th><th>verdict</th>
+<th>expectations passed</th>{head}<th>motor, extractor, seed</th><th>run folder</th></tr>
+{body}
+</table>
+<div id="comparison"></div>
+<script>
+var INDEX = {json.dumps(data, separators=(",", ":"), allow_nan=False)};
+window.BENCH_RUNS = window.BENCH_RUNS || {{}};
+function esc(s) {{ return String(s).replace(/[&<>"']/g, function (c) {{
+  return {{"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}}[c]; }}); }}
+function fmt(v) {{ return (v === undefined || v === null) ? "&mdash;" :
+  Number(v).toPrecision(5).replace(/\\.?0+$/, "").replace(/\\.?0+e/, "e"); }}
+function load(dir) {{
+  return new Promise(function (ok) {{
+    if (window.BENCH_RUNS[dir] || !INDEX.runs[dir].compare) {{ ok(); return; }}
+    var s = document.createElement("script");
+    s.src = encodeURI(dir) + "/compare.js"; s.onload = ok; s.onerror = ok;
+    document.head.appendChild(s); }}); }}
+function compare() {{
+  var dirs = Array.from(document.querySelectorAll(".pick:checked")).map(function (c) {{
+    return c.value; }});
+  var msg = document.getElementById("msg");
+  if (dirs.length < 2) {{ msg.textContent = "tick at least two runs"; return; }}
+  msg.textContent = "";
+  Promise.all(dirs.map(load)).then(function () {{ draw(dirs); }}); }}
+function draw(dirs) {{
+  var out = document.getElementById("comparison");
+  var h = "<h2>Comparison</h2><table><tr><th>metric</th><th>unit</th>";
+  dirs.forEach(function (d) {{ var r = INDEX.runs[d];
+    h += "<th>" + esc(r.sequence) + "<br><span class='u'>" + esc(r.date) + "<br>" +
+      esc(d) + "</span></th>"; }});
+  h += "</tr><tr><td>verdict</td><td></td>";
+  dirs.forEach(function (d) {{ var r = INDEX.runs[d];
+    h += "<td class='" + r.verdict.toLowerCase() + "'>" + r.verdict + "</td>"; }});
+  h += "</tr>";
+  INDEX.metrics.forEach(function (m) {{
+    h += "<tr><td>" + esc(m) + "</td><td>" + esc(INDEX.units[m] || "-") + "</td>";
+    dirs.forEach(function (d) {{ h += "<td class='num'>" + fmt(INDEX.runs[d].metrics[m]) +
+      "</td>"; }});
+    h += "</tr>"; }});
+  h += "</table>";
+  var keys = ["position error (rad el.)", "estimated speed (r/min)", "true speed (r/min)"];
+  var missing = dirs.filter(function (d) {{ return !window.BENCH_RUNS[d]; }});
+  if (missing.length) h += "<p class='note'>no plot data for: " + esc(missing.join(", ")) +
+    " (runs from an older bench, or no simulator truth)</p>";
+  keys.forEach(function (k, i) {{
+    h += "<div id='cmpplot" + i + "' style='height:330px'></div>"; }});
+  out.innerHTML = h;
+  keys.forEach(function (k, i) {{
+    var traces = [];
+    dirs.forEach(function (d) {{ var r = window.BENCH_RUNS[d];
+      if (!r || !r.series[k]) return;
+      traces.push({{type: "scatter", mode: "lines", x: r.series[k].t, y: r.series[k].y,
+        line: {{width: 1.5, dash: ["solid", "dash", "dot", "dashdot"][traces.length % 4]}},
+        name: INDEX.runs[d].sequence + " " + INDEX.runs[d].date}}); }});
+    Plotly.newPlot("cmpplot" + i, traces, {{
+      title: {{text: k + " (runs overlaid)", x: 0, xanchor: "left"}},
+      margin: {{l: 70, r: 20, t: 40, b: 45}}, hovermode: "x unified",
+      legend: {{orientation: "h", y: -0.25}},
+      xaxis: {{title: {{text: "sequence time (s)"}}, gridcolor: "#e5e5e5"}},
+      yaxis: {{title: {{text: k}}, gridcolor: "#e5e5e5", zeroline: false}}}},
+      {{displaylogo: false, responsive: true}}); }});
+  out.scrollIntoView(); }}
+document.getElementById("cmp").addEventListener("click", compare);
+var pre = new URLSearchParams(location.search).get("compare");
+if (pre) {{ pre.split(",").forEach(function (d) {{
+  var c = document.querySelector(".pick[value='" + CSS.escape(d) + "']");
+  if (c) c.checked = true; }}); compare(); }}
+</script>
+</body></html>
+"""
+    out = root / "index.html"
+    tmp = out.with_name(out.name + ".tmp")
+    tmp.write_text(doc, encoding="utf-8")
+    tmp.replace(out)
+    return out

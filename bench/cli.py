@@ -171,6 +171,16 @@ def build_parser() -> argparse.ArgumentParser:
                                    "and EMCY messages; --reset sends a fault reset.")
     p.add_argument("--reset", action="store_true", help="fault reset (controlword bit 7)")
     _conn_args(p)
+    p = sub.add_parser("report", help="reports: the runs index",
+                       description="Regenerate report pages from the run folders.")
+    rsub = p.add_subparsers(dest="report_cmd", metavar="WHAT", required=True)
+    ri = rsub.add_parser("index", help="write RUNS/index.html listing all runs",
+                         description="Write RUNS/index.html: every run folder (sequence, "
+                         "date, verdict, key metrics, link to its report) and a comparison "
+                         "view of the runs ticked. Also done after every 'bench run'.")
+    ri.add_argument("--runs", default="runs", metavar="DIR", help="run folder root (default "
+                                                                  "runs/)")
+
     from bench import _campaign
     _campaign.add_parser(sub)
     return ap
@@ -347,12 +357,36 @@ def cmd_run(args: argparse.Namespace) -> int:
             break
         if not r.passed and rc == EXIT_OK:
             rc = EXIT_FAIL
+    _update_index(args.runs)
     if args.summary_json:
         doc: Any = summaries[0] if len(summaries) == 1 else summaries
         Path(args.summary_json).write_text(json.dumps(doc, indent=2) + "\n")
     if args.junit:
         write_junit(args.junit, results, kinds[0] if kinds else None)
     return rc
+
+
+def _update_index(runs_root: str) -> None:
+    """Refresh RUNS/index.html after a run; a failure is one line, never the run's result."""
+    from bench._report import write_index
+
+    try:
+        print(f"  runs index: {write_index(runs_root)}")
+    except Exception as e:  # noqa: BLE001 - the run itself is complete and saved
+        print(f"bench: runs index not updated: {e}", file=sys.stderr)
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from bench._report import write_index
+
+    try:
+        out = write_index(args.runs)
+    except FileNotFoundError:
+        raise UserError(f"--runs {args.runs}: no such folder (run 'bench run ...' first, or "
+                        "give the folder that holds the run folders)") from None
+    n = out.read_text(encoding="utf-8").count("class='pick'")
+    print(f"{out} ({n} run(s))")
+    return EXIT_OK
 
 
 def _prefetch(module: str) -> None:
@@ -606,7 +640,7 @@ def main(argv: list[str] | None = None) -> int:
     _sigterm_as_interrupt()
     handlers = {"run": cmd_run, "validate": cmd_validate, "live": cmd_live, "info": cmd_info,
                 "param": cmd_param, "config": cmd_config, "faults": cmd_faults,
-                "campaign": _campaign_cmd}
+                "campaign": _campaign_cmd, "report": cmd_report}
     try:
         return handlers[args.cmd](args)
     except KeyboardInterrupt:
