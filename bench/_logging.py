@@ -110,7 +110,8 @@ class TraceListener(can.Listener):
         self.path = path
         self.writer = can.Logger(str(path))
         self.lock = threading.Lock()
-        self.count = 0
+        self.count = 0      # frames received from the bus
+        self.tx_count = 0   # frames the bench sent (logged too)
         self.id_counts: dict[int, int] = {}
 
     def on_message_received(self, msg: can.Message) -> None:
@@ -123,6 +124,9 @@ class TraceListener(can.Listener):
                 msg.channel = None
         with self.lock:
             self.writer.on_message_received(msg)
+            if not msg.is_rx:  # sent by the bench (see RunLogger._hook_sends)
+                self.tx_count += 1
+                return
             self.count += 1
             i = msg.arbitration_id
             self.id_counts[i] = self.id_counts.get(i, 0) + 1
@@ -189,10 +193,12 @@ class RunLogger:
         self.network = network
         self.counters: dict[str, SeqCounter] = {}
         self.meta: dict[str, Any] = {}
+        self._send_hooked: Any = None
         if network is not None and getattr(network, "notifier", None) is not None:
             self.trace = TraceListener(self.dir / f"can.{trace_format}")
             network.notifier.add_listener(self.errors)
             network.notifier.add_listener(self.trace)
+            self._hook_sends(network)
         self.flush_s = flush_s
         self._stop = threading.Event()
         self._flusher = threading.Thread(target=self._flush_loop, name="bench-log-flush",
@@ -213,6 +219,7 @@ class RunLogger:
     def mark_start(self, t0_s: float) -> None:
         """Origin of sequence time on the drive clock (s)."""
         self.t_origin_s = t0_s
+        self.meta["time_origin_s"] = float(t0_s)  # drive clock at sequence time 0
 
     def event(self, t_s: float, kind: str, detail: dict[str, Any]) -> None:
         ev = {"t_s": round(float(t_s), 6), "kind": kind, **detail}
@@ -248,7 +255,9 @@ class RunLogger:
                 name = prefix + k
                 ch = self._channels.get(name)
                 if ch is None:
-                    ch = self._channels[name] = _Channel(units.get(k, ""), [], [])
+                    unit = units.get(k) or (_signal_units().get(k, "")
+                                            if prefix.startswith(("tel.", "trace.")) else "")
+                    ch = self._channels[name] = _Channel(unit, [], [])
                 ch.t.append(t)
                 ch.v.append(np.asarray(v))
 
@@ -320,6 +329,31 @@ class RunLogger:
             part = self._part
         _write_mf4(self.dir / "signals" / f"part_{part:05d}.mf4", new)
 
+    def _hook_sends(self, network: Any) -> None:
+        """Log what the bench sends too (SDO requests, NMT, SYNC, heartbeat, RPDOs):
+        a bus does not receive its own frames, so the notifier alone records one
+        direction. Every frame given to ``bus.send`` is written to the trace as a
+        transmitted frame (``is_rx=False``) with its send time."""
+        bus = getattr(network, "bus", None)
+        if bus is None or self.trace is None:
+            return
+        trace = self.trace
+        orig = bus.send
+
+        def send(msg: can.Message, timeout: float | None = None) -> None:
+            orig(msg, timeout)
+            try:
+                m = copy.copy(msg)
+                m.is_rx = False
+                m.timestamp = time.time()
+                trace.on_message_received(m)
+            except Exception as e:  # noqa: BLE001 - logging must never stop a send
+                log.error("could not log a sent frame: %s", e)
+
+        had_own = "send" in vars(bus)
+        bus.send = send  # instance attribute: python-can's periodic tasks call it too
+        self._send_hooked = (bus, orig if had_own else None)
+
     def close(self, join_mf4: bool = True) -> dict[str, Any]:
         """Stop the flusher, flush, detach listeners, join the MF4 parts.
 
@@ -331,6 +365,16 @@ class RunLogger:
         self._stop.set()
         self._flusher.join(timeout=5)
         self.flush()
+        if self._send_hooked is not None:
+            bus, own = self._send_hooked
+            if own is not None:
+                bus.send = own
+            else:
+                try:
+                    del bus.send  # back to the class's method
+                except AttributeError:
+                    pass
+            self._send_hooked = None
         if self.trace is not None and self.network is not None and self.network.notifier:
             for lst in (self.trace, self.errors):
                 try:
@@ -341,6 +385,7 @@ class RunLogger:
         self._events.close()
         out: dict[str, Any] = {
             "frames_logged": self.trace.count if self.trace else 0,
+            "frames_sent_logged": self.trace.tx_count if self.trace else 0,
             "frames_by_id": dict(self.trace.id_counts) if self.trace else {},
             "receive_errors": list(self.errors.errors),
             "lost_frames": {k: c.lost for k, c in self.counters.items()},
@@ -352,7 +397,10 @@ class RunLogger:
         return out
 
     def join_mf4(self) -> str | None:
-        """Concatenate ``signals/part_*.mf4`` into ``signals.mf4``."""
+        """Join everything into one compressed ``signals.mf4`` with the run's metadata in
+        its header and a unit and comment on every channel; the crash-safety parts
+        (``signals/part_*.mf4``) are removed once it is written, so the data is stored
+        once."""
         names = self.channels()
         if not names:
             return None
@@ -361,12 +409,79 @@ class RunLogger:
             t, v = self.channel(name)
             rows.append((name, unit, t, v))
         path = self.dir / "signals.mf4"
-        _write_mf4(path, rows)
+        _write_mf4(path, rows, header=self._mf4_header(), compression=2)
+        for part in (self.dir / "signals").glob("part_*.mf4"):
+            part.unlink()
+        try:
+            (self.dir / "signals").rmdir()
+        except OSError:
+            pass
         return path.name
 
+    def _mf4_header(self) -> dict[str, str]:
+        """What makes the MF4 self-describing (also in meta.json)."""
+        m = self.meta
+        seq = m.get("sequence", {}) or {}
+        drv = m.get("drive", {}) or {}
+        info = m.get("connection_info", {}) or {}
+        return {
+            "sequence": str(seq.get("name", "")), "sequence_file": str(seq.get("file", "")),
+            "seed": str(seq.get("seed", "")), "motor": str(seq.get("motor", "")),
+            "extractor": str(seq.get("extractor", "")),
+            "drive": "SIMULATED" if info.get("kind") == "sim" else "HARDWARE",
+            "connection": str(m.get("connection", "")),
+            "firmware_version": str(drv.get("firmware_version", "")),
+            "firmware_build": str(drv.get("build_id", "")),
+            "bench_version": _bench_version(),
+            "time_origin_s": f"{self.t_origin_s:.9f}",
+            "time_base": "drive clock (s); sequence time = t - time_origin_s",
+            "created_utc": str(m.get("created_utc", "")),
+        }
 
-def _write_mf4(path: Path, rows: Iterable[tuple[str, str, np.ndarray, np.ndarray]]) -> None:
-    """Write channels to an MF4 file atomically; one group per time base."""
+
+_SIGNAL_UNITS: dict[str, str] | None = None
+
+
+def _signal_units() -> dict[str, str]:
+    """Units of the drive's serial/trace signals (od.yaml ``signals:``)."""
+    global _SIGNAL_UNITS
+    if _SIGNAL_UNITS is None:
+        from protocols._od import load
+
+        _SIGNAL_UNITS = {s["name"]: str(s.get("unit", "")) for s in load().signals}
+    return _SIGNAL_UNITS
+
+
+def channel_comment(name: str) -> str:
+    """Where a channel comes from, for the MF4 channel comment."""
+    src, _, sig = name.partition(".")
+    if src == "pdo":
+        return f"received over CAN: TPDO signal {sig} (decoded to SI by the bench)"
+    if src == "tel":
+        return f"received over the serial link: telemetry signal {sig} (fw_snapshot_t)"
+    if src == "trace":
+        cap, _, s2 = sig.partition(".")
+        return (f"drive trace buffer, capture '{cap}', signal {s2}, full control rate "
+                "(uploaded over the serial link)")
+    if src == "sim":
+        return (f"simulated drive record: {sig} (plant truth or firmware internals; "
+                "not available on hardware)")
+    return name
+
+
+def _mf4_header_xml(header: dict[str, str]) -> str:
+    from xml.sax.saxutils import escape
+
+    props = "".join(f'<e name="{escape(k)}">{escape(v)}</e>' for k, v in header.items())
+    return ("<HDcomment><TX>pmlsm bench run: decoded drive signals</TX>"
+            f"<common_properties>{props}</common_properties></HDcomment>")
+
+
+def _write_mf4(path: Path, rows: Iterable[tuple[str, str, np.ndarray, np.ndarray]],
+               header: dict[str, str] | None = None, compression: int = 0) -> None:
+    """Write channels to an MF4 file atomically; one group per time base. ``header``
+    goes into the file header's common properties; ``compression`` is asammdf's
+    (0 none for the crash-safety parts, 2 transposed deflate for the final file)."""
     from asammdf import MDF, Signal
 
     groups: dict[int, list[Any]] = {}
@@ -382,16 +497,20 @@ def _write_mf4(path: Path, rows: Iterable[tuple[str, str, np.ndarray, np.ndarray
             bases[key] = t
             groups[key] = []
         v = np.asarray(v)
+        com = channel_comment(name)
         if v.ndim > 1:
             for j in range(v.shape[1]):
-                groups[key].append(Signal(v[:, j], t, name=f"{name}[{j}]", unit=unit))
+                groups[key].append(Signal(v[:, j], t, name=f"{name}[{j}]", unit=unit,
+                                          comment=f"{com}, component {j}"))
         else:
-            groups[key].append(Signal(v, t, name=name, unit=unit))
+            groups[key].append(Signal(v, t, name=name, unit=unit, comment=com))
     mdf = MDF(version="4.10")
+    if header:
+        mdf.header.comment = _mf4_header_xml(header)
     for sigs in groups.values():
         mdf.append(sigs, comment="pmlsm bench")
     tmp = path.with_suffix(".tmp")
-    mdf.save(tmp, overwrite=True)
+    mdf.save(tmp, overwrite=True, compression=compression)
     mdf.close()
     written = tmp if tmp.exists() else tmp.with_suffix(".mf4")
     os.replace(written, path)
