@@ -82,15 +82,25 @@ def write_junit(path: str | Path, results: list[RunResult],
                               value=str(v).lower() if isinstance(v, bool) else str(v))
         cases = []
         for e in r.expectations:
+            # time = the stretch of sequence time the expectation judged (s)
             tc = ET.Element("testcase", classname=f"bench.{r.sequence}", name=e.name,
-                            time="0")
+                            time=f"{max(0.0, e.window_s[1] - e.window_s[0]):.6g}")
             if not e.passed:
                 f = ET.SubElement(tc, "failure", message=e.message or "failed",
                                   type="ExpectationFailed")
                 f.text = (f"{e.metric} over {list(e.window_s)} s: measured {e.measured!r}, "
                           f"required {e.criterion} (sequence line {e.line})")
+            props = ET.SubElement(tc, "properties")
+            unit = METRIC_DEFS[e.metric].unit if e.metric in METRIC_DEFS else ""
+            limit = e.criterion.split()[-1] if e.criterion else ""
+            for k, v in (("metric", e.metric),
+                         ("measured", "nan" if not math.isfinite(e.measured)
+                          else f"{e.measured:.9g}"),
+                         ("required", e.criterion), ("limit", limit), ("unit", unit),
+                         ("window_s", f"{e.window_s[0]:g} {e.window_s[1]:g}"),
+                         ("sequence_line", str(e.line)), ("doc", e.doc)):
+                ET.SubElement(props, "property", name=k, value=v)
             if e.paper is not None:
-                props = ET.SubElement(tc, "properties")
                 ET.SubElement(props, "property", name="paper", value=f"{e.paper:g}")
                 ET.SubElement(props, "property", name="paper_reproduced",
                               value=str(bool(e.paper_met)).lower())

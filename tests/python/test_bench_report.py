@@ -79,5 +79,20 @@ def test_paper_claim_reported_beside_the_limit(tmp_path: Path) -> None:
     write_junit(j, [r])
     case = ET.parse(j).getroot().find("testsuite").find("testcase")
     props = {p.get("name"): p.get("value") for p in case.find("properties")}
-    assert props == {"paper": "1", "paper_reproduced": "false"}
+    assert props["paper"] == "1" and props["paper_reproduced"] == "false"
     assert case.find("failure") is None
+
+
+def test_junit_cases_carry_measured_value_limit_unit_window_and_duration(tmp_path: Path
+                                                                         ) -> None:
+    p = tmp_path / "j.xml"
+    write_junit(p, [_result(passed=False)])
+    cases = ET.parse(p).getroot().find("testsuite").findall("testcase")
+    for case, (measured, limit, unit) in zip(cases[:2], (("0.008", "0.01", "rad (electrical)"),
+                                                         ("3.5", "1", "r/min")), strict=True):
+        props = {q.get("name"): q.get("value") for q in case.find("properties")}
+        assert float(props["measured"]) == float(measured)
+        assert float(props["limit"]) == float(limit) and props["required"].endswith(limit)
+        assert props["unit"].startswith(unit)
+        assert [float(x) for x in props["window_s"].split()] == [0.15, 1.0]
+        assert float(case.get("time")) == 0.85  # the window's duration (s), not "0"
