@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import math
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -46,6 +47,48 @@ class Recorder(Protocol):
     def event(self, t_s: float, kind: str, detail: dict[str, Any]) -> None: ...
     def truth(self) -> dict[str, np.ndarray] | None: ...
     def trace_window(self, name: str, t0_s: float, t1_s: float, signals: list[str]) -> None: ...
+
+
+class InterruptGuard:
+    """Ctrl-C / SIGTERM while a run is stopping must not stop the stopping.
+
+    Inside the guard the first signal raises ``KeyboardInterrupt`` (the run stops, the
+    drive is disabled) and switches to *stopping*; from then on, and from
+    :meth:`begin_stop` on (a normal end or an error), further signals are announced
+    and ignored until the guard exits, so a second Ctrl-C 10-50 ms after the first
+    can neither interrupt disabling the drive nor skip the report and summary.
+    Main thread only (elsewhere a no-op). ``kill -9`` still ends the process.
+    """
+
+    def __init__(self, say: Callable[[str], None] | None = None, stopping: bool = False
+                 ) -> None:
+        self.say = say or (lambda m: print(m, file=sys.stderr, flush=True))
+        self.stopping = stopping
+        self.ignored = 0
+        self._old: dict[int, Any] = {}
+
+    def begin_stop(self) -> None:
+        self.stopping = True
+
+    def _handler(self, signum: int, frame: Any) -> None:
+        if not self.stopping:
+            self.stopping = True
+            raise KeyboardInterrupt(f"signal {signum}")
+        self.ignored += 1
+        if self.ignored == 1:
+            self.say("bench: already stopping - the drive is being disabled and the run "
+                     "saved; please wait (about a second)")
+
+    def __enter__(self) -> InterruptGuard:
+        if threading.current_thread() is threading.main_thread():
+            self._old = {sig: signal.signal(sig, self._handler)
+                         for sig in (signal.SIGINT, signal.SIGTERM)}
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, h in self._old.items():
+            signal.signal(sig, h)
+        self._old = {}
 
 
 @dataclass
@@ -202,6 +245,8 @@ class Runner:
         self.traces: list[dict[str, Any]] = []
         self.clock = drive.clock
         self._t0 = 0.0
+        #: set by run_sequence: its InterruptGuard, so stopping is never interrupted
+        self.guard: InterruptGuard | None = None
         self._speed_mps = 0.0
         self._force_N = 0.0
         self._load_N = 0.0
@@ -392,23 +437,32 @@ class Runner:
             self.rec.event(self.now(), "abort", {"error": result.error})
             raise
         finally:
-            result.safe_state = self.safe_state()
-            self.rec.event(self.now(), "safe_state", {"status": result.safe_state})
-            result.duration_s = result.duration_s or self.now()
-            try:
-                truth = self.rec.truth()
-            except Exception as e:  # noqa: BLE001 - never mask the original exception
-                log.error("truth data unavailable: %s", e)
-                truth = None
-            if truth is not None and len(truth.get("t_s", ())) > 0:
-                result.metrics, result.metric_windows = run_metrics(
-                    truth, self.units.pole_pitch_m, self.units.pole_pairs, seq.settle_s,
-                    min(result.duration_s, seq.duration_s))
+            if self.guard is not None:  # run_sequence's guard spans the saving too
+                self.guard.begin_stop()
+                self._finish(seq, result, wall0)
             else:
-                result.metrics = dict.fromkeys(METRIC_NAMES, float("nan"))
-            result.passed = (not result.aborted and result.safe_state == "disabled"
-                             and all(x.passed for x in result.expectations))
-            result.wall_s = time.monotonic() - wall0
-            if isinstance(self.rec, _NullRecorder):
-                result.events = self.rec.events
+                with InterruptGuard(stopping=True):
+                    self._finish(seq, result, wall0)
         return result
+
+    def _finish(self, seq: Sequence, result: RunResult, wall0: float) -> None:
+        """Safe state, metrics and verdict (runs with interrupts deferred)."""
+        result.safe_state = self.safe_state()
+        self.rec.event(self.now(), "safe_state", {"status": result.safe_state})
+        result.duration_s = result.duration_s or self.now()
+        try:
+            truth = self.rec.truth()
+        except Exception as e:  # noqa: BLE001 - never mask the original exception
+            log.error("truth data unavailable: %s", e)
+            truth = None
+        if truth is not None and len(truth.get("t_s", ())) > 0:
+            result.metrics, result.metric_windows = run_metrics(
+                truth, self.units.pole_pitch_m, self.units.pole_pairs, seq.settle_s,
+                min(result.duration_s, seq.duration_s))
+        else:
+            result.metrics = dict.fromkeys(METRIC_NAMES, float("nan"))
+        result.passed = (not result.aborted and result.safe_state == "disabled"
+                         and all(x.passed for x in result.expectations))
+        result.wall_s = time.monotonic() - wall0
+        if isinstance(self.rec, _NullRecorder):
+            result.events = self.rec.events

@@ -35,7 +35,7 @@ from bench._drive import Drive
 from bench._load import CanopenLoad, LoadDevice, NoLoad
 from bench._logging import RunLogger, run_dir_for
 from bench._report import make_plots, write_html, write_junit, write_summary_json
-from bench._runner import Runner, RunResult
+from bench._runner import InterruptGuard, Runner, RunResult
 from bench._sequence import Sequence
 from bench._units import MotorUnits, motor_units
 
@@ -509,54 +509,59 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
     runner = Runner(drive, conn.units, conn.load, logger, progress=prog,
                     f_pwm_Hz=f_pwm if tel is not None else None)
     interrupted: BaseException | None = None
-    try:
-        result = runner.run(seq)
-    except KeyboardInterrupt as e:
-        interrupted = e
-        result = runner.result
-    except Exception as e:  # noqa: BLE001 - the run result records it
-        interrupted = e
-        result = runner.result
-    finally:
-        if bar is not None:
-            bar.close()
-    if runner.traces and tel is not None:
-        _collect_trace(runner, drive, tel, logger)
-    if conn.sim is not None:
-        conn.sim.sink = None
-    if conn.sim is not None and conn.sim.wait_idle():
-        _settle_count(logger)
-    pdo.drain()
-    if tel is not None:
-        tel.stop()
-    logstats = logger.close(join_mf4=True)
-    if tel is not None:
-        logstats["telemetry"] = tel.stats
-        logstats["lost_frames"]["serial_telemetry"] = tel.rx.frames_lost
-        if tel.error:
-            logstats["receive_errors"].append("telemetry: " + tel.error)
-    if conn.sim is not None:
-        sent = conn.sim.frames_to_bus + conn.sim.syncs_sent - sent0
-        logstats["lost_frames"]["can"] = max(0, sent - logstats["frames_logged"])
-        logstats["sim_frames_to_bus"] = sent
-    if logstats["receive_errors"]:
-        _say("bench: CAN receive-thread errors: " + "; ".join(logstats["receive_errors"]))
-    logger.write_meta({"result": {"passed": result.passed, "error": result.error,
-                                  "safe_state": result.safe_state},
-                       "logging": logstats})
-    rep = None
-    extra = {"run_dir": str(run_dir), "lost_frames": logstats["lost_frames"],
-             "receive_errors": logstats["receive_errors"], **drive_kind(conn)}
-    if report:
-        plots = make_plots(logger, result, conn.units, run_dir)
-        rep = run_dir / "report.html"
-        write_html(rep, result, plots, logger.meta, logstats)
-    write_summary_json(run_dir / "summary.json", result, extra)
-    write_junit(run_dir / "junit.xml", [result], drive_kind(conn))
-    if summary_json:
-        write_summary_json(summary_json, result, extra)
-    if junit:
-        write_junit(junit, [result], drive_kind(conn))
+    # one guard from the start of the run to the last file written: the first Ctrl-C
+    # stops the run, later ones cannot interrupt the safe state or the saving
+    with InterruptGuard(_say) as guard:
+        runner.guard = guard
+        try:
+            result = runner.run(seq)
+        except KeyboardInterrupt as e:
+            interrupted = e
+            result = runner.result
+        except Exception as e:  # noqa: BLE001 - the run result records it
+            interrupted = e
+            result = runner.result
+        finally:
+            guard.begin_stop()
+            if bar is not None:
+                bar.close()
+        if runner.traces and tel is not None:
+            _collect_trace(runner, drive, tel, logger)
+        if conn.sim is not None:
+            conn.sim.sink = None
+        if conn.sim is not None and conn.sim.wait_idle():
+            _settle_count(logger)
+        pdo.drain()
+        if tel is not None:
+            tel.stop()
+        logstats = logger.close(join_mf4=True)
+        if tel is not None:
+            logstats["telemetry"] = tel.stats
+            logstats["lost_frames"]["serial_telemetry"] = tel.rx.frames_lost
+            if tel.error:
+                logstats["receive_errors"].append("telemetry: " + tel.error)
+        if conn.sim is not None:
+            sent = conn.sim.frames_to_bus + conn.sim.syncs_sent - sent0
+            logstats["lost_frames"]["can"] = max(0, sent - logstats["frames_logged"])
+            logstats["sim_frames_to_bus"] = sent
+        if logstats["receive_errors"]:
+            _say("bench: CAN receive-thread errors: " + "; ".join(logstats["receive_errors"]))
+        logger.write_meta({"result": {"passed": result.passed, "error": result.error,
+                                      "safe_state": result.safe_state},
+                           "logging": logstats})
+        rep = None
+        extra = {"run_dir": str(run_dir), "lost_frames": logstats["lost_frames"],
+                 "receive_errors": logstats["receive_errors"], **drive_kind(conn)}
+        if report:
+            plots = make_plots(logger, result, conn.units, run_dir)
+            rep = run_dir / "report.html"
+            write_html(rep, result, plots, logger.meta, logstats)
+        write_summary_json(run_dir / "summary.json", result, extra)
+        write_junit(run_dir / "junit.xml", [result], drive_kind(conn))
+        if summary_json:
+            write_summary_json(summary_json, result, extra)
+        if junit:
+            write_junit(junit, [result], drive_kind(conn))
     return RunOutput(result, run_dir, logstats, rep, interrupted)
 
 

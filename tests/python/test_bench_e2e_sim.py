@@ -269,3 +269,44 @@ def test_fallback_is_never_silent(tmp_path: Path, capsys: pytest.CaptureFixture[
         assert ("FALLBACK" in html) is fb
         run_summary = json.loads(next(runs.rglob("summary.json")).read_text())
         assert run_summary["drive"] == "SIMULATED" and run_summary["fallback"] is fb
+
+
+@pytest.mark.parametrize("gap_ms", [10, 25, 50])
+def test_second_ctrl_c_does_not_skip_the_safe_state_or_the_files(tmp_path: Path,
+                                                                  gap_ms: int) -> None:
+    """Ctrl-C twice, 10-50 ms apart: the drive is still disabled and the report,
+    summary and JUnit are still written (they were skipped in 3 of 10 trials)."""
+    seq = tmp_path / "long.yaml"
+    seq.write_text("name: long\nmotor: paper_salient\nextractor: sogi_adaptive\nseed: 0\n"
+                   "steps:\n  - enable: {}\n  - set_speed: {value: 100, unit: r/min}\n"
+                   "  - wait: {duration_s: 600}\n  - disable: {}\n")
+    summary, junit = tmp_path / "s.json", tmp_path / "j.xml"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    p = subprocess.Popen([sys.executable, "-m", "bench.cli", "run", str(seq), "--sim",
+                          "--runs", str(tmp_path / "runs"), "--summary-json", str(summary),
+                          "--junit", str(junit), "--no-progress"],
+                         env=env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not list((tmp_path / "runs").glob("*/events.jsonl")):
+            assert time.monotonic() < deadline and p.poll() is None
+            time.sleep(0.05)
+        time.sleep(0.7)
+        p.send_signal(signal.SIGINT)
+        time.sleep(gap_ms / 1000.0)
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130, err
+    assert "Traceback" not in err
+    doc = json.loads(summary.read_text())
+    assert doc["aborted"] and doc["safe_state"] == "disabled"
+    run = Path(doc["run_dir"])
+    for f in ("report.html", "summary.json", "junit.xml", "signals.mf4"):
+        assert (run / f).is_file(), f
+    assert junit.is_file()
+    sw = read_signals(run)["pdo.statusword"][1]
+    assert int(sw[-1]) & 0x4F == 0x40  # SWITCH ON DISABLED, reported by the drive
