@@ -6,7 +6,7 @@ ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
 OUT="$ROOT/build/comm/fuzz/cov"
 COMM="$ROOT/firmware_c/comm"
 mkdir -p "$OUT"
-SRCS=("$COMM/src/co_od.c" "$COMM/src/co_node.c" "$COMM/src/fw_serial.c"
+SRCS=("$COMM"/src/co_*.c "$COMM/src/fw_serial.c"
       "$COMM/generated/co_od_table.c" "$COMM/generated/fw_serial_signals.c")
 objs=()
 for t in fuzz_sdo fuzz_pdo fuzz_serial; do
@@ -19,4 +19,4 @@ for t in fuzz_sdo fuzz_pdo fuzz_serial; do
 done
 llvm-profdata merge -o "$OUT/all.profdata" "$OUT"/*.profraw
 llvm-cov report "${objs[@]:1}" "$OUT/fuzz_sdo" -instr-profile="$OUT/all.profdata" \
-  "$COMM/src/co_node.c" "$COMM/src/co_od.c" "$COMM/src/fw_serial.c"
+  "$COMM"/src/co_*.c "$COMM/src/fw_serial.c"

@@ -19,7 +19,7 @@ OUT="$ROOT/build/comm/fuzz"
 CC="${FUZZ_CC:-clang}"
 mkdir -p "$OUT/artifacts"
 COMM="$ROOT/firmware_c/comm"
-SRCS=("$COMM/src/co_od.c" "$COMM/src/co_node.c" "$COMM/src/fw_serial.c"
+SRCS=("$COMM"/src/co_*.c "$COMM/src/fw_serial.c"
       "$COMM/generated/co_od_table.c" "$COMM/generated/fw_serial_signals.c")
 FLAGS=(-std=c11 -g -O1 -fno-omit-frame-pointer
        -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all

@@ -34,7 +34,7 @@ static void co_reset_comm_rt(co_node_t *node) {
 
 /** Reset the OD range [lo, hi] to defaults. */
 static void co_reset_od_range(co_node_t *node, uint16_t lo, uint16_t hi) {
-  uint8_t tmp[CO_OD_RAM_SIZE];
+  uint8_t tmp[CO_OD_RAM_SIZE] = {0}; /* text slots: no stack leftovers in the tails */
   co_od_reset(tmp, sizeof tmp, node->node_id);
   for (uint16_t pos = 0u; pos < CO_OD_COUNT; pos++) {
     const co_od_entry_t *e = co_od_entry(pos);
