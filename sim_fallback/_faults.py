@@ -76,7 +76,8 @@ def _fw_overrides(case: FaultCase) -> dict[str, float]:
     out: dict[str, float] = {}
     if case.fw_from_motor:  # gains tuned for another motor, left in place
         other = fw_config(load_motor(case.fw_from_motor))
-        for k in ("spd_kp_A_per_radps", "spd_ki_A_per_rad", "pll_accel_per_A"):
+        for k in ("spd_kp_A_per_radps", "spd_ki_A_per_rad", "pll_accel_per_A", "pll_kp", "pll_ki",
+                  "pll_kd"):
             out[k] = float(getattr(other, k))
         out["gains_auto"] = 0  # explicit gains: the drive must not re-derive them
     if case.fw_scale:

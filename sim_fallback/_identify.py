@@ -33,7 +33,11 @@ from ._sim import SIM_REF_FORCE, SIM_REF_SPEED, Sim
 
 #: Relaxed monitor settings while identifying an unknown motor: the saliency
 #: check must measure, not judge, and the start must not depend on guessed gains.
-IDENT_FW = {"mon_sal_tol": 10.0, "saliency_min": 0.05}
+IDENT_FW = {"mon_sal_tol": 10.0, "saliency_min": 0.05,
+            # the paper's conservative observer while the motor is unknown: the derived
+            # one assumes the configured mass, and at standstill with several amperes on
+            # d a fast observer's angle jitter makes thrust that moves the mover
+            "gains_auto": 0, "pll_kp": 86.6, "pll_ki": 5000.0, "pll_kd": 1.0e5}
 
 #: Speed profile of the motion runs: relative amplitude and frequency (Hz) of the
 #: sinusoid around the mean speed.

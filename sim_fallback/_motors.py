@@ -472,22 +472,25 @@ def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
     cfg.coulomb_N = pl["F_coulomb_N"]
     cfg.cur_bw_radps = 1100.0  # the paper's current-loop rule: k_P = L_d 1100, k_I = R 1100
     cfg.gains_auto = 1
-    if motor.parameterization == "rotary":
-        # the paper's speed PI, 0.1 A/(r/min) and 0.6 A/(r/min s), kept as given
-        L.fw_config_derive(cfg)
-        cfg.gains_auto = 0
-        cfg.spd_kp_A_per_radps = 0.1 * 60.0 / (2.0 * math.pi * p)
-        cfg.spd_ki_A_per_rad = 0.6 * 60.0 / (2.0 * math.pi * p)
-    else:
-        cfg.spd_bw_radps = motor.controller["speed_bw_radps"]
-        L.fw_config_derive(cfg)
-    cfg.pll_kp = 86.6
-    cfg.pll_ki = 5000.0
     c = motor.controller
     cfg.i_max_A = c["i_max_A"]
     cfg.i_trip_A = c["i_trip_A"]
     cfg.u_inj_V = c["u_inj_V"]
     cfg.f_inj_Hz = c["f_inj_Hz"]
+    if motor.parameterization == "rotary":
+        # the paper's speed PI, 0.1 A/(r/min) and 0.6 A/(r/min s), and its PLL, kept
+        L.fw_config_derive(cfg)
+        cfg.gains_auto = 0
+        cfg.spd_kp_A_per_radps = 0.1 * 60.0 / (2.0 * math.pi * p)
+        cfg.spd_ki_A_per_rad = 0.6 * 60.0 / (2.0 * math.pi * p)
+        cfg.pll_kp = 86.6
+        cfg.pll_ki = 5000.0
+        cfg.pll_kd = 1.0e5
+    else:
+        # linear motors: every gain from the physical description, in the drive
+        # (fw_config_derive: current and speed PI, observer incl. its bandwidth)
+        cfg.spd_bw_radps = motor.controller["speed_bw_radps"]
+        L.fw_config_derive(cfg)
     full = 2.0 ** pl["adc_bits"]
     cfg.adc_A_per_count = 2.0 * pl["adc_i_fullscale_A"] / full
     cfg.adc_offset_counts = full / 2.0

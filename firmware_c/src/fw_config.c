@@ -3,6 +3,7 @@
  * @brief Default configuration, the configuration field table (names,
  *        units, ranges) and its validation, including the saliency check.
  */
+#include <math.h>
 #include <stddef.h>
 #include <string.h>
 
@@ -88,6 +89,12 @@ static const fw_config_field_t k_fields[] = {
     F32(spd_bw_radps, "rad/s", 0.1f, 1e4f),
     U32(gains_auto, "", 0.0f, 1.0f),
 };
+
+/* Observer design point of fw_config_derive (docs/tuning.md): a load step of this
+ * fraction of the peak thrust K_F i_max leaves at most this angle error. */
+#define FW_PLL_DESIGN_LOAD 0.2f
+#define FW_PLL_DESIGN_ERR_RAD 0.05f
+#define FW_PLL_W_MIN 30.0f /* rad/s: about the paper's observer (kp 86.6 = 3 x 29) */
 
 #define K_NFIELDS (sizeof(k_fields) / sizeof(k_fields[0]))
 
@@ -184,6 +191,19 @@ void fw_config_derive(fw_config_t *cfg) {
   cfg->spd_kp_A_per_radps = cfg->mass_kg * cfg->spd_bw_radps / K_F / k_e;
   cfg->spd_ki_A_per_rad = cfg->spd_kp_A_per_radps * cfg->spd_bw_radps / 6.0f;
   cfg->pll_accel_per_A = k_e * K_F / cfg->mass_kg;
+  /* Observer (PLL) bandwidth w from the mechanics: the angle error of the PLL to an
+   * acceleration step a it does not know (a load step) is about a / ki. A load of
+   * FW_PLL_DESIGN_LOAD x the peak thrust K_F i_max must leave at most
+   * FW_PLL_DESIGN_ERR_RAD, with ki = 3 w^2 (three poles at -w: kp = 3 w, ki = 3 w^2,
+   * kd = w^3). Bounded below by the paper's observer (about 30 rad/s) and above by
+   * the injection: the HF demodulation is one sample per injection period. */
+  const float a_d = k_e * FW_PLL_DESIGN_LOAD * K_F * cfg->i_max_A / cfg->mass_kg;
+  const float w_max = FW_TWO_PI_F32 * cfg->f_inj_Hz / 40.0f;
+  float w = sqrtf((a_d > 0.0f ? a_d : 0.0f) / (3.0f * FW_PLL_DESIGN_ERR_RAD));
+  w = fw_clampf(w, FW_PLL_W_MIN, (w_max > FW_PLL_W_MIN ? w_max : FW_PLL_W_MIN));
+  cfg->pll_kp = 3.0f * w;
+  cfg->pll_ki = 3.0f * w * w;
+  cfg->pll_kd = w * w * w;
 }
 
 size_t fw_config_field_count(void) { return K_NFIELDS; }

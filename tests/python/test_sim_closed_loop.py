@@ -168,3 +168,22 @@ def test_iron_core_linear_closed_loop():
     assert r.valid, r.info["invalid_reason"]
     assert r.metrics["position_error_rms_rad"] < 0.2
     assert abs(np.mean(r.v_mps[r.t_s > 1.0]) - 0.3) < 0.05
+
+
+@pytest.mark.parametrize("v_mps", [0.1, 0.3, 1.0])
+def test_iron_core_load_step_with_the_derived_observer(v_mps):
+    """The drive derives its observer from mass and peak thrust (fw_config_derive): a
+    60 N load step (5 % of K_F i_max) on the 6 kg iron-core mover keeps the issue's
+    accuracy from 0.15 s on, in the injection region, at the handover speed and on the
+    back-EMF observer. With the paper's observer it faulted at 0.3 m/s and reached
+    0.075 / 0.35 rad at 1 m/s (docs/tuning.md). Measured: 0.012/0.04, 0.012/0.04,
+    0.004/0.03 rad (RMS / max)."""
+    r = run_scenario("iron_core_linear", speed_ref=v_mps, speed_unit="mps",
+                     load=[(0.0, 0.0), (0.5, 60.0)], load_unit="N", t_end=1.0, seed=1,
+                     x0_m="random")
+    assert r.valid, r.info["invalid_reason"]
+    assert r.metrics["position_error_rms_rad"] <= 0.02
+    assert r.metrics["position_error_max_rad"] <= 0.08
+    # (the speed itself recovers slowly: the 20 rad/s speed loop of this motor file
+    # stalls at 0.1 m/s and is 0.15 m/s low 0.4 s after the step at 0.3 m/s; the
+    # estimate stays right through it, which is what this test is about)

@@ -416,7 +416,10 @@ void fw_config_default(fw_config_t *cfg);
  *   K_F = 1.5 (pi/tau) psi_f (N/A),
  *   cur_kp = L_d w_c, cur_ki = R w_c (w_c = cur_bw_radps),
  *   spd_kp = m w_s / K_F * tau / pi (A per el. rad/s), spd_ki = spd_kp w_s / 6,
- *   pll_accel_per_A = (pi/tau) K_F / m (el. rad/s^2 per A).
+ *   pll_accel_per_A = (pi/tau) K_F / m (el. rad/s^2 per A),
+ *   observer poles at -w: pll_kp = 3 w, pll_ki = 3 w^2, pll_kd = w^3 with
+ *   w = sqrt(a_d / (3 * 0.05 rad)), a_d = (pi/tau) 0.2 K_F i_max / m (a load step of
+ *   20 % of the peak thrust leaves about 0.05 rad), w within [30, 2 pi f_inj / 40].
  * fw_init and fw_set_config apply it, so the stored configuration (and the
  * object dictionary) shows the gains in use. No-op when gains_auto is 0.
  */
