@@ -30,6 +30,26 @@ static void test_derive_matches_formulas(void) {
   TT_CHECK_NEAR(c.spd_kp_A_per_radps, kp, 1e-5 * kp);
   TT_CHECK_NEAR(c.spd_ki_A_per_rad, kp * 20.0 / 6.0, 1e-5 * kp * 20.0 / 6.0);
   TT_CHECK_NEAR(c.pll_accel_per_A, ke * KF / 6.0, 1e-5 * ke * KF / 6.0);
+  /* observer: poles at -w, w = sqrt(a_d / (3 * 0.05)), a_d = ke * 0.2 * KF * i_max / m */
+  const double a_d = ke * 0.2 * KF * (double)c.i_max_A / 6.0;
+  const double w = sqrt(a_d / 0.15);
+  TT_CHECK(w > 30.0 && w < 2.0 * M_PI * 3000.0 / 40.0); /* inside the bounds */
+  TT_CHECK_NEAR(c.pll_kp, 3.0 * w, 1e-5 * 3.0 * w);
+  TT_CHECK_NEAR(c.pll_ki, 3.0 * w * w, 1e-5 * 3.0 * w * w);
+  TT_CHECK_NEAR(c.pll_kd, w * w * w, 1e-5 * w * w * w);
+  TT_CHECK(c.pll_kd < c.pll_kp * c.pll_ki); /* Routh: stable */
+  {
+    fw_config_t h = c; /* a very heavy mover: the lower bound */
+    h.mass_kg = 5.0e4f;
+    fw_config_derive(&h);
+    TT_CHECK_NEAR(h.pll_kp, 90.0, 1e-3);
+    fw_config_t l = c; /* a very light one: the injection bounds it */
+    l.mass_kg = 0.01f;
+    fw_config_derive(&l);
+    TT_CHECK_NEAR(l.pll_kp, 3.0 * 2.0 * M_PI * 3000.0 / 40.0, 1e-2);
+    fw_config_issue_t issue;
+    TT_CHECK(fw_config_check(&l, &issue) == FW_OK); /* within the OD ranges */
+  }
   /* fw_init stores the derived gains */
   fw_config_t c2 = c;
   c2.cur_kp_V_per_A = 0.0f;
