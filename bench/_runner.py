@@ -289,6 +289,8 @@ class Runner:
             self.load.enable()
             d.enable(p.get("mode", "speed"))
         elif kind == "disable":
+            if self._t_disable is None:
+                self._t_disable = self.now()  # the headline metrics end here
             self._set_load(0.0)
             d.disable()
         elif kind == "set_mode":
@@ -419,6 +421,7 @@ class Runner:
         """
         result = RunResult(sequence=seq.name)
         self.result = result
+        self._t_disable: float | None = None
         wall0 = time.monotonic()
         self._t0 = self.clock.now()
         mark = getattr(self.rec, "mark_start", None)
@@ -456,9 +459,14 @@ class Runner:
             log.error("truth data unavailable: %s", e)
             truth = None
         if truth is not None and len(truth.get("t_s", ())) > 0:
+            # default windows end just before the drive was disabled (not at the end of
+            # the record: the sample at the disable instant already has the reference at
+            # 0, which made the main job's tracking error read 99 r/min)
+            t_end = min(result.duration_s, seq.duration_s)
+            if self._t_disable is not None and self._t_disable > seq.settle_s:
+                t_end = min(t_end, self._t_disable - 1e-9)
             result.metrics, result.metric_windows = run_metrics(
-                truth, self.units.pole_pitch_m, self.units.pole_pairs, seq.settle_s,
-                min(result.duration_s, seq.duration_s))
+                truth, self.units.pole_pitch_m, self.units.pole_pairs, seq.settle_s, t_end)
         else:
             result.metrics = dict.fromkeys(METRIC_NAMES, float("nan"))
         result.passed = (not result.aborted and result.safe_state == "disabled"

@@ -57,6 +57,10 @@ def test_paper_load_step_on_the_simulated_drive(tmp_path: Path) -> None:
     assert m["position_error_rms_mm"] == pytest.approx(
         m["position_error_rms_rad"] * 24.0 / math.pi, rel=1e-6)
     assert doc["lost_frames"] == {"can": 0, "serial_telemetry": 0}
+    # headline windows end before the disable instant (whose sample has the reference at
+    # 0: the tracking error read 99 r/min); what is left is the start-up at 0.15 s
+    assert doc["metric_windows_s"]["speed_tracking_error_max_rpm"][1] < 1.0
+    assert 15.0 < doc["metrics"]["speed_tracking_error_max_rpm"] < 50.0
     # JUnit: 4 expectations + run
     suite = ET.parse(junit).getroot().find("testsuite")
     assert [c.get("name") for c in suite.findall("testcase")][-1] == "run"
