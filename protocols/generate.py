@@ -11,6 +11,7 @@ Outputs (checked in; tests/python/test_protocol_od.py fails on drift):
 
 - firmware_c/comm/generated/co_od_table.h / .c   (C table, see co_od.h)
 - firmware_c/comm/generated/fw_serial_signals.h / .c (signal table, see fw_serial.h)
+- firmware_c/include/pmlsm/fw_faults.h            (fw_fault_t: codes and names of the core)
 - protocols/generated/pmlsm_drive.eds           (CiA 306 EDS for canopen.import_od)
 - protocols/generated/od_names.py               (fault codes and names, object indices)
 - docs/od_table.md                               (documentation)
@@ -383,6 +384,31 @@ def gen_py_names(od: ObjectDictionary) -> str:
     return "\n".join(lines)
 
 
+def gen_fault_header(od: ObjectDictionary) -> str:
+    """fw_fault_t for the core (firmware_c/include/pmlsm/fw_faults.h): the codes,
+    names and texts of od.yaml's ``faults:`` list, the one source."""
+    lines = [f"/* {HEADER} */",
+             "/**",
+             " * @file fw_faults.h",
+             " * @brief Fault codes (fw_fault_t): the CiA 301/402 emergency error codes sent",
+             " *        in EMCY and shown in 0x603F; 0xFFxx are manufacturer-specific.",
+             " *        Names and texts: protocols/od.yaml, faults:.",
+             " */",
+             "#ifndef PMLSM_FW_FAULTS_H",
+             "#define PMLSM_FW_FAULTS_H",
+             "",
+             "typedef enum {",
+             "  FW_FAULT_NONE = 0x0000, /**< no fault */"]
+    for f in sorted(od.faults, key=lambda x: x.code):
+        text = f.text.replace("*/", "* /")
+        lines.append(f"  FW_FAULT_{f.name} = 0x{f.code:04X}, /**< {text} */")
+    lines += ["} fw_fault_t;", "",
+              "/** Number of fault codes (without FW_FAULT_NONE). */",
+              f"#define FW_FAULT_COUNT {len(od.faults)}u", "",
+              "#endif /* PMLSM_FW_FAULTS_H */", ""]
+    return "\n".join(lines)
+
+
 def outputs(od: ObjectDictionary | None = None) -> dict[Path, str]:
     """Every generated file: path -> expected content."""
     od = od or load()
@@ -392,6 +418,7 @@ def outputs(od: ObjectDictionary | None = None) -> dict[Path, str]:
         gen / "co_od_table.c": gen_c_source(od),
         gen / "fw_serial_signals.h": gen_signals_header(od),
         gen / "fw_serial_signals.c": gen_signals_source(od),
+        ROOT / "firmware_c" / "include" / "pmlsm" / "fw_faults.h": gen_fault_header(od),
         ROOT / "protocols" / "generated" / "pmlsm_drive.eds": gen_eds(od),
         ROOT / "protocols" / "generated" / "od_names.py": gen_py_names(od),
         ROOT / "docs" / "od_table.md": gen_markdown(od),

@@ -155,9 +155,9 @@ def test_option_codes_are_cia402_int16(od):
 
 def _c_fault_enum() -> dict[int, str]:
     """fw_fault_t parsed from the C header: code -> name without FW_FAULT_."""
-    text = Path(generate.ROOT, "firmware_c", "include", "pmlsm", "fw_ctrl.h").read_text()
+    text = Path(generate.ROOT, "firmware_c", "include", "pmlsm", "fw_faults.h").read_text()
     body = re.search(r"typedef enum \{(.*?)\}\s*fw_fault_t;", text, re.S)
-    assert body, "fw_fault_t not found in fw_ctrl.h"
+    assert body, "fw_fault_t not found in fw_faults.h"
     code = re.sub(r"/\*.*?\*/", "", body.group(1), flags=re.S)
     out: dict[int, str] = {}
     for m in re.finditer(r"FW_FAULT_(\w+)\s*=\s*(0[xX][0-9A-Fa-f]+|\d+)", code):

@@ -74,39 +74,10 @@ typedef enum {
  *  not averaged: the axis change settles). */
 #define FW_SAL_PERIODS 4u
 
-/**
- * Fault codes. Values are the CiA 301/402 emergency error codes sent in
- * EMCY and shown in 0x603F; 0xFFxx are manufacturer-specific.
- */
-typedef enum {
-  FW_FAULT_NONE = 0x0000,
-  FW_FAULT_OVERCURRENT = 0x2310,        /**< |phase current| > i_trip_A */
-  FW_FAULT_DC_OVERVOLTAGE = 0x3210,     /**< u_dc > u_dc_max_V */
-  FW_FAULT_DC_UNDERVOLTAGE = 0x3220,    /**< u_dc < u_dc_min_V while enabled */
-  FW_FAULT_INPUT_INVALID = 0x5210,      /**< NaN/inf in a sampled input */
-  FW_FAULT_ADC_RANGE = 0x5220,          /**< ADC count outside [0, adc_max] */
-  FW_FAULT_CONFIG_INVALID = 0x6320,     /**< enable requested with a bad config */
-  FW_FAULT_HEARTBEAT_LOST = 0x8130,     /**< supervisor heartbeat lost (CANopen) */
-  FW_FAULT_RPDO_TIMEOUT = 0x8250,       /**< RPDO not received within its event timer (CANopen) */
-  FW_FAULT_EST_HF_LOW = 0xFF01,         /**< HF response too small: loss of lock */
-  FW_FAULT_EST_PLL_ERROR = 0xFF02,      /**< PLL error persistently large */
-  FW_FAULT_SALIENCY_TOO_LOW = 0xFF03,   /**< |Lq-Ld|/Ld < saliency_min: refused */
-  FW_FAULT_POLARITY_UNDETERMINED = 0xFF04, /**< +/- pulse responses too alike */
-  /* linear-axis protections */
-  FW_FAULT_I2T = 0x2350,             /**< current-time integral above the i2t limit */
-  FW_FAULT_OVERSPEED = 0x8400,       /**< |estimated speed| > v_max_mps */
-  FW_FAULT_FOLLOWING_ERROR = 0x8611, /**< |speed ref - estimate| > window for too long */
-  FW_FAULT_POSITION_LIMIT = 0x8612,  /**< estimated position outside the software limits */
-  /* integrity monitor (fw_mon.h): the estimate or the measurements are not trustworthy */
-  FW_FAULT_CURRENT_SENSOR_SUM = 0xFF05,    /**< |i_a + i_b + i_c| too large: gain/offset/open sensor */
-  FW_FAULT_CURRENT_SENSOR_OFFSET = 0xFF06, /**< standstill offset (PWM off) above i_offset_max_A */
-  FW_FAULT_SALIENCY_MISMATCH = 0xFF07,     /**< measured saliency low or far from the configured one */
-  FW_FAULT_MOVING_AT_ENABLE = 0xFF08,      /**< mover faster than start_speed_max_mps at enable */
-  FW_FAULT_EST_HF_ANGLE = 0xFF09,          /**< HF response says |angle error| > mon_angle_max_rad */
-  FW_FAULT_EST_BEMF_MISMATCH = 0xFF0A,     /**< voltage-equation residual disagrees with the estimate */
-  FW_FAULT_EST_ACCEL_IMPLAUSIBLE = 0xFF0B, /**< observer needs more acceleration than thrust + load can give */
-  FW_FAULT_CURRENT_CONTROL = 0xFF0C        /**< current loop cannot follow (open phase, lost DC link) */
-} fw_fault_t;
+/* Fault codes (fw_fault_t): generated from protocols/od.yaml (faults:), the one
+ * list of codes, names and texts for the core, the CANopen slave, the bench and the
+ * docs. */
+#include "fw_faults.h"
 
 /** Reaction option codes (CiA 402 0x605A quick stop, 0x605E fault reaction). */
 typedef enum {
