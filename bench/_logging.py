@@ -162,6 +162,24 @@ class _Channel:
     flushed: int = 0  # number of list items already written to a part file
 
 
+def _compact(ch: _Channel) -> None:
+    """Join a channel's pieces (many small per-frame arrays) into at most two: the part
+    already written to a part file and the rest, so that reading a channel again (the
+    runner's expectations read the truth at every check) costs one copy of what arrived
+    since, not a concatenation of every piece since the start. Call under the lock."""
+    n, f = len(ch.t), ch.flushed
+    if n <= 2:
+        return
+    if 0 < f < n:
+        ch.t[:] = [np.concatenate(ch.t[:f]), np.concatenate(ch.t[f:])]
+        ch.v[:] = [np.concatenate(ch.v[:f]), np.concatenate(ch.v[f:])]
+        ch.flushed = 1
+    else:
+        ch.t[:] = [np.concatenate(ch.t)]
+        ch.v[:] = [np.concatenate(ch.v)]
+        ch.flushed = 1 if f else 0
+
+
 class RunLogger:
     """Everything a run writes. Thread-safe ``append``; a flusher thread.
 
@@ -267,6 +285,9 @@ class RunLogger:
             ch = self._channels.get(name)
             if ch is None or not ch.t:
                 return np.empty(0), np.empty(0)
+            _compact(ch)
+            if len(ch.t) == 1:
+                return ch.t[0], ch.v[0]
             return np.concatenate(ch.t), np.concatenate(ch.v)
 
     def channels(self) -> dict[str, str]:
