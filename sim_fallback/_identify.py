@@ -39,6 +39,10 @@ IDENT_FW = {"mon_sal_tol": 10.0, "saliency_min": 0.05,
             # d a fast observer's angle jitter makes thrust that moves the mover
             "gains_auto": 0, "pll_kp": 86.6, "pll_ki": 5000.0, "pll_kd": 1.0e5}
 
+#: Speed-loop bandwidth (rad/s) while identifying: the motor file's may be tuned for a
+#: known motor (iron_core_linear: 80 rad/s); on an unknown one a slow loop is safer.
+IDENT_SPEED_BW = 20.0
+
 #: Speed profile of the motion runs: relative amplitude and frequency (Hz) of the
 #: sinusoid around the mean speed.
 PROFILE = (0.6, 3.0)
@@ -141,6 +145,13 @@ def identify(motor: Motor, seed: int = 0, travel_m: float = 0.3, n_starts: int =
     fw = dict(IDENT_FW)
     fw.update(guess or {})
     cfg0 = fw_config(motor, "pseudo", **fw)
+    if motor.parameterization == "linear" and "spd_kp_A_per_radps" not in fw:
+        # a conservative speed loop while the motor is unknown (IDENT_SPEED_BW): the
+        # gains derived from the file's bandwidth, scaled (k_P ~ bw, k_I ~ bw^2)
+        s_bw = IDENT_SPEED_BW / float(cfg0.spd_bw_radps)
+        fw["spd_kp_A_per_radps"] = float(cfg0.spd_kp_A_per_radps) * s_bw
+        fw["spd_ki_A_per_rad"] = float(cfg0.spd_ki_A_per_rad) * s_bw * s_bw
+        cfg0 = fw_config(motor, "pseudo", **fw)
     i_max = float(cfg0.i_max_A)
     Ts, u_inj = 1.0 / float(cfg0.f_pwm_Hz), float(cfg0.u_inj_V)
     q_larger = float(cfg0.L_q_H) > float(cfg0.L_d_H)

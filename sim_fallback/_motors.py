@@ -54,7 +54,7 @@ class MotorFileError(ValueError):
 
 
 _FW_NAMES = {"R_ohm", "L_d_H", "L_q_H", "psi_f_Wb", "pole_pitch_m", "pole_pairs", "f_pwm_Hz",
-             "i_max_A", "i_trip_A", "u_inj_V", "f_inj_Hz"}
+             "i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz"}
 
 
 def firmware_field_ranges() -> dict[str, tuple[float, float, str]]:
@@ -169,6 +169,7 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float, float, str, Any]] = {
     # controller (gains are derived; these tune the derivation and limits)
     ("controller", "speed_bw_radps"): (False, 1.0, 1000.0, "rad/s", 35.0),
     ("controller", "i_max_A"): (False, 0.05, 400.0, "A", 20.0),
+    ("controller", "i_rated_A"): (False, 0.01, 400.0, "A", 10.0),
     ("controller", "i_trip_A"): (False, 0.1, 500.0, "A", 24.0),
     ("controller", "u_inj_V"): (False, 0.0, 400.0, "V", 50.0),
     ("controller", "f_inj_Hz"): (False, 100.0, 20000.0, "Hz", 3000.0),
@@ -393,6 +394,10 @@ def _build(path: Path, doc: dict[str, Any]) -> Motor:
             F_s = F_c  # only the Coulomb (kinetic) level given: no extra breakaway
         fric_keys = ("static_friction_N", "coulomb_friction_N", 1.0)
         cog = float(g["cogging_N"])
+    if g["i_rated_A"] > g["i_max_A"]:
+        raise _err(path, "controller.i_rated_A", f"{g['i_rated_A']} A must not exceed "
+                   f"controller.i_max_A = {g['i_max_A']} A (the continuous rating is at most "
+                   "the peak)")
     if g["i_trip_A"] <= g["i_max_A"]:
         raise _err(path, "controller.i_trip_A", f"{g['i_trip_A']} A must exceed "
                    f"controller.i_max_A = {g['i_max_A']} A (the trip level is above the limit)")
@@ -474,6 +479,7 @@ def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
     cfg.gains_auto = 1
     c = motor.controller
     cfg.i_max_A = c["i_max_A"]
+    cfg.i_rated_A = c["i_rated_A"]
     cfg.i_trip_A = c["i_trip_A"]
     cfg.u_inj_V = c["u_inj_V"]
     cfg.f_inj_Hz = c["f_inj_Hz"]

@@ -78,7 +78,7 @@ fw_fault_t fw_mon_enable(fw_mon_t *m) {
   }
   memcpy(m->offset_A, m->off_f, sizeof(m->offset_A));
   m->e_ref_A = 0.0f;
-  m->e_d_f = m->e_q_f = m->r_d_f = m->r_q_f = m->ictrl_f = 0.0f;
+  m->e_d_f = m->e_q_f = m->r_d_f = m->r_q_f = m->ictrl_f = m->w_f = 0.0f;
   m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
   m->angle_hf_rad = m->angle_bemf_rad = m->e_bemf_V = 0.0f;
   return FW_FAULT_NONE;
@@ -134,7 +134,7 @@ fw_fault_t fw_mon_saliency(fw_mon_t *m, const fw_config_t *cfg, float y_dd, floa
 void fw_mon_run_start(fw_mon_t *m) {
   m->e_d_f = m->e_ref_A;
   m->e_q_f = 0.0f;
-  m->r_d_f = m->r_q_f = m->ictrl_f = 0.0f;
+  m->r_d_f = m->r_q_f = m->ictrl_f = m->w_f = 0.0f;
   m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
   m->eval_k = 0u;
 }
@@ -166,6 +166,10 @@ fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in) {
                      m->R_ohm, m->L_d_H, m->L_q_H, r);
     m->r_d_f += m->a_slow * (r[0] - m->r_d_f);
     m->r_q_f += m->a_slow * (r[1] - m->r_q_f);
+    /* the speed the residual is compared with goes through the same low-pass:
+     * otherwise the 5 ms lag of the residual alone reads as a mismatch whenever
+     * the speed changes fast (2 m/s -> 0 in 10 ms at full thrust) */
+    m->w_f += m->a_slow * (in->omega_hat_radps - m->w_f);
   }
 
   if (!in->running) {
@@ -195,7 +199,7 @@ fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in) {
       m->t_hf = persist(m->t_hf, m->angle_hf_rad > m->angle_max_rad, dte);
 
       /* back-EMF residual */
-      float e_hat = fabsf(in->omega_hat_radps) * m->psi_f_Wb;
+      float e_hat = fabsf(m->w_f) * m->psi_f_Wb;
       float e_meas = sqrtf(m->r_d_f * m->r_d_f + m->r_q_f * m->r_q_f);
       m->e_bemf_V = e_meas;
       bool bad = false;
@@ -205,7 +209,7 @@ fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in) {
           m->angle_bemf_rad = FW_PI_F32; /* magnitude disagrees: no angle to speak of */
         } else {
           float ang = atan2f(-m->r_d_f, m->r_q_f);
-          if (in->omega_hat_radps < 0.0f) {
+          if (m->w_f < 0.0f) {
             ang = fw_wrap_pi_f32(ang + FW_PI_F32);
           }
           m->angle_bemf_rad = fabsf(ang);

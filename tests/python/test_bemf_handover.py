@@ -90,7 +90,7 @@ def test_flying_start_never_accelerates_the_mover(v0):
     """Enabled on a coasting mover, the drive catches it on the back-EMF within the
     alignment's motion check (15 ms), never pushes it faster, and brings it to the
     reference without a fault. From 2 m/s the mover brakes to rest and sticks (20 N
-    static friction): the speed PI (20 rad/s, integral 1/6 of it) needs about 1 s to
+    static friction): the speed PI (80 rad/s, integral 1/6 of it) needs some time to
     build the breakaway current, so the run lasts 1.5 s (with the derived observer the
     speed estimate no longer jitters the integrator through the stiction earlier)."""
     mot = load_motor("iron_core_linear")

@@ -67,6 +67,7 @@ typedef struct {
   /* filtered signals */
   float e_d_f, e_q_f;
   float r_d_f, r_q_f;
+  float w_f;          /**< |w^| through the residual's low-pass (like compared with like) */
   float i_prev_A[2];  /**< last fundamental current (for L di/dt) */
   float isum_f, ictrl_f;
   float imag_f;       /**< low-passed |i_a| + |i_b| + |i_c| */
