@@ -27,6 +27,7 @@ import functools
 import itertools
 import json
 import math
+import re
 import time
 import traceback
 from collections.abc import Callable, Iterable
@@ -37,7 +38,16 @@ from typing import Any
 import numpy as np
 import yaml
 
+from bench import _scenario_metrics as SM
+
 SCENARIOS = ("load_step", "speed_reversal", "startup", "fault_case")
+#: Axis targets that are plain run arguments (besides plant.<field> and fw.<field>).
+DIRECT_TARGETS = ("seed", "noise", "x0_m")
+#: What a named axis's case may set.
+CASE_TARGETS = ("extractor", "noise", "x0_m")
+#: Keys of ``base``.
+BASE_KEYS = ("scenario", "motor", "extractor", "t_end", "record_decimation", "case",
+             "windows", "event_s", "trace")
 #: Metrics of a fault_case run (sim_fallback._faults.run_case), beside the drive metrics.
 FAULT_CASE_METRICS = ("blind_max_s", "rms_rad", "max_rad", "t_fault_s", "pwm_off_after_s",
                       "verdict_ok")
@@ -58,18 +68,30 @@ class Axis:
     target: str
     kind: str
     spec: list[Any]
+    #: a named axis: target -> expression of its value x (kind "values"), or
+    #: case label -> {target: value} (kind "cases")
+    sets: dict[str, str] | None = None
+    cases: dict[str, dict[str, Any]] | None = None
 
     def value(self, u: float) -> Any:
         """Map u in [0, 1) to this axis's value."""
-        if self.kind == "values":
+        if self.kind in ("values", "cases"):
             v = self.spec[min(int(u * len(self.spec)), len(self.spec) - 1)]
             return v if isinstance(v, str) else float(v)
         lo, hi = self.spec
         v = lo + (hi - lo) * u
         return float(int(v)) if self.target == "seed" else float(v)
 
+    def targets(self) -> list[str]:
+        """What this axis sets in a run (a named axis: every target it sets)."""
+        if self.sets is not None:
+            return list(self.sets)
+        if self.cases is not None:
+            return list(dict.fromkeys(t for c in self.cases.values() for t in c))
+        return [self.target]
+
     def grid(self) -> list[Any]:
-        if self.kind == "values":
+        if self.kind in ("values", "cases"):
             return [x if isinstance(x, str) else float(x) for x in self.spec]
         lo, hi = self.spec
         if self.target == "seed":
@@ -96,6 +118,17 @@ class Campaign:
     axes: list[Axis]
     metrics: list[str]
     limits: list[Limit] = field(default_factory=list)
+    title: str = ""
+
+    def run_base(self) -> dict[str, Any]:
+        """The base a worker gets: the file's base plus which axes scale their nominal
+        value (``_scales``) and the named axes' targets (``_named``)."""
+        base = dict(self.base)
+        base["_scales"] = {a.target: a.kind == "scale" for a in self.axes}
+        base["_named"] = {a.target: (["set", a.sets] if a.sets is not None else
+                                     ["cases", a.cases]) for a in self.axes
+                          if a.sets is not None or a.cases is not None}
+        return base
 
     def runs(self) -> list[dict[str, Any]]:
         """Every run's parameters, deterministic in the file alone."""
@@ -136,6 +169,232 @@ def _find(node: yaml.MappingNode, key: str) -> yaml.Node | None:
 
 def _finite(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
+_FACTOR = re.compile(r"(?:x(?:\^(\d+))?|(plant\.[A-Za-z0-9_]+)|([-+]?(?:\d+\.?\d*|\.\d+)"
+                     r"(?:[eE][-+]?\d+)?))$")
+
+
+def _valid_extractor(v: Any) -> bool:
+    from bench._sequence import EXTRACTORS
+    return v in EXTRACTORS
+
+
+@functools.lru_cache(maxsize=32)
+def _motor_plant_cached(name: str) -> dict[str, Any] | None:
+    from sim_fallback import load_motor
+    try:
+        return dict(load_motor(name).plant)
+    except Exception:  # noqa: BLE001 - any unreadable motor is "not a motor"
+        return None
+
+
+def _motor_plant(name: Any) -> dict[str, Any] | None:
+    """The motor file's plant parameters (nominal), or None if it is not a motor."""
+    return _motor_plant_cached(name) if isinstance(name, str) and _NAME.match(name) else None
+
+
+def _choices(what: str) -> str:
+    if what == "extractor":
+        from bench._sequence import EXTRACTORS
+        return ", ".join(EXTRACTORS)
+    from sim_fallback import MOTOR_DIR
+    return "motor names (" + ", ".join(sorted(f.stem for f in Path(MOTOR_DIR).glob("*.toml"))) \
+        + ")"
+
+
+def _is_field(t: Any) -> bool:
+    return isinstance(t, str) and t.startswith(("plant.", "fw.")) and bool(
+        _NAME.match(t.partition(".")[2]))
+
+
+def _field_error(t: str, plant: dict[str, Any] | None) -> str | None:
+    """Why ``plant.<f>`` / ``fw.<f>`` names no parameter (None: it does)."""
+    kind, _, f = t.partition(".")
+    if kind == "plant" and plant is not None and f not in plant:
+        return f"no plant parameter {f!r} (sim_plant_params_t; docs/simulator.md)"
+    if kind == "fw":
+        from sim_fallback import FwConfig
+        if f not in {n for n, *_ in FwConfig._fields_}:
+            return f"no drive configuration field {f!r} (fw_config_t; docs/firmware.md)"
+    return None
+
+
+def parse_expr(expr: Any) -> list[tuple[str, Any]] | None:
+    """A named axis's ``set`` expression: a product of factors, each a number, ``x``
+    (the axis value), ``x^N`` or ``plant.<field>`` (the motor file's nominal value),
+    evaluated left to right. None if malformed."""
+    if isinstance(expr, (int, float)) and not isinstance(expr, bool):
+        expr = str(expr)
+    if not isinstance(expr, str) or not expr.strip():
+        return None
+    out: list[tuple[str, Any]] = []
+    for f in expr.split("*"):
+        m = _FACTOR.match(f.strip())
+        if m is None:
+            return None
+        if m.group(2):
+            out.append(("plant", m.group(2)[6:]))
+        elif m.group(3):
+            out.append(("num", float(m.group(3))))
+        else:
+            out.append(("x", int(m.group(1) or 1)))
+    return out
+
+
+def eval_expr(expr: str, x: float, plant: dict[str, Any]) -> float:
+    """Value of a ``set`` expression for axis value ``x`` (see :func:`parse_expr`)."""
+    acc: float | None = None
+    for kind, v in parse_expr(expr) or []:
+        f = float(plant[v]) if kind == "plant" else v if kind == "num" else float(x) ** v
+        acc = f if acc is None else acc * f
+    return float(acc if acc is not None else "nan")
+
+
+def _node_at(node: yaml.Node | None, path: str) -> yaml.Node | None:
+    """The deepest node along a dotted path of mapping keys (labels and targets may hold
+    dots: the longest key that matches is taken)."""
+    while path and isinstance(node, yaml.MappingNode):
+        for k, v in node.value:
+            key = str(k.value)
+            if path == key or path.startswith(key + "."):
+                node, path = v, path[len(key) + 1:]
+                break
+        else:
+            break
+    return node
+
+
+def _is_named_axis(tgt: Any, spec: Any) -> bool:
+    return (isinstance(tgt, str) and bool(_NAME.match(tgt)) and tgt not in DIRECT_TARGETS
+            and isinstance(spec, dict) and ("set" in spec or "cases" in spec))
+
+
+def _parse_named_axis(name: str, spec: dict[str, Any], plant: dict[str, Any] | None,
+                      err: Callable[[str, str], None]) -> Axis | None:
+    """``name: {values: [...], set: {target: expr}}`` or ``name: {cases: {label: {...}}}``."""
+    fld = f"axes.{name}"
+    if "cases" in spec:
+        cases = spec["cases"]
+        if set(spec) != {"cases"} or not isinstance(cases, dict) or not cases:
+            err(fld, "cases: need a non-empty mapping label: {target: value, ...} (and "
+                "nothing else)")
+            return None
+        ok = True
+        for label, sets in cases.items():
+            cf = f"{fld}.cases.{label}"
+            if not isinstance(sets, dict):
+                err(cf, "need a mapping target: value ({} for the nominal run)")
+                ok = False
+                continue
+            for t, v in sets.items():
+                if t == "extractor":
+                    good = _valid_extractor(v)
+                    why = None if good else f"{v!r} not one of {_choices('extractor')}"
+                elif t in CASE_TARGETS or _is_field(t):
+                    why = (_field_error(t, plant) if _is_field(t) else None) or (
+                        None if _finite(v) else f"{v!r}: need a finite number")
+                else:
+                    why = "target must be extractor, noise, x0_m, plant.<field> or fw.<field>"
+                if why:
+                    err(f"{cf}.{t}", why)
+                    ok = False
+        return Axis(name, "cases", [str(k) for k in cases],
+                    cases={str(k): dict(v) for k, v in cases.items()}) if ok else None
+    vals, sets = spec.get("values"), spec.get("set")
+    if set(spec) != {"values", "set"}:
+        err(fld, "a named axis needs values: [...] and set: {target: expression} (or cases)")
+        return None
+    if not isinstance(vals, list) or not vals or not all(_finite(v) for v in vals):
+        err(fld, "values must be a non-empty list of finite numbers")
+        return None
+    if not isinstance(sets, dict) or not sets:
+        err(fld, "set: need a mapping target: expression")
+        return None
+    ok = True
+    for t, expr in sets.items():
+        why = (_field_error(t, plant) if _is_field(t) else
+               "target must be plant.<field> or fw.<field>")
+        factors = parse_expr(expr)
+        if why is None and factors is None:
+            why = (f"{expr!r}: need a product of numbers, x, x^N and plant.<field>, "
+                   "e.g. 1100 * plant.L_d0_H * x")
+        bad = [v for k, v in factors or [] if k == "plant" and plant is not None
+               and v not in plant]
+        if why is None and bad:
+            why = f"no plant parameter {bad[0]!r} in the expression"
+        if why:
+            err(f"{fld}.set.{t}", why)
+            ok = False
+    return Axis(name, "values", [float(v) for v in vals], sets={str(k): str(v) for k, v
+                                                                  in sets.items()}) if ok \
+        else None
+
+
+def _check_base(base: dict[str, Any], bnode: yaml.Node | None, sc: str,
+                err: Callable[[yaml.Node | None, str, str], None]
+                ) -> tuple[dict[str, Any] | None, dict[str, list[float]], float | None]:
+    """Validate ``base``; returns the motor's plant parameters, the windows and event_s."""
+    def node(key: str) -> yaml.Node | None:
+        return (_find(bnode, key) or bnode) if isinstance(bnode, yaml.MappingNode) else bnode
+
+    for k in base:
+        if k not in BASE_KEYS:
+            err(node(k), f"base.{k}", f"unknown; known: {', '.join(BASE_KEYS)}")
+    plant = None
+    if sc != "fault_case":
+        mot = base.get("motor", "paper_salient")
+        plant = _motor_plant(mot)
+        if plant is None:
+            err(node("motor"), "base.motor", f"{mot!r}: need one of {_choices('motor')}")
+        if "extractor" in base and not _valid_extractor(base["extractor"]):
+            err(node("extractor"), "base.extractor",
+                f"{base['extractor']!r} not one of {_choices('extractor')}")
+    t_end = base.get("t_end", 1.0)
+    if not _finite(t_end) or not 0 < t_end <= 3600:
+        err(node("t_end"), "base.t_end", f"{t_end!r}: need a number in (0, 3600] s")
+        t_end = 1.0
+    dec = base.get("record_decimation", 8)
+    if not isinstance(dec, int) or isinstance(dec, bool) or not 1 <= dec <= 10_000:
+        err(node("record_decimation"), "base.record_decimation",
+            f"{dec!r}: need an integer in [1, 10000]")
+    windows: dict[str, list[float]] = {}
+    raw = base.get("windows", {})
+    if not isinstance(raw, dict):
+        err(node("windows"), "base.windows", "need a mapping name: [t0, t1] (s)")
+        raw = {}
+    for w, span in raw.items():
+        if not (isinstance(w, str) and _NAME.match(w)):
+            err(node("windows"), f"base.windows.{w}", "name must be an identifier")
+        elif (not isinstance(span, list) or len(span) != 2 or not all(_finite(x) for x in span)
+              or not 0 <= span[0] < span[1] <= t_end):
+            err(node("windows"), f"base.windows.{w}",
+                f"{span!r}: need [t0, t1] with 0 <= t0 < t1 <= t_end ({t_end:g} s)")
+        else:
+            windows[w] = [float(span[0]), float(span[1])]
+    event_s = base.get("event_s")
+    if event_s is not None and not (_finite(event_s) and 0 <= event_s < t_end):
+        err(node("event_s"), "base.event_s", f"{event_s!r}: need a time in [0, t_end) s")
+        event_s = None
+    tr = base.get("trace")
+    if tr is not None:
+        sig = tr.get("signals") if isinstance(tr, dict) else None
+        dec_t = tr.get("decimation", 8) if isinstance(tr, dict) else None
+        seeds = tr.get("seeds") if isinstance(tr, dict) else None
+        if (not isinstance(tr, dict) or set(tr) - {"signals", "decimation", "seeds"}
+                or not isinstance(sig, list) or not sig
+                or any(x not in SM.TRACE_SIGNALS for x in sig)):
+            err(node("trace"), "base.trace", "need {signals: [...], decimation: N, seeds: "
+                f"[...]}} with signals from {', '.join(SM.TRACE_SIGNALS)}")
+        elif not isinstance(dec_t, int) or isinstance(dec_t, bool) or not 1 <= dec_t <= 10_000:
+            err(node("trace"), "base.trace.decimation", f"{dec_t!r}: need an integer in "
+                "[1, 10000]")
+        elif seeds is not None and (not isinstance(seeds, list) or not all(
+                isinstance(x, int) and not isinstance(x, bool) for x in seeds)):
+            err(node("trace"), "base.trace.seeds", "need a list of integer seeds (or leave "
+                "it out: every run)")
+    return plant, windows, (float(event_s) if event_s is not None else None)
 
 
 def load_campaign(path: str | Path, metric_names: Iterable[str] | None = None) -> Campaign:
@@ -181,6 +440,7 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
         if "case" not in data.get("axes", {}) and base.get("case") not in names:
             err(bnode, "base.case", f"{base.get('case')!r} is not a fault case ({len(names)} "
                 "listed in docs/fault_matrix.md)")
+    motor_plant, windows, event_s = _check_base(base, bnode, sc, err)
     samp = data.get("sampling", {"method": "grid"})
     snode = _find(root, "sampling")
     method = samp.get("method", "grid") if isinstance(samp, dict) else None
@@ -213,11 +473,29 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             else:
                 axes.append(Axis("case", "values", list(vals)))
             continue
-        ok_target = (tgt in ("seed", "noise", "x0_m") or str(tgt).startswith("plant.")
-                     or str(tgt).startswith("fw."))
+        if tgt in ("extractor", "motor"):  # string-valued axes
+            vals = spec.get("values") if isinstance(spec, dict) and len(spec) == 1 else None
+            bad = (None if not isinstance(vals, list) or not vals else
+                   [v for v in vals if not (_valid_extractor(v) if tgt == "extractor"
+                                            else _motor_plant(v) is not None)])
+            if bad is None or bad:
+                err(node, fld, f"need values: [...] of {_choices(tgt)}"
+                    + (f"; {bad[0]!r} is not one" if bad else ""))
+            else:
+                axes.append(Axis(str(tgt), "values", list(vals)))
+            continue
+        if _is_named_axis(tgt, spec):
+            ax = _parse_named_axis(str(tgt), spec, motor_plant,
+                                   lambda f, m, n=node, t=str(tgt):
+                                   err(_node_at(n, f[len("axes." + t) + 1:]), f, m))
+            if ax is not None:
+                axes.append(ax)
+            continue
+        ok_target = tgt in DIRECT_TARGETS or _is_field(tgt)
         if not ok_target:
-            err(node, fld, "target must be seed, noise, x0_m, case, plant.<field> or "
-                "fw.<field>")
+            err(node, fld, "target must be seed, noise, x0_m, case, extractor, motor, "
+                "plant.<field> or fw.<field>, or a named axis with values and set, or "
+                "cases")
             continue
         if not isinstance(spec, dict) or len(spec) != 1:
             err(node, fld, "need exactly one of values: [...], range: [lo, hi], "
@@ -239,18 +517,38 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
         if kind == "scale" and vals[0] <= 0:
             err(node, fld, "scale factors must be > 0")
             continue
+        why = _field_error(str(tgt), motor_plant)
+        if why:
+            err(node, fld, why)
+            continue
         axes.append(Axis(str(tgt), kind, [float(v) for v in vals]))
+    seen: dict[str, str] = {}
+    for ax in axes:
+        for t in ax.targets():
+            if t in seen:
+                err(anode, f"axes.{ax.target}", f"sets {t}, which axis {seen[t]} sets too")
+            seen.setdefault(t, ax.target)
     metrics = data.get("metrics", [])
     mnode = _find(root, "metrics")
     known = set(metric_names) if metric_names is not None else None
     if known is not None and sc == "fault_case":
         known |= set(FAULT_CASE_METRICS)
+    elif known is not None:
+        known |= set(SM.EVENT_METRICS + SM.STARTUP_METRICS + SM.RUN_METRICS)
     if not isinstance(metrics, list) or not metrics:
         err(mnode, "metrics", "need a non-empty list of metric names")
         metrics = []
     for m in metrics:
-        if known is not None and m not in known:
-            err(mnode, "metrics", f"unknown metric {m!r}; known: {', '.join(sorted(known))}")
+        if known is None or m in known or (sc != "fault_case"
+                                           and SM.is_window_metric(str(m), windows)):
+            if m in SM.EVENT_METRICS and event_s is None:
+                err(mnode, "metrics", f"{m} needs base.event_s (the event's time, s)")
+            continue
+        hint = (f"; or <window>.<{'|'.join(SM.WINDOW_METRICS)}> with a window of "
+                f"base.windows ({', '.join(windows) or 'none defined'})"
+                if sc != "fault_case" else "")
+        err(mnode, "metrics", f"unknown metric {m!r}; known: {', '.join(sorted(known))}"
+            + hint)
     limits: list[Limit] = []
     lnode = _find(root, "limits")
     for i, lim in enumerate(data.get("limits", []) or []):
@@ -271,10 +569,14 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
         total = int(np.prod([len(a.grid()) for a in axes]))
         if total > 10_000_000:
             err(anode, "axes", f"grid of {total} runs; use sampling random or lhs")
+    title = data.get("title", "")
+    if not isinstance(title, str):
+        err(_find(root, "title"), "title", "must be text")
     if errs:
         raise CampaignError("\n".join(errs))
     return Campaign(str(data["name"]), p, dict(base), method or "grid",
-                    int(n) if method != "grid" else 0, int(sseed), axes, list(metrics), limits)
+                    int(n) if method != "grid" else 0, int(sseed), axes, list(metrics), limits,
+                    str(title))
 
 
 # ---- one run -----------------------------------------------------------------
@@ -311,6 +613,21 @@ def _split(params: dict[str, Any]) -> tuple[dict[str, float], dict[str, float], 
     return plant, fw, rest
 
 
+def _expand(base: dict[str, Any], params: dict[str, Any],
+            plant: dict[str, Any]) -> dict[str, Any]:
+    """A run's parameters with each named axis replaced by the targets it sets."""
+    named = base.get("_named", {})
+    out = {k: v for k, v in params.items() if k not in named}
+    for name, (kind, spec) in named.items():
+        if name not in params:
+            continue
+        if kind == "set":
+            out.update({t: eval_expr(e, params[name], plant) for t, e in spec.items()})
+        else:
+            out.update(spec[params[name]])
+    return out
+
+
 @functools.lru_cache(maxsize=16)
 def _motor_and_config(motor: str, extractor: str) -> tuple[Any, Any]:
     """Motor file and its nominal configuration, parsed once per worker process."""
@@ -323,8 +640,7 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
               metrics: list[str]) -> dict[str, Any]:
     from sim_fallback import paper_scenario
 
-    plant, fw, rest = _split(params)
-    seed = int(rest.get("seed", 0))
+    seed = int(params.get("seed", 0))
     scales = base.get("_scales", {})
     if base.get("scenario") == "fault_case":
         from sim_fallback._faults import CASES, run_case
@@ -337,26 +653,44 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
             if m != "verdict_ok":
                 out[m] = float(r[m]) if r.get(m) is not None else float("nan")
         return out
+    motor_name = str(params.get("motor", base.get("motor", "paper_salient")))
+    motor, _ = _motor_and_config(motor_name, "sogi_adaptive")
+    plant, fw, rest = _split(_expand(base, params, motor.plant))
+    extractor = str(rest.get("extractor", base.get("extractor", "sogi_adaptive")))
     # scale axes multiply the nominal value (motor plant / derived configuration)
-    motor, nominal_fw = _motor_and_config(base.get("motor", "paper_salient"),
-                                          base.get("extractor", "sogi_adaptive"))
+    motor, nominal_fw = _motor_and_config(motor_name, extractor)
     fw_abs = {k: (float(getattr(nominal_fw, k)) * v if scales.get("fw." + k) else v)
               for k, v in fw.items()}
     plant_abs = {k: (float(motor.plant[k]) * v if scales.get("plant." + k) else v)
                  for k, v in plant.items()}
+    for k, v in plant_abs.items():  # integer plant fields (adc_bits, n_sub) from a float axis
+        if isinstance(motor.plant.get(k), int) and float(v).is_integer():
+            plant_abs[k] = int(v)
+    windows = base.get("windows", {})
+    analysis = SM.needs_analysis(metrics, windows)
+    tr = base.get("trace")
     kw: dict[str, Any] = {"t_end": float(base.get("t_end", 1.0)),
                           "record_decimation": int(base.get("record_decimation", 8)),
-                          "channels": []}  # only what the metrics need
+                          # only what the metrics need
+                          "channels": list(SM.CHANNELS) if analysis or tr else []}
     if "noise" in rest:
         kw["noise"] = float(rest["noise"])
     if "x0_m" in rest:
         kw["x0_m"] = float(rest["x0_m"])
-    r = paper_scenario(base.get("scenario", "load_step"),
-                       extractor=base.get("extractor", "sogi_adaptive"), motor=motor,
+    r = paper_scenario(base.get("scenario", "load_step"), extractor=extractor, motor=motor,
                        seed=seed, plant=plant_abs or None, fw=fw_abs or None, **kw)
-    out = {"fault": int(r.fault_code)}
+    out: dict[str, Any] = {"fault": int(r.fault_code)}
     for m in metrics:
         out[m] = float(r.metrics.get(m, float("nan")))
+    if analysis:
+        f_inj = float(fw_abs.get("f_inj_Hz", nominal_fw.f_inj_Hz))
+        f_pwm = float(plant_abs.get("f_pwm_Hz", motor.plant["f_pwm_Hz"]))
+        out.update(SM.analyse(r, metrics, windows, base.get("event_s"),
+                              int(round(f_pwm / f_inj))))
+    if tr:
+        keep = tr.get("seeds") is None or seed in tr["seeds"]
+        sig = SM.trace(r, tr["signals"], int(tr.get("decimation", 8))) if keep else {}
+        out.update({f"trace.{s}": sig.get(f"trace.{s}") for s in tr["signals"]})
     return out
 
 
@@ -384,7 +718,9 @@ def _write_part(rdir: Path, rows: list[dict[str, Any]]) -> None:
     import pyarrow.parquet as pq
     k = len(list(rdir.glob("part-*.parquet")))
     tmp = rdir / f".part-{k:06d}.tmp"
-    pq.write_table(pa.Table.from_pylist(rows), tmp)
+    keys = list(dict.fromkeys(key for r in rows for key in r))  # a failed run has fewer
+    pq.write_table(pa.Table.from_pylist([{key: r.get(key) for key in keys} for r in rows]),
+                   tmp)
     tmp.replace(rdir / f"part-{k:06d}.parquet")  # atomic: a kill leaves no torn file
 
 
@@ -392,31 +728,45 @@ def run_campaign(c: Campaign, out: Path, scheduler: str | None = None,
                  workers: int | None = None, serial: bool = False, batch: int = 64,
                  progress: Callable[[int, int, float], None] | None = None) -> Path:
     """Run every run not yet in the results; return the results folder."""
-    rdir = results_dir(c, out)
-    rdir.mkdir(parents=True, exist_ok=True)
-    (rdir / "campaign.json").write_text(json.dumps(
-        {"name": c.name, "file": str(c.path), "base": c.base, "method": c.method, "n": c.n,
-         "sampling_seed": c.sampling_seed, "metrics": c.metrics,
-         "axes": [[a.target, a.kind, a.spec] for a in c.axes]}, indent=1))
-    base = dict(c.base)
-    base["_scales"] = {a.target: a.kind == "scale" for a in c.axes}
-    todo = [r for r in c.runs() if r["run"] not in done_runs(rdir)]
-    total, t0, buf, finished = len(todo), time.perf_counter(), [], 0
+    return run_campaigns([c], out, scheduler, workers, serial, batch, progress)[0]
 
-    def emit(row: dict[str, Any]) -> None:
+
+def run_campaigns(cs: list[Campaign], out: Path, scheduler: str | None = None,
+                  workers: int | None = None, serial: bool = False, batch: int = 64,
+                  progress: Callable[[int, int, float], None] | None = None) -> list[Path]:
+    """Several campaigns through one cluster at once (their chunks share the workers, so
+    short campaigns do not each pay a start and a tail); results as for run_campaign."""
+    rdirs, bases, todos = [], [], []
+    for c in cs:
+        rdir = results_dir(c, out)
+        rdir.mkdir(parents=True, exist_ok=True)
+        (rdir / "campaign.json").write_text(json.dumps(
+            {"name": c.name, "title": c.title, "file": str(c.path), "base": c.base,
+             "method": c.method, "n": c.n, "sampling_seed": c.sampling_seed,
+             "metrics": c.metrics, "axes": [[a.target, a.kind, a.spec] for a in c.axes]},
+            indent=1, ensure_ascii=False), encoding="utf-8")
+        rdirs.append(rdir)
+        bases.append(c.run_base())
+        done = done_runs(rdir)
+        todos.append([r for r in c.runs() if r["run"] not in done])
+    total, t0, finished = sum(len(t) for t in todos), time.perf_counter(), 0
+    bufs: list[list[dict[str, Any]]] = [[] for _ in cs]
+
+    def emit(i: int, row: dict[str, Any]) -> None:
         nonlocal finished
-        buf.append(row)
+        bufs[i].append(row)
         finished += 1
-        if len(buf) >= batch:
-            _write_part(rdir, buf)
-            buf.clear()
+        if len(bufs[i]) >= batch:
+            _write_part(rdirs[i], bufs[i])
+            bufs[i].clear()
         if progress:
             progress(finished, total, time.perf_counter() - t0)
 
     try:
         if serial or total == 0:
-            for r in todo:
-                emit(run_one(base, r, c.metrics))
+            for i, c in enumerate(cs):
+                for r in todos[i]:
+                    emit(i, run_one(bases[i], r, c.metrics))
         else:
             from dask.distributed import Client, LocalCluster, as_completed
             if scheduler:
@@ -433,21 +783,27 @@ def run_campaign(c: Campaign, out: Path, scheduler: str | None = None,
             try:
                 n_workers = max(1, len(client.scheduler_info().get("workers", {})) or 1)
                 size = max(1, min(64, total // (8 * n_workers)))
-                chunks = [todo[i:i + size] for i in range(0, total, size)]
-                futs = client.map(run_chunk, [base] * len(chunks), chunks,
-                                  [c.metrics] * len(chunks), pure=False)
+                owner, chunks = [], []
+                for i, todo in enumerate(todos):
+                    for k in range(0, len(todo), size):
+                        owner.append(i)
+                        chunks.append(todo[k:k + size])
+                futs = client.map(run_chunk, [bases[i] for i in owner], chunks,
+                                  [cs[i].metrics for i in owner], pure=False)
+                index = {f.key: i for f, i in zip(futs, owner, strict=True)}
                 for fut in as_completed(futs):
                     for row in fut.result():
-                        emit(row)
+                        emit(index[fut.key], row)
                     fut.release()
             finally:
                 client.close()
                 if cluster is not None:
                     cluster.close()
     finally:
-        if buf:
-            _write_part(rdir, buf)
-    return rdir
+        for i, buf in enumerate(bufs):
+            if buf:
+                _write_part(rdirs[i], buf)
+    return rdirs
 
 
 def load_results(rdir: Path) -> Any:
@@ -458,8 +814,17 @@ def load_results(rdir: Path) -> Any:
     if not parts:
         return {}
     t = pa.concat_tables(parts, promote_options="default")
-    return {name: np.asarray(t.column(name).to_pylist(), dtype=object)
-            for name in t.column_names}
+    out = {}
+    for name in t.column_names:
+        vals = t.column(name).to_pylist()
+        col = np.empty(len(vals), dtype=object)
+        if pa.types.is_list(t.schema.field(name).type):
+            for i, v in enumerate(vals):  # list cells (traces) stay one object each
+                col[i] = v
+        else:
+            col[:] = vals
+        out[name] = col
+    return out
 
 
 def statistic(values: np.ndarray, stat: str) -> float:
@@ -533,9 +898,7 @@ def cmd(args: Any) -> int:
             print(f"bench: --replay {args.replay}: campaign {c.name} has runs 0.."
                   f"{len(runs) - 1}", file=sys.stderr)
             return 2
-        base = dict(c.base)
-        base["_scales"] = {a.target: a.kind == "scale" for a in c.axes}
-        row = run_one(base, runs[args.replay], c.metrics)
+        row = run_one(c.run_base(), runs[args.replay], c.metrics)
         print(json.dumps({k: v for k, v in row.items() if k != "traceback"}, indent=1))
         return 0 if row["error"] is None else 1
     other = Path(args.compare) if args.compare else None

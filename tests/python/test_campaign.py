@@ -1,6 +1,7 @@
 """Campaigns: file validation, deterministic sampling, Parquet results that survive
 an interruption, recorded failures, Dask and serial runs that agree."""
 
+import json
 import math
 from pathlib import Path
 
@@ -138,3 +139,129 @@ def test_report_shows_limits_worst_runs_and_comparison(tmp_path):
     res = load_results(tmp_path / "a" / "tiny")
     worst = max(float(x) for x in res["position_error_rms_rad"])
     assert f"{worst:.4g}" in text
+
+
+# ---- named axes, string axes, windows, traces (the paper reproduction's campaigns) ----
+
+def test_every_reproduction_campaign_is_valid():
+    files = sorted((ROOT / "campaigns/reproduction").glob("*.yaml"))
+    assert len(files) == 14
+    from sim_fallback.metrics import METRIC_NAMES
+    names = {load_campaign(f, METRIC_NAMES).name for f in files}
+    assert len(names) == len(files)  # each its own results folder
+
+
+BAD = "name: x\nbase: {scenario: load_step%s}\naxes:\n%s\nmetrics: [%s]\n"
+
+
+@pytest.mark.parametrize("base,axes,metrics,where", [
+    ("", "  extractor: {values: [pseudo, sogi_fast]}", "position_error_rms_rad",
+     "c.yaml:4: axes.extractor: need values: [...] of pseudo, sogi, sogi_adaptive; "
+     "'sogi_fast' is not one"),
+    ("", "  motor: {values: [no_such_motor]}", "position_error_rms_rad",
+     "c.yaml:4: axes.motor: need values: [...] of motor names ("),
+    ("", "  k:\n    values: [1, 2]\n    set: {fw.pll_kp: 86.6 * y}", "position_error_rms_rad",
+     "c.yaml:6: axes.k.set.fw.pll_kp: '86.6 * y': need a product of numbers, x, x^N"),
+    ("", "  k:\n    values: [1, 2]\n    set: {fw.pll_kp: plant.L_x * x}",
+     "position_error_rms_rad", "c.yaml:6: axes.k.set.fw.pll_kp: no plant parameter 'L_x'"),
+    ("", "  k:\n    values: [1, 2]\n    set: {fw.no_field: x}", "position_error_rms_rad",
+     "c.yaml:6: axes.k.set.fw.no_field: no drive configuration field 'no_field'"),
+    ("", "  plant.R_ohms: {values: [1.0]}", "position_error_rms_rad",
+     "c.yaml:4: axes.plant.R_ohms: no plant parameter 'R_ohms'"),
+    ("", "  v:\n    cases:\n      a: {extractor: sogi, speed: 3}", "position_error_rms_rad",
+     "c.yaml:6: axes.v.cases.a.speed: target must be extractor, noise, x0_m"),
+    ("", "  k:\n    values: [1]\n    set: {fw.L_q_H: plant.L_q_H * x}\n"
+     "  fw.L_q_H: {values: [0.01]}", "position_error_rms_rad",
+     "axes.fw.L_q_H: sets fw.L_q_H, which axis k sets too"),
+    (", windows: {steady: [0.7, 0.2]}", "  seed: {values: [0]}", "steady.pos_rms",
+     "c.yaml:2: base.windows.steady: [0.7, 0.2]: need [t0, t1] with 0 <= t0 < t1"),
+    (", windows: {steady: [0.7, 1.0]}", "  seed: {values: [0]}", "tail.pos_rms",
+     "unknown metric 'tail.pos_rms'"),
+    ("", "  seed: {values: [0]}", "t_speed_back_s",
+     "c.yaml:5: metrics: t_speed_back_s needs base.event_s"),
+    (", trace: {signals: [omega]}", "  seed: {values: [0]}", "position_error_rms_rad",
+     "c.yaml:2: base.trace: need {signals"),
+    (", extractor: sogi2", "  seed: {values: [0]}", "position_error_rms_rad",
+     "c.yaml:2: base.extractor: 'sogi2' not one of"),
+    (", tend: 1", "  seed: {values: [0]}", "position_error_rms_rad",
+     "c.yaml:2: base.tend: unknown; known: scenario"),
+])
+def test_extension_errors_name_file_line_field(base, axes, metrics, where):
+    with pytest.raises(CampaignError) as ei:
+        _parse(BAD % (base, axes, metrics))
+    assert where in str(ei.value)
+
+
+def test_set_expressions_evaluate_like_python():
+    from bench._campaign import eval_expr, parse_expr
+    plant = {"L_d0_H": 0.012, "R_ohm": 0.958}
+    for x in (0.8, 0.9, 1.1, 1.2):  # bit for bit what a hand-written loop computes
+        assert eval_expr("1100 * plant.L_d0_H * x", x, plant) == 1100.0 * 0.012 * x
+        assert eval_expr("5000 * x^2", x, plant) == 5000.0 * x**2
+        assert eval_expr("1e5 * x^3", x, plant) == 1.0e5 * x**3
+    assert parse_expr("2 * * x") is None and parse_expr("x + 1") is None
+
+
+def test_named_and_case_axes_run_what_they_say(tmp_path):
+    """A named axis sets its targets and a case its values: each run equals the direct
+    simulator call with those arguments (the reference)."""
+    import sim_fallback as sf
+    c = _parse("""
+name: named
+base: {scenario: load_step, t_end: 0.3}
+sampling: {method: grid}
+axes:
+  mm: {values: [0.9, 1.1], set: {fw.L_q_H: plant.L_q_H * x}}
+  sensing:
+    cases:
+      ideal: {noise: 0.0, plant.adc_bits: 16, extractor: sogi}
+      default: {}
+metrics: [position_error_rms_rad]
+""")
+    runs = c.runs()
+    assert [(r["mm"], r["sensing"]) for r in runs] == [
+        (0.9, "ideal"), (0.9, "default"), (1.1, "ideal"), (1.1, "default")]
+    res = load_results(run_campaign(c, tmp_path, serial=True))
+    got = dict(zip(res["run"].astype(int), res["position_error_rms_rad"].astype(float),
+                   strict=True))
+    mot = sf.load_motor("paper_salient")
+    for r in runs:
+        kw = ({"noise": 0.0, "plant": {"adc_bits": 16}, "extractor": "sogi"}
+              if r["sensing"] == "ideal" else {})
+        ex = kw.pop("extractor", "sogi_adaptive")
+        ref = sf.paper_scenario("load_step", ex, seed=int(r["seed"]), t_end=0.3,
+                                record_decimation=8, channels=[],
+                                fw={"L_q_H": mot.plant["L_q_H"] * r["mm"]}, **kw)
+        assert got[r["run"]] == ref.metrics["position_error_rms_rad"], r
+
+
+def test_windows_events_and_traces_are_columns(tmp_path):
+    c = _parse("""
+name: win
+base:
+  scenario: load_step
+  t_end: 0.7
+  record_decimation: 1
+  windows: {steady: [0.55, 0.7]}
+  event_s: 0.5
+  trace: {signals: [t_s, position_error_rad], decimation: 24, seeds: [0]}
+sampling: {method: grid}
+axes:
+  extractor: {values: [pseudo, sogi]}
+  seed: {values: [0, 1]}
+metrics: [valid, steady.pos_rms, steady.ripple_d, t_est_back_s]
+""")
+    res = load_results(run_campaign(c, tmp_path, serial=True))
+    for k in range(4):
+        params = json.loads(res["params"][k])
+        tr = res["trace.position_error_rad"][k]
+        if params["seed"] == 0:  # kept for seed 0 only, every 24th sample (1 ms)
+            assert len(tr) == len(res["trace.t_s"][k]) == 700
+            e = np.asarray(tr)[550:]  # t >= 0.55 s
+            assert float(np.sqrt(np.mean(e**2))) == pytest.approx(
+                float(res["steady.pos_rms"][k]), rel=0.3)  # 1 ms samples of the same error
+        else:
+            assert tr is None
+        assert res["valid"][k] == 1.0
+        assert 0.0 < float(res["t_est_back_s"][k]) < 0.2
+        assert 0.1 < float(res["steady.ripple_d"][k]) < 0.5  # 50 V / 3 kHz on 12 mH: ~0.2 A
