@@ -126,6 +126,8 @@ class Param:
     min, max : float or None
         Documented limits.
     doc : str
+    command : bool
+        An action or set-point (od.yaml ``command``), not configuration.
     """
 
     name: str
@@ -137,6 +139,7 @@ class Param:
     min: float | None
     max: float | None
     doc: str
+    command: bool = False
 
     @property
     def address(self) -> str:
@@ -165,7 +168,8 @@ def param_table() -> dict[str, Param]:
             hi = cfg[e.fw_config].get("max", hi)
         dotted = e.name if e.kind == "var" else f"{e.object_name}.{e.name}"
         canon = e.fw_config or dotted
-        p = Param(canon, e.index, e.sub, e.unit or "", e.type, e.access, lo, hi, e.doc)
+        p = Param(canon, e.index, e.sub, e.unit or "", e.type, e.access, lo, hi, e.doc,
+                  e.command)
         for key in {canon, dotted, f"0x{e.index:04X}:{e.sub}", f"0x{e.index:04x}:{e.sub}"}:
             out.setdefault(key, p)
         if e.kind == "var":
@@ -513,7 +517,7 @@ class Drive:
         for p in self.params.values():
             if p.access != "rw" or (p.index, p.sub) in seen or 0x1400 <= p.index < 0x1C00:
                 continue
-            if p.index in (0x6040, 0x60FF, 0x6071, 0x2070):  # commands, not configuration
+            if p.command:  # od.yaml `command`: an action or set-point, not configuration
                 continue
             seen.add((p.index, p.sub))
             v = self.read_raw(p.index, p.sub)
@@ -592,6 +596,40 @@ class Drive:
             if progress:
                 progress(p.name)
         return len(plan)
+
+    # ---- non-volatile memory (CiA 301 0x1010 / 0x1011) -------------------------------
+    SAVE_SIGNATURE = 0x65766173  #: 'save' in ASCII, written to 0x1010:1
+    LOAD_SIGNATURE = 0x64616F6C  #: 'load' in ASCII, written to 0x1011:1
+
+    def _nvm_command(self, index: int, signature: int, what: str) -> None:
+        if not int(self.read_raw(index, 1)) & 1:
+            raise ParamError(f"the drive has no non-volatile memory (0x{index:04X}:1 reads 0): "
+                             f"nothing {what}")
+        try:
+            self.write_raw(index, 1, signature)
+        except ParamError as e:
+            cause = e.__cause__
+            code = int(cause.code) if isinstance(cause, SdoAbortedError) else None
+            if code == 0x08000022:
+                raise ParamError(f"0x{index:04X}:1: refused while the power stage is enabled "
+                                 f"(SDO abort 0x08000022); disable the drive first: nothing "
+                                 f"{what}") from e
+            if code == 0x08000020:
+                raise ParamError(f"0x{index:04X}:1: the drive could not write its "
+                                 f"non-volatile memory (SDO abort 0x08000020): nothing "
+                                 f"{what}") from e
+            raise
+
+    def save_config(self) -> None:
+        """Store the running configuration in the drive's non-volatile memory (CiA 301
+        0x1010:1 'save'); it is loaded at power-up and NMT reset node. Raises
+        :class:`ParamError` (the drive has none, the power stage is on, the medium failed)."""
+        self._nvm_command(0x1010, self.SAVE_SIGNATURE, "saved")
+
+    def erase_saved_config(self) -> None:
+        """Erase the stored configuration (CiA 301 0x1011:1 'load'): the defaults apply from
+        the next NMT reset node or power-up; the running values stay until then."""
+        self._nvm_command(0x1011, self.LOAD_SIGNATURE, "erased")
 
     # ---- trace buffer (scope) ---------------------------------------------------------
     def trace_capture(self, signals: list[str], pre_s: float, f_pwm_Hz: float) -> dict[str, Any]:

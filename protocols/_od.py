@@ -74,6 +74,9 @@ class OdEntry:
         Default is ``$NODEID+default``.
     pdo : bool
         PDO mappable.
+    command : bool
+        Writing it is an action or a set-point (controlword, targets, store
+        commands), not configuration: not stored by 0x1010, not backed up.
     size : int
         Size in bytes (maximum length for strings).
     fw_config : str | None
@@ -98,6 +101,7 @@ class OdEntry:
     default: int | float | str = 0
     nodeid_relative: bool = False
     pdo: bool = False
+    command: bool = False
     size: int = 0
     fw_config: str | None = None
     scale: float = 1.0
@@ -225,7 +229,8 @@ def _entry(obj: dict[str, Any], sub: dict[str, Any], kind: str,
         index=index, sub=sub_i, name=name, object_name=str(obj["name"]), kind=kind,
         type=typ, access=access, unit=str(sub.get("unit", "") or ""), min=mn, max=mx,
         default=default, nodeid_relative=rel, pdo=bool(sub.get("pdo", False)),
-        size=size, fw_config=fwc, scale=scale, doc=str(sub.get("doc", "") or ""),
+        command=bool(sub.get("command", False)), size=size, fw_config=fwc, scale=scale,
+        doc=str(sub.get("doc", "") or ""),
     )
 
 

@@ -104,6 +104,8 @@ def gen_c_source(od: ObjectDictionary) -> str:
             flags.append("CO_FLAG_PDO")
         if e.nodeid_relative:
             flags.append("CO_FLAG_NODEID")
+        if e.command:
+            flags.append("CO_FLAG_CMD")
         flag_s = " | ".join(flags) if flags else "0u"
         if e.is_int:
             lo, hi = INT_RANGE[e.type]

@@ -79,6 +79,8 @@ INDEX_ERROR_REGISTER = 0x1001
 INDEX_COB_ID_SYNC = 0x1005
 INDEX_MANUFACTURER_DEVICE_NAME = 0x1008
 INDEX_MANUFACTURER_SOFTWARE_VERSION = 0x100A
+INDEX_STORE_PARAMETERS = 0x1010
+INDEX_RESTORE_DEFAULT_PARAMETERS = 0x1011
 INDEX_COB_ID_EMCY = 0x1014
 INDEX_CONSUMER_HEARTBEAT_TIME = 0x1016
 INDEX_PRODUCER_HEARTBEAT_TIME = 0x1017
@@ -141,6 +143,10 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x1005, 0): 'COB-ID SYNC',
     (0x1008, 0): 'Manufacturer device name',
     (0x100A, 0): 'Manufacturer software version',
+    (0x1010, 0): 'Highest sub-index supported',
+    (0x1010, 1): 'Save all parameters',
+    (0x1011, 0): 'Highest sub-index supported',
+    (0x1011, 1): 'Restore all default parameters',
     (0x1014, 0): 'COB-ID EMCY',
     (0x1016, 0): 'Highest sub-index supported',
     (0x1016, 1): 'Consumer heartbeat time 1',

@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 257u
-#define CO_OD_RAM_SIZE 849u
+#define CO_OD_COUNT 261u
+#define CO_OD_RAM_SIZE 859u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -15,258 +15,262 @@
 #define CO_OD_1005_00 2u /* COB-ID SYNC: COB-ID SYNC */
 #define CO_OD_1008_00 3u /* Manufacturer device name: Manufacturer device name */
 #define CO_OD_100A_00 4u /* Manufacturer software version: Manufacturer software version */
-#define CO_OD_1014_00 5u /* COB-ID EMCY: COB-ID EMCY */
-#define CO_OD_1016_00 6u /* Consumer heartbeat time: Highest sub-index supported */
-#define CO_OD_1016_01 7u /* Consumer heartbeat time: Consumer heartbeat time 1 */
-#define CO_OD_1016_02 8u /* Consumer heartbeat time: Consumer heartbeat time 2 */
-#define CO_OD_1017_00 9u /* Producer heartbeat time: Producer heartbeat time */
-#define CO_OD_1018_00 10u /* Identity object: Highest sub-index supported */
-#define CO_OD_1018_01 11u /* Identity object: Vendor-ID */
-#define CO_OD_1018_02 12u /* Identity object: Product code */
-#define CO_OD_1018_03 13u /* Identity object: Revision number */
-#define CO_OD_1018_04 14u /* Identity object: Serial number */
-#define CO_OD_1400_00 15u /* RPDO1 communication parameter: Highest sub-index supported */
-#define CO_OD_1400_01 16u /* RPDO1 communication parameter: COB-ID */
-#define CO_OD_1400_02 17u /* RPDO1 communication parameter: Transmission type */
-#define CO_OD_1400_05 18u /* RPDO1 communication parameter: Event timer */
-#define CO_OD_1401_00 19u /* RPDO2 communication parameter: Highest sub-index supported */
-#define CO_OD_1401_01 20u /* RPDO2 communication parameter: COB-ID */
-#define CO_OD_1401_02 21u /* RPDO2 communication parameter: Transmission type */
-#define CO_OD_1401_05 22u /* RPDO2 communication parameter: Event timer */
-#define CO_OD_1402_00 23u /* RPDO3 communication parameter: Highest sub-index supported */
-#define CO_OD_1402_01 24u /* RPDO3 communication parameter: COB-ID */
-#define CO_OD_1402_02 25u /* RPDO3 communication parameter: Transmission type */
-#define CO_OD_1402_05 26u /* RPDO3 communication parameter: Event timer */
-#define CO_OD_1403_00 27u /* RPDO4 communication parameter: Highest sub-index supported */
-#define CO_OD_1403_01 28u /* RPDO4 communication parameter: COB-ID */
-#define CO_OD_1403_02 29u /* RPDO4 communication parameter: Transmission type */
-#define CO_OD_1403_05 30u /* RPDO4 communication parameter: Event timer */
-#define CO_OD_1600_00 31u /* RPDO1 mapping parameter: Number of mapped objects */
-#define CO_OD_1600_01 32u /* RPDO1 mapping parameter: Mapped object 1 */
-#define CO_OD_1600_02 33u /* RPDO1 mapping parameter: Mapped object 2 */
-#define CO_OD_1600_03 34u /* RPDO1 mapping parameter: Mapped object 3 */
-#define CO_OD_1600_04 35u /* RPDO1 mapping parameter: Mapped object 4 */
-#define CO_OD_1600_05 36u /* RPDO1 mapping parameter: Mapped object 5 */
-#define CO_OD_1600_06 37u /* RPDO1 mapping parameter: Mapped object 6 */
-#define CO_OD_1600_07 38u /* RPDO1 mapping parameter: Mapped object 7 */
-#define CO_OD_1600_08 39u /* RPDO1 mapping parameter: Mapped object 8 */
-#define CO_OD_1601_00 40u /* RPDO2 mapping parameter: Number of mapped objects */
-#define CO_OD_1601_01 41u /* RPDO2 mapping parameter: Mapped object 1 */
-#define CO_OD_1601_02 42u /* RPDO2 mapping parameter: Mapped object 2 */
-#define CO_OD_1601_03 43u /* RPDO2 mapping parameter: Mapped object 3 */
-#define CO_OD_1601_04 44u /* RPDO2 mapping parameter: Mapped object 4 */
-#define CO_OD_1601_05 45u /* RPDO2 mapping parameter: Mapped object 5 */
-#define CO_OD_1601_06 46u /* RPDO2 mapping parameter: Mapped object 6 */
-#define CO_OD_1601_07 47u /* RPDO2 mapping parameter: Mapped object 7 */
-#define CO_OD_1601_08 48u /* RPDO2 mapping parameter: Mapped object 8 */
-#define CO_OD_1602_00 49u /* RPDO3 mapping parameter: Number of mapped objects */
-#define CO_OD_1602_01 50u /* RPDO3 mapping parameter: Mapped object 1 */
-#define CO_OD_1602_02 51u /* RPDO3 mapping parameter: Mapped object 2 */
-#define CO_OD_1602_03 52u /* RPDO3 mapping parameter: Mapped object 3 */
-#define CO_OD_1602_04 53u /* RPDO3 mapping parameter: Mapped object 4 */
-#define CO_OD_1602_05 54u /* RPDO3 mapping parameter: Mapped object 5 */
-#define CO_OD_1602_06 55u /* RPDO3 mapping parameter: Mapped object 6 */
-#define CO_OD_1602_07 56u /* RPDO3 mapping parameter: Mapped object 7 */
-#define CO_OD_1602_08 57u /* RPDO3 mapping parameter: Mapped object 8 */
-#define CO_OD_1603_00 58u /* RPDO4 mapping parameter: Number of mapped objects */
-#define CO_OD_1603_01 59u /* RPDO4 mapping parameter: Mapped object 1 */
-#define CO_OD_1603_02 60u /* RPDO4 mapping parameter: Mapped object 2 */
-#define CO_OD_1603_03 61u /* RPDO4 mapping parameter: Mapped object 3 */
-#define CO_OD_1603_04 62u /* RPDO4 mapping parameter: Mapped object 4 */
-#define CO_OD_1603_05 63u /* RPDO4 mapping parameter: Mapped object 5 */
-#define CO_OD_1603_06 64u /* RPDO4 mapping parameter: Mapped object 6 */
-#define CO_OD_1603_07 65u /* RPDO4 mapping parameter: Mapped object 7 */
-#define CO_OD_1603_08 66u /* RPDO4 mapping parameter: Mapped object 8 */
-#define CO_OD_1800_00 67u /* TPDO1 communication parameter: Highest sub-index supported */
-#define CO_OD_1800_01 68u /* TPDO1 communication parameter: COB-ID */
-#define CO_OD_1800_02 69u /* TPDO1 communication parameter: Transmission type */
-#define CO_OD_1800_03 70u /* TPDO1 communication parameter: Inhibit time */
-#define CO_OD_1800_05 71u /* TPDO1 communication parameter: Event timer */
-#define CO_OD_1801_00 72u /* TPDO2 communication parameter: Highest sub-index supported */
-#define CO_OD_1801_01 73u /* TPDO2 communication parameter: COB-ID */
-#define CO_OD_1801_02 74u /* TPDO2 communication parameter: Transmission type */
-#define CO_OD_1801_03 75u /* TPDO2 communication parameter: Inhibit time */
-#define CO_OD_1801_05 76u /* TPDO2 communication parameter: Event timer */
-#define CO_OD_1802_00 77u /* TPDO3 communication parameter: Highest sub-index supported */
-#define CO_OD_1802_01 78u /* TPDO3 communication parameter: COB-ID */
-#define CO_OD_1802_02 79u /* TPDO3 communication parameter: Transmission type */
-#define CO_OD_1802_03 80u /* TPDO3 communication parameter: Inhibit time */
-#define CO_OD_1802_05 81u /* TPDO3 communication parameter: Event timer */
-#define CO_OD_1803_00 82u /* TPDO4 communication parameter: Highest sub-index supported */
-#define CO_OD_1803_01 83u /* TPDO4 communication parameter: COB-ID */
-#define CO_OD_1803_02 84u /* TPDO4 communication parameter: Transmission type */
-#define CO_OD_1803_03 85u /* TPDO4 communication parameter: Inhibit time */
-#define CO_OD_1803_05 86u /* TPDO4 communication parameter: Event timer */
-#define CO_OD_1A00_00 87u /* TPDO1 mapping parameter: Number of mapped objects */
-#define CO_OD_1A00_01 88u /* TPDO1 mapping parameter: Mapped object 1 */
-#define CO_OD_1A00_02 89u /* TPDO1 mapping parameter: Mapped object 2 */
-#define CO_OD_1A00_03 90u /* TPDO1 mapping parameter: Mapped object 3 */
-#define CO_OD_1A00_04 91u /* TPDO1 mapping parameter: Mapped object 4 */
-#define CO_OD_1A00_05 92u /* TPDO1 mapping parameter: Mapped object 5 */
-#define CO_OD_1A00_06 93u /* TPDO1 mapping parameter: Mapped object 6 */
-#define CO_OD_1A00_07 94u /* TPDO1 mapping parameter: Mapped object 7 */
-#define CO_OD_1A00_08 95u /* TPDO1 mapping parameter: Mapped object 8 */
-#define CO_OD_1A01_00 96u /* TPDO2 mapping parameter: Number of mapped objects */
-#define CO_OD_1A01_01 97u /* TPDO2 mapping parameter: Mapped object 1 */
-#define CO_OD_1A01_02 98u /* TPDO2 mapping parameter: Mapped object 2 */
-#define CO_OD_1A01_03 99u /* TPDO2 mapping parameter: Mapped object 3 */
-#define CO_OD_1A01_04 100u /* TPDO2 mapping parameter: Mapped object 4 */
-#define CO_OD_1A01_05 101u /* TPDO2 mapping parameter: Mapped object 5 */
-#define CO_OD_1A01_06 102u /* TPDO2 mapping parameter: Mapped object 6 */
-#define CO_OD_1A01_07 103u /* TPDO2 mapping parameter: Mapped object 7 */
-#define CO_OD_1A01_08 104u /* TPDO2 mapping parameter: Mapped object 8 */
-#define CO_OD_1A02_00 105u /* TPDO3 mapping parameter: Number of mapped objects */
-#define CO_OD_1A02_01 106u /* TPDO3 mapping parameter: Mapped object 1 */
-#define CO_OD_1A02_02 107u /* TPDO3 mapping parameter: Mapped object 2 */
-#define CO_OD_1A02_03 108u /* TPDO3 mapping parameter: Mapped object 3 */
-#define CO_OD_1A02_04 109u /* TPDO3 mapping parameter: Mapped object 4 */
-#define CO_OD_1A02_05 110u /* TPDO3 mapping parameter: Mapped object 5 */
-#define CO_OD_1A02_06 111u /* TPDO3 mapping parameter: Mapped object 6 */
-#define CO_OD_1A02_07 112u /* TPDO3 mapping parameter: Mapped object 7 */
-#define CO_OD_1A02_08 113u /* TPDO3 mapping parameter: Mapped object 8 */
-#define CO_OD_1A03_00 114u /* TPDO4 mapping parameter: Number of mapped objects */
-#define CO_OD_1A03_01 115u /* TPDO4 mapping parameter: Mapped object 1 */
-#define CO_OD_1A03_02 116u /* TPDO4 mapping parameter: Mapped object 2 */
-#define CO_OD_1A03_03 117u /* TPDO4 mapping parameter: Mapped object 3 */
-#define CO_OD_1A03_04 118u /* TPDO4 mapping parameter: Mapped object 4 */
-#define CO_OD_1A03_05 119u /* TPDO4 mapping parameter: Mapped object 5 */
-#define CO_OD_1A03_06 120u /* TPDO4 mapping parameter: Mapped object 6 */
-#define CO_OD_1A03_07 121u /* TPDO4 mapping parameter: Mapped object 7 */
-#define CO_OD_1A03_08 122u /* TPDO4 mapping parameter: Mapped object 8 */
-#define CO_OD_2000_00 123u /* HF extractor: HF extractor */
-#define CO_OD_2001_00 124u /* SOGI k: SOGI k */
-#define CO_OD_2002_00 125u /* Adaptive SOGI enable: Adaptive SOGI enable */
-#define CO_OD_2003_00 126u /* Adaptive SOGI: Highest sub-index supported */
-#define CO_OD_2003_01 127u /* Adaptive SOGI: k max */
-#define CO_OD_2003_02 128u /* Adaptive SOGI: k min */
-#define CO_OD_2003_03 129u /* Adaptive SOGI: Error at k max */
-#define CO_OD_2010_00 130u /* Injection: Highest sub-index supported */
-#define CO_OD_2010_01 131u /* Injection: Amplitude */
-#define CO_OD_2010_02 132u /* Injection: Frequency */
-#define CO_OD_2011_00 133u /* PLL gains: Highest sub-index supported */
-#define CO_OD_2011_01 134u /* PLL gains: kp */
-#define CO_OD_2011_02 135u /* PLL gains: ki */
-#define CO_OD_2011_03 136u /* PLL gains: kd */
-#define CO_OD_2011_04 137u /* PLL gains: Acceleration feed-forward */
-#define CO_OD_2011_05 138u /* PLL gains: Bandwidth scale when locked */
-#define CO_OD_2020_00 139u /* Estimator: Highest sub-index supported */
-#define CO_OD_2020_01 140u /* Estimator: Estimated angle */
-#define CO_OD_2020_02 141u /* Estimator: Estimated speed */
-#define CO_OD_2020_03 142u /* Estimator: Estimated linear speed */
-#define CO_OD_2020_04 143u /* Estimator: PLL error */
-#define CO_OD_2020_05 144u /* Estimator: HF amplitude */
-#define CO_OD_2020_06 145u /* Estimator: Filtered PLL error */
-#define CO_OD_2020_07 146u /* Estimator: SOGI k in use */
-#define CO_OD_2020_08 147u /* Estimator: Start-up phase */
-#define CO_OD_2020_09 148u /* Estimator: Disturbance acceleration */
-#define CO_OD_2030_00 149u /* Fault history: Highest sub-index supported */
-#define CO_OD_2030_01 150u /* Fault history: Fault 1 */
-#define CO_OD_2030_02 151u /* Fault history: Fault 2 */
-#define CO_OD_2030_03 152u /* Fault history: Fault 3 */
-#define CO_OD_2030_04 153u /* Fault history: Fault 4 */
-#define CO_OD_2030_05 154u /* Fault history: Fault 5 */
-#define CO_OD_2030_06 155u /* Fault history: Fault 6 */
-#define CO_OD_2030_07 156u /* Fault history: Fault 7 */
-#define CO_OD_2030_08 157u /* Fault history: Fault 8 */
-#define CO_OD_2040_00 158u /* Firmware version: Firmware version */
-#define CO_OD_2041_00 159u /* Build id: Build id */
-#define CO_OD_2042_00 160u /* Device tag: Device tag */
-#define CO_OD_2050_00 161u /* Drive configuration: Highest sub-index supported */
-#define CO_OD_2050_01 162u /* Drive configuration: PWM frequency */
-#define CO_OD_2050_02 163u /* Drive configuration: Phase resistance */
-#define CO_OD_2050_03 164u /* Drive configuration: L_d */
-#define CO_OD_2050_04 165u /* Drive configuration: L_q */
-#define CO_OD_2050_05 166u /* Drive configuration: PM flux linkage */
-#define CO_OD_2050_06 167u /* Drive configuration: Pole pitch */
-#define CO_OD_2050_07 168u /* Drive configuration: DC undervoltage trip */
-#define CO_OD_2050_08 169u /* Drive configuration: DC overvoltage trip */
-#define CO_OD_2050_09 170u /* Drive configuration: Overcurrent trip */
-#define CO_OD_2050_0A 171u /* Drive configuration: Current limit */
-#define CO_OD_2050_0B 172u /* Drive configuration: Speed limit */
-#define CO_OD_2050_0C 173u /* Drive configuration: Current loop kp */
-#define CO_OD_2050_0D 174u /* Drive configuration: Current loop ki */
-#define CO_OD_2050_0E 175u /* Drive configuration: Speed loop kp */
-#define CO_OD_2050_0F 176u /* Drive configuration: Speed loop ki */
-#define CO_OD_2050_10 177u /* Drive configuration: Speed filter */
-#define CO_OD_2050_11 178u /* Drive configuration: Saliency minimum */
-#define CO_OD_2050_12 179u /* Drive configuration: Quick stop time */
-#define CO_OD_2051_00 180u /* Protections: Highest sub-index supported */
-#define CO_OD_2051_01 181u /* Protections: Max speed */
-#define CO_OD_2051_02 182u /* Protections: Position limit min */
-#define CO_OD_2051_03 183u /* Protections: Position limit max */
-#define CO_OD_2051_04 184u /* Protections: Following error window */
-#define CO_OD_2051_05 185u /* Protections: Following error time */
-#define CO_OD_2051_06 186u /* Protections: Rated current */
-#define CO_OD_2051_07 187u /* Protections: i2t time */
-#define CO_OD_2051_08 188u /* Protections: Quick stop option */
-#define CO_OD_2051_09 189u /* Protections: Fault reaction option */
-#define CO_OD_2051_0A 190u /* Protections: Fault braking time */
-#define CO_OD_2052_00 191u /* Integrity monitor: Highest sub-index supported */
-#define CO_OD_2052_01 192u /* Integrity monitor: HF angle limit */
-#define CO_OD_2052_02 193u /* Integrity monitor: Detection time */
-#define CO_OD_2052_03 194u /* Integrity monitor: Saliency tolerance */
-#define CO_OD_2052_04 195u /* Integrity monitor: Back-EMF angle limit */
-#define CO_OD_2052_05 196u /* Integrity monitor: Back-EMF minimum */
-#define CO_OD_2052_06 197u /* Integrity monitor: Current sum limit */
-#define CO_OD_2052_07 198u /* Integrity monitor: Current offset limit */
-#define CO_OD_2052_08 199u /* Integrity monitor: Start speed limit */
-#define CO_OD_2053_00 200u /* Back-EMF observer: Highest sub-index supported */
-#define CO_OD_2053_01 201u /* Back-EMF observer: Handover up */
-#define CO_OD_2053_02 202u /* Back-EMF observer: Handover down */
-#define CO_OD_2053_03 203u /* Back-EMF observer: Injection share */
-#define CO_OD_2054_00 204u /* Machine and loop bandwidths: Highest sub-index supported */
-#define CO_OD_2054_01 205u /* Machine and loop bandwidths: Mover mass */
-#define CO_OD_2054_02 206u /* Machine and loop bandwidths: Viscous friction */
-#define CO_OD_2054_03 207u /* Machine and loop bandwidths: Coulomb friction */
-#define CO_OD_2054_04 208u /* Machine and loop bandwidths: Current loop bandwidth */
-#define CO_OD_2054_05 209u /* Machine and loop bandwidths: Speed loop bandwidth */
-#define CO_OD_2054_06 210u /* Machine and loop bandwidths: Gains automatic */
-#define CO_OD_2060_00 211u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 212u /* Telemetry: Decimation */
-#define CO_OD_2060_02 213u /* Telemetry: Signal count */
-#define CO_OD_2060_03 214u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 215u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 216u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 217u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 218u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 219u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 220u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 221u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 222u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 223u /* Trace: Command */
-#define CO_OD_2070_02 224u /* Trace: State */
-#define CO_OD_2070_03 225u /* Trace: Trigger signal */
-#define CO_OD_2070_04 226u /* Trace: Trigger level */
-#define CO_OD_2070_05 227u /* Trace: Trigger edge */
-#define CO_OD_2070_06 228u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 229u /* Trace: Signal count */
-#define CO_OD_2070_08 230u /* Trace: Signal 1 */
-#define CO_OD_2070_09 231u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 232u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 233u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 234u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 235u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 236u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 237u /* Trace: Signal 8 */
-#define CO_OD_603F_00 238u /* Error code: Error code */
-#define CO_OD_6040_00 239u /* Controlword: Controlword */
-#define CO_OD_6041_00 240u /* Statusword: Statusword */
-#define CO_OD_605A_00 241u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 242u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 243u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 244u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 245u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 246u /* Following error window: Following error window */
-#define CO_OD_6066_00 247u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 248u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 249u /* Target torque: Target torque */
-#define CO_OD_6077_00 250u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 251u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 252u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 253u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 254u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 255u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 256u /* Supported drive modes: Supported drive modes */
+#define CO_OD_1010_00 5u /* Store parameters: Highest sub-index supported */
+#define CO_OD_1010_01 6u /* Store parameters: Save all parameters */
+#define CO_OD_1011_00 7u /* Restore default parameters: Highest sub-index supported */
+#define CO_OD_1011_01 8u /* Restore default parameters: Restore all default parameters */
+#define CO_OD_1014_00 9u /* COB-ID EMCY: COB-ID EMCY */
+#define CO_OD_1016_00 10u /* Consumer heartbeat time: Highest sub-index supported */
+#define CO_OD_1016_01 11u /* Consumer heartbeat time: Consumer heartbeat time 1 */
+#define CO_OD_1016_02 12u /* Consumer heartbeat time: Consumer heartbeat time 2 */
+#define CO_OD_1017_00 13u /* Producer heartbeat time: Producer heartbeat time */
+#define CO_OD_1018_00 14u /* Identity object: Highest sub-index supported */
+#define CO_OD_1018_01 15u /* Identity object: Vendor-ID */
+#define CO_OD_1018_02 16u /* Identity object: Product code */
+#define CO_OD_1018_03 17u /* Identity object: Revision number */
+#define CO_OD_1018_04 18u /* Identity object: Serial number */
+#define CO_OD_1400_00 19u /* RPDO1 communication parameter: Highest sub-index supported */
+#define CO_OD_1400_01 20u /* RPDO1 communication parameter: COB-ID */
+#define CO_OD_1400_02 21u /* RPDO1 communication parameter: Transmission type */
+#define CO_OD_1400_05 22u /* RPDO1 communication parameter: Event timer */
+#define CO_OD_1401_00 23u /* RPDO2 communication parameter: Highest sub-index supported */
+#define CO_OD_1401_01 24u /* RPDO2 communication parameter: COB-ID */
+#define CO_OD_1401_02 25u /* RPDO2 communication parameter: Transmission type */
+#define CO_OD_1401_05 26u /* RPDO2 communication parameter: Event timer */
+#define CO_OD_1402_00 27u /* RPDO3 communication parameter: Highest sub-index supported */
+#define CO_OD_1402_01 28u /* RPDO3 communication parameter: COB-ID */
+#define CO_OD_1402_02 29u /* RPDO3 communication parameter: Transmission type */
+#define CO_OD_1402_05 30u /* RPDO3 communication parameter: Event timer */
+#define CO_OD_1403_00 31u /* RPDO4 communication parameter: Highest sub-index supported */
+#define CO_OD_1403_01 32u /* RPDO4 communication parameter: COB-ID */
+#define CO_OD_1403_02 33u /* RPDO4 communication parameter: Transmission type */
+#define CO_OD_1403_05 34u /* RPDO4 communication parameter: Event timer */
+#define CO_OD_1600_00 35u /* RPDO1 mapping parameter: Number of mapped objects */
+#define CO_OD_1600_01 36u /* RPDO1 mapping parameter: Mapped object 1 */
+#define CO_OD_1600_02 37u /* RPDO1 mapping parameter: Mapped object 2 */
+#define CO_OD_1600_03 38u /* RPDO1 mapping parameter: Mapped object 3 */
+#define CO_OD_1600_04 39u /* RPDO1 mapping parameter: Mapped object 4 */
+#define CO_OD_1600_05 40u /* RPDO1 mapping parameter: Mapped object 5 */
+#define CO_OD_1600_06 41u /* RPDO1 mapping parameter: Mapped object 6 */
+#define CO_OD_1600_07 42u /* RPDO1 mapping parameter: Mapped object 7 */
+#define CO_OD_1600_08 43u /* RPDO1 mapping parameter: Mapped object 8 */
+#define CO_OD_1601_00 44u /* RPDO2 mapping parameter: Number of mapped objects */
+#define CO_OD_1601_01 45u /* RPDO2 mapping parameter: Mapped object 1 */
+#define CO_OD_1601_02 46u /* RPDO2 mapping parameter: Mapped object 2 */
+#define CO_OD_1601_03 47u /* RPDO2 mapping parameter: Mapped object 3 */
+#define CO_OD_1601_04 48u /* RPDO2 mapping parameter: Mapped object 4 */
+#define CO_OD_1601_05 49u /* RPDO2 mapping parameter: Mapped object 5 */
+#define CO_OD_1601_06 50u /* RPDO2 mapping parameter: Mapped object 6 */
+#define CO_OD_1601_07 51u /* RPDO2 mapping parameter: Mapped object 7 */
+#define CO_OD_1601_08 52u /* RPDO2 mapping parameter: Mapped object 8 */
+#define CO_OD_1602_00 53u /* RPDO3 mapping parameter: Number of mapped objects */
+#define CO_OD_1602_01 54u /* RPDO3 mapping parameter: Mapped object 1 */
+#define CO_OD_1602_02 55u /* RPDO3 mapping parameter: Mapped object 2 */
+#define CO_OD_1602_03 56u /* RPDO3 mapping parameter: Mapped object 3 */
+#define CO_OD_1602_04 57u /* RPDO3 mapping parameter: Mapped object 4 */
+#define CO_OD_1602_05 58u /* RPDO3 mapping parameter: Mapped object 5 */
+#define CO_OD_1602_06 59u /* RPDO3 mapping parameter: Mapped object 6 */
+#define CO_OD_1602_07 60u /* RPDO3 mapping parameter: Mapped object 7 */
+#define CO_OD_1602_08 61u /* RPDO3 mapping parameter: Mapped object 8 */
+#define CO_OD_1603_00 62u /* RPDO4 mapping parameter: Number of mapped objects */
+#define CO_OD_1603_01 63u /* RPDO4 mapping parameter: Mapped object 1 */
+#define CO_OD_1603_02 64u /* RPDO4 mapping parameter: Mapped object 2 */
+#define CO_OD_1603_03 65u /* RPDO4 mapping parameter: Mapped object 3 */
+#define CO_OD_1603_04 66u /* RPDO4 mapping parameter: Mapped object 4 */
+#define CO_OD_1603_05 67u /* RPDO4 mapping parameter: Mapped object 5 */
+#define CO_OD_1603_06 68u /* RPDO4 mapping parameter: Mapped object 6 */
+#define CO_OD_1603_07 69u /* RPDO4 mapping parameter: Mapped object 7 */
+#define CO_OD_1603_08 70u /* RPDO4 mapping parameter: Mapped object 8 */
+#define CO_OD_1800_00 71u /* TPDO1 communication parameter: Highest sub-index supported */
+#define CO_OD_1800_01 72u /* TPDO1 communication parameter: COB-ID */
+#define CO_OD_1800_02 73u /* TPDO1 communication parameter: Transmission type */
+#define CO_OD_1800_03 74u /* TPDO1 communication parameter: Inhibit time */
+#define CO_OD_1800_05 75u /* TPDO1 communication parameter: Event timer */
+#define CO_OD_1801_00 76u /* TPDO2 communication parameter: Highest sub-index supported */
+#define CO_OD_1801_01 77u /* TPDO2 communication parameter: COB-ID */
+#define CO_OD_1801_02 78u /* TPDO2 communication parameter: Transmission type */
+#define CO_OD_1801_03 79u /* TPDO2 communication parameter: Inhibit time */
+#define CO_OD_1801_05 80u /* TPDO2 communication parameter: Event timer */
+#define CO_OD_1802_00 81u /* TPDO3 communication parameter: Highest sub-index supported */
+#define CO_OD_1802_01 82u /* TPDO3 communication parameter: COB-ID */
+#define CO_OD_1802_02 83u /* TPDO3 communication parameter: Transmission type */
+#define CO_OD_1802_03 84u /* TPDO3 communication parameter: Inhibit time */
+#define CO_OD_1802_05 85u /* TPDO3 communication parameter: Event timer */
+#define CO_OD_1803_00 86u /* TPDO4 communication parameter: Highest sub-index supported */
+#define CO_OD_1803_01 87u /* TPDO4 communication parameter: COB-ID */
+#define CO_OD_1803_02 88u /* TPDO4 communication parameter: Transmission type */
+#define CO_OD_1803_03 89u /* TPDO4 communication parameter: Inhibit time */
+#define CO_OD_1803_05 90u /* TPDO4 communication parameter: Event timer */
+#define CO_OD_1A00_00 91u /* TPDO1 mapping parameter: Number of mapped objects */
+#define CO_OD_1A00_01 92u /* TPDO1 mapping parameter: Mapped object 1 */
+#define CO_OD_1A00_02 93u /* TPDO1 mapping parameter: Mapped object 2 */
+#define CO_OD_1A00_03 94u /* TPDO1 mapping parameter: Mapped object 3 */
+#define CO_OD_1A00_04 95u /* TPDO1 mapping parameter: Mapped object 4 */
+#define CO_OD_1A00_05 96u /* TPDO1 mapping parameter: Mapped object 5 */
+#define CO_OD_1A00_06 97u /* TPDO1 mapping parameter: Mapped object 6 */
+#define CO_OD_1A00_07 98u /* TPDO1 mapping parameter: Mapped object 7 */
+#define CO_OD_1A00_08 99u /* TPDO1 mapping parameter: Mapped object 8 */
+#define CO_OD_1A01_00 100u /* TPDO2 mapping parameter: Number of mapped objects */
+#define CO_OD_1A01_01 101u /* TPDO2 mapping parameter: Mapped object 1 */
+#define CO_OD_1A01_02 102u /* TPDO2 mapping parameter: Mapped object 2 */
+#define CO_OD_1A01_03 103u /* TPDO2 mapping parameter: Mapped object 3 */
+#define CO_OD_1A01_04 104u /* TPDO2 mapping parameter: Mapped object 4 */
+#define CO_OD_1A01_05 105u /* TPDO2 mapping parameter: Mapped object 5 */
+#define CO_OD_1A01_06 106u /* TPDO2 mapping parameter: Mapped object 6 */
+#define CO_OD_1A01_07 107u /* TPDO2 mapping parameter: Mapped object 7 */
+#define CO_OD_1A01_08 108u /* TPDO2 mapping parameter: Mapped object 8 */
+#define CO_OD_1A02_00 109u /* TPDO3 mapping parameter: Number of mapped objects */
+#define CO_OD_1A02_01 110u /* TPDO3 mapping parameter: Mapped object 1 */
+#define CO_OD_1A02_02 111u /* TPDO3 mapping parameter: Mapped object 2 */
+#define CO_OD_1A02_03 112u /* TPDO3 mapping parameter: Mapped object 3 */
+#define CO_OD_1A02_04 113u /* TPDO3 mapping parameter: Mapped object 4 */
+#define CO_OD_1A02_05 114u /* TPDO3 mapping parameter: Mapped object 5 */
+#define CO_OD_1A02_06 115u /* TPDO3 mapping parameter: Mapped object 6 */
+#define CO_OD_1A02_07 116u /* TPDO3 mapping parameter: Mapped object 7 */
+#define CO_OD_1A02_08 117u /* TPDO3 mapping parameter: Mapped object 8 */
+#define CO_OD_1A03_00 118u /* TPDO4 mapping parameter: Number of mapped objects */
+#define CO_OD_1A03_01 119u /* TPDO4 mapping parameter: Mapped object 1 */
+#define CO_OD_1A03_02 120u /* TPDO4 mapping parameter: Mapped object 2 */
+#define CO_OD_1A03_03 121u /* TPDO4 mapping parameter: Mapped object 3 */
+#define CO_OD_1A03_04 122u /* TPDO4 mapping parameter: Mapped object 4 */
+#define CO_OD_1A03_05 123u /* TPDO4 mapping parameter: Mapped object 5 */
+#define CO_OD_1A03_06 124u /* TPDO4 mapping parameter: Mapped object 6 */
+#define CO_OD_1A03_07 125u /* TPDO4 mapping parameter: Mapped object 7 */
+#define CO_OD_1A03_08 126u /* TPDO4 mapping parameter: Mapped object 8 */
+#define CO_OD_2000_00 127u /* HF extractor: HF extractor */
+#define CO_OD_2001_00 128u /* SOGI k: SOGI k */
+#define CO_OD_2002_00 129u /* Adaptive SOGI enable: Adaptive SOGI enable */
+#define CO_OD_2003_00 130u /* Adaptive SOGI: Highest sub-index supported */
+#define CO_OD_2003_01 131u /* Adaptive SOGI: k max */
+#define CO_OD_2003_02 132u /* Adaptive SOGI: k min */
+#define CO_OD_2003_03 133u /* Adaptive SOGI: Error at k max */
+#define CO_OD_2010_00 134u /* Injection: Highest sub-index supported */
+#define CO_OD_2010_01 135u /* Injection: Amplitude */
+#define CO_OD_2010_02 136u /* Injection: Frequency */
+#define CO_OD_2011_00 137u /* PLL gains: Highest sub-index supported */
+#define CO_OD_2011_01 138u /* PLL gains: kp */
+#define CO_OD_2011_02 139u /* PLL gains: ki */
+#define CO_OD_2011_03 140u /* PLL gains: kd */
+#define CO_OD_2011_04 141u /* PLL gains: Acceleration feed-forward */
+#define CO_OD_2011_05 142u /* PLL gains: Bandwidth scale when locked */
+#define CO_OD_2020_00 143u /* Estimator: Highest sub-index supported */
+#define CO_OD_2020_01 144u /* Estimator: Estimated angle */
+#define CO_OD_2020_02 145u /* Estimator: Estimated speed */
+#define CO_OD_2020_03 146u /* Estimator: Estimated linear speed */
+#define CO_OD_2020_04 147u /* Estimator: PLL error */
+#define CO_OD_2020_05 148u /* Estimator: HF amplitude */
+#define CO_OD_2020_06 149u /* Estimator: Filtered PLL error */
+#define CO_OD_2020_07 150u /* Estimator: SOGI k in use */
+#define CO_OD_2020_08 151u /* Estimator: Start-up phase */
+#define CO_OD_2020_09 152u /* Estimator: Disturbance acceleration */
+#define CO_OD_2030_00 153u /* Fault history: Highest sub-index supported */
+#define CO_OD_2030_01 154u /* Fault history: Fault 1 */
+#define CO_OD_2030_02 155u /* Fault history: Fault 2 */
+#define CO_OD_2030_03 156u /* Fault history: Fault 3 */
+#define CO_OD_2030_04 157u /* Fault history: Fault 4 */
+#define CO_OD_2030_05 158u /* Fault history: Fault 5 */
+#define CO_OD_2030_06 159u /* Fault history: Fault 6 */
+#define CO_OD_2030_07 160u /* Fault history: Fault 7 */
+#define CO_OD_2030_08 161u /* Fault history: Fault 8 */
+#define CO_OD_2040_00 162u /* Firmware version: Firmware version */
+#define CO_OD_2041_00 163u /* Build id: Build id */
+#define CO_OD_2042_00 164u /* Device tag: Device tag */
+#define CO_OD_2050_00 165u /* Drive configuration: Highest sub-index supported */
+#define CO_OD_2050_01 166u /* Drive configuration: PWM frequency */
+#define CO_OD_2050_02 167u /* Drive configuration: Phase resistance */
+#define CO_OD_2050_03 168u /* Drive configuration: L_d */
+#define CO_OD_2050_04 169u /* Drive configuration: L_q */
+#define CO_OD_2050_05 170u /* Drive configuration: PM flux linkage */
+#define CO_OD_2050_06 171u /* Drive configuration: Pole pitch */
+#define CO_OD_2050_07 172u /* Drive configuration: DC undervoltage trip */
+#define CO_OD_2050_08 173u /* Drive configuration: DC overvoltage trip */
+#define CO_OD_2050_09 174u /* Drive configuration: Overcurrent trip */
+#define CO_OD_2050_0A 175u /* Drive configuration: Current limit */
+#define CO_OD_2050_0B 176u /* Drive configuration: Speed limit */
+#define CO_OD_2050_0C 177u /* Drive configuration: Current loop kp */
+#define CO_OD_2050_0D 178u /* Drive configuration: Current loop ki */
+#define CO_OD_2050_0E 179u /* Drive configuration: Speed loop kp */
+#define CO_OD_2050_0F 180u /* Drive configuration: Speed loop ki */
+#define CO_OD_2050_10 181u /* Drive configuration: Speed filter */
+#define CO_OD_2050_11 182u /* Drive configuration: Saliency minimum */
+#define CO_OD_2050_12 183u /* Drive configuration: Quick stop time */
+#define CO_OD_2051_00 184u /* Protections: Highest sub-index supported */
+#define CO_OD_2051_01 185u /* Protections: Max speed */
+#define CO_OD_2051_02 186u /* Protections: Position limit min */
+#define CO_OD_2051_03 187u /* Protections: Position limit max */
+#define CO_OD_2051_04 188u /* Protections: Following error window */
+#define CO_OD_2051_05 189u /* Protections: Following error time */
+#define CO_OD_2051_06 190u /* Protections: Rated current */
+#define CO_OD_2051_07 191u /* Protections: i2t time */
+#define CO_OD_2051_08 192u /* Protections: Quick stop option */
+#define CO_OD_2051_09 193u /* Protections: Fault reaction option */
+#define CO_OD_2051_0A 194u /* Protections: Fault braking time */
+#define CO_OD_2052_00 195u /* Integrity monitor: Highest sub-index supported */
+#define CO_OD_2052_01 196u /* Integrity monitor: HF angle limit */
+#define CO_OD_2052_02 197u /* Integrity monitor: Detection time */
+#define CO_OD_2052_03 198u /* Integrity monitor: Saliency tolerance */
+#define CO_OD_2052_04 199u /* Integrity monitor: Back-EMF angle limit */
+#define CO_OD_2052_05 200u /* Integrity monitor: Back-EMF minimum */
+#define CO_OD_2052_06 201u /* Integrity monitor: Current sum limit */
+#define CO_OD_2052_07 202u /* Integrity monitor: Current offset limit */
+#define CO_OD_2052_08 203u /* Integrity monitor: Start speed limit */
+#define CO_OD_2053_00 204u /* Back-EMF observer: Highest sub-index supported */
+#define CO_OD_2053_01 205u /* Back-EMF observer: Handover up */
+#define CO_OD_2053_02 206u /* Back-EMF observer: Handover down */
+#define CO_OD_2053_03 207u /* Back-EMF observer: Injection share */
+#define CO_OD_2054_00 208u /* Machine and loop bandwidths: Highest sub-index supported */
+#define CO_OD_2054_01 209u /* Machine and loop bandwidths: Mover mass */
+#define CO_OD_2054_02 210u /* Machine and loop bandwidths: Viscous friction */
+#define CO_OD_2054_03 211u /* Machine and loop bandwidths: Coulomb friction */
+#define CO_OD_2054_04 212u /* Machine and loop bandwidths: Current loop bandwidth */
+#define CO_OD_2054_05 213u /* Machine and loop bandwidths: Speed loop bandwidth */
+#define CO_OD_2054_06 214u /* Machine and loop bandwidths: Gains automatic */
+#define CO_OD_2060_00 215u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 216u /* Telemetry: Decimation */
+#define CO_OD_2060_02 217u /* Telemetry: Signal count */
+#define CO_OD_2060_03 218u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 219u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 220u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 221u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 222u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 223u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 224u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 225u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 226u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 227u /* Trace: Command */
+#define CO_OD_2070_02 228u /* Trace: State */
+#define CO_OD_2070_03 229u /* Trace: Trigger signal */
+#define CO_OD_2070_04 230u /* Trace: Trigger level */
+#define CO_OD_2070_05 231u /* Trace: Trigger edge */
+#define CO_OD_2070_06 232u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 233u /* Trace: Signal count */
+#define CO_OD_2070_08 234u /* Trace: Signal 1 */
+#define CO_OD_2070_09 235u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 236u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 237u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 238u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 239u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 240u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 241u /* Trace: Signal 8 */
+#define CO_OD_603F_00 242u /* Error code: Error code */
+#define CO_OD_6040_00 243u /* Controlword: Controlword */
+#define CO_OD_6041_00 244u /* Statusword: Statusword */
+#define CO_OD_605A_00 245u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 246u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 247u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 248u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 249u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 250u /* Following error window: Following error window */
+#define CO_OD_6066_00 251u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 252u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 253u /* Target torque: Target torque */
+#define CO_OD_6077_00 254u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 255u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 256u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 257u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 258u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 259u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 260u /* Supported drive modes: Supported drive modes */
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 

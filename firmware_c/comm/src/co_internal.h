@@ -61,6 +61,10 @@ static inline bool co_is_rpdo_map(uint16_t i) {
 static inline bool co_is_tpdo_map(uint16_t i) {
   return i >= 0x1A00u && i < 0x1A00u + CO_OD_NR_TPDO;
 }
+/** 0x1010 store parameters / 0x1011 restore defaults, sub >= 1: commands. */
+static inline bool co_is_store_cmd(uint16_t i, uint8_t sub) {
+  return (i == 0x1010u || i == 0x1011u) && sub >= 1u;
+}
 
 /** Queue a frame for transmission (counted in count.tx_frames when queued). */
 CO_INTERNAL void co_send(co_node_t *node, uint16_t id, uint8_t dlc, const uint8_t *data);

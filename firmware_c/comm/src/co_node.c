@@ -147,6 +147,12 @@ static co_abort_t co_check_comm_write(const co_node_t *node, uint16_t index, uin
   if (index == 0x1016u) {
     return co_hb_check_config(node, sub, v);
   }
+  if (co_is_store_cmd(index, sub)) {
+    /* CiA 301: a wrong signature is refused with 0x08000020; without an
+       application there is nothing that could store or restore */
+    uint32_t want = index == 0x1010u ? CO_SIGNATURE_SAVE : CO_SIGNATURE_LOAD;
+    return (len == 4u && v == want && node->cb.on_write != NULL) ? CO_ABORT_NONE : CO_ABORT_APP;
+  }
   return co_pdo_check_config(node, index, sub, v);
 }
 
@@ -174,6 +180,9 @@ co_abort_t co_write_pos(co_node_t *node, uint16_t pos, const uint8_t *data, size
     if (a != CO_ABORT_NONE) {
       return a;
     }
+  }
+  if (co_is_store_cmd(e->index, e->sub)) {
+    return CO_ABORT_NONE; /* a command, done by the hook: the OD keeps the capabilities */
   }
   co_od_store(node->od, sizeof node->od, pos, data, len);
   /* side effects */

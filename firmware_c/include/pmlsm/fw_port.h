@@ -3,7 +3,7 @@
  * @brief The one hardware contract of the firmware.
  *
  * Everything hardware-shaped crosses this header: PWM, ADC, CAN frames,
- * UART bytes, time and critical sections. The control core (fw_ctrl.h) does
+ * UART bytes, time, critical sections and the non-volatile parameter memory. The control core (fw_ctrl.h) does
  * not call any of it: it is a pure step function. The application glue
  * (fw_app.c: interrupt -> fw_step -> PWM, CAN/UART queues) calls the port.
  *
@@ -11,7 +11,15 @@
  * every function below. Ports in this repository:
  *   - port/blank/fw_port_blank.c : compiles anywhere, does nothing; proves the
  *     core has no hidden dependency (built for host and Cortex-M4F).
- *   - sim_fallback/src : the simulated drive (plant + ADC + inverter model).
+ *   - sim_fallback/src : the simulated drive (plant + ADC + inverter model);
+ *     sim_nvm.c is its non-volatile memory: one file per simulated drive.
+ *
+ * Non-volatile memory: the drive application stores one parameter block
+ * (CiA 301 0x1010 'save', see fw_app.h). It does not call the two nvm
+ * functions by name: the board glue hands them to fw_app_attach_nvm()
+ * (fw_app_nvm_t), so the application links without a port, and a port
+ * without storage returns FW_NVM_UNSUPPORTED (the drive then answers 'save'
+ * with SDO abort 0x08000020 and reads 0 from 0x1010:1).
  *
  * Interrupt handlers copy and flag; work happens in the step function.
  */
@@ -57,6 +65,30 @@ size_t fw_port_uart_write(fw_port_t *port, const uint8_t *data, size_t len);
 /** Enter / leave a critical section (disable / restore interrupts). */
 uint32_t fw_port_critical_enter(fw_port_t *port);
 void fw_port_critical_exit(fw_port_t *port, uint32_t key);
+
+/** Result of the non-volatile memory functions. */
+typedef enum {
+  FW_NVM_OK = 0,
+  FW_NVM_UNSUPPORTED = 1, /**< this port has no non-volatile memory */
+  FW_NVM_EMPTY = 2,       /**< read: nothing stored (erased or never written) */
+  FW_NVM_ERROR = 3        /**< the medium failed, or the block does not fit */
+} fw_nvm_status_t;
+
+/**
+ * Read the stored parameter block into buf (at most cap bytes); *len is its
+ * size on FW_NVM_OK. The application checks the content (CRC, product,
+ * firmware version) itself.
+ */
+fw_nvm_status_t fw_port_nvm_read(fw_port_t *port, uint8_t *buf, size_t cap, size_t *len);
+
+/**
+ * Replace the stored parameter block by data[0..len) - atomically where the
+ * medium allows it (a torn write must read back as a block whose CRC fails,
+ * never as a mix that passes). len == 0 erases it (FW_NVM_EMPTY afterwards).
+ * Called from the SDO server in the control task while the power stage is
+ * off; a port whose medium is slow (flash erase) may take milliseconds.
+ */
+fw_nvm_status_t fw_port_nvm_write(fw_port_t *port, const uint8_t *data, size_t len);
 
 #ifdef __cplusplus
 }

@@ -48,3 +48,20 @@ void fw_port_critical_exit(fw_port_t *port, uint32_t key) {
   (void)port;
   (void)key;
 }
+
+fw_nvm_status_t fw_port_nvm_read(fw_port_t *port, uint8_t *buf, size_t cap, size_t *len) {
+  (void)port;
+  (void)buf;
+  (void)cap;
+  if (len != NULL) {
+    *len = 0u;
+  }
+  return FW_NVM_UNSUPPORTED;
+}
+
+fw_nvm_status_t fw_port_nvm_write(fw_port_t *port, const uint8_t *data, size_t len) {
+  (void)port;
+  (void)data;
+  (void)len;
+  return FW_NVM_UNSUPPORTED;
+}

@@ -45,6 +45,13 @@ int main(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
   (void)fw_app_init(&g_app, &cfg, 1u);
+  /* Boot from the non-volatile memory (CiA 301 0x1010/0x1011). The blank
+     port has none (FW_NVM_UNSUPPORTED: 'save' is refused with SDO abort
+     0x08000020). TODO(board port): one flash sector - erase + program in
+     fw_port_nvm_write, called from the SDO server with the power stage off;
+     a torn write fails the block's CRC and the drive boots on defaults. */
+  const fw_app_nvm_t nvm = {&g_port, fw_port_nvm_read, fw_port_nvm_write};
+  (void)fw_app_attach_nvm(&g_app, &nvm);
   for (;;) {
     pwm_adc_irq_handler();
   }

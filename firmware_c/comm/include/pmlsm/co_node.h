@@ -40,6 +40,11 @@ extern "C" {
 #define CO_SDO_TIMEOUT_US 1000000u
 #define CO_HB_CONSUMERS 2u  /**< sub-indices of 0x1016 */
 
+/** CiA 301 signatures: 'save' written to 0x1010:1 stores the parameters,
+ *  'load' written to 0x1011:1 restores the defaults (ASCII, little endian). */
+#define CO_SIGNATURE_SAVE 0x65766173u
+#define CO_SIGNATURE_LOAD 0x64616F6Cu
+
 /** NMT states (values as sent in the heartbeat). */
 typedef enum {
   CO_NMT_INITIALISING = 0x00,
@@ -74,6 +79,12 @@ typedef enum {
  * Called for every write (SDO or RPDO) after the generic checks passed and
  * before the value is stored. Return CO_ABORT_NONE to accept, an abort code
  * to refuse (the value is then not stored).
+ *
+ * 0x1010 (store parameters) and 0x1011 (restore defaults), sub-index >= 1,
+ * are commands: the node checks the CiA 301 signature ('save' / 'load',
+ * else abort 0x08000020), calls the hook to do the work (no hook: abort
+ * 0x08000020) and never stores the signature: reading keeps returning the
+ * storage capabilities the application put there.
  */
 typedef co_abort_t (*co_write_hook_t)(void *ctx, uint16_t index, uint8_t sub,
                                       const uint8_t *data, size_t len);

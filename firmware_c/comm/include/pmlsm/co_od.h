@@ -42,6 +42,7 @@ typedef enum {
 /** Flag bits of an entry. */
 #define CO_FLAG_PDO 0x01u    /**< PDO mappable */
 #define CO_FLAG_NODEID 0x02u /**< default is node id + def_i */
+#define CO_FLAG_CMD 0x04u    /**< an action or set-point, not configuration (od.yaml `command`) */
 
 /** SDO abort codes (CiA 301). */
 typedef enum {

@@ -29,8 +29,26 @@
  *
  * NMT and the power stage: NMT stop and reset communication switch the
  * power stage off in the same control period (CiA 402 "disable voltage":
- * SWITCH ON DISABLED); reset node restarts the core as after fw_app_init
- * (same configuration, no fault, SWITCH ON DISABLED).
+ * SWITCH ON DISABLED); reset node restarts the core as after power-up
+ * (the configuration of fw_app_init, or the stored one, no fault, SWITCH ON
+ * DISABLED).
+ *
+ * Non-volatile memory (CiA 301 0x1010 / 0x1011): the board glue attaches
+ * its port's storage with fw_app_attach_nvm() after fw_app_init(); that is
+ * the boot: a stored block whose CRC, product code, firmware version and
+ * configuration layout match, and whose configuration passes
+ * fw_config_check(), replaces the configuration given to fw_app_init and
+ * the storable objects (communication 0x1005..0x1BFF, device tag 0x2042,
+ * telemetry 0x2060). Anything wrong: the defaults stay and
+ * fw_app_nvm_state() says why. 'save' written to 0x1010:1 stores the
+ * running configuration (refused while the power stage is enabled: abort
+ * 0x08000022); 'load' written to 0x1011:1 erases the block, so the defaults
+ * apply from the next NMT reset node or power-up. NMT reset node loads the
+ * block again; reset communication reloads its communication objects.
+ * Block: header (magic 'PNVM', format, product code, firmware version,
+ * layout hash, length), sizeof(fw_config_t) bytes of configuration, the
+ * objects as (index, sub, length, value) records, CRC-32 (IEEE 802.3) of
+ * everything before it.
  */
 #ifndef PMLSM_FW_APP_H
 #define PMLSM_FW_APP_H
@@ -54,6 +72,28 @@ extern "C" {
 #ifndef FW_APP_UART_LEN
 #define FW_APP_UART_LEN 4096u /**< UART TX ring (bytes, power of two) */
 #endif
+#ifndef FW_APP_NVM_LEN
+#define FW_APP_NVM_LEN 2048u /**< largest stored parameter block (bytes) */
+#endif
+
+/** The port's non-volatile memory as the application uses it (fw_port.h). */
+typedef struct {
+  fw_port_t *port;
+  fw_nvm_status_t (*read)(fw_port_t *port, uint8_t *buf, size_t cap, size_t *len);
+  fw_nvm_status_t (*write)(fw_port_t *port, const uint8_t *data, size_t len);
+} fw_app_nvm_t;
+
+/** What the last boot (fw_app_attach_nvm, NMT reset node) did with the stored block. */
+typedef enum {
+  FW_APP_NVM_NONE = 0,        /**< no non-volatile memory (none attached, or unsupported) */
+  FW_APP_NVM_EMPTY = 1,       /**< nothing stored: defaults */
+  FW_APP_NVM_LOADED = 2,      /**< the stored block is in use */
+  FW_APP_NVM_BAD_CRC = 3,     /**< rejected: size, magic or CRC wrong (torn or foreign data) */
+  FW_APP_NVM_BAD_PRODUCT = 4, /**< rejected: stored by another product */
+  FW_APP_NVM_BAD_VERSION = 5, /**< rejected: other firmware version or configuration layout */
+  FW_APP_NVM_BAD_CONTENT = 6, /**< rejected: configuration or an object out of range */
+  FW_APP_NVM_READ_ERROR = 7   /**< the medium failed */
+} fw_app_nvm_state_t;
 
 /** Application counters (diagnostics, tests). */
 typedef struct {
@@ -84,6 +124,10 @@ typedef struct {
   uint16_t last_fault;
   uint8_t init_done;
   fw_app_counters_t count;
+  fw_app_nvm_t nvm;       /**< attached storage (read == NULL: none) */
+  uint8_t nvm_supported;  /**< the port has non-volatile memory (0x1010:1 bit 0) */
+  uint8_t nvm_state;      /**< fw_app_nvm_state_t of the last boot */
+  uint8_t nvm_buf[FW_APP_NVM_LEN]; /**< block being read or written */
 } fw_app_t;
 
 /**
@@ -118,6 +162,30 @@ const fw_app_counters_t *fw_app_counters(const fw_app_t *app);
 
 /** Error register (0x1001) bits for a fault code. */
 uint8_t fw_app_error_register(uint16_t fault_code);
+
+/**
+ * Attach the port's non-volatile memory and boot from it (see above): call
+ * once after fw_app_init, before the first fw_app_step. nvm is copied.
+ * Returns what was done with the stored block.
+ */
+fw_app_nvm_state_t fw_app_attach_nvm(fw_app_t *app, const fw_app_nvm_t *nvm);
+
+/** What the last boot did with the stored block. */
+fw_app_nvm_state_t fw_app_nvm_state(const fw_app_t *app);
+
+/**
+ * Store the running configuration and the storable objects now (what
+ * 'save' in 0x1010:1 does). Returns CO_ABORT_NONE, CO_ABORT_APP (no
+ * storage, block too large, medium failed) or CO_ABORT_DEVICE_STATE (power
+ * stage enabled).
+ */
+co_abort_t fw_app_nvm_save(fw_app_t *app);
+
+/** Erase the stored block (what 'load' in 0x1011:1 does); as fw_app_nvm_save. */
+co_abort_t fw_app_nvm_erase(fw_app_t *app);
+
+/** CRC-32 (IEEE 802.3 / ISO-HDLC: reflected 0xEDB88320, init and final xor ~0). */
+uint32_t fw_app_crc32(const uint8_t *data, size_t len);
 
 #ifdef __cplusplus
 }
