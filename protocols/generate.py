@@ -4,14 +4,13 @@ Usage::
 
     python -m protocols.generate          # write the generated files
     python -m protocols.generate --check  # exit 1 when a generated file drifted
-    python -m protocols.generate --sync-fw-config build/.../tests/c/test_co_od_config
-        # take fw_config limits/defaults from the firmware's table, then generate
 
 Outputs (checked in; tests/python/test_protocol_od.py fails on drift):
 
 - firmware_c/comm/generated/co_od_table.h / .c   (C table, see co_od.h)
 - firmware_c/comm/generated/fw_serial_signals.h / .c (signal table, see fw_serial.h)
 - firmware_c/include/pmlsm/fw_faults.h            (fw_fault_t: codes and names of the core)
+- firmware_c/include/pmlsm/fw_config_fields.h     (fw_config_t field table: types, units, ranges)
 - protocols/generated/pmlsm_drive.eds           (CiA 306 EDS for canopen.import_od)
 - protocols/generated/od_names.py               (fault codes and names, object indices)
 - docs/od_table.md                               (documentation)
@@ -411,6 +410,46 @@ def gen_fault_header(od: ObjectDictionary) -> str:
     return "\n".join(lines)
 
 
+def _c_f32(x: float) -> str:
+    """A float32 C literal that parses to exactly the float32 nearest ``x``."""
+    t = _short_f32(float(x))
+    return (t if any(ch in t for ch in ".e") else t + ".0") + "f"
+
+
+def gen_config_fields_header(od: ObjectDictionary) -> str:
+    """The firmware's configuration field table (fw_config.c) as an X-macro list, from
+    od.yaml's ``fw_config:`` section, the one source of types, units and ranges."""
+    lines = [f"/* {HEADER} */",
+             "/**",
+             " * @file fw_config_fields.h",
+             " * @brief Every fw_config_t field: type, SI unit, inclusive range and default,",
+             " *        in the struct's order (protocols/od.yaml, fw_config:). fw_config.c",
+             " *        builds fw_config_field() from FW_CONFIG_FIELDS(F32, U32) with",
+             " *        F32/U32(name, unit, min, max, default); the defaults of",
+             " *        fw_config_default() are checked against the last argument by",
+             " *        tests/c/test_co_od_config.c.",
+             " */",
+             "#ifndef PMLSM_FW_CONFIG_FIELDS_H",
+             "#define PMLSM_FW_CONFIG_FIELDS_H",
+             "",
+             "/* clang-format off */",
+             "#define FW_CONFIG_FIELDS(F32, U32) \\"]
+    items = list(od.fw_config.items())
+    for k, (name, v) in enumerate(items):
+        unit = str(v.get("unit", "")).replace("\\", "").replace('"', "")
+        if v.get("u32"):
+            body = (f"U32({name}, \"{unit}\", {int(v['min'])}.0f, {int(v['max'])}.0f, "
+                    f"{int(v['default'])}u)")
+        else:
+            body = (f"F32({name}, \"{unit}\", {_c_f32(v['min'])}, {_c_f32(v['max'])}, "
+                    f"{_c_f32(v['default'])})")
+        lines.append(f"  {body}" + (" \\" if k < len(items) - 1 else ""))
+    lines += ["/* clang-format on */", "",
+              f"#define FW_CONFIG_FIELD_COUNT {len(items)}u", "",
+              "#endif /* PMLSM_FW_CONFIG_FIELDS_H */", ""]
+    return "\n".join(lines)
+
+
 def outputs(od: ObjectDictionary | None = None) -> dict[Path, str]:
     """Every generated file: path -> expected content."""
     od = od or load()
@@ -421,6 +460,8 @@ def outputs(od: ObjectDictionary | None = None) -> dict[Path, str]:
         gen / "fw_serial_signals.h": gen_signals_header(od),
         gen / "fw_serial_signals.c": gen_signals_source(od),
         ROOT / "firmware_c" / "include" / "pmlsm" / "fw_faults.h": gen_fault_header(od),
+        ROOT / "firmware_c" / "include" / "pmlsm" / "fw_config_fields.h":
+            gen_config_fields_header(od),
         ROOT / "protocols" / "generated" / "pmlsm_drive.eds": gen_eds(od),
         ROOT / "protocols" / "generated" / "od_names.py": gen_py_names(od),
         ROOT / "docs" / "od_table.md": gen_markdown(od),
@@ -472,49 +513,10 @@ def _short_f32(x: float) -> str:
     return r
 
 
-def sync_fw_config(exe: str, yaml_path: Path | None = None) -> None:
-    """Rewrite the `fw_config:` section of od.yaml from the firmware's own table.
-
-    ``exe`` is the built tests/c/test_co_od_config, which prints the C table
-    (fw_config_field() limits, fw_config_default() values) with ``--yaml``.
-    """
-    import subprocess
-
-    import yaml
-
-    yaml_path = yaml_path or (ROOT / "protocols" / "od.yaml")
-    out = subprocess.run([exe, "--yaml"], check=True, capture_output=True, text=True).stdout
-    table = yaml.safe_load(out)["fw_config"]
-    old = (yaml.safe_load(yaml_path.read_text()) or {}).get("fw_config", {}) or {}
-    width = max(len(k) for k in table) + 1
-    lines = ["fw_config:"]
-    for name, v in table.items():
-        was_int = all(isinstance(old.get(name, {}).get(k), int)
-                      for k in ("min", "max", "default"))
-        if all(float(v[k]).is_integer() for k in ("min", "max", "default")) and (
-                was_int or name.endswith(("extractor", "_samples", "_pairs", "_count",
-                                          "_option", "_auto"))):
-            nums = f"min: {int(v['min'])}, max: {int(v['max'])}, default: {int(v['default'])}"
-        else:
-            nums = (f"min: {_short_f32(v['min'])}, max: {_short_f32(v['max'])}, "
-                    f"default: {_short_f32(v['default'])}")
-        unit = f', unit: "{v["unit"]}"' if v.get("unit") else ""
-        lines.append(f"  {name + ':':{width}} {{{nums}{unit}}}")
-    text = yaml_path.read_text()
-    a = text.index("\nfw_config:\n") + 1
-    b = text.index("\n\n", a)
-    yaml_path.write_text(text[:a] + "\n".join(lines) + text[b:])
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true", help="exit 1 if a file drifted")
-    ap.add_argument("--sync-fw-config", metavar="TEST_EXE",
-                    help="first rewrite od.yaml's fw_config section from the C table, "
-                         "printed by the built tests/c/test_co_od_config --yaml")
     args = ap.parse_args(argv)
-    if args.sync_fw_config:
-        sync_fw_config(args.sync_fw_config)
     if args.check:
         bad = drifted()
         for p in bad:

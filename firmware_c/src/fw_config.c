@@ -7,88 +7,18 @@
 #include <stddef.h>
 #include <string.h>
 
+#include "pmlsm/fw_config_fields.h"
 #include "pmlsm/fw_ctrl.h"
 
-#define F32(name, unit, lo, hi) {#name, unit, offsetof(fw_config_t, name), 0u, lo, hi}
-#define U32(name, unit, lo, hi) {#name, unit, offsetof(fw_config_t, name), 1u, lo, hi}
-
-/*
- * Ranges are engineering limits for this drive class, not tuning advice.
- * The table is the firmware side of the object dictionary's limits
- * (protocols/od.yaml); a test keeps the two in agreement.
- */
-static const fw_config_field_t k_fields[] = {
-    F32(f_pwm_Hz, "Hz", 4000.0f, 100000.0f),
-    F32(R_ohm, "ohm", 1e-3f, 100.0f),
-    F32(L_d_H, "H", 1e-5f, 1.0f),
-    F32(L_q_H, "H", 1e-5f, 1.0f),
-    F32(psi_f_Wb, "Wb", 1e-4f, 10.0f),
-    F32(pole_pairs, "", 1.0f, 500.0f),
-    F32(pole_pitch_m, "m", 1e-3f, 1.0f),
-    F32(u_dc_min_V, "V", 1.0f, 1000.0f),
-    F32(u_dc_max_V, "V", 5.0f, 1200.0f),
-    F32(i_trip_A, "A", 0.1f, 500.0f),
-    F32(i_max_A, "A", 0.05f, 400.0f),
-    F32(speed_max_radps_e, "rad/s", 1.0f, 20000.0f),
-    F32(cur_kp_V_per_A, "V/A", 0.0f, 1000.0f),
-    F32(cur_ki_V_per_As, "V/(A s)", 0.0f, 1e6f),
-    F32(spd_kp_A_per_radps, "A s/rad", 0.0f, 100.0f),
-    F32(spd_ki_A_per_rad, "A/rad", 0.0f, 1e4f),
-    F32(spd_filter_Hz, "Hz", 1.0f, 2000.0f),
-    F32(u_inj_V, "V", 1.0f, 400.0f), /* 0 would leave start-up in ALIGN for ever */
-    F32(f_inj_Hz, "Hz", 100.0f, 20000.0f),
-    U32(extractor, "", 0.0f, 2.0f),
-    F32(sogi_k, "", FW_SOGI_K_MIN, FW_SOGI_K_MAX),
-    F32(sogi_k_adapt_max, "", FW_SOGI_K_MIN, FW_SOGI_K_MAX),
-    F32(sogi_k_adapt_min, "", FW_SOGI_K_MIN, FW_SOGI_K_MAX),
-    F32(sogi_adapt_err_rad, "rad", 1e-3f, 1.0f),
-    F32(pll_kp, "1/s", 0.0f, 1e4f),
-    F32(pll_ki, "1/s^2", 0.0f, 1e7f),
-    F32(pll_accel_per_A, "rad/(s^2 A)", 0.0f, 1e7f),
-    F32(pll_bw_min, "", 0.1f, 1.0f),
-    F32(pll_kd, "1/s^3", 0.0f, 1e9f),
-    F32(align_time_s, "s", 0.0f, 5.0f),
-    F32(pol_pulse_V, "V", 0.0f, 600.0f),
-    U32(pol_pulse_samples, "", 1.0f, 1000.0f),
-    U32(pol_pulse_pairs, "", 1.0f, 64.0f),
-    F32(pol_margin, "", 0.0f, 1.0f),
-    F32(saliency_min, "", 0.0f, 1.0f),
-    F32(hf_min_ratio, "", 0.0f, 1.0f),
-    F32(pll_err_max_rad, "rad", 0.01f, 1.6f),
-    F32(pll_err_time_s, "s", 0.0f, 10.0f),
-    F32(quick_stop_time_s, "s", 0.0f, 10.0f),
-    F32(adc_A_per_count, "A", 1e-6f, 10.0f),
-    F32(adc_offset_counts, "", 0.0f, 65535.0f),
-    F32(adc_V_per_count, "V", 1e-6f, 100.0f),
-    U32(adc_max_count, "", 255.0f, 65535.0f),
-    F32(v_max_mps, "m/s", 1e-3f, 100.0f),
-    F32(pos_limit_min_m, "m", -1e4f, 1e4f),
-    F32(pos_limit_max_m, "m", -1e4f, 1e4f),
-    F32(follow_err_mps, "m/s", 1e-3f, 100.0f),
-    F32(follow_err_time_s, "s", 1e-3f, 10.0f),
-    F32(i_rated_A, "A", 0.01f, 400.0f),
-    F32(i2t_time_s, "s", 0.01f, 1000.0f),
-    U32(quick_stop_option, "", 0.0f, 2.0f),
-    U32(fault_reaction_option, "", 0.0f, 2.0f),
-    F32(fault_brake_time_s, "s", 0.0f, 1.0f),
-    F32(mon_angle_max_rad, "rad", 0.05f, 1.5f),
-    F32(mon_detect_time_s, "s", 1e-3f, 0.1f),
-    F32(mon_sal_tol, "", 0.05f, 10.0f),
-    F32(mon_bemf_max_rad, "rad", 0.05f, 3.2f),
-    F32(mon_bemf_min_V, "V", 0.1f, 1000.0f),
-    F32(i_sum_max_A, "A", 1e-3f, 500.0f),
-    F32(i_offset_max_A, "A", 1e-3f, 500.0f),
-    F32(start_speed_max_mps, "m/s", 1e-3f, 100.0f),
-    F32(bemf_e_on_V, "V", 0.0f, 1000.0f),
-    F32(bemf_e_off_V, "V", 0.0f, 1000.0f),
-    F32(bemf_inj_share, "", 0.05f, 1.0f),
-    F32(mass_kg, "kg", 1e-3f, 1e5f),
-    F32(visc_Ns_per_m, "N s/m", 0.0f, 1e6f),
-    F32(coulomb_N, "N", 0.0f, 1e6f),
-    F32(cur_bw_radps, "rad/s", 1.0f, 1e5f),
-    F32(spd_bw_radps, "rad/s", 0.1f, 1e4f),
-    U32(gains_auto, "", 0.0f, 1.0f),
-};
+/* The table itself is generated from protocols/od.yaml (fw_config:), the one
+ * source of the ranges: engineering limits for this drive class, not tuning
+ * advice. The defaults (last argument) are fw_config_default()'s below, checked
+ * by tests/c/test_co_od_config.c. */
+#define F32(name, unit, lo, hi, dflt) {#name, unit, offsetof(fw_config_t, name), 0u, lo, hi},
+#define U32(name, unit, lo, hi, dflt) {#name, unit, offsetof(fw_config_t, name), 1u, lo, hi},
+static const fw_config_field_t k_fields[] = {FW_CONFIG_FIELDS(F32, U32)};
+#undef F32
+#undef U32
 
 /* Observer design point of fw_config_derive (docs/tuning.md): a load step of this
  * fraction of the peak thrust K_F i_max leaves at most this angle error. */

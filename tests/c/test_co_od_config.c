@@ -4,14 +4,17 @@
  *        (protocols/od.yaml `fw_config:`) has the limits of
  *        fw_config_field() and the default of fw_config_default().
  *
- * On failure it prints the `fw_config:` section od.yaml should have
- * (paste it, then run python -m protocols.generate).
+ * And: the field table generated from od.yaml (fw_config_fields.h) is the
+ * one fw_config_field() serves, and every default written there is
+ * fw_config_default()'s value. On failure it prints the defaults od.yaml
+ * should have (--yaml prints them all).
  */
 #include <math.h>
 #include <string.h>
 
 #include "co_od_table.h"
 #include "pmlsm/co_od.h"
+#include "pmlsm/fw_config_fields.h"
 #include "pmlsm/fw_ctrl.h"
 #include "tinytest.h"
 
@@ -30,17 +33,49 @@ static float cfg_value(const fw_config_t *cfg, const fw_config_field_t *f) {
 static void print_yaml(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  printf("fw_config:\n");
-  for (uint32_t k = 0; k < CO_OD_CFG_COUNT; k++) {
-    const fw_config_field_t *f = fw_config_field_find(co_od_cfg_links[k].field);
-    const co_od_entry_t *e = co_od_entry(co_od_cfg_links[k].pos);
-    if (f == NULL || e == NULL || e->type != (f->is_u32 ? e->type : CO_TYPE_REAL32) ||
-        co_od_cfg_links[k].scale != 1.0f || (f->is_u32 && e->min_i < 0)) {
-      continue; /* the views in wire units repeat a field */
-    }
-    printf("  %s: {min: %.9g, max: %.9g, default: %.9g, unit: \"%s\"}\n", f->name,
-           (double)f->min, (double)f->max, (double)cfg_value(&cfg, f), f->unit);
+  printf("fw_config defaults (fw_config_default):\n");
+  for (size_t i = 0; i < fw_config_field_count(); i++) {
+    const fw_config_field_t *f = fw_config_field(i);
+    printf("  %s: default %.9g\n", f->name, (double)cfg_value(&cfg, f));
   }
+}
+
+/* The generated table, field by field, against what fw_config_field() serves and
+ * what fw_config_default() sets. */
+static void test_generated_table_and_defaults(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  size_t i = 0;
+  TT_CHECK(fw_config_field_count() == FW_CONFIG_FIELD_COUNT);
+#define F32(name_, unit_, lo_, hi_, dflt_)                                                \
+  do {                                                                                   \
+    const fw_config_field_t *f = fw_config_field(i++);                                   \
+    TT_CHECK(f != NULL && strcmp(f->name, #name_) == 0 && !f->is_u32);                   \
+    TT_CHECK(f != NULL && f->offset == offsetof(fw_config_t, name_));                    \
+    TT_CHECK(f != NULL && f->min == (lo_) && f->max == (hi_) && strcmp(f->unit, unit_) == 0); \
+    if (cfg.name_ != (dflt_)) {                                                          \
+      printf("  drift: od.yaml fw_config.%s default %.9g, fw_config_default() %.9g\n",  \
+             #name_, (double)(dflt_), (double)cfg.name_);                                \
+    }                                                                                    \
+    TT_CHECK(cfg.name_ == (dflt_));                                                      \
+  } while (0);
+#define U32(name_, unit_, lo_, hi_, dflt_)                                                \
+  do {                                                                                   \
+    const fw_config_field_t *f = fw_config_field(i++);                                   \
+    TT_CHECK(f != NULL && strcmp(f->name, #name_) == 0 && f->is_u32);                    \
+    TT_CHECK(f != NULL && f->min == (lo_) && f->max == (hi_));                           \
+    if (cfg.name_ != (dflt_)) {                                                          \
+      printf("  drift: od.yaml fw_config.%s default %u, fw_config_default() %u\n",      \
+             #name_, (unsigned)(dflt_), (unsigned)cfg.name_);                            \
+    }                                                                                    \
+    TT_CHECK(cfg.name_ == (dflt_));                                                      \
+  } while (0);
+  FW_CONFIG_FIELDS(F32, U32)
+#undef F32
+#undef U32
+  /* the SOGI's own clamp and the configuration range are one range */
+  TT_CHECK(fw_config_field_find("sogi_k")->min == FW_SOGI_K_MIN);
+  TT_CHECK(fw_config_field_find("sogi_k")->max == FW_SOGI_K_MAX);
 }
 
 static void check_scaled(const co_od_cfg_link_t *l, const co_od_entry_t *e,
@@ -135,6 +170,7 @@ int main(int argc, char **argv) {
     print_yaml();
     return 0;
   }
+  TT_RUN(test_generated_table_and_defaults);
   TT_RUN(test_limits_and_defaults);
   int rc = TT_SUMMARY();
   if (rc != 0) {
