@@ -15,7 +15,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from typing import Any, Protocol
 
@@ -419,6 +419,17 @@ class Runner:
         state; the partial :class:`RunResult` is available as
         ``self.result``.
         """
+        for _ in self.iter_steps(seq):
+            pass
+        return self.result
+
+    def iter_steps(self, seq: Sequence) -> Iterator[Step]:
+        """Execute ``seq`` one step per ``next()`` (``bench shell``); yields each step
+        after doing it. When the generator ends, is closed (``.close()``) or collected,
+        the drive goes to the safe state and ``self.result`` holds the verdict of what
+        ran (a closed one is aborted). Sequence time keeps running between steps: on a
+        drive paced to the wall clock, a ``wait`` that is already past returns at once.
+        """
         result = RunResult(sequence=seq.name)
         self.result = result
         self._t_disable: float | None = None
@@ -433,6 +444,7 @@ class Runner:
                 self.rec.event(self.now(), "step", {"index": step.index, "step": step.kind,
                                                     "params": step.params})
                 self._do(step, seq, result)
+                yield step
             result.duration_s = self.now()
         except BaseException as e:
             result.aborted = True

@@ -61,6 +61,9 @@ _PDO_SIGNALS: dict[tuple[int, int], tuple[str, str, float | None]] = {
 }
 
 
+_PDO_UNITS = {name: unit for name, unit, _ in _PDO_SIGNALS.values()}
+
+
 class NoHardware(RuntimeError):
     """No usable CAN bus or no drive answering on it."""
 
@@ -194,8 +197,10 @@ def open_sim(motor: str = "paper_salient", extractor: str = "sogi_adaptive", see
 
 def open_hardware(interface: str | None, channel: str | None, bitrate: int | None,
                   node_id: int = 1, load_node: int | None = None, motor: str | None = None,
-                  serial_url: str | None = None, probe_timeout_s: float = 0.5) -> Connection:
-    """Open a python-can bus and check that the drive answers.
+                  serial_url: str | None = None, probe_timeout_s: float = 0.5,
+                  bus_kw: dict[str, Any] | None = None) -> Connection:
+    """Open a python-can bus and check that the drive answers (``bus_kw``: further
+    python-can arguments, e.g. socketcand's host and port).
 
     Raises
     ------
@@ -210,6 +215,7 @@ def open_hardware(interface: str | None, channel: str | None, bitrate: int | Non
         kw["channel"] = channel
     if bitrate:
         kw["bitrate"] = bitrate
+    kw.update(bus_kw or {})
     if not interface:
         try:
             cfg = can.util.load_config()
@@ -263,13 +269,28 @@ def connect(sim: bool = False, interface: str | None = None, channel: str | None
             realtime: bool = False, motor: str = "paper_salient",
             extractor: str = "sogi_adaptive", seed: int = 0, x0: float | str = 0.0,
             node_id: int = 1, load_node: int | None = None, record_decimation: int = 1,
-            say: Callable[[str], None] = _say, require_hardware: bool = False) -> Connection:
+            say: Callable[[str], None] = _say, require_hardware: bool = False,
+            sim_server: Any = None) -> Connection:
     """Hardware if available and not ``sim``; else the simulated drive (announced).
 
     With ``require_hardware`` (a rig's CI job) a missing drive raises
     :class:`NoHardware` instead of falling back. A fallback connection has
     ``info["fallback"] = True``; the report, summary.json and JUnit say SIMULATED.
+
+    ``sim_server`` (a :class:`bench._simserver.ServerState`): the simulated drive server
+    of ``bench sim start``, reached exactly as hardware (python-can ``socketcand``, the
+    same canopen code path), never a fallback; its results say SIMULATED too.
     """
+    if sim_server is not None:
+        bc = sim_server.bus_config()
+        c = open_hardware(bc.pop("interface"), bc.pop("channel"), None, node_id, load_node,
+                          motor, serial_url, bus_kw=bc)
+        c.description = (f"SIMULATED drive server node {node_id} (pid {sim_server.pid}, "
+                         f"socketcand {sim_server.address}, motor {sim_server.motor})")
+        c.info.update(kind="sim", via="sim_server", server_pid=sim_server.pid,
+                      fallback=False)
+        say(f"bench: connected to the {c.description}")
+        return c
     fallback = False
     if not sim:
         try:
@@ -297,7 +318,8 @@ def connect(sim: bool = False, interface: str | None = None, channel: str | None
 def drive_kind(conn: Connection) -> dict[str, Any]:
     """What produced the results: ``{"drive": "SIMULATED"|"HARDWARE", "simulated": bool,
     "fallback": bool}`` (summary.json, JUnit properties, report banner)."""
-    return {"drive": "SIMULATED" if conn.is_sim else "HARDWARE", "simulated": conn.is_sim,
+    simulated = conn.is_sim or conn.info.get("kind") == "sim"  # in process or sim server
+    return {"drive": "SIMULATED" if simulated else "HARDWARE", "simulated": simulated,
             "fallback": bool(conn.info.get("fallback", False))}
 
 
@@ -305,11 +327,14 @@ def drive_kind(conn: Connection) -> dict[str, Any]:
 
 
 class PdoRecorder:
-    """Decodes the drive's TPDOs into SI signals (``pdo.<name>``) for the logger."""
+    """Decodes the drive's TPDOs into SI signals (``pdo.<name>``) for the logger and,
+    with ``live``, for the live telemetry feed (:class:`bench._live.LiveFeed`; its
+    ``put`` never blocks the canopen receive thread that calls this)."""
 
-    def __init__(self, conn: Connection, logger: RunLogger) -> None:
+    def __init__(self, conn: Connection, logger: RunLogger | None, live: Any = None) -> None:
         self.conn = conn
         self.logger = logger
+        self.live = live
         self._buf: dict[str, tuple[list[float], list[float], str]] = {}
         self._lock = threading.Lock()
         try:
@@ -322,23 +347,29 @@ class PdoRecorder:
 
     def _on_pdo(self, pdo_map: Any) -> None:
         t = self.conn.clock_of(pdo_map.timestamp or time.time())
-        with self._lock:
-            for var in pdo_map:
-                key = (var.index, var.subindex)
-                spec = _PDO_SIGNALS.get(key)
-                if spec is None:
-                    continue
-                name, unit, scale = spec
-                raw = var.raw
-                if scale is None:  # per mille of the rated force -> N
-                    val = float(raw) * 1e-3 * self._rated
-                else:
-                    val = float(raw) * scale
-                b = self._buf.setdefault(name, ([], [], unit))
-                b[0].append(t)
-                b[1].append(val)
+        vals: dict[str, float] = {}
+        for var in pdo_map:
+            spec = _PDO_SIGNALS.get((var.index, var.subindex))
+            if spec is None:
+                continue
+            name, unit, scale = spec
+            raw = var.raw
+            if scale is None:  # per mille of the rated force -> N
+                vals[name] = float(raw) * 1e-3 * self._rated
+            else:
+                vals[name] = float(raw) * scale
+        if self.logger is not None:
+            with self._lock:
+                for name, val in vals.items():
+                    b = self._buf.setdefault(name, ([], [], _PDO_UNITS[name]))
+                    b[0].append(t)
+                    b[1].append(val)
+        if self.live is not None and vals:
+            self.live.put("pdo.", t, vals)
 
     def drain(self) -> None:
+        if self.logger is None:
+            return
         with self._lock:
             buf, self._buf = self._buf, {}
         for name, (t, v, unit) in buf.items():
@@ -357,13 +388,15 @@ class TelemetryReader(threading.Thread):
     ``traces``. Only a failing port or logger ends the thread early (``error``).
     """
 
-    def __init__(self, port: Any, logger: RunLogger, f_pwm_Hz: float) -> None:
+    def __init__(self, port: Any, logger: RunLogger | None, f_pwm_Hz: float,
+                 live: Any = None) -> None:
         super().__init__(name="bench-telemetry", daemon=True)
         from protocols import serial_link
 
         self.sl = serial_link
         self.port = port
         self.logger = logger
+        self.live = live  # LiveFeed: put() never blocks this thread
         self.rx = serial_link.Receiver()
         self.asm = serial_link.TraceAssembler()
         self.traces: list[Any] = []
@@ -405,9 +438,16 @@ class TelemetryReader(threading.Thread):
                         c = cols.setdefault(name, ([], []))
                         c[0].append(t)
                         c[1].append(v)
+                groups: dict[tuple[float, ...], dict[str, np.ndarray]] = {}
                 for name, (t, v) in cols.items():
-                    self.logger.append(np.asarray(t), {name: np.asarray(v)}, {},
-                                       prefix="tel.")
+                    ta, va = np.asarray(t), np.asarray(v)
+                    if self.logger is not None:
+                        self.logger.append(ta, {name: va}, {}, prefix="tel.")
+                    groups.setdefault(tuple(t), {})[name] = va
+                live = self.live
+                if live is not None:  # one item per set of signals sharing their times
+                    for tk, vals in groups.items():
+                        live.put("tel.", np.asarray(tk), vals)
         except Exception as e:  # noqa: BLE001 - surfaced in the result
             self.error = f"{type(e).__name__}: {e}"
             log.error("telemetry reader: %s", self.error)
@@ -424,6 +464,126 @@ class TelemetryReader(threading.Thread):
         return {"frames_ok": self.rx.frames_ok, "frames_bad": self.rx.frames_bad,
                 "frames_lost": self.rx.frames_lost, "restarts": self.rx.restarts,
                 "payload_bad": sum(self.payload_errors.values()) + self.asm.frames_bad}
+
+
+# ---- live telemetry to rerun ------------------------------------------------------------
+
+
+def open_live(spec: Any, conn: Connection, run_dir: Any, name: str, lazy: bool = False) -> Any:
+    """Open the rerun side of live telemetry (:class:`bench._live.LiveTelemetry`) for a
+    connection: the .rrd goes to ``spec.path`` or ``run_dir/telemetry.rrd``. ``lazy``: the
+    feed only; ``.open()`` opens rerun later."""
+    from pathlib import Path
+
+    from bench._live import LiveTelemetry
+
+    path = Path(spec.path) if spec.path is not None else Path(run_dir) / "telemetry.rrd"
+    return LiveTelemetry(spec, path, name, pole_pairs=conn.units.pole_pairs,
+                         radius_m=conn.units.radius_m, say=_say, lazy=lazy)
+
+
+def close_live(live: Any, drive_time_s: float | None = None) -> dict[str, Any]:
+    """Flush and close live telemetry; print its one-line summary; its statistics."""
+    from bench._live import summary_line
+
+    stats = live.close()
+    _say("bench: " + summary_line(live.feed.stats, live.recording, drive_time_s))
+    stats["drive_time_s"] = drive_time_s
+    return stats
+
+
+@dataclass
+class LiveOutput:
+    """What :func:`run_live` produced."""
+
+    run_dir: Any
+    stats: dict[str, Any]
+    drive_time_s: float
+    fault: str | None = None
+    interrupted: bool = False
+
+
+def run_live(conn: Connection, spec: Any, speed_mps: float, duration_s: float = 0.0,
+             runs_root: str = "runs") -> LiveOutput:
+    """``bench live``: enable the drive in speed mode, stream the decoded wire telemetry
+    (TPDOs, serial telemetry; the simulated drive's truth beside) to rerun until
+    ``duration_s`` of drive time after the enable (0: until Ctrl-C); the drive is disabled
+    on exit.
+
+    The same code for hardware and the simulated drive: the simulated drive is paced to
+    the wall clock and feeds only its truth channels; everything else comes from the bus
+    and the serial link, decoded as on hardware. The .rrd goes to ``spec.path`` or a run
+    folder ``runs_root/<time>_live/telemetry.rrd``. A viewer (spawn, serve, connect) is
+    opened before the drive is enabled. A recording only (save, spawn without a display)
+    opens while the drive already runs (its ~0.6 s of imports and blueprint would otherwise
+    come before the first sample); the samples meanwhile wait in the feed's queue.
+    """
+    from pathlib import Path
+
+    from bench._drive import fault_text
+    from bench._live import recording_only
+
+    run_dir = None if spec.path is not None else run_dir_for("live", runs_root)
+    try:
+        live = open_live(spec, conn, run_dir, "live", lazy=recording_only(spec))
+    except BaseException:  # the viewer did not start: nothing moved, leave no empty folder
+        if run_dir is not None and Path(run_dir).is_dir() and not any(Path(run_dir).iterdir()):
+            Path(run_dir).rmdir()
+        raise
+    feed = live.feed
+    if conn.sim is not None:
+        conn.sim.record_decimation = max(conn.sim.record_decimation, 12)  # truth at 2 kHz
+        conn.sim.sink = feed.put_truth
+        conn.sim.set_realtime(True)
+    pdo = PdoRecorder(conn, None, live=feed)
+    tel = None
+    if conn.serial is not None:
+        f_pwm = float(conn.sim.sim.cfg.f_pwm_Hz) if conn.sim is not None else 24000.0
+        if conn.sim is None:
+            try:
+                f_pwm = float(conn.drive.read_raw(0x2050, 1))  # PWM = control rate
+            except Exception:  # noqa: BLE001 - keep the default
+                pass
+        tel = TelemetryReader(conn.serial, None, f_pwm, live=feed)
+        tel.start()
+    d = conn.drive
+    interrupted = False
+    fault = None
+    t0 = t_end = d.clock.now()
+    conn.start_heartbeat()
+    try:
+        d.enable("speed")
+        d.set_speed_mps(speed_mps)
+        t0 = d.clock.now()
+        live.open()
+        _say("bench: live; Ctrl-C to stop (the drive is disabled on exit)")
+        while duration_s <= 0 or d.clock.now() - t0 < duration_s:
+            now = d.clock.now()
+            d.clock.sleep_until(min(now + 0.1, t0 + duration_s) if duration_s > 0
+                                else now + 0.1)
+            if d.state == "FAULT":
+                fault = fault_text(d.fault_code())
+                _say(f"bench: drive FAULT {fault}")
+                break
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        t_end = d.clock.now()
+        try:
+            d.disable()
+            _say("bench: drive disabled")
+        except Exception as e:  # noqa: BLE001
+            _say(f"bench: SAFE STATE FAILED: {e}")
+        if conn.sim is not None:
+            conn.sim.sink = None
+        pdo.live = None
+        if tel is not None:
+            tel.live = None
+            tel.stop()
+        drive_time = max(0.0, t_end - t0)
+        stats = close_live(live, drive_time_s=drive_time)
+    out_dir = Path(run_dir) if run_dir is not None else Path(spec.path).parent
+    return LiveOutput(out_dir, stats, drive_time, fault, interrupted)
 
 
 # ---- a complete run ---------------------------------------------------------------------
@@ -446,6 +606,10 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
                  report: bool = True) -> RunOutput:
     """Run ``seq`` on an open connection: log, evaluate, report.
 
+    ``rerun`` (a :class:`bench._live.RerunSpec`) streams the decoded wire telemetry (and
+    the simulated drive's truth beside it) to rerun and records ``telemetry.rrd`` in the
+    run folder (or the spec's path); its statistics are in ``logstats["rerun"]``.
+
     KeyboardInterrupt is caught after the safe state, recorded as an aborted
     run and returned in ``interrupted`` (the report and JUnit are still
     written), so the caller can exit with 130.
@@ -455,17 +619,19 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
         conn.sim.wait_idle()
     logger = RunLogger(run_dir, conn.network, trace_format=trace_format)
     sent0 = (conn.sim.frames_to_bus + conn.sim.syncs_sent) if conn.sim is not None else 0
+    live = open_live(rerun, conn, run_dir, seq.name) if rerun is not None else None
+    feed = live.feed if live is not None else None
     sinks: list[Callable[..., None]] = [
         lambda t, v, u: logger.append(t, v, u, prefix="sim.")]
-    if rerun is not None:
-        sinks.append(rerun.log_sim_chunk)
+    if feed is not None:
+        sinks.append(feed.put_truth)
     if conn.sim is not None:
         conn.sim.sink = lambda t, v, u: [s(t, v, u) for s in sinks]
-    pdo = PdoRecorder(conn, logger)
+    pdo = PdoRecorder(conn, logger, live=feed)
     tel = None
     f_pwm = float(conn.sim.sim.cfg.f_pwm_Hz) if conn.sim is not None else 24000.0
     if conn.serial is not None:
-        tel = TelemetryReader(conn.serial, logger, f_pwm)
+        tel = TelemetryReader(conn.serial, logger, f_pwm, live=feed)
         tel.start()
     drive = conn.drive
     conn.start_heartbeat()
@@ -499,8 +665,6 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
         t = min(t, bar.total) if bar is not None else t
         if bar is not None and t - bar.n >= 0.01:
             bar.update(round(t - bar.n, 3))
-        if rerun is not None:
-            rerun.set_time_hint(t)
 
     try:
         f_pwm = float(drive.read_raw(0x2050, 1))  # PWM = control rate, from the drive
@@ -535,6 +699,11 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
         if tel is not None:
             tel.stop()
         logstats = logger.close(join_mf4=True)
+        if live is not None:
+            pdo.live = None
+            if tel is not None:
+                tel.live = None
+            logstats["rerun"] = close_live(live, drive_time_s=seq.duration_s)
         if tel is not None:
             logstats["telemetry"] = tel.stats
             logstats["lost_frames"]["serial_telemetry"] = tel.rx.frames_lost

@@ -45,6 +45,10 @@ def _conn_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("connection (hardware if found, else the simulated drive)")
     g.add_argument("--sim", action="store_true",
                    help="use the simulated drive (python-can virtual bus, same CANopen)")
+    g.add_argument("--sim-server", action="store_true",
+                   help="the simulated drive server of `bench sim start` (its own process, "
+                        "reached over python-can socketcand on 127.0.0.1 exactly as "
+                        "hardware; successive commands see the same drive)")
     g.add_argument("--require-hardware", action="store_true",
                    help="fail with exit 3 when no drive answers instead of falling back to "
                         "the simulated drive (for a rig's CI job)")
@@ -73,10 +77,21 @@ def _conn_args(p: argparse.ArgumentParser) -> None:
 
 
 def _rerun_arg(p: argparse.ArgumentParser) -> None:
+    """``--rerun MODE [ARGS]`` (parsed by :func:`bench._live.parse_rerun_spec` in
+    :func:`_make_rerun`). ``nargs="+"`` takes every token up to the next option, so
+    ``bench run --rerun spawn SEQ.yaml`` gives ``--rerun`` the file name: the sequence
+    files become optional for argparse and :func:`_make_rerun` hands the tokens the mode
+    does not take back to them (``cmd_run`` then requires at least one)."""
     p.add_argument("--rerun", nargs="+", metavar="MODE",
-                   help="live telemetry with rerun: 'spawn' (viewer; headless -> .rrd), "
-                        "'save PATH' (.rrd file), 'serve' (gRPC server, prints the URL), "
-                        "'connect URL'")
+                   help="live telemetry to rerun (also recorded as .rrd, in the run folder "
+                        "unless 'save PATH.rrd'): 'spawn' (native viewer; without a display: "
+                        "recording only), 'save [PATH.rrd]', 'serve [GRPC_PORT [WEB_PORT]]' "
+                        "(gRPC server and web viewer on 127.0.0.1, default 9876 9090; prints "
+                        "the viewer URL), 'connect [URL|PORT]' (a running viewer, default "
+                        "rerun+http://127.0.0.1:9876/proxy)")
+    for a in p._actions:  # the positional sequence files (bench run): see above
+        if a.dest == "sequences" and a.nargs == "+":
+            a.nargs = "*"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -151,9 +166,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="do not connect: the table from the object dictionary, no values")
     _conn_args(pl)
 
-    p = sub.add_parser("config", help="configuration backup / restore",
-                       description="Back the drive's rw parameters up to a JSON file, or "
-                                   "restore them from one.")
+    p = sub.add_parser("config", help="configuration backup / restore / save to the drive",
+                       description="Back the drive's rw parameters up to a JSON file, "
+                                   "restore them from one, or store the running "
+                                   "configuration in the drive's non-volatile memory.")
     csub = p.add_subparsers(dest="action", metavar="ACTION")
     cb = csub.add_parser("backup", help="write the configuration to FILE",
                          description="Write every rw parameter (with units) to FILE (JSON).")
@@ -165,7 +181,59 @@ def build_parser() -> argparse.ArgumentParser:
                          "unit and range); if anything is wrong nothing is written (exit 2).")
     cr.add_argument("file")
     _conn_args(cr)
+    cs = csub.add_parser("save", help="store the running configuration in the drive",
+                         description="Store the running configuration in the drive's "
+                         "non-volatile memory (CiA 301 0x1010:1 'save'): the drive loads it "
+                         "at power-up and NMT reset node. Refused while the power stage is "
+                         "enabled. The in-process --sim drive has none: use `bench sim start` "
+                         "and --sim-server.")
+    _conn_args(cs)
+    cd = csub.add_parser("defaults", help="erase the stored configuration",
+                         description="Erase the configuration stored in the drive (CiA 301 "
+                         "0x1011:1 'load'): the defaults apply from the next NMT reset node "
+                         "or power-up; the running values stay until then.")
+    _conn_args(cd)
 
+    p = sub.add_parser("sim", help="the simulated drive as its own process (server)",
+                       description="Start, stop or show the simulated drive server: one "
+                       "simulated drive paced to the wall clock in a background process, "
+                       "reached over python-can's socketcand interface on 127.0.0.1 "
+                       "(--sim-server, or --interface socketcand --channel can0 --host "
+                       "127.0.0.1 --port N). Successive commands see the same drive; its "
+                       "non-volatile memory (bench config save) survives stop/start. State, "
+                       "log and memory files: $BENCH_SIM_DIR, else "
+                       "$XDG_STATE_HOME/pmlsm-bench, else ~/.local/state/pmlsm-bench.",
+                       epilog="Exit codes: 0 ok (status: running), 2 bad option or already "
+                              "running, 3 not running or it failed to start.")
+    ssub = p.add_subparsers(dest="sim_cmd", metavar="ACTION", required=True)
+    st = ssub.add_parser("start", help="start the server in the background",
+                         description="Start the simulated drive server and wait until it "
+                         "listens.")
+    st.add_argument("--motor", default="paper_salient", help="motor file (default "
+                                                             "paper_salient)")
+    st.add_argument("--extractor", choices=("pseudo", "sogi", "sogi_adaptive"),
+                    default="sogi_adaptive", help="HF extractor (default sogi_adaptive)")
+    st.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    st.add_argument("--node-id", type=int, default=1, help="drive node id (default 1)")
+    st.add_argument("--port", type=int, default=0,
+                    help="TCP port on 127.0.0.1 (default 0: any free port)")
+    ssub.add_parser("stop", help="stop the server", description="Stop the simulated drive "
+                    "server (SIGTERM, SIGKILL after 5 s); a stale state file is removed.")
+    ssub.add_parser("status", help="is it running, where, which motor",
+                    description="Show the simulated drive server's state; exit 3 when none "
+                    "is running.")
+
+    p = sub.add_parser("shell", help="IPython with a connected drive (parameters by name, "
+                       "live set-points and telemetry, sequences step by step)",
+                       description="Open IPython with `drive` connected: drive.p.<TAB> "
+                       "completes every parameter (value with unit and range; assign to "
+                       "write), drive.enable()/speed()/force()/disable(), drive.live() streams "
+                       "telemetry to rerun while you type, drive.stepper(SEQ.yaml) runs a "
+                       "sequence one step per next(). A simulated drive follows the wall "
+                       "clock. Leaving the shell disables the drive.")
+    p.add_argument("--runs", default="runs", metavar="DIR",
+                   help="folder for live telemetry recordings (default runs/)")
+    _conn_args(p)
     p = sub.add_parser("faults", help="read (and reset) faults",
                        description="Show the latched fault, error register, fault history "
                                    "and EMCY messages; --reset sends a fault reset.")
@@ -193,8 +261,34 @@ def _sigterm_as_interrupt() -> None:
     signal.signal(signal.SIGTERM, handler)
 
 
+def _sim_server_state(args: argparse.Namespace) -> Any:
+    """The running simulated drive server for ``--sim-server`` (None without it)."""
+    if not getattr(args, "sim_server", False):
+        return None
+    for opt, val in (("--sim", args.sim), ("--interface", args.interface),
+                     ("--channel", args.channel), ("--bitrate", args.bitrate),
+                     ("--realtime", args.realtime)):
+        if val:
+            raise UserError(f"--sim-server and {opt} contradict each other (the server's "
+                            "drive is paced to the wall clock on its own bus); drop one")
+    from bench._simserver import SimServerError, check_running
+
+    try:
+        st = check_running()
+    except SimServerError as e:
+        raise UserError(str(e), EXIT_DRIVE) from None
+    if args.node_id != st.node_id:
+        raise UserError(f"--node-id {args.node_id}: the simulated drive server's drive is "
+                        f"node {st.node_id}")
+    return st
+
+
 def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
     from bench._session import connect
+
+    server = _sim_server_state(args)
+    if server is not None and not args.motor and (seq is None or seq.motor == server.motor):
+        args.motor = server.motor  # units from the motor the server simulates
 
     motor = args.motor or (seq.motor if seq is not None else "paper_salient")
     extractor = args.extractor or (seq.extractor if seq is not None else "sogi_adaptive")
@@ -212,13 +306,17 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
     if args.seed is not None and args.seed < 0:
         raise UserError(f"--seed {args.seed}: allowed range >= 0")
     where = f"--motor {motor}" if args.motor or seq is None else f"{seq.path}: motor"
+    if server is not None and motor != server.motor:
+        raise UserError(f"{where} is {motor!r}, the simulated drive server simulates "
+                        f"{server.motor!r}: restart it with `bench sim start --motor {motor}`")
     refusal = _check_motor(motor, extractor, where, sim_only=args.sim)
     try:
         conn = connect(sim=args.sim, interface=args.interface, channel=args.channel,
                        bitrate=args.bitrate, serial_url=args.serial, realtime=args.realtime,
                        motor=motor, extractor=extractor, seed=seed, x0=x0,
                        node_id=args.node_id, load_node=args.load_node,
-                       require_hardware=getattr(args, "require_hardware", False))
+                       require_hardware=getattr(args, "require_hardware", False),
+                       sim_server=server)
     except UserError:
         raise
     except Exception as e:  # noqa: BLE001 - the bus, the drive or the simulator library
@@ -263,24 +361,30 @@ def _check_motor(motor: str, extractor: str, where: str, sim_only: bool) -> str 
     return None
 
 
-def _make_rerun(spec: list[str] | None, default_dir: Path, pole_pairs: float) -> Any:
-    if not spec:
-        return None
-    from bench._live import RerunSink
+def _make_rerun(tokens: list[str] | None, args: argparse.Namespace | None = None) -> Any:
+    """``--rerun`` tokens -> a :class:`bench._live.RerunSpec` (None without ``--rerun``).
 
-    mode = spec[0]
-    target = spec[1] if len(spec) > 1 else None
-    if mode == "save" and target is None:
-        target = str(default_dir / "telemetry.rrd")
-    if mode == "spawn":
-        target = str(default_dir / "telemetry.rrd")
-    sink = RerunSink(mode, target, pole_pairs=pole_pairs)
-    if sink.url:
-        print(f"bench: rerun gRPC server at {sink.url} (rerun --connect {sink.url})",
-              file=sys.stderr)
-    if sink.path:
-        print(f"bench: rerun recording -> {sink.path}", file=sys.stderr)
-    return sink
+    Tokens the mode does not take go back to ``args.sequences`` (``bench run --rerun spawn
+    SEQ.yaml``); where there are none to take them (``bench live``) they are an error. A
+    bad specification is a :class:`UserError` (one line, exit 2), raised before anything
+    connects or moves.
+    """
+    if not tokens:
+        return None
+    from bench._live import RerunSpecError, check_spec, parse_rerun_spec
+
+    try:
+        spec, rest = parse_rerun_spec(list(tokens))
+        check_spec(spec)  # serve: both ports free on 127.0.0.1
+    except RerunSpecError as e:
+        raise UserError(str(e)) from None
+    if rest:
+        if args is not None and hasattr(args, "sequences"):
+            args.sequences = [*(args.sequences or []), *rest]
+        else:
+            raise UserError(f"--rerun {' '.join(tokens)}: unexpected {' '.join(rest)!r}; "
+                            "allowed: " + ", ".join(spec.FORMS))
+    return spec
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -305,10 +409,17 @@ def _print_issues(e: Any) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from bench._live import RerunStartError
     from bench._report import summary, write_junit
     from bench._sequence import SequenceError, load_sequence
     from bench._session import run_sequence
 
+    rerun = _make_rerun(args.rerun, args)  # may hand file names back to args.sequences
+    if not args.sequences:
+        raise UserError("run: SEQ.yaml: at least one sequence file is required")
+    if rerun is not None and rerun.path is not None and len(args.sequences) > 1:
+        raise UserError(f"--rerun save {rerun.path}: one file for {len(args.sequences)} "
+                        "sequences; give no PATH (each run folder gets its telemetry.rrd)")
     seqs = []
     bad = False
     for f in args.sequences:  # validate everything before anything moves
@@ -329,14 +440,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     rc = EXIT_OK
     for seq in seqs:
         conn = _connect(args, seq)
-        rerun = None
-        try:
-            rerun = _make_rerun(args.rerun, Path(args.runs), conn.units.pole_pairs)
+        try:  # rerun: telemetry.rrd in the run folder (or the 'save PATH.rrd' given)
             out = run_sequence(seq, conn, runs_root=args.runs, progress=not args.no_progress,
                                rerun=rerun, trace_format=args.trace_format)
+        except RerunStartError as e:  # before the sequence started: nothing moved
+            raise UserError(f"--rerun {rerun.mode}: {e}", EXIT_DRIVE) from None
         finally:
-            if rerun is not None:
-                rerun.close()
             conn.close()
         r = out.result
         results.append(r)
@@ -431,14 +540,19 @@ def _print_result(r: Any, out: Any, kind: dict[str, Any] | None = None) -> None:
 
 
 def cmd_live(args: argparse.Namespace) -> int:
+    """``bench live``: :func:`bench._session.run_live` (the same code for hardware and the
+    simulated drive). Exit 0, 2 bad input (before anything connects), 3 connection error or
+    drive fault, 130 interrupted (the drive was disabled first)."""
     import math
 
-    from bench._logging import run_dir_for
+    from bench._live import RerunStartError
+    from bench._session import run_live
 
     if not math.isfinite(args.speed):
         raise UserError(f"--speed {args.speed}: not a finite number")
     if not (math.isfinite(args.duration) and 0 <= args.duration <= 86400):
         raise UserError(f"--duration {args.duration}: allowed range [0, 86400] s")
+    spec = _make_rerun(args.rerun or ["spawn"])  # bad --rerun: exit 2 before connecting
     lim = None
     try:
         from bench._sequence import drive_envelope
@@ -452,40 +566,25 @@ def cmd_live(args: argparse.Namespace) -> int:
     if lim is not None and abs(args.speed) > lim:
         raise UserError(f"--speed {args.speed:g} {args.unit}: allowed range [{-lim:.4g}, "
                         f"{lim:.4g}] {args.unit} (the drive's speed limit)")
+    args.realtime = True  # live: the simulated drive is paced to the wall clock
     conn = _connect(args)
-    d = conn.drive
-    out_dir = run_dir_for("live", "runs")
-    rerun = _make_rerun(args.rerun or ["spawn"], out_dir, conn.units.pole_pairs)
-    if conn.sim is not None:
-        conn.sim.sink = rerun.log_sim_chunk
-        conn.sim.set_realtime(True)  # live viewing: the simulated drive follows the wall clock
-    interrupted = False
-    conn.start_heartbeat()
     try:
-        d.enable("speed")
-        d.set_speed_mps(conn.units.speed_to_mps(args.speed, args.unit))
-        t0 = d.clock.now()
-        print("bench: live; Ctrl-C to stop (the drive is disabled on exit)", file=sys.stderr)
-        while args.duration <= 0 or d.clock.now() - t0 < args.duration:
-            d.clock.sleep_until(d.clock.now() + 0.1)
-            if d.state == "FAULT":
-                from bench._drive import fault_text
-
-                print(f"bench: drive FAULT {fault_text(d.fault_code())}", file=sys.stderr)
-                break
-    except KeyboardInterrupt:
-        interrupted = True
+        out = run_live(conn, spec, conn.units.speed_to_mps(args.speed, args.unit),
+                       duration_s=args.duration)
+    except RerunStartError as e:  # the viewer/server did not start; the drive is disabled
+        raise UserError(f"--rerun {spec.mode}: {e}", EXIT_DRIVE) from None
     finally:
-        try:
-            d.disable()
-            print("bench: drive disabled", file=sys.stderr)
-        except Exception as e:  # noqa: BLE001
-            print(f"bench: SAFE STATE FAILED: {e}", file=sys.stderr)
-        if conn.sim is not None:
-            conn.sim.sink = None
-        rerun.close()
         conn.close()
-    return EXIT_INTERRUPT if interrupted else EXIT_OK
+    rec = out.stats.get("recording")
+    if rec:
+        print(f"  recording: {rec['path']} ({rec['bytes'] / 1e6:.2f} MB, drive time "
+              f"{out.drive_time_s:.2f} s)")
+    if out.interrupted:
+        print("bench: interrupted; drive disabled", file=sys.stderr)
+        return EXIT_INTERRUPT
+    if out.fault is not None:
+        return EXIT_DRIVE
+    return EXIT_OK
 
 
 def cmd_info(args: argparse.Namespace) -> int:
@@ -556,8 +655,9 @@ def cmd_param(args: argparse.Namespace) -> int:
 def cmd_config(args: argparse.Namespace) -> int:
     from bench._drive import ParamError, ParamInputError
 
-    if args.action not in ("backup", "restore"):
-        raise UserError("config: choose backup or restore (see bench config --help)")
+    if args.action not in ("backup", "restore", "save", "defaults"):
+        raise UserError("config: choose backup, restore, save or defaults (see bench config "
+                        "--help)")
     doc: Any = None
     if args.action == "restore":  # read and parse the file before connecting
         try:
@@ -573,6 +673,20 @@ def cmd_config(args: argparse.Namespace) -> int:
     conn = _connect(args)
     try:
         d = conn.drive
+        if args.action in ("save", "defaults") and conn.is_sim:
+            raise UserError("the in-process simulated drive (--sim) has no non-volatile "
+                            "memory: start the simulated drive server (`bench sim start`) "
+                            "and use --sim-server", EXIT_DRIVE)
+        if args.action == "save":
+            d.save_config()
+            print("bench: configuration stored in the drive's non-volatile memory (loaded at "
+                  "power-up and NMT reset node)")
+            return EXIT_OK
+        if args.action == "defaults":
+            d.erase_saved_config()
+            print("bench: stored configuration erased; the defaults apply from the next NMT "
+                  "reset node or power-up")
+            return EXIT_OK
         if args.action == "backup":
             doc = {"bench_version": __version__, "drive": d.identity(),
                    "parameters": d.backup()}
@@ -594,6 +708,61 @@ def cmd_config(args: argparse.Namespace) -> int:
         raise UserError(f"{args.file}: {e.strerror}", EXIT_USAGE) from None
     finally:
         conn.close()
+
+
+def cmd_shell(args: argparse.Namespace) -> int:
+    try:
+        import IPython  # noqa: F401 - checked before connecting
+    except ImportError:
+        raise UserError("bench shell needs IPython: python3 -m pip install ipython") from None
+    from bench import _shell
+
+    if args.sim:
+        args.realtime = True  # the simulated drive runs while the user types
+    conn = _connect(args)
+    conn.start_heartbeat()  # a shell that dies stops the drive (consumer heartbeat)
+    return _shell.start(conn, args.runs)
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    from bench import _simserver as S
+
+    if args.sim_cmd == "status":
+        try:
+            st = S.check_running()
+        except S.SimServerError as e:
+            stale = S.read_state()
+            if stale is not None and not S.pid_is_server(stale.pid):
+                S.stop()  # removes the stale state file
+            raise UserError(str(e), EXIT_DRIVE) from None
+        print(S.describe(st))
+        return EXIT_OK
+    if args.sim_cmd == "stop":
+        how, pid = S.stop()
+        print({"none": "bench: no simulated drive server running",
+               "stale": f"bench: removed a stale state file (pid {pid} was not running)",
+               "stopped": f"bench: simulated drive server stopped (pid {pid})",
+               "killed": f"bench: simulated drive server killed (pid {pid}: no exit within "
+                         "5 s of SIGTERM)"}[how])
+        return EXIT_OK
+    if not 1 <= args.node_id <= 127:
+        raise UserError(f"--node-id {args.node_id}: allowed range [1, 127]")
+    if not 0 <= args.port <= 65535:
+        raise UserError(f"--port {args.port}: allowed range [0, 65535] (0: any free port)")
+    if args.seed < 0:
+        raise UserError(f"--seed {args.seed}: allowed range >= 0")
+    _check_motor(args.motor, args.extractor, f"--motor {args.motor}", sim_only=True)
+    st = S.read_state()
+    if st is not None and S.pid_is_server(st.pid):
+        raise UserError(f"a simulated drive server is already running (pid {st.pid}, "
+                        f"{st.address}, motor {st.motor}); `bench sim stop` first")
+    try:
+        st = S.start(args.motor, args.extractor, args.seed, args.node_id, args.port,
+                     say=lambda m: print(m, file=sys.stderr))
+    except S.SimServerError as e:
+        raise UserError(str(e), EXIT_DRIVE) from None
+    print(S.describe(st))
+    return EXIT_OK
 
 
 def cmd_faults(args: argparse.Namespace) -> int:
@@ -634,13 +803,16 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     if not args.verbose:
         logging.getLogger("canopen").setLevel(logging.ERROR)
+        # python-can's socketcand client warns for every frame split across two TCP reads
+        logging.getLogger("can.interfaces.socketcand").setLevel(logging.ERROR)
     if args.cmd is None:
         ap.print_help()
         return EXIT_USAGE
     _sigterm_as_interrupt()
     handlers = {"run": cmd_run, "validate": cmd_validate, "live": cmd_live, "info": cmd_info,
                 "param": cmd_param, "config": cmd_config, "faults": cmd_faults,
-                "campaign": _campaign_cmd, "report": cmd_report}
+                "campaign": _campaign_cmd, "report": cmd_report, "sim": cmd_sim,
+                "shell": cmd_shell}
     try:
         return handlers[args.cmd](args)
     except KeyboardInterrupt:

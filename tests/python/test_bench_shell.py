@@ -1,0 +1,103 @@
+"""`bench shell`: the session's `drive` object (parameters by name with units, tab
+completion, set-points, a sequence one step at a time) and the command itself with a piped
+stdin."""
+
+from __future__ import annotations
+
+import inspect
+import os
+import rlcompleter
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bench._drive import ParamError
+from bench._sequence import load_sequence
+from bench._session import connect
+from bench._shell import ident, namespace
+
+REPO = Path(__file__).resolve().parents[2]
+SEQ = REPO / "sequences" / "paper_load_step.yaml"
+
+
+@pytest.fixture
+def ns():
+    conn = connect(sim=True, realtime=False, say=lambda _m: None)
+    names = namespace(conn)
+    yield names
+    names["drive"].close()
+
+
+def test_parameter_names_complete_and_show_units(ns):
+    drive = ns["drive"]
+    comp = rlcompleter.Completer(ns)
+    found = {comp.complete("drive.p.u_in", i) for i in range(5)} - {None}
+    assert "drive.p.u_inj_V" in found
+    assert "Target_velocity" in dir(drive.p)  # objects without a fw_config name too
+    v = drive.p.u_inj_V
+    assert float(v) == pytest.approx(50.0)  # the motor file's injection amplitude
+    assert repr(v).startswith("50.0 V") and "0x2010:1" in repr(v)
+    doc = inspect.getdoc(v)
+    assert "u_inj_V (0x2010:1" in doc and "range [" in doc
+    assert ident("Injection.Amplitude") == "Injection_Amplitude"
+    assert ident("Target velocity") == "Target_velocity"
+    assert ident("0x2010:1").startswith("p_")
+
+
+def test_assignment_writes_the_drive_and_is_checked(ns):
+    drive, conn = ns["drive"], ns["conn"]
+    drive.p.u_inj_V = "30 V"
+    assert conn.drive.read_raw(0x2010, 1) == pytest.approx(30.0)
+    drive.p.u_inj_V = 35
+    assert conn.drive.read_raw(0x2010, 1) == pytest.approx(35.0)
+    with pytest.raises(ParamError, match=r"allowed range \[1\.0, 400\.0\]"):
+        drive.p.u_inj_V = 5000
+    with pytest.raises(ParamError, match="unit"):
+        drive.p.u_inj_V = "30 A"
+    with pytest.raises(ParamError, match="did you mean: .*u_inj_V"):
+        _ = drive.p.u_inj
+    assert conn.drive.read_raw(0x2010, 1) == pytest.approx(35.0)  # refused: unchanged
+
+
+def test_sequence_one_step_at_a_time(ns):
+    drive = ns["drive"]
+    seq = load_sequence(SEQ)
+    steps = drive.stepper(SEQ)
+    first = next(steps)
+    assert first.index == 0 and first.kind == seq.steps[0].kind
+    assert drive.state == "OPERATION ENABLED" or first.kind != "enable"
+    done = [first, *steps]
+    assert [s.index for s in done] == list(range(len(seq.steps)))
+    r = drive.last_result
+    assert r is not None and not r.aborted and r.expectations
+    assert drive.state == "SWITCH ON DISABLED"  # safe state at the end
+
+
+def test_closing_a_stepper_is_the_safe_state(ns):
+    drive = ns["drive"]
+    steps = drive.stepper(SEQ)
+    next(steps)  # enable
+    next(steps)
+    assert drive.state == "OPERATION ENABLED"
+    steps.close()
+    assert drive.state == "SWITCH ON DISABLED"
+    assert drive.last_result.aborted
+
+
+def test_bench_shell_with_piped_input(tmp_path):
+    script = ("print('U=', float(drive.p.u_inj_V))\n"
+              "drive.p.u_inj_V = 25\n"
+              "print('U2=', float(drive.p.u_inj_V))\n"
+              "drive.enable(); drive.speed(0.05)\n"
+              "print('STATE=', drive.state)\n"
+              "exit\n")
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    p = subprocess.run([sys.executable, "-m", "bench", "shell", "--sim", "--runs",
+                        str(tmp_path)], input=script, capture_output=True, text=True,
+                       cwd=REPO, env=env, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert "U= 50.0" in p.stdout and "U2= 25.0" in p.stdout
+    assert "STATE= OPERATION ENABLED" in p.stdout
+    assert "Traceback" not in p.stdout + p.stderr

@@ -1,0 +1,223 @@
+"""The simulated drive server (`bench sim start/stop/status`, --sim-server): its own
+process behind python-can's socketcand interface, the same CANopen code path as
+hardware, a non-volatile memory that survives stop/start (CiA 301 0x1010/0x1011), and
+one-line errors with exit 3 when it is gone.
+
+The other side of the wire is the canopen library over python-can's own socketcand
+client, not the bench's code.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+EDS = REPO / "protocols" / "generated" / "pmlsm_drive.eds"
+SAVE, LOAD = 0x65766173, 0x64616F6C
+
+
+def bench(*args: str, env: dict[str, str]) -> tuple[int, str, str]:
+    p = subprocess.run([sys.executable, "-m", "bench", *args], cwd=REPO, env=env,
+                       capture_output=True, text=True, timeout=120)
+    return p.returncode, p.stdout, p.stderr
+
+
+@pytest.fixture
+def env(tmp_path: Path) -> Iterator[dict[str, str]]:
+    e = dict(os.environ)
+    e["BENCH_SIM_DIR"] = str(tmp_path / "simstate")
+    e["PYTHONPATH"] = str(REPO) + os.pathsep + e.get("PYTHONPATH", "")
+    yield e
+    bench("sim", "stop", env=e)
+
+
+def _state(env: dict[str, str]) -> dict:
+    import json
+
+    return json.loads((Path(env["BENCH_SIM_DIR"]) / "simserver.json").read_text())
+
+
+def _node(env: dict[str, str]):  # noqa: ANN202 - canopen objects
+    import can
+    import canopen
+
+    st = _state(env)
+    bus = can.Bus(interface="socketcand", channel=st["channel"], host=st["host"],
+                  port=st["port"])
+    net = canopen.Network(bus)
+    net.connect()
+    node = canopen.RemoteNode(st["node_id"], str(EDS))
+    net.add_node(node)
+    node.sdo.RESPONSE_TIMEOUT = 1.0
+    return net, node
+
+
+def _no_traceback(*texts: str) -> None:
+    for t in texts:
+        assert "Traceback" not in t, t
+
+
+def test_successive_commands_see_the_same_drive_and_save_survives_restart(env):
+    rc, out, err = bench("sim", "status", env=env)
+    assert rc == 3 and "no simulated drive server running" in err
+    rc, out, err = bench("sim", "start", env=env)
+    assert rc == 0, err
+    assert "socketcand: 127.0.0.1:" in out and "nothing stored: defaults" in out
+    st = _state(env)
+    assert st["host"] == "127.0.0.1"  # never another interface
+    rc, out, err = bench("param", "set", "u_inj_V", "25", "--sim-server", env=env)
+    assert rc == 0, err
+    assert "SIMULATED drive server" in err  # never presented as hardware
+    rc, out, _ = bench("param", "get", "u_inj_V", "--sim-server", env=env)
+    assert rc == 0 and "= 25.0 V" in out, out  # a second process, the same drive
+    rc, out, err = bench("config", "save", "--sim-server", env=env)
+    assert rc == 0, err
+    assert bench("sim", "stop", env=env)[0] == 0
+    assert not (Path(env["BENCH_SIM_DIR"]) / "simserver.json").exists()
+    rc, out, err = bench("sim", "start", env=env)
+    assert rc == 0 and "stored parameters loaded" in out, out + err
+    rc, out, _ = bench("param", "get", "u_inj_V", "--sim-server", env=env)
+    assert "= 25.0 V" in out, out
+    # erase: the running value stays, the defaults come back with the next start
+    assert bench("config", "defaults", "--sim-server", env=env)[0] == 0
+    assert "= 25.0 V" in bench("param", "get", "u_inj_V", "--sim-server", env=env)[1]
+    bench("sim", "stop", env=env)
+    rc, out, _ = bench("sim", "start", env=env)
+    assert "nothing stored: defaults" in out
+    assert "= 50.0 V" in bench("param", "get", "u_inj_V", "--sim-server", env=env)[1]
+
+
+def test_store_commands_from_a_canopen_master(env):
+    """CiA 301 0x1010/0x1011 from the canopen library: bit 0 says 'saves on command', a
+    wrong signature is refused with 0x08000020, 'save' with the power stage on with
+    0x08000022; NMT reset node boots from the stored block."""
+    from canopen.sdo.exceptions import SdoAbortedError
+
+    assert bench("sim", "start", env=env)[0] == 0
+    net, node = _node(env)
+    try:
+        assert node.sdo[0x1010][1].raw == 1 and node.sdo[0x1011][1].raw == 1
+        with pytest.raises(SdoAbortedError) as e:
+            node.sdo[0x1010][1].raw = 0x12345678
+        assert e.value.code == 0x08000020
+        with pytest.raises(SdoAbortedError) as e:
+            node.sdo[0x1011][1].raw = SAVE  # 'save' is not the restore signature
+        assert e.value.code == 0x08000020
+        node.sdo[0x2010][1].raw = 30.0
+        node.sdo[0x6060].raw = 9  # speed mode; enable: shutdown, switch on, enable
+        for cw in (0x06, 0x07, 0x0F):
+            node.sdo[0x6040].raw = cw
+            time.sleep(0.05)
+        deadline = time.monotonic() + 3.0
+        while node.sdo[0x6041].raw & 0x6F != 0x27 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert node.sdo[0x6041].raw & 0x6F == 0x27  # OPERATION ENABLED
+        with pytest.raises(SdoAbortedError) as e:
+            node.sdo[0x1010][1].raw = SAVE
+        assert e.value.code == 0x08000022
+        node.sdo[0x6040].raw = 0x00
+        time.sleep(0.05)
+        node.sdo[0x1010][1].raw = SAVE
+        node.sdo[0x2010][1].raw = 40.0
+        node.nmt.state = "RESET"  # reset node: power-up behaviour
+        time.sleep(0.5)
+        assert node.sdo[0x2010][1].raw == pytest.approx(30.0)
+        node.sdo[0x1011][1].raw = LOAD
+        node.nmt.state = "RESET"
+        time.sleep(0.5)
+        assert node.sdo[0x2010][1].raw == pytest.approx(50.0)
+    finally:
+        net.disconnect()
+
+
+def test_a_killed_server_is_a_one_line_error_with_exit_3(env):
+    assert bench("sim", "start", env=env)[0] == 0
+    pid = _state(env)["pid"]
+    os.kill(pid, signal.SIGKILL)
+    time.sleep(0.3)
+    rc, out, err = bench("param", "get", "u_inj_V", "--sim-server", env=env)
+    _no_traceback(out, err)
+    assert rc == 3 and f"pid {pid}) is not running" in err, err
+    assert len(err.strip().splitlines()) == 1
+    rc, _, err = bench("sim", "status", env=env)
+    assert rc == 3 and "stale" in err
+    rc, _, err = bench("sim", "status", env=env)  # the stale file was removed
+    assert rc == 3 and "no simulated drive server running" in err
+    rc, out, err = bench("sim", "start", env=env)
+    assert rc == 0, err
+
+
+def test_bad_options_and_no_nvm_in_process(env):
+    for args, needle in ((("sim", "start", "--port", "70000"), "--port 70000: allowed range"),
+                         (("sim", "start", "--node-id", "0"), "--node-id 0: allowed range"),
+                         (("sim", "start", "--motor", "no_such_motor"), "no_such_motor"),
+                         (("param", "get", "u_inj_V", "--sim-server", "--sim"),
+                          "contradict")):
+        rc, out, err = bench(*args, env=env)
+        _no_traceback(out, err)
+        assert rc == 2 and needle in err, (args, err)
+    rc, out, err = bench("config", "save", "--sim", env=env)
+    _no_traceback(out, err)
+    assert rc == 3 and "no non-volatile memory" in err and "bench sim start" in err
+
+
+def _recv_until(s: socket.socket, needle: bytes, timeout_s: float = 2.0) -> bytes:
+    s.settimeout(0.2)
+    buf = b""
+    deadline = time.monotonic() + timeout_s
+    while needle not in buf and time.monotonic() < deadline:
+        try:
+            chunk = s.recv(65536)
+        except TimeoutError:
+            continue
+        if not chunk:
+            break
+        buf += chunk
+    return buf
+
+
+def test_socketcand_server_survives_garbage_and_bridges_clients(env):
+    """Malformed commands get '< error ... >', random bytes never stop the server, a
+    frame sent by one client reaches the other (as on a bus) and the drive answers it."""
+    assert bench("sim", "start", env=env)[0] == 0
+    st = _state(env)
+    addr = (st["host"], st["port"])
+    a, b = socket.create_connection(addr), socket.create_connection(addr)
+    try:
+        for s in (a, b):
+            assert _recv_until(s, b"< hi >").startswith(b"< hi >")
+            s.sendall(b"< open can0 >")
+            assert b"< ok >" in _recv_until(s, b"< ok >")
+            s.sendall(b"< rawmode >")
+            assert b"< ok >" in _recv_until(s, b"< ok >")
+        a.sendall(b"< send 601 9 40 00 10 00 00 00 00 00 00 >")  # dlc 9
+        assert b"< error" in _recv_until(a, b"< error")
+        a.sendall(b"< send 7FF0 1 00 >")  # an 11-bit id too large, not extended
+        a.sendall(b"< open can9 >")
+        assert b"could not open bus" in _recv_until(a, b"could not open bus")
+        rng = random.Random(7)
+        for _ in range(50):  # random garbage on a throw-away connection
+            with socket.create_connection(addr) as g:
+                g.sendall(bytes(rng.randrange(256) for _ in range(rng.randrange(1, 300))))
+        # SDO upload of 0x1000 from client a: client b sees the request and the answer
+        a.sendall(b"< send 601 8 40 00 10 00 00 00 00 00 >")
+        seen = _recv_until(b, b"< frame 581 ")
+        assert b"< frame 601 " in seen and b"< frame 581 " in seen
+        ans = seen[seen.index(b"< frame 581 "):].split(b">")[0].split()
+        data = bytes.fromhex(ans[-1].decode())
+        assert data[0] == 0x43 and int.from_bytes(data[4:8], "little") == 0x00020192
+    finally:
+        a.close()
+        b.close()
+    rc, out, _ = bench("sim", "status", env=env)
+    assert rc == 0 and "running" in out
