@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from sim_libs import needs_sim
 
 ROOT = Path(__file__).resolve().parents[2]
 HEAD = "name: x\nmotor: paper_salient\nextractor: sogi\nseed: 0\n"
@@ -18,21 +19,6 @@ GOOD_MOTOR = (ROOT / "sim_fallback/motors/paper_salient.toml").read_text()
 BANNERS = ("bench: using the SIMULATED drive", "bench: no drive hardware found",
            "bench: FALLING BACK TO THE SIMULATED DRIVE")
 
-
-def _sim_available() -> bool:
-    try:
-        from sim_fallback import _lib
-
-        _lib.lib()
-        from protocols import _clib
-
-        _clib.load_app()
-        return True
-    except Exception:  # noqa: BLE001
-        return False
-
-
-needs_sim = pytest.mark.skipif(not _sim_available(), reason="simulator libraries not built")
 
 
 def bench(*args: str, cwd: Path) -> tuple[int, list[str]]:

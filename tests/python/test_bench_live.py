@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from sim_libs import needs_sim
 
 from bench._live import (
     DEFAULT_GRPC_PORT,
@@ -236,20 +237,6 @@ def test_feed_rejects_bad_parameters() -> None:
 # ---- the command line, on the simulated drive ---------------------------------------------
 
 
-def _sim_available() -> bool:
-    try:
-        from sim_fallback import _lib
-
-        _lib.lib()
-        from protocols import _clib
-
-        _clib.load_app()
-        return True
-    except Exception:  # noqa: BLE001
-        return False
-
-
-needs_sim = pytest.mark.skipif(not _sim_available(), reason="simulator libraries not built")
 BANNERS = ("bench: using the SIMULATED drive", "bench: no drive hardware found",
            "bench: FALLING BACK TO THE SIMULATED DRIVE")
 

@@ -15,24 +15,12 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tools"))
 
 from check_web_viewer import find_chromium, plot_pixels  # noqa: E402
-
-
-def _sim_available() -> bool:
-    try:
-        from sim_fallback import _lib
-
-        _lib.lib()
-        from protocols import _clib
-
-        _clib.load_app()
-        return True
-    except Exception:  # noqa: BLE001
-        return False
+from sim_libs import needs_sim  # noqa: E402
 
 
 @pytest.mark.skipif(find_chromium() is None,
                     reason="no Chromium (apt-get install chromium, or set CHROMIUM=PATH)")
-@pytest.mark.skipif(not _sim_available(), reason="simulator libraries not built")
+@needs_sim
 def test_web_viewer_shows_plots_with_data(tmp_path: Path) -> None:
     png = tmp_path / "web_viewer.png"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
