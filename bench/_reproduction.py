@@ -422,11 +422,16 @@ def _plt() -> Any:
     return plt
 
 
-def _layout(fig: Any) -> None:
-    """Fixed margins (tight_layout costs seconds per figure on a busy machine)."""
+def _save(fig: Any, path: Path, dpi: int) -> None:
+    """Fixed margins (tight_layout costs seconds per figure on a busy machine), write the
+    PNG, free the figure."""
+    import matplotlib.pyplot as plt
+
     h = fig.get_figheight()
     fig.subplots_adjust(left=0.08, right=0.985, bottom=min(0.2, 0.5 / h), top=1.0 - 0.45 / h,
                         wspace=0.28, hspace=0.35)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
 
 
 def _wrap_nan(t: np.ndarray, th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -472,9 +477,7 @@ def fig_scenario(rep: Reproduction, scenario: str, path: Path, dpi: int) -> None
     ax[3, 0].set_ylabel("speed error n̂−n (r/min)")
     ax[0, 0].legend(loc="upper right", fontsize=7)
     ax[2, 0].legend(loc="lower left", fontsize=7)
-    _layout(fig)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    _save(fig, path, dpi)
 
 
 def fig_startup_seeds(rep: Reproduction, path: Path, dpi: int) -> None:
@@ -492,9 +495,7 @@ def fig_startup_seeds(rep: Reproduction, path: Path, dpi: int) -> None:
             ax[j].axvspan(0.0, t_run.mean, color="0.93", zorder=0)
     ax[0].set_ylabel("position error (el. rad)")
     ax[0].set_ylim(-1.0, 1.0)
-    _layout(fig)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    _save(fig, path, dpi)
 
 
 def _sweep_axes(ax: Any, pts: list[SweepPoint], what: str, label: str, scale: float = 1.0,
@@ -533,10 +534,8 @@ def fig_sweeps(rep: Reproduction, outdir: Path, dpi: int) -> list[str]:
     ax[0, 0].legend(fontsize=7)
     fig.suptitle("estimator parameter mismatch, load step (steady: last 0.3 s; transient: "
                  "0.5-0.7 s; mean ± sd over seeds)")
-    _layout(fig)
     names.append("sweep_mismatch.png")
-    fig.savefig(outdir / names[-1], dpi=dpi)
-    plt.close(fig)
+    _save(fig, outdir / names[-1], dpi)
     # noise
     fig, ax = plt.subplots(1, 3, figsize=(11, 3))
     _sweep_axes(ax[0], sweeps["noise"], "pos_rms", "steady RMS error (el. rad)")
@@ -546,10 +545,8 @@ def fig_sweeps(rep: Reproduction, outdir: Path, dpi: int) -> list[str]:
         a.set_xlabel("current-sensor noise σ (ADC counts, 1 count = 12.2 mA)")
     ax[0].legend(fontsize=7)
     fig.suptitle("current-sensor noise (load step, last 0.3 s)")
-    _layout(fig)
     names.append("sweep_noise.png")
-    fig.savefig(outdir / names[-1], dpi=dpi)
-    plt.close(fig)
+    _save(fig, outdir / names[-1], dpi)
     # injection amplitude and frequency
     fig, ax = plt.subplots(2, 3, figsize=(11, 5.5))
     for r, key in enumerate(("u_inj", "f_inj")):
@@ -561,10 +558,8 @@ def fig_sweeps(rep: Reproduction, outdir: Path, dpi: int) -> list[str]:
     ax[0, 0].legend(fontsize=7)
     fig.suptitle("injection amplitude (f = 3 kHz) and frequency (u = 50 V), load step, "
                  "last 0.3 s")
-    _layout(fig)
     names.append("sweep_injection.png")
-    fig.savefig(outdir / names[-1], dpi=dpi)
-    plt.close(fig)
+    _save(fig, outdir / names[-1], dpi)
     # tuning: SOGI k and PLL bandwidth
     fig, ax = plt.subplots(1, 4, figsize=(12, 3))
     _sweep_axes(ax[0], sweeps["sogi_k"], "pos_rms", "steady RMS error (el. rad)")
@@ -579,10 +574,8 @@ def fig_sweeps(rep: Reproduction, outdir: Path, dpi: int) -> list[str]:
     ax[1].legend(fontsize=7)
     fig.suptitle("SOGI k (fixed-k SOGI), PLL/observer bandwidth and saliency (adaptive SOGI), "
                  "load step, last 0.3 s")
-    _layout(fig)
     names.append("sweep_tuning.png")
-    fig.savefig(outdir / names[-1], dpi=dpi)
-    plt.close(fig)
+    _save(fig, outdir / names[-1], dpi)
     return names
 
 
@@ -602,9 +595,7 @@ def fig_table1(rows: list[dict[str, Any]], path: Path, dpi: int) -> bool:
         a.set_xlabel("t (s)")
     fig.suptitle("paper_table1 (L_d = L_q) with the saliency and polarity checks defeated: "
                  "no tracking")
-    _layout(fig)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    _save(fig, path, dpi)
     return True
 
 
