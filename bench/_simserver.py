@@ -68,6 +68,10 @@ class SimServerError(RuntimeError):
     """No usable simulated drive server (none, stale, not answering); exit 3."""
 
 
+class AlreadyRunning(SimServerError):
+    """``start`` while a server runs: the user's mistake (exit 2), nothing started."""
+
+
 def state_dir() -> Path:
     """Folder of the state file, the log and the NVM files (created on demand)."""
     env = os.environ.get("BENCH_SIM_DIR")
@@ -483,14 +487,16 @@ def start(motor: str, extractor: str, seed: int, node_id: int, port: int,
 
     Raises
     ------
+    AlreadyRunning
+        A server is running already.
     SimServerError
-        Already running, or the process did not come up (its log's last lines).
+        The process did not come up (its log's last lines).
     """
     folder = state_dir()
     st = read_state(folder)
     if st is not None:
         if pid_is_server(st.pid):
-            raise SimServerError(f"a simulated drive server is already running (pid {st.pid}, "
+            raise AlreadyRunning(f"a simulated drive server is already running (pid {st.pid}, "
                                  f"{st.address}, motor {st.motor}); `bench sim stop` first")
         say(f"bench: removed the stale state file {folder / STATE_FILE} (pid {st.pid} "
             "was not running)")

@@ -752,13 +752,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise UserError(f"--seed {args.seed}: allowed range >= 0")
     _check_motor(args.motor, args.extractor, f"--motor {args.motor}", sim_only=True)
-    st = S.read_state()
-    if st is not None and S.pid_is_server(st.pid):
-        raise UserError(f"a simulated drive server is already running (pid {st.pid}, "
-                        f"{st.address}, motor {st.motor}); `bench sim stop` first")
     try:
         st = S.start(args.motor, args.extractor, args.seed, args.node_id, args.port,
                      say=lambda m: print(m, file=sys.stderr))
+    except S.AlreadyRunning as e:
+        raise UserError(str(e)) from None
     except S.SimServerError as e:
         raise UserError(str(e), EXIT_DRIVE) from None
     print(S.describe(st))

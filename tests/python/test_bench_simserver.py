@@ -75,6 +75,8 @@ def test_successive_commands_see_the_same_drive_and_save_survives_restart(env):
     assert "socketcand: 127.0.0.1:" in out and "nothing stored: defaults" in out
     st = _state(env)
     assert st["host"] == "127.0.0.1"  # never another interface
+    rc, out, err = bench("sim", "start", env=env)
+    assert rc == 2 and "already running" in err and _state(env)["pid"] == st["pid"]
     rc, out, err = bench("param", "set", "u_inj_V", "25", "--sim-server", env=env)
     assert rc == 0, err
     assert "SIMULATED drive server" in err  # never presented as hardware

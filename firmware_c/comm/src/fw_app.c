@@ -376,12 +376,13 @@ static fw_status_t fw_app_start_core(fw_app_t *app, const fw_config_t *cfg) {
 }
 
 /** Boot from the stored block: configuration and objects (comm_only: the
- *  communication objects alone, for NMT reset communication). */
-static void fw_app_nvm_boot(fw_app_t *app, bool comm_only) {
+ *  communication objects alone, for NMT reset communication). Returns true
+ *  when it started the core with the stored configuration. */
+static bool fw_app_nvm_boot(fw_app_t *app, bool comm_only) {
   if (app->nvm.read == NULL) {
     app->nvm_supported = 0u;
     app->nvm_state = (uint8_t)FW_APP_NVM_NONE;
-    return;
+    return false;
   }
   size_t len = 0u;
   fw_nvm_status_t st = app->nvm.read(app->nvm.port, app->nvm_buf, sizeof app->nvm_buf, &len);
@@ -405,6 +406,7 @@ static void fw_app_nvm_boot(fw_app_t *app, bool comm_only) {
   if (state == FW_APP_NVM_LOADED) {
     fw_app_nvm_apply_records(app, len, records, comm_only);
   }
+  return !comm_only && state == FW_APP_NVM_LOADED;
 }
 
 fw_app_nvm_state_t fw_app_attach_nvm(fw_app_t *app, const fw_app_nvm_t *nvm) {
@@ -419,7 +421,7 @@ fw_app_nvm_state_t fw_app_attach_nvm(fw_app_t *app, const fw_app_nvm_t *nvm) {
   } else {
     app->nvm = *nvm;
   }
-  fw_app_nvm_boot(app, false);
+  (void)fw_app_nvm_boot(app, false);
   fw_app_sync_static_od(app);
   co_node_set_u32(&app->node, CO_OD_6041_00, fw_statusword(&app->ctrl));
   return (fw_app_nvm_state_t)app->nvm_state;
@@ -563,8 +565,9 @@ static void fw_app_power_off(fw_app_t *app) {
  *  configuration given to fw_app_init, replaced by the stored block when
  *  one is attached and valid (fw_app_attach_nvm). */
 static void fw_app_reboot(fw_app_t *app) {
-  (void)fw_app_start_core(app, &app->boot_cfg);
-  fw_app_nvm_boot(app, false);
+  if (!fw_app_nvm_boot(app, false)) { /* the core starts once, on one configuration */
+    (void)fw_app_start_core(app, &app->boot_cfg);
+  }
   app->cw_pending = 0u;
   app->mode_applied = -1;
   app->last_fault = 0u; /* a restarted node has nothing to reset: no EMCY */
@@ -598,7 +601,7 @@ static void fw_app_on_event(void *ctx, co_event_t ev, uint32_t arg) {
       fw_app_reboot(app);
     } else {
       fw_app_power_off(app);
-      fw_app_nvm_boot(app, true); /* the stored communication objects are their power-on values */
+      (void)fw_app_nvm_boot(app, true); /* the stored communication objects are their power-on values */
     }
     /* the OD went back to its defaults: show the core's real state again */
     fw_app_sync_static_od(app);
