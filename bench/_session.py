@@ -109,6 +109,14 @@ class Connection:
             return msg_ts - self.sim.epoch
         return msg_ts - (time.time() - time.monotonic())
 
+    def control_rate_Hz(self) -> float | None:
+        """The drive's control rate (= its PWM frequency, ``f_pwm_Hz``) read from the
+        drive; the simulated drive's configuration, or None, when it cannot be read."""
+        try:
+            return float(self.drive.get("f_pwm_Hz")[0])
+        except Exception:  # noqa: BLE001 - an old firmware, a lost answer
+            return float(self.sim.sim.cfg.f_pwm_Hz) if self.sim is not None else None
+
     def start_heartbeat(self, period_ms: int = 100) -> None:
         """Hardware: be the supervisor the drive watches while it may move, and the SYNC producer.
 
@@ -538,12 +546,8 @@ def run_live(conn: Connection, spec: Any, speed_mps: float, duration_s: float = 
     pdo = PdoRecorder(conn, None, live=feed)
     tel = None
     if conn.serial is not None:
-        f_pwm = float(conn.sim.sim.cfg.f_pwm_Hz) if conn.sim is not None else 24000.0
-        if conn.sim is None:
-            try:
-                f_pwm = float(conn.drive.read_raw(0x2050, 1))  # PWM = control rate
-            except Exception:  # noqa: BLE001 - keep the default
-                pass
+        f_pwm = (float(conn.sim.sim.cfg.f_pwm_Hz) if conn.sim is not None
+                 else conn.control_rate_Hz() or 24000.0)
         tel = TelemetryReader(conn.serial, None, f_pwm, live=feed)
         tel.start()
     d = conn.drive
@@ -666,10 +670,7 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
         if bar is not None and t - bar.n >= 0.01:
             bar.update(round(t - bar.n, 3))
 
-    try:
-        f_pwm = float(drive.read_raw(0x2050, 1))  # PWM = control rate, from the drive
-    except Exception:  # noqa: BLE001 - keep the default
-        pass
+    f_pwm = conn.control_rate_Hz() or f_pwm
     runner = Runner(drive, conn.units, conn.load, logger, progress=prog,
                     f_pwm_Hz=f_pwm if tel is not None else None)
     interrupted: BaseException | None = None

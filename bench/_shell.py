@@ -172,12 +172,9 @@ class Shell:
         from bench._sequence import load_sequence
 
         seq = load_sequence(path)
-        f_pwm = None
-        try:
-            f_pwm = float(self.d.read_raw(0x2050, 1))  # PWM = control rate
-        except Exception:  # noqa: BLE001 - trace steps then only mark the window
-            pass
-        runner = Runner(self.d, self.units, self.conn.load, f_pwm_Hz=f_pwm)
+        # without the control rate, trace steps only mark their window
+        runner = Runner(self.d, self.units, self.conn.load,
+                        f_pwm_Hz=self.conn.control_rate_Hz())
 
         def gen() -> Iterator[Any]:
             try:
