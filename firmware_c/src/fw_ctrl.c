@@ -264,7 +264,7 @@ const fw_config_t *fw_get_config(const fw_ctrl_t *ctrl) { return ctrl ? &ctrl->c
 fw_cia402_state_t fw_state(const fw_ctrl_t *ctrl) { return ctrl->sm.state; }
 
 uint16_t fw_statusword(const fw_ctrl_t *ctrl) {
-  bool warning = ctrl->snap.u_dc_V < ctrl->cfg.u_dc_min_V;
+  bool warning = ctrl->u_dc_V < ctrl->cfg.u_dc_min_V;
   bool reached = false;
   if (ctrl->sm.state == FW_CIA402_OPERATION_ENABLED && ctrl->phase == FW_START_RUN) {
     if (ctrl->mode == FW_MODE_SPEED) {
@@ -322,7 +322,7 @@ fw_status_t fw_set_mode(fw_ctrl_t *ctrl, fw_mode_t mode) {
   }
   if (mode != ctrl->mode && mode == FW_MODE_SPEED) {
     /* bumpless: the speed integrator starts from the present i_q reference */
-    ctrl->pi_spd.integ = fw_clampf(ctrl->snap.i_dq_ref_A[1], -ctrl->cfg.i_max_A,
+    ctrl->pi_spd.integ = fw_clampf(ctrl->i_q_ref_A, -ctrl->cfg.i_max_A,
                                    ctrl->cfg.i_max_A);
   }
   ctrl->mode = mode;
@@ -423,7 +423,7 @@ static void ring_push(fw_ctrl_t *c, float ed, float eq, float ia, float ib) {
  * Extraction, demodulation and PLL for one sample. Returns the fundamental
  * alpha/beta current (HF removed) for the current loop.
  */
-static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab) {
+static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab, float *hf_amp_A) {
   const fw_config_t *cfg = &c->cfg;
   fw_extractor_t ex = (fw_extractor_t)cfg->extractor;
 
@@ -514,7 +514,7 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab) {
    * an estimated disturbance (load, friction) driven by the same error.
    * Error dynamics: e''' + kp e'' + ki e' + kd e = (disturbance changes). */
   if (c->phase == FW_START_RUN) {
-    c->pll.w_i_radps += c->dt_s * (cfg->pll_accel_per_A * c->snap.i_dq_A[1] + c->accel_dist);
+    c->pll.w_i_radps += c->dt_s * (cfg->pll_accel_per_A * c->i_q_ff_A + c->accel_dist);
     c->pll.w_i_radps = fw_clampf(c->pll.w_i_radps, -cfg->speed_max_radps_e, cfg->speed_max_radps_e);
     c->accel_dist += c->dt_s * cfg->pll_kd * c->pll_scale * c->pll_scale * c->pll_scale * eps;
   }
@@ -525,6 +525,7 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab) {
 
   c->snap.pll_err_rad = eps;
   c->snap.hf_amp_A = E_d;
+  *hf_amp_A = E_d;
   c->snap.hf_q_A = E_q;
   c->snap.i_h_ab_A[0] = ex == FW_EXTRACTOR_PSEUDO ? dh.x : h_a;
   c->snap.i_h_ab_A[1] = ex == FW_EXTRACTOR_PSEUDO ? dh.y : h_b;
@@ -541,12 +542,12 @@ static fw_vec2_f32_t estimator_step(fw_ctrl_t *c, fw_vec2_f32_t i_ab) {
 }
 
 /** HF-response and PLL-error supervision (loss of lock). */
-static void supervise_estimator(fw_ctrl_t *c) {
+static void supervise_estimator(fw_ctrl_t *c, float hf_amp_A) {
   const fw_config_t *cfg = &c->cfg;
   if (c->phase_time_s < FW_HF_SUPERVISION_DELAY_S || c->ring_fill < c->n_inj) {
     return;
   }
-  if (cfg->u_inj_V > 0.0f && c->snap.hf_amp_A < c->hf_min_A * c->bemf.inj_scale) {
+  if (cfg->u_inj_V > 0.0f && hf_amp_A < c->hf_min_A * c->bemf.inj_scale) {
     latch_fault(c, FW_FAULT_EST_HF_LOW);
     return;
   }
@@ -832,6 +833,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
       memset(&safe, 0, sizeof(safe)); /* never propagate NaN into the state */
     }
   }
+  c->u_dc_V = safe.u_dc_V; /* for the statusword's warning bit */
   if (c->phase != FW_START_IDLE) {
     fw_mon_compensate(&c->mon, safe.i_abc_A); /* offsets learnt at standstill */
   }
@@ -863,6 +865,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
       latch_fault(c, mf);
     }
     c->snap.mon_i_sum_A = c->mon.isum_f;
+    c->i_q_ff_A = 0.0f;
     memset(c->snap.i_dq_A, 0, sizeof(c->snap.i_dq_A));
     memset(c->snap.u_dq_V, 0, sizeof(c->snap.u_dq_V));
     c->snap.u_inj_V = 0.0f;
@@ -882,12 +885,13 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   const float theta_k = c->theta_k;
   const fw_sincos_f32_t sc = fw_sincos_f32(theta_k);
   fw_vec2_f32_t e_raw = {0.0f, 0.0f}; /* raw HF difference, sign-demodulated, for the monitor */
+  float hf_amp_A = 0.0f;               /* demodulated HF amplitude of this period */
   if (!pulses) {
     fw_vec2_f32_t dh_raw = {i_ab.x - c->h_prev_raw[0], i_ab.y - c->h_prev_raw[1]};
     e_raw = fw_park_f32(dh_raw, sc);
     e_raw.x *= c->sign_hist[1];
     e_raw.y *= c->sign_hist[1];
-    i_f_ab = estimator_step(c, i_ab);
+    i_f_ab = estimator_step(c, i_ab, &hf_amp_A);
   }
   fw_vec2_f32_t i_dq = fw_park_f32(pulses ? i_ab : i_f_ab, sc);
   if (c->phase == FW_START_RUN && !pulses) {
@@ -901,7 +905,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
       fw_mon_run_start(&c->mon);
     }
   } else if (c->phase != FW_START_SALIENCY) {
-    supervise_estimator(c);
+    supervise_estimator(c, hf_amp_A);
   }
   /* End ALIGN where the HF current triangle crosses its mean (the middle of
    * the positive half period): no residual HF current biases the pulses.
@@ -1057,6 +1061,8 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   (void)fw_svpwm_f32(u_ab, safe.u_dc_V, out->duty_abc, NULL);
   out->pwm_enable = 1u;
 
+  c->i_q_ff_A = i_dq.y;
+  c->i_q_ref_A = i_q_ref;
   c->snap.i_dq_A[0] = i_dq.x;
   c->snap.i_dq_A[1] = i_dq.y;
   c->snap.i_dq_ref_A[0] = i_d_ref;

@@ -369,7 +369,11 @@ typedef struct {
   uint8_t fault_hard;     /**< a latched fault needs the power stage off at once */
   uint16_t fault_hist[FW_FAULT_HISTORY_LEN];
   uint32_t fault_hist_count;
-  /* last signals for the snapshot */
+  /* last period's signals the core itself uses (the snapshot is write-only) */
+  float u_dc_V;           /**< DC link of the last step (statusword warning) */
+  float i_q_ff_A;         /**< fundamental i_q of the last full step (observer thrust feed-forward) */
+  float i_q_ref_A;        /**< i_q reference of the last full step (bumpless SPEED switch) */
+  /* last signals for the snapshot (written only, never read back) */
   fw_snapshot_t snap;
 } fw_ctrl_t;
 
