@@ -232,6 +232,12 @@ typedef struct {
   uint8_t pwm_enable;  /**< 0: all switches off */
 } fw_outputs_t;
 
+#include "fw_fault.h"
+#include "fw_foc.h"
+#include "fw_inj.h"
+#include "fw_obs.h"
+#include "fw_start.h"
+
 /** Read-only view of internal signals, for telemetry. */
 typedef struct {
   uint32_t step_count;
@@ -288,6 +294,18 @@ typedef struct {
 /**
  * Drive core state. Allocate it yourself (static or on a stack); treat the
  * members as private. No pointers inside, so it can be copied.
+ *
+ * fw_step() orchestrates the blocks, each a caller-owned struct with its own
+ * init/reset and update/output functions (docs/architecture.md):
+ *   fault   fw_fault.h  latch, history, input checks; prot: linear-axis protections
+ *   start   fw_start.h  alignment (flying start), saliency check, polarity test
+ *   inj     fw_inj.h    square-wave injection, HF extraction (SOGIs), demodulation
+ *   obs     fw_obs.h    angle error, PLL + mechanical extension, position, speed filter
+ *   foc     fw_foc.h    speed and current PIs, voltage limit, modulation
+ *   mon     fw_mon.h    integrity monitor;  bemf fw_bemf.h back-EMF observer, handover
+ *   sm      fw_cia402.h CiA 402 state machine
+ * The core itself keeps only the drive state machine (start-up phase and its
+ * time, quick stop), the references and the configuration.
  */
 typedef struct {
   fw_config_t cfg;
@@ -297,82 +315,37 @@ typedef struct {
   fw_mode_t mode;
   uint32_t step_count;
   float dt_s;
-  uint32_t n_inj;        /**< PWM periods per injection period */
-  uint32_t inj_idx;      /**< position inside the injection period */
   /* references */
   float speed_ref_radps_e;
   float i_d_ref_A;
   float i_q_ref_force_A;
-  /* blocks */
-  fw_pi_f32_t pi_d, pi_q, pi_spd;
-  fw_sogi_f32_t sogi_a, sogi_b;
-  fw_pll_f32_t pll;
-  /* extraction / demodulation state */
-  float h_prev_raw[2];    /**< previous raw alpha/beta current (pseudo-filter) */
-  float h_prev_sogi[2];   /**< previous SOGI output */
-  float h_sogi[2];        /**< SOGI output this step */
-  float sign_hist[4];     /**< injection signs; [0] = newest commanded */
-  float ring_ed[FW_INJ_MAX_SAMPLES]; /**< moving average over one injection period */
-  float ring_eq[FW_INJ_MAX_SAMPLES];
-  float ring_ia[FW_INJ_MAX_SAMPLES];
-  float ring_ib[FW_INJ_MAX_SAMPLES];
-  float sum_ed, sum_eq, sum_ia, sum_ib;
-  uint32_t ring_idx, ring_fill;
-  float err_f;            /**< low-passed signed PLL error */
-  float est_hold_s;       /**< estimator holds while > 0 (after an extractor switch) */
-  float accel_dist;       /**< estimated disturbance acceleration (el. rad/s^2) */
-  float pll_scale;        /**< present observer bandwidth scale */
-  float pll_err_time_s;
-  float omega_f;
-  float spd_alpha;        /**< speed filter coefficient */
-  float sogi_gd_s_k;      /**< SOGI group delay at the carrier times k (s) */
-  float sogi_gd_s;        /**< SOGI group delay at the present k (s) */
-  float eps_gain;         /**< L_q / (L_q - L_d): ratio -> angle error */
-  float inv_n_inj;        /**< 1 / n_inj */
-  float inv_adapt_err;    /**< 1 / sogi_adapt_err_rad */
-  float hf_min_A;         /**< HF-loss threshold hf_min_ratio T u_inj / L_q */
-  float err_alpha;        /**< |PLL error| filter coefficient */
-  float inj_sign;         /**< injection sign commanded this step */
-  float qs_still_s;       /**< time at standstill during quick stop */
-  float pos_unwrapped_e;  /**< unwrapped electrical angle estimate: remainder in [-pi, pi) ... */
-  int32_t pos_turns;      /**< ... plus this many whole electrical turns (2 pi) */
-  float theta_prev;
-  float theta_k;          /**< estimate at this step's sampling instant */
-  /* start-up */
+  /* drive state machine inside OPERATION ENABLED */
   fw_start_phase_t phase;
   float phase_time_s;
-  uint32_t pol_k;
-  float pol_base, pol_ext, pol_sum_pos, pol_sum_neg;
-  uint8_t polarity_flipped;
-  /* standstill saliency check: mean responses y_dd, y_qd, y_dq, y_qq */
-  float sal_acc[4];
-  uint32_t sal_k;
-  /* integrity monitor and protections */
+  uint8_t polarity_flipped; /**< 1 when start-up added pi to the estimate */
+  float qs_time_s;        /**< time in quick stop / fault braking */
+  float qs_still_s;       /**< time at standstill during quick stop */
+  float theta_k;          /**< estimate at this step's sampling instant */
+  float u_dc_V;           /**< DC link of the last step (statusword warning) */
+  float e_start_max_V;    /**< back-EMF at start_speed_max_mps */
+  /* blocks */
+  fw_fault_latch_t fault;
+  fw_protect_t prot;
+  fw_start_t start;
+  fw_inj_t inj;
+  union {
+    fw_obs_t obs;
+    /* The observer's PLL and error filter under their former names, for tests
+     * and tools that read them (tests/c/test_ctrl.c, benchmarks/): the same
+     * storage as obs.pll and obs.err_f (common initial sequence). */
+    struct {
+      fw_pll_f32_t pll;
+      float err_f;
+    };
+  };
+  fw_foc_t foc;
   fw_mon_t mon;
   fw_bemf_t bemf;
-  /* flying start: back-EMF in the stationary frame while aligning */
-  float u_ab_prev_V[2];   /**< fundamental alpha/beta voltage commanded last period */
-  float i_f_ab_prev_A[2];
-  float fly_e_ab_V[2];    /**< low-passed alpha/beta back-EMF */
-  float fly_rot_rad;      /**< rotation of that vector over the observation window */
-  uint8_t flying;         /**< 1: this run started on a moving mover (no saliency check) */
-  float u_dq_prev_V[2];   /**< fundamental voltage commanded last period (applied now) */
-  float i2t_A2s;          /**< i^2 t above i_rated_A */
-  float follow_time_s;    /**< time outside the following-error window */
-  float w_vmax_radps;     /**< v_max_mps in electrical rad/s */
-  float w_follow_radps;   /**< follow_err_mps in electrical rad/s */
-  float e_start_max_V;    /**< back-EMF at start_speed_max_mps */
-  /* quick stop */
-  float qs_time_s;
-  /* faults */
-  fw_fault_t fault;
-  uint8_t fault_hard;     /**< a latched fault needs the power stage off at once */
-  uint16_t fault_hist[FW_FAULT_HISTORY_LEN];
-  uint32_t fault_hist_count;
-  /* last period's signals the core itself uses (the snapshot is write-only) */
-  float u_dc_V;           /**< DC link of the last step (statusword warning) */
-  float i_q_ff_A;         /**< fundamental i_q of the last full step (observer thrust feed-forward) */
-  float i_q_ref_A;        /**< i_q reference of the last full step (bumpless SPEED switch) */
   /* last signals for the snapshot (written only, never read back) */
   fw_snapshot_t snap;
 } fw_ctrl_t;

@@ -1,0 +1,108 @@
+/**
+ * @file fw_fault.h
+ * @brief Fault block: the latch (first cause, hard/braking reaction, history)
+ *        and the protections on the sampled inputs and on the estimate
+ *        (overcurrent, DC link, i2t, overspeed, software position limits,
+ *        speed following error).
+ *
+ * The codes themselves (fw_fault_t) are generated into fw_faults.h. The CiA 402
+ * consequences of a latched fault (FAULT REACTION ACTIVE, braking, PWM off)
+ * are the drive state machine's (fw_ctrl.c); this block only decides and
+ * remembers.
+ *
+ * Included by fw_ctrl.h (needs fw_config_t and fw_inputs_t).
+ */
+#ifndef PMLSM_FW_FAULT_H
+#define PMLSM_FW_FAULT_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#ifndef PMLSM_FW_CTRL_H
+#error "include pmlsm/fw_ctrl.h"
+#endif
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Fault latch and history (caller-owned). */
+typedef struct {
+  fw_fault_t code;     /**< latched first cause, FW_FAULT_NONE if none */
+  uint8_t hard;        /**< a latched fault needs the power stage off at once */
+  uint16_t hist[FW_FAULT_HISTORY_LEN]; /**< newest first (depth: fw_ctrl.h) */
+  uint32_t hist_count;
+} fw_fault_latch_t;
+
+/** Empty latch, empty history. */
+void fw_fault_latch_init(fw_fault_latch_t *f);
+/**
+ * Latch a cause: the first one is the one reported, every new cause enters
+ * the history (once while it repeats), a cause that does not brake first
+ * (fw_fault_brakes_first) makes the latch hard. FW_FAULT_NONE is ignored.
+ */
+void fw_fault_latch_update(fw_fault_latch_t *f, fw_fault_t code, uint32_t fault_reaction_option);
+/** Fault reset: cause and hard flag cleared, history kept. */
+void fw_fault_latch_reset(fw_fault_latch_t *f);
+/** Latched cause (FW_FAULT_NONE if none). */
+fw_fault_t fw_fault_latch_code(const fw_fault_latch_t *f);
+/** History, newest first, into codes[0..n); returns the number written. */
+uint32_t fw_fault_latch_history(const fw_fault_latch_t *f, uint16_t *codes, uint32_t n);
+
+/**
+ * Fault reaction (CiA 402 0x605E): true when the drive may brake under
+ * control before switching off. Only faults that leave the estimate and the
+ * measurements trustworthy do (heartbeat lost, position limit, i2t); with
+ * option FW_REACT_SWITCH_OFF none does.
+ */
+bool fw_fault_brakes_first(uint32_t fault_reaction_option, fw_fault_t code);
+
+/**
+ * Checks on one period's sampled inputs: NaN/inf, overcurrent on any phase,
+ * DC-link overvoltage, and undervoltage while the power stage is enabled.
+ */
+fw_fault_t fw_fault_check_inputs(const fw_config_t *cfg, const fw_inputs_t *in,
+                                 bool power_enabled);
+
+/** Linear-axis protections on the estimate (caller-owned). */
+typedef struct {
+  float i2t_A2s;         /**< integral of i^2 above i_rated_A^2 */
+  float follow_time_s;   /**< time outside the following-error window */
+  float w_vmax_radps;    /**< v_max_mps in electrical rad/s */
+  float w_follow_radps;  /**< follow_err_mps in electrical rad/s */
+  float dt_s;
+} fw_protect_t;
+
+/** Inputs of one closed-loop period. */
+typedef struct {
+  float i_dq_A[2];          /**< fundamental current */
+  float omega_hat_radps;    /**< observer speed (overspeed) */
+  float omega_f_radps;      /**< filtered speed (following error) */
+  float pos_m;              /**< estimated position; read only when the limits are on */
+  float cmd;                /**< command whose sign says where the axis is driven:
+                                 speed reference (SPEED) or i_q reference (FORCE) */
+  float speed_ref_radps_e;  /**< speed reference (following error) */
+  uint8_t speed_mode;       /**< 1: SPEED mode (following error supervised) */
+  uint8_t quick_stop;       /**< 1: braking: no following-error supervision */
+} fw_protect_in_t;
+
+/** Thresholds from the configuration; i2t and following-error state cleared. */
+void fw_protect_init(fw_protect_t *p, const fw_config_t *cfg, float dt_s);
+/** New configuration: thresholds only (the i2t state, i.e. the heat, is kept). */
+void fw_protect_config(fw_protect_t *p, const fw_config_t *cfg, float dt_s);
+/** Closed loop (re)starts: following-error timer cleared (i2t kept). */
+void fw_protect_reset(fw_protect_t *p);
+/** Power stage off: i2t cools down at the rated current. */
+void fw_protect_cool(fw_protect_t *p, const fw_config_t *cfg);
+/**
+ * One closed-loop period: i2t, overspeed, software position limits (a limit
+ * trips only while the command points further out, so that the axis can be
+ * driven back after a fault reset) and the speed following error, in this
+ * order; returns the first fault found.
+ */
+fw_fault_t fw_protect_update(fw_protect_t *p, const fw_config_t *cfg, const fw_protect_in_t *in);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* PMLSM_FW_FAULT_H */

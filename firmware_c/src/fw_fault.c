@@ -1,0 +1,132 @@
+/**
+ * @file fw_fault.c
+ * @brief Fault latch, history and protections (see fw_fault.h).
+ */
+#include <math.h>
+#include <string.h>
+
+#include "pmlsm/fw_ctrl.h"
+
+void fw_fault_latch_init(fw_fault_latch_t *f) { memset(f, 0, sizeof(*f)); }
+
+bool fw_fault_brakes_first(uint32_t fault_reaction_option, fw_fault_t code) {
+  if (fault_reaction_option == (uint32_t)FW_REACT_SWITCH_OFF) {
+    return false; /* 0x605E = 0: switch off for every fault */
+  }
+  /* faults that leave the estimate and the measurements trustworthy */
+  return code == FW_FAULT_HEARTBEAT_LOST || code == FW_FAULT_POSITION_LIMIT ||
+         code == FW_FAULT_I2T;
+}
+
+static void hist_push(fw_fault_latch_t *f, fw_fault_t code) {
+  for (uint32_t i = FW_FAULT_HISTORY_LEN - 1u; i > 0u; i--) {
+    f->hist[i] = f->hist[i - 1u];
+  }
+  f->hist[0] = (uint16_t)code;
+  if (f->hist_count < FW_FAULT_HISTORY_LEN) {
+    f->hist_count++;
+  }
+}
+
+void fw_fault_latch_update(fw_fault_latch_t *f, fw_fault_t code, uint32_t fault_reaction_option) {
+  if (code == FW_FAULT_NONE) {
+    return;
+  }
+  if (f->code == FW_FAULT_NONE) {
+    f->code = code; /* the first cause is the one reported */
+  }
+  if (f->hist_count == 0u || f->hist[0] != (uint16_t)code) {
+    hist_push(f, code); /* every new cause, once while it repeats */
+  }
+  if (!fw_fault_brakes_first(fault_reaction_option, code)) {
+    f->hard = 1u;
+  }
+}
+
+void fw_fault_latch_reset(fw_fault_latch_t *f) {
+  f->code = FW_FAULT_NONE;
+  f->hard = 0u;
+}
+
+fw_fault_t fw_fault_latch_code(const fw_fault_latch_t *f) { return f->code; }
+
+uint32_t fw_fault_latch_history(const fw_fault_latch_t *f, uint16_t *codes, uint32_t n) {
+  uint32_t m = f->hist_count < n ? f->hist_count : n;
+  for (uint32_t i = 0; i < m; i++) {
+    codes[i] = f->hist[i];
+  }
+  return m;
+}
+
+fw_fault_t fw_fault_check_inputs(const fw_config_t *cfg, const fw_inputs_t *in,
+                                 bool power_enabled) {
+  for (int i = 0; i < 3; i++) {
+    if (!fw_isfinite_f32(in->i_abc_A[i])) {
+      return FW_FAULT_INPUT_INVALID;
+    }
+  }
+  if (!fw_isfinite_f32(in->u_dc_V)) {
+    return FW_FAULT_INPUT_INVALID;
+  }
+  for (int i = 0; i < 3; i++) {
+    if (fabsf(in->i_abc_A[i]) > cfg->i_trip_A) {
+      return FW_FAULT_OVERCURRENT;
+    }
+  }
+  if (in->u_dc_V > cfg->u_dc_max_V) {
+    return FW_FAULT_DC_OVERVOLTAGE;
+  }
+  if (power_enabled && in->u_dc_V < cfg->u_dc_min_V) {
+    return FW_FAULT_DC_UNDERVOLTAGE;
+  }
+  return FW_FAULT_NONE;
+}
+
+/* ---- linear-axis protections -------------------------------------------- */
+
+void fw_protect_config(fw_protect_t *p, const fw_config_t *cfg, float dt_s) {
+  p->dt_s = dt_s;
+  p->w_vmax_radps = fw_units_mps_to_radps_e(cfg, cfg->v_max_mps);
+  p->w_follow_radps = fw_units_mps_to_radps_e(cfg, cfg->follow_err_mps);
+}
+
+void fw_protect_init(fw_protect_t *p, const fw_config_t *cfg, float dt_s) {
+  p->i2t_A2s = 0.0f;
+  p->follow_time_s = 0.0f;
+  fw_protect_config(p, cfg, dt_s);
+}
+
+void fw_protect_reset(fw_protect_t *p) { p->follow_time_s = 0.0f; }
+
+void fw_protect_cool(fw_protect_t *p, const fw_config_t *cfg) {
+  p->i2t_A2s -= cfg->i_rated_A * cfg->i_rated_A * p->dt_s;
+  p->i2t_A2s = p->i2t_A2s > 0.0f ? p->i2t_A2s : 0.0f;
+}
+
+fw_fault_t fw_protect_update(fw_protect_t *p, const fw_config_t *cfg, const fw_protect_in_t *in) {
+  const float dt = p->dt_s;
+  const float ir2 = cfg->i_rated_A * cfg->i_rated_A;
+  p->i2t_A2s += (in->i_dq_A[0] * in->i_dq_A[0] + in->i_dq_A[1] * in->i_dq_A[1] - ir2) * dt;
+  p->i2t_A2s = p->i2t_A2s > 0.0f ? p->i2t_A2s : 0.0f;
+  if (cfg->i_rated_A < cfg->i_max_A &&
+      p->i2t_A2s > (cfg->i_max_A * cfg->i_max_A - ir2) * cfg->i2t_time_s) {
+    return FW_FAULT_I2T;
+  }
+  if (fabsf(in->omega_hat_radps) > p->w_vmax_radps) {
+    return FW_FAULT_OVERSPEED;
+  }
+  if (cfg->pos_limit_min_m < cfg->pos_limit_max_m) {
+    const float x = in->pos_m;
+    if ((x > cfg->pos_limit_max_m && !(in->cmd < 0.0f)) ||
+        (x < cfg->pos_limit_min_m && !(in->cmd > 0.0f))) {
+      return FW_FAULT_POSITION_LIMIT;
+    }
+  }
+  bool follow = in->speed_mode && !in->quick_stop &&
+                fabsf(in->speed_ref_radps_e - in->omega_f_radps) > p->w_follow_radps;
+  p->follow_time_s = follow ? p->follow_time_s + dt : 0.0f;
+  if (p->follow_time_s > cfg->follow_err_time_s) {
+    return FW_FAULT_FOLLOWING_ERROR;
+  }
+  return FW_FAULT_NONE;
+}

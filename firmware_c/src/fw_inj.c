@@ -1,0 +1,154 @@
+/**
+ * @file fw_inj.c
+ * @brief Square-wave injection and HF current extraction (see fw_inj.h).
+ */
+#include <math.h>
+#include <string.h>
+
+#include "pmlsm/fw_ctrl.h"
+
+void fw_inj_init(fw_inj_t *j, const fw_config_t *cfg, float dt_s) {
+  j->dt_s = dt_s;
+  j->n_inj = (uint32_t)(cfg->f_pwm_Hz / cfg->f_inj_Hz + 0.5f);
+  j->inv_n_inj = 1.0f / (float)j->n_inj;
+  /* Group delay of the pre-warped discrete SOGI at its centre: the analog
+   * 2/(k w0) times the warping slope dW/dw = (w0 T/2) sec^2(w0 T/2) / tan(w0 T/2). */
+  const float w0 = FW_TWO_PI_F32 * cfg->f_inj_Hz;
+  const float h = 0.5f * w0 * dt_s;
+  const float t = tanf(h);
+  j->sogi_gd_s_k = (2.0f / w0) * h * (1.0f + t * t) / t;
+  fw_inj_reset(j, cfg);
+}
+
+static void restart_averages(fw_inj_t *j) {
+  j->ring_idx = 0u;
+  j->ring_fill = 0u;
+  j->sum_ed = j->sum_eq = j->sum_ia = j->sum_ib = 0.0f;
+}
+
+void fw_inj_reset(fw_inj_t *j, const fw_config_t *cfg) {
+  float k = cfg->extractor == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE ? cfg->sogi_k_adapt_max
+                                                                     : cfg->sogi_k;
+  (void)fw_sogi_init_f32(&j->sogi_a, cfg->f_inj_Hz, k, j->dt_s);
+  (void)fw_sogi_init_f32(&j->sogi_b, cfg->f_inj_Hz, k, j->dt_s);
+  j->sogi_gd_s = j->sogi_gd_s_k / j->sogi_a.k;
+  memset(j->h_prev_raw, 0, sizeof(j->h_prev_raw));
+  memset(j->h_prev_sogi, 0, sizeof(j->h_prev_sogi));
+  memset(j->sign_hist, 0, sizeof(j->sign_hist));
+  restart_averages(j);
+  memset(j->ring_ed, 0, sizeof(j->ring_ed));
+  memset(j->ring_eq, 0, sizeof(j->ring_eq));
+  memset(j->ring_ia, 0, sizeof(j->ring_ia));
+  memset(j->ring_ib, 0, sizeof(j->ring_ib));
+  j->inj_idx = 0u;
+}
+
+void fw_inj_set_k(fw_inj_t *j, float k) {
+  fw_sogi_set_k_f32(&j->sogi_a, k);
+  fw_sogi_copy_gain_f32(&j->sogi_b, &j->sogi_a);
+  j->sogi_gd_s = j->sogi_gd_s_k / j->sogi_a.k; /* k is clamped > 0 by set_k */
+}
+
+void fw_inj_set_extractor(fw_inj_t *j, const fw_config_t *cfg, fw_extractor_t ex) {
+  fw_inj_set_k(j, ex == FW_EXTRACTOR_SOGI_ADAPTIVE ? cfg->sogi_k_adapt_max : cfg->sogi_k);
+  restart_averages(j); /* the demodulated history belongs to the old path */
+}
+
+/** Moving average over one injection period (ring of n_inj samples). */
+static void ring_push(fw_inj_t *j, float ed, float eq, float ia, float ib) {
+  uint32_t i = j->ring_idx;
+  if (j->ring_fill == j->n_inj) {
+    j->sum_ed -= j->ring_ed[i];
+    j->sum_eq -= j->ring_eq[i];
+    j->sum_ia -= j->ring_ia[i];
+    j->sum_ib -= j->ring_ib[i];
+  } else {
+    j->ring_fill++;
+  }
+  j->ring_ed[i] = ed;
+  j->ring_eq[i] = eq;
+  j->ring_ia[i] = ia;
+  j->ring_ib[i] = ib;
+  j->sum_ed += ed;
+  j->sum_eq += eq;
+  j->sum_ia += ia;
+  j->sum_ib += ib;
+  j->ring_idx = (i + 1u == j->n_inj) ? 0u : i + 1u;
+}
+
+void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab, fw_sincos_f32_t sc_k,
+                   float theta_hat, float w_hat, fw_inj_meas_t *m) {
+  /* Voltage applied over [k-1, k] was commanded at k-2. sign_hist is aged by
+   * fw_inj_output later in this period, so here sign_hist[0] = s(k-1),
+   * sign_hist[1] = s(k-2). */
+  const float s = j->sign_hist[1];
+  /* raw HF difference in the sampling frame, for the monitor */
+  const fw_vec2_f32_t dh_raw = {i_ab.x - j->h_prev_raw[0], i_ab.y - j->h_prev_raw[1]};
+  m->e_raw_dq_A = fw_park_f32(dh_raw, sc_k);
+  m->e_raw_dq_A.x *= s;
+  m->e_raw_dq_A.y *= s;
+
+  const float h_a = fw_sogi_step_f32(&j->sogi_a, i_ab.x, NULL);
+  const float h_b = fw_sogi_step_f32(&j->sogi_b, i_ab.y, NULL);
+  fw_vec2_f32_t dh;
+  if (ex == FW_EXTRACTOR_PSEUDO) {
+    dh.x = i_ab.x - j->h_prev_raw[0];
+    dh.y = i_ab.y - j->h_prev_raw[1];
+  } else {
+    dh.x = h_a - j->h_prev_sogi[0];
+    dh.y = h_b - j->h_prev_sogi[1];
+  }
+  j->h_prev_raw[0] = i_ab.x;
+  j->h_prev_raw[1] = i_ab.y;
+  j->h_prev_sogi[0] = h_a;
+  j->h_prev_sogi[1] = h_b;
+
+  /* Demodulate in the frame the estimate had when this HF response was
+   * produced: half a period back for the difference, plus the SOGI's group
+   * delay at the carrier. Rotating by the present estimate instead mixes the
+   * delay into the saliency term and locks at a lag of about
+   * (1 + G_sum/G_diff) w tau / 2 (3 w tau for Lq = 1.5 Ld). */
+  float tau_s = 0.5f * j->dt_s;
+  if (ex != FW_EXTRACTOR_PSEUDO) {
+    tau_s += j->sogi_gd_s;
+  }
+  const fw_sincos_f32_t sc_d = fw_sincos_f32(theta_hat - w_hat * tau_s);
+  const fw_vec2_f32_t dh_dq = fw_park_f32(dh, sc_d);
+  ring_push(j, s * dh_dq.x, s * dh_dq.y, i_ab.x, i_ab.y);
+  const float inv_n = j->ring_fill == j->n_inj ? j->inv_n_inj : 1.0f / (float)j->ring_fill;
+  m->E_d_A = j->sum_ed * inv_n;
+  m->E_q_A = j->sum_eq * inv_n;
+
+  if (ex == FW_EXTRACTOR_PSEUDO) {
+    m->i_h_ab_A = dh;
+    m->i_f_ab_A.x = j->sum_ia * inv_n; /* one-period average removes the square-wave response */
+    m->i_f_ab_A.y = j->sum_ib * inv_n;
+  } else {
+    m->i_h_ab_A.x = h_a;
+    m->i_h_ab_A.y = h_b;
+    m->i_f_ab_A.x = i_ab.x - h_a; /* eq. 10: fundamental = measured - extracted HF */
+    m->i_f_ab_A.y = i_ab.y - h_b;
+  }
+}
+
+void fw_inj_adapt(fw_inj_t *j, const fw_config_t *cfg, float r) {
+  /* Observable adaptation (replaces eq. 13's theta - theta_hat): a wide band
+   * while the PLL error is large, a narrow one when locked. */
+  const float k = cfg->sogi_k_adapt_min + (cfg->sogi_k_adapt_max - cfg->sogi_k_adapt_min) * r;
+  if (fabsf(k - j->sogi_a.k) > FW_INJ_SOGI_K_STEP) {
+    fw_inj_set_k(j, k);
+  }
+}
+
+float fw_inj_output(fw_inj_t *j, bool on) {
+  float s = 0.0f;
+  if (on) {
+    s = (j->inj_idx < j->n_inj / 2u) ? 1.0f : -1.0f;
+    j->inj_idx = (j->inj_idx + 1u == j->n_inj) ? 0u : j->inj_idx + 1u;
+  }
+  j->sign_hist[3] = j->sign_hist[2];
+  j->sign_hist[2] = j->sign_hist[1];
+  j->sign_hist[1] = j->sign_hist[0];
+  j->sign_hist[0] = s;
+  return s;
+}

@@ -1,0 +1,141 @@
+/**
+ * @file fw_obs.c
+ * @brief HF/back-EMF angle error, PLL with mechanical extension, position,
+ *        filtered speed, estimator supervision (see fw_obs.h).
+ */
+#include <math.h>
+
+#include "pmlsm/fw_ctrl.h"
+
+/* Corner of the |PLL error| filter used for adaptation and supervision. */
+#define FW_ERR_FILTER_HZ 5.0f
+
+static float lp_alpha(float f_Hz, float dt_s) {
+  return 1.0f - expf(-FW_TWO_PI_F32 * f_Hz * dt_s);
+}
+
+/** Add d (|d| <= pi) to the unwrapped position, kept as whole electrical
+ *  turns plus a remainder in [-pi, pi): a single float would lose the
+ *  increments once the position is large (ulp 0.06 rad at 1e6 rad). */
+static void pos_add(fw_obs_t *o, float d) {
+  float x = o->pos_unwrapped_e + d;
+  if (x >= FW_PI_F32) {
+    x -= FW_TWO_PI_F32;
+    o->pos_turns++;
+  } else if (x < -FW_PI_F32) {
+    x += FW_TWO_PI_F32;
+    o->pos_turns--;
+  }
+  o->pos_unwrapped_e = x;
+}
+
+void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s) {
+  o->dt_s = dt_s;
+  o->spd_alpha = lp_alpha(cfg->spd_filter_Hz, dt_s);
+  o->err_alpha = lp_alpha(FW_ERR_FILTER_HZ, dt_s);
+  /* reciprocals and products the step would otherwise divide for */
+  o->eps_gain = cfg->L_q_H / (cfg->L_q_H - cfg->L_d_H);
+  o->inv_adapt_err = 1.0f / cfg->sogi_adapt_err_rad;
+  o->hf_min_A = cfg->hf_min_ratio * dt_s * cfg->u_inj_V / cfg->L_q_H;
+}
+
+void fw_obs_reset(fw_obs_t *o, const fw_config_t *cfg) {
+  fw_pll_init_f32(&o->pll, cfg->pll_kp, cfg->pll_ki, cfg->speed_max_radps_e);
+  o->err_f = 0.0f;
+  o->accel_dist = 0.0f;
+  o->est_hold_s = 0.0f;
+  o->pll_err_time_s = 0.0f;
+  o->omega_f = 0.0f;
+  o->theta_prev = o->pll.theta_rad;
+}
+
+void fw_obs_keep_position(fw_obs_t *o) {
+  pos_add(o, -o->pll.theta_rad); /* the estimate restarts from 0: keep the position */
+}
+
+void fw_obs_set(fw_obs_t *o, float theta_rad, float w_radps) {
+  fw_pll_reset_f32(&o->pll, theta_rad, w_radps);
+  o->theta_prev = theta_rad;
+}
+
+void fw_obs_catch(fw_obs_t *o, float theta_rad, float w0_radps) {
+  fw_obs_set(o, theta_rad, w0_radps);
+  o->omega_f = w0_radps;
+  o->accel_dist = 0.0f;
+}
+
+void fw_obs_flip(fw_obs_t *o) {
+  fw_pll_reset_f32(&o->pll, o->pll.theta_rad + FW_PI_F32, 0.0f);
+  o->theta_prev = o->pll.theta_rad;
+  pos_add(o, FW_PI_F32);
+}
+
+void fw_obs_hold(fw_obs_t *o, float t_s) { o->est_hold_s = t_s; }
+
+float fw_obs_update(fw_obs_t *o, const fw_config_t *cfg, const fw_obs_in_t *in, float *adapt_r) {
+  const float dt = o->dt_s;
+  float eps = 0.0f;
+  const float floor_A = 1e-6f;
+  if (in->E_d_A > floor_A) {
+    eps = (in->E_q_A / in->E_d_A) * o->eps_gain;
+    eps = fw_clampf(eps, -1.0f, 1.0f);
+  }
+  if (o->est_hold_s > 0.0f) { /* extractor just switched */
+    o->est_hold_s -= dt;
+    eps = 0.0f;
+  }
+  if (in->hold) {
+    eps = 0.0f; /* injection moves to q^ during the saliency check: hold the estimate */
+  } else if (in->bemf_active) {
+    eps = in->bemf_err_rad; /* above injection speeds */
+  }
+  /* Low-passed *signed* error: its magnitude is the tracking error. The
+   * per-sample eps carries ~0.04 rad of sensor noise, so a filtered |eps|
+   * would measure the noise, not the lock. */
+  o->err_f += o->err_alpha * (eps - o->err_f);
+  const float r = fw_clampf(fabsf(o->err_f) * o->inv_adapt_err, 0.0f, 1.0f);
+  *adapt_r = r;
+
+  if (!in->settled) {
+    eps = 0.0f; /* filters still settling: extrapolate, do not correct */
+  }
+  /* Bandwidth scheduling: all observer poles scaled by lambda in [bw_min, 1],
+   * lambda rising with the tracking error (same observable as the SOGI). */
+  const float lam = cfg->pll_bw_min + (1.0f - cfg->pll_bw_min) * r;
+  o->pll_scale = lam;
+  o->pll.kp = cfg->pll_kp * lam;
+  o->pll.ki = cfg->pll_ki * lam * lam;
+  fw_pll_step_f32(&o->pll, eps, dt);
+  /* Mechanical observer extension of the PLL: the speed state also
+   * integrates the acceleration the measured thrust current predicts, plus
+   * an estimated disturbance (load, friction) driven by the same error.
+   * Error dynamics: e''' + kp e'' + ki e' + kd e = (disturbance changes). */
+  if (in->running) {
+    o->pll.w_i_radps += dt * (cfg->pll_accel_per_A * o->i_q_ff_A + o->accel_dist);
+    o->pll.w_i_radps = fw_clampf(o->pll.w_i_radps, -cfg->speed_max_radps_e, cfg->speed_max_radps_e);
+    o->accel_dist += dt * cfg->pll_kd * o->pll_scale * o->pll_scale * o->pll_scale * eps;
+  }
+  const float dth = fw_wrap_pi_f32(o->pll.theta_rad - o->theta_prev);
+  pos_add(o, dth);
+  o->theta_prev = o->pll.theta_rad;
+  o->omega_f += o->spd_alpha * (o->pll.w_i_radps - o->omega_f);
+  return eps;
+}
+
+fw_fault_t fw_obs_supervise(fw_obs_t *o, const fw_config_t *cfg, float hf_amp_A,
+                            float inj_scale, bool running) {
+  if (cfg->u_inj_V > 0.0f && hf_amp_A < o->hf_min_A * inj_scale) {
+    return FW_FAULT_EST_HF_LOW;
+  }
+  if (running) {
+    if (fabsf(o->err_f) > cfg->pll_err_max_rad) {
+      o->pll_err_time_s += o->dt_s;
+      if (o->pll_err_time_s > cfg->pll_err_time_s) {
+        return FW_FAULT_EST_PLL_ERROR;
+      }
+    } else {
+      o->pll_err_time_s = 0.0f;
+    }
+  }
+  return FW_FAULT_NONE;
+}
