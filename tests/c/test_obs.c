@@ -1,0 +1,170 @@
+/* Tests for fw_obs: the angle error eps = (E_q / E_d) L_q / (L_q - L_d)
+ * (clamp, floor, hold, back-EMF, settling), the error low-pass
+ * (alpha = 1 - exp(-2 pi 5 Hz T)) and the adaptation signal, the bandwidth
+ * scheduling of the PLL gains, the mechanical extension (thrust feed-forward
+ * integrates pll_accel_per_A i_q), the position over flips and restarts,
+ * and the supervision thresholds (HF loss, PLL error time). */
+#include <math.h>
+#include <string.h>
+
+#include "pmlsm/fw_ctrl.h"
+#include "tinytest.h"
+
+static void setup(fw_obs_t *o, fw_config_t *cfg) {
+  fw_config_default(cfg); /* L_d 12 mH, L_q 18 mH: L_q / (L_q - L_d) = 3 */
+  memset(o, 0, sizeof(*o));
+  fw_obs_init(o, cfg, 1.0f / cfg->f_pwm_Hz);
+  fw_obs_reset(o, cfg);
+}
+
+static fw_obs_in_t hf_in(float E_d, float E_q) {
+  fw_obs_in_t in;
+  memset(&in, 0, sizeof(in));
+  in.E_d_A = E_d;
+  in.E_q_A = E_q;
+  in.settled = 1u;
+  return in;
+}
+
+static void test_error(void) {
+  fw_config_t cfg;
+  fw_obs_t o;
+  setup(&o, &cfg);
+  const double dt = 1.0 / 24000.0, alpha = 1.0 - exp(-2.0 * M_PI * 5.0 * dt);
+  TT_CHECK_NEAR(o.eps_gain, 3.0, 1e-5);
+  float r;
+  fw_obs_in_t in = hf_in(0.05f, 0.001f);
+  TT_CHECK_NEAR(fw_obs_update(&o, &cfg, &in, &r), 0.02 * 3.0, 1e-6);
+  TT_CHECK_NEAR(o.err_f, alpha * 0.06, 1e-8);
+  TT_CHECK_NEAR(r, alpha * 0.06 / 0.02, 1e-6); /* |err_f| / sogi_adapt_err_rad */
+  /* bandwidth scheduling: kp = pll_kp lam, ki = pll_ki lam^2, lam = bw_min + (1 - bw_min) r */
+  const double lam = cfg.pll_bw_min + (1.0 - cfg.pll_bw_min) * r;
+  TT_CHECK_NEAR(o.pll.kp, cfg.pll_kp * lam, 1e-4);
+  TT_CHECK_NEAR(o.pll.ki, cfg.pll_ki * lam * lam, 1e-2);
+  /* clamp to +-1 rad */
+  in = hf_in(0.05f, -0.05f);
+  TT_CHECK_NEAR(fw_obs_update(&o, &cfg, &in, &r), -1.0, 0.0);
+  /* floor: no HF response, no error */
+  in = hf_in(1e-7f, 1e-7f);
+  TT_CHECK(fw_obs_update(&o, &cfg, &in, &r) == 0.0f);
+  /* hold (saliency check) outranks the back-EMF */
+  in = hf_in(0.05f, 0.01f);
+  in.hold = 1u;
+  in.bemf_active = 1u;
+  in.bemf_err_rad = 0.3f;
+  TT_CHECK(fw_obs_update(&o, &cfg, &in, &r) == 0.0f);
+  in.hold = 0u;
+  TT_CHECK(fw_obs_update(&o, &cfg, &in, &r) == 0.3f);
+  /* not settled: the PLL is not corrected, but the filter sees the error */
+  setup(&o, &cfg);
+  in = hf_in(0.05f, 0.001f);
+  in.settled = 0u;
+  TT_CHECK(fw_obs_update(&o, &cfg, &in, &r) == 0.0f);
+  TT_CHECK_NEAR(o.err_f, alpha * 0.06, 1e-8);
+  TT_CHECK(o.pll.theta_rad == 0.0f && o.pll.w_i_radps == 0.0f);
+  /* extractor switch: held for the given time */
+  setup(&o, &cfg);
+  fw_obs_hold(&o, 0.001f); /* 24 periods */
+  in = hf_in(0.05f, 0.001f);
+  int n_zero = 0;
+  for (int k = 0; k < 30; k++) {
+    n_zero += fw_obs_update(&o, &cfg, &in, &r) == 0.0f;
+  }
+  TT_CHECK(n_zero >= 24 && n_zero <= 25);
+}
+
+static void test_mechanical_extension(void) {
+  fw_config_t cfg;
+  fw_obs_t o;
+  setup(&o, &cfg);
+  cfg.pll_accel_per_A = 100.0f;
+  fw_obs_set_iq(&o, 2.0f);
+  fw_obs_in_t in = hf_in(0.0f, 0.0f); /* no error: only the feed-forward acts */
+  in.running = 1u;
+  float r;
+  for (int k = 0; k < 2400; k++) {
+    (void)fw_obs_update(&o, &cfg, &in, &r);
+  }
+  /* w = 200 rad/s^2 * 0.1 s; theta = w t^2 / 2 (PI part sees no error) */
+  TT_CHECK_NEAR(o.pll.w_i_radps, 20.0, 1e-3);
+  TT_CHECK_NEAR(o.accel_dist, 0.0, 0.0);
+  TT_CHECK(o.omega_f > 0.0f && o.omega_f < 20.0f); /* low-passed */
+  TT_CHECK_NEAR(fw_obs_pos_e(&o), 0.5 * 200.0 * 0.1 * 0.1, 0.01);
+  /* not running: no feed-forward */
+  const float w = o.pll.w_i_radps;
+  in.running = 0u;
+  (void)fw_obs_update(&o, &cfg, &in, &r);
+  TT_CHECK(o.pll.w_i_radps == w);
+}
+
+static void test_position(void) {
+  fw_config_t cfg;
+  fw_obs_t o;
+  setup(&o, &cfg);
+  /* flip: pi on the estimate and on the position */
+  fw_obs_set(&o, 1.0f, 0.0f);
+  const float p0 = fw_obs_pos_e(&o);
+  fw_obs_flip(&o);
+  TT_CHECK_NEAR(o.pll.theta_rad, 1.0 - M_PI, 1e-6);
+  TT_CHECK_NEAR(fw_obs_pos_e(&o) - p0, M_PI, 1e-6);
+  /* restart from 0 keeping the position: the position is the sum of the
+   * estimate's increments, and the restarted estimate will add its way back
+   * from 0 to the angle it had, so that angle is taken off first */
+  const float p1 = fw_obs_pos_e(&o), th1 = o.pll.theta_rad;
+  fw_obs_keep_position(&o);
+  fw_obs_reset(&o, &cfg);
+  TT_CHECK(o.pll.theta_rad == 0.0f && o.theta_prev == 0.0f);
+  TT_CHECK_NEAR(fw_obs_pos_e(&o), p1 - th1, 1e-6);
+  fw_obs_set(&o, th1, 0.0f); /* a hand-over does not move the position ... */
+  TT_CHECK_NEAR(fw_obs_pos_e(&o), p1 - th1, 1e-6);
+  fw_obs_in_t in = hf_in(0.0f, 0.0f);
+  float r;
+  fw_obs_set(&o, 0.0f, 0.0f);
+  o.pll.w_i_radps = o.pll.w_hat_radps = th1 * 24000.0f / 100.0f; /* test set-up: a ramp */
+  for (int k = 0; k < 100; k++) {
+    (void)fw_obs_update(&o, &cfg, &in, &r); /* ... re-converging from 0 to th1 does */
+  }
+  TT_CHECK_NEAR(o.pll.theta_rad, th1, 1e-4);
+  TT_CHECK_NEAR(fw_obs_pos_e(&o), p1, 1e-4);
+  /* catch: estimate and filtered speed set, no disturbance */
+  fw_obs_catch(&o, -2.0f, 300.0f);
+  TT_CHECK(o.pll.theta_rad == -2.0f && o.pll.w_i_radps == 300.0f && o.omega_f == 300.0f &&
+           o.accel_dist == 0.0f && o.theta_prev == -2.0f);
+}
+
+static void test_supervise(void) {
+  fw_config_t cfg;
+  fw_obs_t o;
+  setup(&o, &cfg);
+  /* HF loss below hf_min_ratio T u_inj / L_q, scaled by the injection in use */
+  const double hf_min = 0.3 * (1.0 / 24000.0) * 50.0 / 0.018;
+  TT_CHECK_NEAR(o.hf_min_A, hf_min, 1e-7);
+  TT_CHECK(fw_obs_supervise(&o, &cfg, (float)(0.99 * hf_min), 1.0f, false) ==
+           FW_FAULT_EST_HF_LOW);
+  TT_CHECK(fw_obs_supervise(&o, &cfg, (float)(1.01 * hf_min), 1.0f, false) == FW_FAULT_NONE);
+  TT_CHECK(fw_obs_supervise(&o, &cfg, (float)(0.5 * hf_min), 0.25f, false) == FW_FAULT_NONE);
+  /* PLL error above pll_err_max_rad for longer than pll_err_time_s (running only) */
+  o.err_f = 0.6f; /* test set-up: the filter state */
+  int k_trip = -1;
+  for (int k = 1; k <= 2000 && k_trip < 0; k++) {
+    if (fw_obs_supervise(&o, &cfg, 1.0f, 1.0f, true) == FW_FAULT_EST_PLL_ERROR) {
+      k_trip = k;
+    }
+  }
+  TT_CHECK(k_trip >= 1200 && k_trip <= 1202); /* 0.05 s = 1200 periods */
+  fw_obs_reset(&o, &cfg);
+  o.err_f = 0.6f;
+  int n = 0;
+  for (int k = 0; k < 2000; k++) {
+    n += fw_obs_supervise(&o, &cfg, 1.0f, 1.0f, false) != FW_FAULT_NONE;
+  }
+  TT_CHECK(n == 0);
+}
+
+int main(void) {
+  TT_RUN(test_error);
+  TT_RUN(test_mechanical_extension);
+  TT_RUN(test_position);
+  TT_RUN(test_supervise);
+  return TT_SUMMARY();
+}

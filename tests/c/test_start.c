@@ -1,0 +1,144 @@
+/* Tests for fw_start: the end of the alignment (time and injection index
+ * n/4 - 1), the saliency check's schedule (d^ then q^, first period of each
+ * not averaged) and means, the polarity test's voltage pattern, timing and
+ * decision, and the flying-start catch on a synthetic rotating back-EMF
+ * (angle and speed against e_ab = w psi_f (-sin th, cos th)). */
+#include <math.h>
+
+#include "pmlsm/fw_ctrl.h"
+#include "tinytest.h"
+
+static void test_align_done(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg); /* align 0.08 s, n_inj 8: last index 1 */
+  TT_CHECK(!fw_start_align_done(&cfg, 0.079f, 1u, 8u));
+  TT_CHECK(fw_start_align_done(&cfg, 0.08f, 1u, 8u));
+  TT_CHECK(!fw_start_align_done(&cfg, 0.09f, 2u, 8u));
+  TT_CHECK(fw_start_align_done(&cfg, 0.09f, 3u, 16u));
+  TT_CHECK(fw_start_align_done(&cfg, 0.09f, 0u, 2u)); /* n/4 = 0: index 0 */
+}
+
+static void test_saliency(void) {
+  fw_start_t s;
+  fw_start_reset(&s);
+  fw_start_saliency_begin(&s);
+  const uint32_t n = 8u, col = FW_SAL_PERIODS * n;
+  int done_at = -1;
+  for (uint32_t k = 0; k < 2u * col; k++) {
+    const bool on_q = k >= col;
+    TT_CHECK(fw_start_saliency_on_q(&s, n) == on_q);
+    /* the first period of each axis carries junk that must not count */
+    const bool first = (k % col) < n;
+    fw_vec2_f32_t e;
+    e.x = first ? 100.0f : (on_q ? 3.0f : 1.0f);
+    e.y = first ? -100.0f : (on_q ? 4.0f : 2.0f);
+    fw_start_saliency_update(&s, n, e);
+    if (fw_start_saliency_advance(&s, n) && done_at < 0) {
+      done_at = (int)k;
+    }
+  }
+  TT_CHECK(done_at == (int)(2u * col - 1u));
+  float y[4];
+  fw_start_saliency_means(&s, n, y);
+  TT_CHECK_NEAR(y[0], 1.0, 1e-6);
+  TT_CHECK_NEAR(y[1], 2.0, 1e-6);
+  TT_CHECK_NEAR(y[2], 3.0, 1e-6);
+  TT_CHECK_NEAR(y[3], 4.0, 1e-6);
+}
+
+/* Synthetic d^ current: each excursion rises linearly to +peak_pos (+ pulse)
+ * or falls to -peak_neg (- pulse) and returns; 0 elsewhere. */
+static fw_pol_result_t run_polarity(float peak_pos, float peak_neg, uint32_t *steps,
+                                    fw_start_t *s) {
+  fw_config_t cfg;
+  fw_config_default(&cfg); /* N = 12, 4 pairs, margin */
+  const uint32_t N = cfg.pol_pulse_samples;
+  fw_start_reset(s);
+  fw_start_polarity_begin(s);
+  fw_pol_result_t res = FW_POL_BUSY;
+  uint32_t k = 0;
+  float v_prev = 0.0f, i_d = 0.0f;
+  int bad_v = 0;
+  for (; k < 10000u && res == FW_POL_BUSY; k++) {
+    /* the current follows the voltage of the previous sample */
+    const float peak = v_prev > 0.0f ? peak_pos : peak_neg;
+    i_d += v_prev / cfg.pol_pulse_V * peak / (float)N;
+    const float v = fw_start_polarity_step(s, &cfg, i_d, &res);
+    if (res == FW_POL_BUSY) {
+      const uint32_t seg = (k % (6u * N)) / N;
+      const float want = (seg == 1u || seg == 5u) ? cfg.pol_pulse_V
+                         : (seg == 2u || seg == 4u) ? -cfg.pol_pulse_V : 0.0f;
+      bad_v += v != want;
+    } else {
+      bad_v += v != 0.0f;
+    }
+    v_prev = v;
+  }
+  TT_CHECK(bad_v == 0);
+  *steps = k;
+  return res;
+}
+
+static void test_polarity(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  const uint32_t total = 6u * cfg.pol_pulse_samples * cfg.pol_pulse_pairs;
+  fw_start_t s;
+  uint32_t steps;
+  /* the + excursion (along the magnet) larger: estimate right */
+  TT_CHECK(run_polarity(2.0f, 1.5f, &steps, &s) == FW_POL_ALIGNED);
+  TT_CHECK(steps == total + 1u);
+  /* each pair adds its excursion: the sums are pairs x peak */
+  TT_CHECK_NEAR(s.pol_sum_pos, 4.0 * 2.0, 1e-4);
+  TT_CHECK_NEAR(s.pol_sum_neg, 4.0 * 1.5, 1e-4);
+  TT_CHECK(run_polarity(1.5f, 2.0f, &steps, &s) == FW_POL_FLIPPED);
+  /* within the margin: undetermined */
+  const float m = 1.0f + 0.5f * cfg.pol_margin;
+  TT_CHECK(run_polarity(2.0f * m, 2.0f, &steps, &s) == FW_POL_UNDETERMINED);
+}
+
+static void test_fly_catch(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  const float dt = 1.0f / cfg.f_pwm_Hz;
+  const float psi = cfg.psi_f_Wb;
+  for (int dir = -1; dir <= 1; dir += 2) {
+    fw_start_t s;
+    fw_start_reset(&s);
+    const double w = dir * 400.0; /* el. rad/s: |e| = 73 V */
+    double th = 0.3;
+    const fw_vec2_f32_t i0 = {0.0f, 0.0f};
+    float t = 0.0f;
+    for (int k = 0; k < 360; k++) { /* 15 ms at zero current: e_ab = u_ab */
+      t += dt;
+      fw_start_fly_observe(&s, &cfg, dt, i0, t);
+      th += w * (double)dt;
+      const fw_vec2_f32_t u = {(float)(-w * psi * sin(th)), (float)(w * psi * cos(th))};
+      fw_start_fly_set_u(&s, u);
+    }
+    float th_hat, w0;
+    TT_CHECK(fw_start_fly_catch(&s, &cfg, 0.0f, &th_hat, &w0) == FW_FAULT_MOVING_AT_ENABLE);
+    TT_CHECK(s.flying == 0u);
+    TT_CHECK(fw_start_fly_catch(&s, &cfg, 100.0f, &th_hat, &w0) == FW_FAULT_NONE);
+    TT_CHECK(s.flying == 1u);
+    /* first-order lag tau: |H| = 1 / sqrt(1 + (w tau)^2); the voltage acts one
+     * period later, the catch adds w tau for the filter's lag */
+    const double wt = w * FW_FLY_TAU_S;
+    TT_CHECK_NEAR(w0, w / sqrt(1.0 + wt * wt), 0.01 * fabs(w));
+    double err = fmod((double)th_hat - (th - w * (double)dt) + 3.0 * M_PI, 2.0 * M_PI) - M_PI;
+    TT_CHECK_NEAR(err, 0.0, 0.02);
+  }
+  /* standing still: refused */
+  fw_start_t s;
+  fw_start_reset(&s);
+  float th_hat, w0;
+  TT_CHECK(fw_start_fly_catch(&s, &cfg, 100.0f, &th_hat, &w0) == FW_FAULT_MOVING_AT_ENABLE);
+}
+
+int main(void) {
+  TT_RUN(test_align_done);
+  TT_RUN(test_saliency);
+  TT_RUN(test_polarity);
+  TT_RUN(test_fly_catch);
+  return TT_SUMMARY();
+}
