@@ -10,7 +10,9 @@ A run folder ``runs/<UTC timestamp>_<sequence>/`` holds::
     events.jsonl         step/abort/safe-state events, appended and flushed
     report.html, *.png   report (bench._report)
 
-Crash safety: the CAN trace is flushed and every signal chunk is written
+The MF4 files are written by the bench's MF4 writer process (:mod:`bench._mf4writer`;
+in this process when it is not available). Crash safety: the CAN trace is flushed and
+every signal chunk is written
 (atomically, tmp + rename) at least once per ``flush_s`` (default 0.5 s), so
 a run killed with SIGKILL loses at most about one second and leaves readable
 files. The trace listener is attached to canopen's ``network.notifier``
@@ -113,12 +115,15 @@ class TraceListener(can.Listener):
         self.count = 0      # frames received from the bus
         self.tx_count = 0   # frames the bench sent (logged too)
         self.id_counts: dict[int, int] = {}
+        self._channel_ints: dict[str, int | None] = {}  # channel2int is a regex
 
     def on_message_received(self, msg: can.Message) -> None:
         if isinstance(msg.channel, str):
             # BLF stores the channel as u16, derived from the name's trailing digits:
             # "pmlsm-sim-12345678" would overflow it and kill the receive thread
-            c = can.util.channel2int(msg.channel)
+            c = self._channel_ints.get(msg.channel, -1)
+            if c == -1:
+                c = self._channel_ints[msg.channel] = can.util.channel2int(msg.channel)
             if c is not None and not 0 <= c <= 0xFFFF:
                 msg = copy.copy(msg)
                 msg.channel = None
@@ -192,10 +197,19 @@ class RunLogger:
     trace_format : {"blf", "asc"}
     flush_s : float
         Flush period of the CAN trace and the signal chunks (s).
+    mf4_process : bool or None
+        Write the MF4 files in the bench's MF4 writer process
+        (:meth:`bench._mf4writer.Mf4Writer.shared`), so that asammdf's import and the
+        compression run beside the run on another core. None (default): when asammdf
+        is not imported here yet, or the writer process is already running.
     """
 
     def __init__(self, run_dir: Path, network: Any = None, trace_format: str = "blf",
-                 flush_s: float = 0.5) -> None:
+                 flush_s: float = 0.5, mf4_process: bool | None = None) -> None:
+        import sys
+
+        from bench._mf4writer import Mf4Writer
+
         self.dir = Path(run_dir)
         self.dir.mkdir(parents=True, exist_ok=True)
         (self.dir / "signals").mkdir(exist_ok=True)
@@ -218,6 +232,10 @@ class RunLogger:
             network.notifier.add_listener(self.trace)
             self._hook_sends(network)
         self.flush_s = flush_s
+        if mf4_process is None:
+            mf4_process = "asammdf" not in sys.modules or Mf4Writer.running()
+        self._mf4 = Mf4Writer.shared() if mf4_process else Mf4Writer(use_process=False)
+        self._mf4_before = (len(self._mf4.failed), self._mf4.fallbacks)  # shared: counts
         self._stop = threading.Event()
         self._flusher = threading.Thread(target=self._flush_loop, name="bench-log-flush",
                                          daemon=True)
@@ -332,10 +350,12 @@ class RunLogger:
             except Exception as e:  # noqa: BLE001 - never kill the run for a flush
                 log.error("log flush failed: %s", e)
 
-    def flush(self) -> None:
+    def flush(self, signals: bool = True) -> None:
         """Flush the CAN trace and write new signal samples as a new MF4 part."""
         if self.trace is not None:
             self.trace.flush()
+        if not signals:
+            return
         with self._lock:
             new: list[tuple[str, str, np.ndarray, np.ndarray]] = []
             for name, ch in self._channels.items():
@@ -348,7 +368,7 @@ class RunLogger:
                 return
             self._part += 1
             part = self._part
-        _write_mf4(self.dir / "signals" / f"part_{part:05d}.mf4", new)
+        self._mf4.write(self.dir / "signals" / f"part_{part:05d}.mf4", new)
 
     def _hook_sends(self, network: Any) -> None:
         """Log what the bench sends too (SDO requests, NMT, SYNC, heartbeat, RPDOs):
@@ -375,8 +395,11 @@ class RunLogger:
         bus.send = send  # instance attribute: python-can's periodic tasks call it too
         self._send_hooked = (bus, orig if had_own else None)
 
-    def close(self, join_mf4: bool = True) -> dict[str, Any]:
+    def close(self, join_mf4: bool = True, sync: bool = True) -> dict[str, Any]:
         """Stop the flusher, flush, detach listeners, join the MF4 parts.
+
+        ``sync=False`` returns while the MF4 writer process may still be writing: call
+        :meth:`sync_files` with the returned dict before relying on the files.
 
         Returns
         -------
@@ -385,7 +408,9 @@ class RunLogger:
         """
         self._stop.set()
         self._flusher.join(timeout=5)
-        self.flush()
+        # no last part when the joined file follows: it holds everything (and if the
+        # writer process fails, the bench writes it itself)
+        self.flush(signals=not join_mf4)
         if self._send_hooked is not None:
             bus, own = self._send_hooked
             if own is not None:
@@ -411,11 +436,24 @@ class RunLogger:
             "receive_errors": list(self.errors.errors),
             "lost_frames": {k: c.lost for k, c in self.counters.items()},
             "can_trace": str(self.trace.path.name) if self.trace else None,
-            "mf4": None,
+            "mf4": None, "mf4_errors": [], "mf4_written_in_bench": 0,
         }
         if join_mf4:
             out["mf4"] = self.join_mf4()
+        if sync:
+            self.sync_files(out)
         return out
+
+    def sync_files(self, stats: dict[str, Any]) -> None:
+        """Wait until the MF4 files are written; record the outcome in ``stats`` (the
+        dict :meth:`close` returned): ``mf4`` (None if it could not be written),
+        ``mf4_errors``, ``mf4_written_in_bench`` (files the writer process did not
+        write, written here instead)."""
+        self._mf4.sync()
+        stats["mf4_errors"] = list(self._mf4.failed[self._mf4_before[0]:])
+        if stats.get("mf4") and not (self.dir / stats["mf4"]).exists():
+            stats["mf4"] = None
+        stats["mf4_written_in_bench"] = self._mf4.fallbacks - self._mf4_before[1]
 
     def join_mf4(self) -> str | None:
         """Join everything into one compressed ``signals.mf4`` with the run's metadata in
@@ -430,13 +468,8 @@ class RunLogger:
             t, v = self.channel(name)
             rows.append((name, unit, t, v))
         path = self.dir / "signals.mf4"
-        _write_mf4(path, rows, header=self._mf4_header(), compression=2)
-        for part in (self.dir / "signals").glob("part_*.mf4"):
-            part.unlink()
-        try:
-            (self.dir / "signals").rmdir()
-        except OSError:
-            pass
+        self._mf4.write(path, rows, header=self._mf4_header(), compression=2,
+                        remove_parts=self.dir / "signals")
         return path.name
 
     def _mf4_header(self) -> dict[str, str]:

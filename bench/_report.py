@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import html
 import json
 import math
@@ -172,19 +173,13 @@ def _enabled_window(logger: Any) -> tuple[float, float] | None:
     return float(tt[0]), float(tt[-1])
 
 
-def _nums(a: Any) -> list[Any]:
-    """A float array as a short JSON list: about 7 significant digits of the array's
-    scale, NaN/inf as null (a gap in the line)."""
+def _nums(a: Any) -> dict[str, str]:
+    """A float array as a plotly.js typed array (float32, base64: about 7 significant
+    digits, 5.3 characters per point, and no float formatting in Python, which made
+    JSON the report's largest cost); NaN/inf become NaN, a gap in the line."""
     a = np.asarray(a, dtype=np.float64).ravel()
-    if a.size == 0:
-        return []
-    fin = np.isfinite(a)
-    big = float(np.max(np.abs(a[fin]))) if np.any(fin) else 1.0
-    dec = int(min(12, max(0, 6 - math.floor(math.log10(big))))) if big > 0 else 6
-    out = np.round(a, dec).tolist()
-    if not np.all(fin):
-        out = [x if f else None for x, f in zip(out, fin.tolist(), strict=True)]
-    return out
+    b = np.where(np.isfinite(a), a, np.nan).astype("<f4")
+    return {"dtype": "f4", "bdata": base64.b64encode(b.tobytes()).decode("ascii")}
 
 
 class _Figure:

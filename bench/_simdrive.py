@@ -358,7 +358,17 @@ class SimDrive(DriveBridge):
         self._flush_tx()
         return rec
 
+    @staticmethod
+    def _deliver(sink: Any, recs: list[dict[str, np.ndarray]]) -> None:
+        if len(recs) == 1:
+            rec = recs[0]
+        else:
+            rec = {k: np.concatenate([r[k] for r in recs]) for k in recs[0]}
+        t = rec.pop("t_s")
+        sink(t, rec, SIM_CHANNELS)
+
     def _loop(self) -> None:
+        pending: list[dict[str, np.ndarray]] = []
         try:
             while not self._stop.is_set():
                 if not self._want_run():
@@ -374,11 +384,21 @@ class SimDrive(DriveBridge):
                 with self._lock:
                     rec = self._chunk()
                 self.cpu_s += time.thread_time() - c0
+                sink = self.sink
+                if sink is None:
+                    pending.clear()
+                elif "t_s" in rec and rec["t_s"].size:
+                    pending.append(rec)
+                # the records go to the sink in batches (one logger append per channel
+                # per 50 ms of drive time instead of per 1 ms chunk; 10 ms when paced for
+                # live viewing), and always before waiters hear that the horizon is
+                # reached, so that what they read next includes it
+                if pending and (len(pending) >= (10 if self.paced else 50)
+                                or not self._want_run()):
+                    self._deliver(sink, pending)
+                    pending = []
                 with self._cond:
                     self._cond.notify_all()
-                if self.sink is not None and "t_s" in rec and rec["t_s"].size:
-                    t = rec.pop("t_s")
-                    self.sink(t, rec, SIM_CHANNELS)
         except BaseException as e:  # surfaced to waiters
             self.error = e
             log.exception("simulated drive thread died")

@@ -14,6 +14,7 @@ naming the file, line and field, or the parameter and its allowed range.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import logging
 import os
@@ -409,6 +410,9 @@ def _print_issues(e: Any) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from bench._mf4writer import Mf4Writer
+
+    Mf4Writer.shared()  # its asammdf import runs in a child process beside ours
     from bench._live import RerunStartError
     from bench._report import summary, write_junit
     from bench._sequence import SequenceError, load_sequence
@@ -431,8 +435,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     if bad:
         return EXIT_USAGE
     from bench._session import drive_kind
-
-    _prefetch("asammdf")  # the MF4 writer's ~0.9 s import, overlapped with the run
 
     results = []
     summaries = []
@@ -496,24 +498,6 @@ def cmd_report(args: argparse.Namespace) -> int:
     n = out.read_text(encoding="utf-8").count("class='pick'")
     print(f"{out} ({n} run(s))")
     return EXIT_OK
-
-
-def _prefetch(module: str) -> None:
-    """Import ``module`` in a background thread (the run waits on the simulated drive
-    most of the time, so a slow import costs little wall time there). A failure is
-    left for the real import to report."""
-    import threading
-
-    if module in sys.modules:
-        return
-
-    def imp() -> None:
-        try:
-            __import__(module)
-        except Exception:  # noqa: BLE001, S110 - reported where it is really imported
-            pass
-
-    threading.Thread(target=imp, name=f"bench-prefetch-{module}").start()
 
 
 def _print_result(r: Any, out: Any, kind: dict[str, Any] | None = None) -> None:
@@ -821,6 +805,15 @@ def main(argv: list[str] | None = None) -> int:
         return e.code
     except Exception as e:  # noqa: BLE001 - last resort: one line, traceback kept
         return _internal_error(e, getattr(args, "runs", "runs"))
+
+
+def console_main() -> int:
+    """The ``bench`` console script and ``python -m bench``: :func:`main`, then the
+    process ends, so what is left needs no collection (the interpreter's final
+    collection of a run's objects costs 50-100 ms). Not for in-process callers."""
+    rc = main()
+    gc.freeze()
+    return rc
 
 
 def _internal_error(e: BaseException, runs_root: str) -> int:

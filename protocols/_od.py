@@ -334,9 +334,25 @@ def _parse(path: Path) -> Any:
     return _PARSED[key]
 
 
+_LOADED: dict[tuple[str, int, int], ObjectDictionary] = {}
+
+
 def load(path: Path | str = OD_YAML) -> ObjectDictionary:
-    """Load and validate od.yaml; raises :class:`OdError` naming the field."""
+    """Load and validate od.yaml; raises :class:`OdError` naming the field.
+
+    Expanded once per file version (like :func:`_parse`): the bench asks for it from
+    several modules in one run. Callers must not mutate the result."""
     path = Path(path)
+    st = path.stat()
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    if key not in _LOADED:
+        od = _load(path)
+        _LOADED.clear()
+        _LOADED[key] = od
+    return _LOADED[key]
+
+
+def _load(path: Path) -> ObjectDictionary:
     data = _parse(path)
     fw_limits = data.get("fw_config", {}) or {}
     objs = list(data["objects"]) + _pdo_objects(data.get("pdos", {}) or {})

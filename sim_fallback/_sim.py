@@ -9,6 +9,7 @@ schedule and returns a :class:`Result` with numpy arrays and metrics.
 from __future__ import annotations
 
 import ctypes as C
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,6 +47,32 @@ def _schedule(spec: ScheduleLike, scale: float) -> tuple[np.ndarray, np.ndarray,
     return ta, va, ramp
 
 
+class _SimRecordRaw(C.Structure):
+    """:class:`_lib.SimRecord` with its pointers as plain addresses (same layout)."""
+
+    _fields_ = [(n, C.c_void_p) for n, _, _, _ in _lib.RECORD_CHANNELS] + [
+        ("capacity", C.c_uint32), ("pad_", C.c_uint32)]
+
+
+assert C.sizeof(_SimRecordRaw) == C.sizeof(_lib.SimRecord)
+
+
+@functools.lru_cache(maxsize=64)
+def _record_layout(want: tuple[str, ...], n_rec: int
+                   ) -> tuple[list[tuple[str, np.dtype, int, int, int]], int]:
+    """(name, dtype, columns, bytes, offset) of each recorded channel in one buffer
+    (64-byte aligned), and the buffer's size."""
+    out = []
+    off = 0
+    for name, _, dtype, cols in _lib.RECORD_CHANNELS:
+        if name in want:
+            dt = np.dtype(dtype)
+            nbytes = n_rec * cols * dt.itemsize
+            out.append((name, dt, cols, nbytes, off))
+            off += -(-nbytes // 64) * 64
+    return out, off
+
+
 def _dptr(a: np.ndarray) -> Any:
     return a.ctypes.data_as(C.POINTER(C.c_double))
 
@@ -79,6 +106,8 @@ class Sim:
                  x0_m: float = 0.0, plant: dict[str, Any] | None = None,
                  fw: dict[str, float] | None = None, strict: bool = True) -> None:
         self._L = _lib.lib()
+        self._rec_raw = _SimRecordRaw()  # advance()'s record, reused
+        self._rec = _lib.SimRecord.from_buffer(self._rec_raw)
         self.motor = motor if isinstance(motor, Motor) else load_motor(motor)
         ov = dict(plant or {})
         mp = self.motor.plant
@@ -189,26 +218,28 @@ class Sim:
         n_rec = 0 if first >= k0 + n_steps else (k0 + n_steps - 1 - first) // decimation + 1
         if n_rec >= 2**32:
             raise ValueError("too many records for one call; use chunks")
-        want = CHANNELS if channels is None else list(channels)
-        rec = _lib.SimRecord()
-        rec.capacity = n_rec
-        out: dict[str, np.ndarray] = {}
+        layout, total = _record_layout(tuple(CHANNELS if channels is None else channels),
+                                       n_rec)
         # One allocation for all channels (64-byte aligned views): a long
         # recording is then large enough for numpy to back it with huge pages,
         # which removes most of the page faults taken while the C loop writes
         # it (~2.5 us per 4 KiB fault in a VM, i.e. ~0.1 us per recorded
-        # period). The views keep the shared buffer alive.
-        sel = [c for c in _lib.RECORD_CHANNELS if c[0] in want]
-        sizes = [-(-n_rec * cols * np.dtype(dtype).itemsize // 64) * 64
-                 for _, _, dtype, cols in sel]
-        buf = np.empty(sum(sizes) + 64, dtype=np.uint8)
-        off = -buf.ctypes.data % 64
-        for (name, ptype, dtype, cols), size in zip(sel, sizes, strict=True):
-            a = buf[off:off + n_rec * cols * np.dtype(dtype).itemsize].view(dtype)
-            a = a.reshape((n_rec, cols)) if cols > 1 else a
-            off += size
-            setattr(rec, name, a.ctypes.data_as(ptype))
-            out[name] = a
+        # period). The views keep the shared buffer alive. The record's pointers
+        # are set as plain addresses: the simulated drive calls this once per SYNC
+        # (1,000 times per simulated second), and typed pointer casts made it
+        # 84 us per call instead of 22 us (20 channels, one control period).
+        buf = np.empty(total + 64, dtype=np.uint8)
+        base = buf.ctypes.data
+        off0 = -base % 64
+        raw = self._rec_raw
+        C.memset(C.addressof(raw), 0, C.sizeof(raw))
+        raw.capacity = n_rec
+        out: dict[str, np.ndarray] = {}
+        for name, dtype, cols, nbytes, off in layout:
+            a = buf[off0 + off:off0 + off + nbytes].view(dtype)
+            out[name] = a.reshape((n_rec, cols)) if cols > 1 else a
+            setattr(raw, name, base + off0 + off)
+        rec = self._rec
         got = self._L.sim_run(self._h, n_steps, decimation, C.byref(rec))
         if got < 0:
             raise RuntimeError("sim_run failed")
