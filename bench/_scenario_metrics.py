@@ -7,8 +7,10 @@ its tables and figures from those results alone.
 
 Names, as a campaign lists them under ``metrics:``:
 
-* ``<window>.<m>`` with a window of ``base.windows`` (``name: [t0, t1]``, s,
-  ``t0 <= t < t1``) and ``m`` one of :data:`WINDOW_METRICS`;
+* ``<window>.<m>`` with a window of ``base.windows`` (``name: [t0, t1]``, s, both
+  ends included, as every metric of :mod:`sim_fallback.metrics`) and ``m`` one of
+  :data:`WINDOW_METRICS`; the first five are short names of that module's metrics
+  (:data:`WINDOW_ALIASES`), computed by it;
 * :data:`EVENT_METRICS` (recovery after the event at ``base.event_s``);
 * :data:`STARTUP_METRICS` (closed-loop start and error after settling);
 * :data:`RUN_METRICS` (what the drive did: valid, faulted when, reached RUN).
@@ -29,12 +31,19 @@ from typing import Any
 
 import numpy as np
 
+from sim_fallback.metrics import compute_metrics, window_mask
+
 #: Statistics over a window: position error (el. rad) RMS / max |.| / mean, speed
 #: error (r/min) max |.| / RMS, RMS of the true d / q current minus its mean over one
 #: injection period (A, the HF ripple), and the position error RMS over the samples in
 #: the window in which the drive was in closed loop (RUN; for refused or faulted runs).
 WINDOW_METRICS = ("pos_rms", "pos_max", "pos_mean", "spd_max", "spd_rms", "ripple_d",
                   "ripple_q", "run_err_rms")
+#: Campaign short names of :mod:`sim_fallback.metrics` metrics (one definition each).
+WINDOW_ALIASES = {"pos_rms": "position_error_rms_rad", "pos_max": "position_error_max_rad",
+                  "pos_mean": "position_error_mean_rad",
+                  "spd_max": "speed_filtered_estimate_error_max_rpm",
+                  "spd_rms": "speed_filtered_estimate_error_rms_rpm"}
 #: Times (s) from the event to the first return into a band after the disturbance's peak.
 EVENT_METRICS = ("t_speed_back_s", "t_est_back_s", "t_pos_back_s")
 #: Start of the closed loop (s) and max |position error| after ``settling_time_s``.
@@ -87,21 +96,18 @@ def speed_error_rpm(res: Any) -> np.ndarray:
 
 
 def window_metrics(res: Any, t0: float, t1: float) -> dict[str, float]:
-    """Position error (el. rad) and speed error (r/min) statistics over [t0, t1)."""
-    t = res.data["t_s"]
-    k = (t >= t0) & (t < t1)
-    e = res.position_error_rad[k]
-    w = speed_error_rpm(res)[k]
-    return {"pos_rms": float(np.sqrt(np.mean(e**2))), "pos_max": float(np.max(np.abs(e))),
-            "pos_mean": float(np.mean(e)), "spd_max": float(np.max(np.abs(w))),
-            "spd_rms": float(np.sqrt(np.mean(w**2)))}
+    """Position error (el. rad) and speed error (r/min) statistics over [t0, t1], by
+    their campaign short names (:data:`WINDOW_ALIASES`)."""
+    m = res.motor
+    got = compute_metrics(res.data, m.tau_m, float(m.pole_pairs), (t0, t1),
+                          names=tuple(WINDOW_ALIASES.values()))
+    return {short: got[name] for short, name in WINDOW_ALIASES.items()}
 
 
 def hf_ripple(res: Any, t0: float, t1: float, n_inj: int) -> tuple[float, float]:
     """RMS of the HF current ripple (true d and q current minus its mean over one
-    injection period of ``n_inj`` samples) over [t0, t1), A."""
-    t = res.data["t_s"]
-    k = (t >= t0) & (t < t1)
+    injection period of ``n_inj`` samples) over [t0, t1], A."""
+    k = window_mask(res.data["t_s"], t0, t1)
     out = []
     for ch in ("i_d_A", "i_q_A"):
         x = res.data[ch][k]
@@ -201,8 +207,7 @@ def analyse(res: Any, metrics: Iterable[str], windows: Mapping[str, list[float]]
         w, _, name = m.partition(".")
         t0, t1 = windows[w]
         if name == "run_err_rms":
-            t = res.data["t_s"]
-            k = (t >= t0) & (t < t1) & (res.data["start_phase"] == 3)
+            k = window_mask(res.data["t_s"], t0, t1) & (res.data["start_phase"] == 3)
             out[m] = (float(np.sqrt(np.mean(res.position_error_rad[k] ** 2))) if np.any(k)
                       else float("nan"))
         elif not res.valid:

@@ -84,6 +84,8 @@ METRICS: tuple[MetricDef, ...] = (
               "settled", _POS),
     MetricDef("position_error_rms_mm", "e as above, as mover displacement e tau / pi",
               "RMS", "mm", "settled", _POS),
+    MetricDef("position_error_mean_rad", "e as above", "mean of e (the bias)",
+              "rad (electrical)", "settled", _POS),
     MetricDef("speed_estimate_error_max_rpm",
               "omega_hat - omega_e: the PLL's speed estimate (the drive reports it as "
               "velocity actual value 0x606C) minus the true speed",
@@ -94,6 +96,8 @@ METRICS: tuple[MetricDef, ...] = (
               "omega_f - omega_e: the low-pass filtered speed estimate the speed loop "
               "regulates on minus the true speed", "max |.|", "r/min (rotary equivalent)",
               "settled", _FILT),
+    MetricDef("speed_filtered_estimate_error_rms_rpm", "omega_f - omega_e as above",
+              "RMS", "r/min (rotary equivalent)", "settled", _FILT),
     MetricDef("speed_tracking_error_max_rpm",
               "omega_e - omega_ref: true speed minus the drive's speed reference "
               "(speed mode; includes the transient after each reference change)",
@@ -163,6 +167,12 @@ def _settling_time(tw: np.ndarray, ew: np.ndarray, t0_s: float) -> float:
     return float(tw[first] - t0_s)
 
 
+def window_mask(t: np.ndarray, t0_s: float, t1_s: float) -> np.ndarray:
+    """The samples of the window ``[t0_s, t1_s]`` (both ends included, to 1 ps: the
+    one window convention of every metric)."""
+    return (t >= t0_s - 1e-12) & (t <= t1_s + 1e-12)
+
+
 def compute_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pairs: float,
                     window_s: tuple[float, float] | None = None,
                     names: tuple[str, ...] | list[str] = METRIC_NAMES) -> dict[str, float]:
@@ -196,7 +206,7 @@ def compute_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pa
         t0, t1 = (float(t[0]), float(t[-1])) if t.size else (0.0, 0.0)
     else:
         t0, t1 = float(window_s[0]), float(window_s[1])
-    m = (t >= t0 - 1e-12) & (t <= t1 + 1e-12)
+    m = window_mask(t, t0, t1)
     tw = t[m]
     rpm_per_radps = 60.0 / (2.0 * math.pi * pole_pairs)
     mps_per_radps = pole_pitch_m / math.pi
@@ -220,6 +230,8 @@ def compute_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pa
             v = float(np.sqrt(np.mean(e**2)))
         elif name == "position_error_max_rad":
             v = absmax(e)
+        elif name == "position_error_mean_rad":
+            v = float(np.mean(e))
         elif name == "position_error_rms_mm":
             v = float(np.sqrt(np.mean(e**2))) * mps_per_radps * 1e3
         elif name == "speed_estimate_error_max_rpm":
@@ -228,6 +240,9 @@ def compute_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pa
             v = absmax(sig("omega_hat_radps", "omega_e_radps")) * mps_per_radps
         elif name == "speed_filtered_estimate_error_max_rpm":
             v = absmax(sig("omega_f_radps", "omega_e_radps")) * rpm_per_radps
+        elif name == "speed_filtered_estimate_error_rms_rpm":
+            v = float(np.sqrt(np.mean(sig("omega_f_radps", "omega_e_radps") ** 2))) \
+                * rpm_per_radps
         elif name == "speed_tracking_error_max_rpm":
             v = absmax(sig("omega_e_radps", "speed_ref_radps_e")) * rpm_per_radps
         else:  # settling_time_s

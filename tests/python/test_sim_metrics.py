@@ -47,6 +47,7 @@ def _reference(d, t0, t1, tau=TAU, p=P):
     return {
         "position_error_rms_rad": math.sqrt(np.mean(e[k] ** 2)),
         "position_error_max_rad": np.max(np.abs(e[k])),
+        "position_error_mean_rad": np.mean(e[k]),
         "position_error_rms_mm": math.sqrt(np.mean(e[k] ** 2)) * tau / math.pi * 1e3,
         "speed_estimate_error_max_rpm":
             np.max(np.abs(d["omega_hat_radps"] - d["omega_e_radps"])[k]) * rpm,
@@ -54,6 +55,8 @@ def _reference(d, t0, t1, tau=TAU, p=P):
             np.max(np.abs(d["omega_hat_radps"] - d["omega_e_radps"])[k]) * tau / math.pi,
         "speed_filtered_estimate_error_max_rpm":
             np.max(np.abs(d["omega_f_radps"] - d["omega_e_radps"])[k]) * rpm,
+        "speed_filtered_estimate_error_rms_rpm":
+            math.sqrt(np.mean(((d["omega_f_radps"] - d["omega_e_radps"])[k]) ** 2)) * rpm,
         "speed_tracking_error_max_rpm":
             np.max(np.abs(d["omega_e_radps"] - d["speed_ref_radps_e"])[k]) * rpm,
         "settling_time_s": ts,
@@ -107,6 +110,8 @@ def test_wrapped_error_and_units():
     assert got["speed_estimate_error_max_rpm"] == pytest.approx(1.0, rel=1e-9)
     assert got["speed_estimate_error_max_mps"] == pytest.approx(w_rpm * TAU / math.pi, rel=1e-9)
     assert got["speed_filtered_estimate_error_max_rpm"] == pytest.approx(2.0, rel=1e-9)
+    assert got["speed_filtered_estimate_error_rms_rpm"] == pytest.approx(2.0, rel=1e-9)
+    assert got["position_error_mean_rad"] == pytest.approx(0.01, abs=1e-6)
     assert got["speed_tracking_error_max_rpm"] == pytest.approx(3.0, rel=1e-9)
     assert got["settling_time_s"] == 0.0
 
