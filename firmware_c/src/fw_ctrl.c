@@ -518,8 +518,11 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     }
   } else if (c->phase != FW_START_SALIENCY && c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S &&
              fw_inj_settled(&c->inj)) {
-    latch_fault(c, fw_obs_supervise(&c->obs, cfg, hf.E_d_A, c->bemf.inj_scale,
-                                    c->phase == FW_START_RUN));
+    const fw_fault_t ef =
+        fw_obs_supervise(&c->obs, cfg, hf.E_d_A, c->bemf.inj_scale, c->phase == FW_START_RUN);
+    if (ef != FW_FAULT_NONE) {
+      latch_fault(c, ef);
+    }
   }
   /* During the alignment the zero-current loop holds i = 0: the voltage it
    * needs is the back-EMF of a moving mover (judged once the loop and the

@@ -58,30 +58,6 @@ uint32_t fw_fault_latch_history(const fw_fault_latch_t *f, uint16_t *codes, uint
   return m;
 }
 
-fw_fault_t fw_fault_check_inputs(const fw_config_t *cfg, const fw_inputs_t *in,
-                                 bool power_enabled) {
-  for (int i = 0; i < 3; i++) {
-    if (!fw_isfinite_f32(in->i_abc_A[i])) {
-      return FW_FAULT_INPUT_INVALID;
-    }
-  }
-  if (!fw_isfinite_f32(in->u_dc_V)) {
-    return FW_FAULT_INPUT_INVALID;
-  }
-  for (int i = 0; i < 3; i++) {
-    if (fabsf(in->i_abc_A[i]) > cfg->i_trip_A) {
-      return FW_FAULT_OVERCURRENT;
-    }
-  }
-  if (in->u_dc_V > cfg->u_dc_max_V) {
-    return FW_FAULT_DC_OVERVOLTAGE;
-  }
-  if (power_enabled && in->u_dc_V < cfg->u_dc_min_V) {
-    return FW_FAULT_DC_UNDERVOLTAGE;
-  }
-  return FW_FAULT_NONE;
-}
-
 /* ---- linear-axis protections -------------------------------------------- */
 
 void fw_protect_config(fw_protect_t *p, const fw_config_t *cfg, float dt_s) {

@@ -130,25 +130,3 @@ void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab, fw_sincos
     m->i_f_ab_A.y = i_ab.y - h_b;
   }
 }
-
-void fw_inj_adapt(fw_inj_t *j, const fw_config_t *cfg, float r) {
-  /* Observable adaptation (replaces eq. 13's theta - theta_hat): a wide band
-   * while the PLL error is large, a narrow one when locked. */
-  const float k = cfg->sogi_k_adapt_min + (cfg->sogi_k_adapt_max - cfg->sogi_k_adapt_min) * r;
-  if (fabsf(k - j->sogi_a.k) > FW_INJ_SOGI_K_STEP) {
-    fw_inj_set_k(j, k);
-  }
-}
-
-float fw_inj_output(fw_inj_t *j, bool on) {
-  float s = 0.0f;
-  if (on) {
-    s = (j->inj_idx < j->n_inj / 2u) ? 1.0f : -1.0f;
-    j->inj_idx = (j->inj_idx + 1u == j->n_inj) ? 0u : j->inj_idx + 1u;
-  }
-  j->sign_hist[3] = j->sign_hist[2];
-  j->sign_hist[2] = j->sign_hist[1];
-  j->sign_hist[1] = j->sign_hist[0];
-  j->sign_hist[0] = s;
-  return s;
-}

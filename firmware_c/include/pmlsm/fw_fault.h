@@ -15,6 +15,7 @@
 #ifndef PMLSM_FW_FAULT_H
 #define PMLSM_FW_FAULT_H
 
+#include <math.h>
 #include <stdbool.h>
 #include <stdint.h>
 
@@ -61,8 +62,29 @@ bool fw_fault_brakes_first(uint32_t fault_reaction_option, fw_fault_t code);
  * Checks on one period's sampled inputs: NaN/inf, overcurrent on any phase,
  * DC-link overvoltage, and undervoltage while the power stage is enabled.
  */
-fw_fault_t fw_fault_check_inputs(const fw_config_t *cfg, const fw_inputs_t *in,
-                                 bool power_enabled);
+static inline fw_fault_t fw_fault_check_inputs(const fw_config_t *cfg, const fw_inputs_t *in,
+                                               bool power_enabled) {
+  for (int i = 0; i < 3; i++) {
+    if (!fw_isfinite_f32(in->i_abc_A[i])) {
+      return FW_FAULT_INPUT_INVALID;
+    }
+  }
+  if (!fw_isfinite_f32(in->u_dc_V)) {
+    return FW_FAULT_INPUT_INVALID;
+  }
+  for (int i = 0; i < 3; i++) {
+    if (fabsf(in->i_abc_A[i]) > cfg->i_trip_A) {
+      return FW_FAULT_OVERCURRENT;
+    }
+  }
+  if (in->u_dc_V > cfg->u_dc_max_V) {
+    return FW_FAULT_DC_OVERVOLTAGE;
+  }
+  if (power_enabled && in->u_dc_V < cfg->u_dc_min_V) {
+    return FW_FAULT_DC_UNDERVOLTAGE;
+  }
+  return FW_FAULT_NONE;
+}
 
 /** Linear-axis protections on the estimate (caller-owned). */
 typedef struct {

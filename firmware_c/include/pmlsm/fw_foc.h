@@ -16,6 +16,7 @@
 #ifndef PMLSM_FW_FOC_H
 #define PMLSM_FW_FOC_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "fw_math.h"
@@ -67,10 +68,24 @@ void fw_foc_speed_clear(fw_foc_t *f);
  * Current PIs: u_dq = PI(i_ref - i) + decoupling (-w L_q i_q, w (L_d i_d + psi_f)),
  * each clamped to +-FW_FOC_VOLTAGE_SHARE u_dc / sqrt(3).
  */
-fw_vec2_f32_t fw_foc_current_update(fw_foc_t *f, fw_vec2_f32_t i_ref_dq_A, fw_vec2_f32_t i_dq_A,
-                                    float w_radps, float u_dc_V, float dt_s);
+static inline fw_vec2_f32_t fw_foc_current_update(fw_foc_t *f, fw_vec2_f32_t i_ref_dq_A,
+                                                  fw_vec2_f32_t i_dq_A, float w_radps,
+                                                  float u_dc_V, float dt_s) {
+  const float u_lim = FW_FOC_VOLTAGE_SHARE * u_dc_V * FW_INV_SQRT3_F32;
+  f->pi_d.out_min = f->pi_q.out_min = -u_lim;
+  f->pi_d.out_max = f->pi_q.out_max = u_lim;
+  const float ff_d = -w_radps * f->p.L_q_H * i_dq_A.y;
+  const float ff_q = w_radps * (f->p.L_d_H * i_dq_A.x + f->p.psi_f_Wb);
+  fw_vec2_f32_t u;
+  u.x = fw_pi_step_f32(&f->pi_d, i_ref_dq_A.x - i_dq_A.x, ff_d, dt_s);
+  u.y = fw_pi_step_f32(&f->pi_q, i_ref_dq_A.y - i_dq_A.y, ff_q, dt_s);
+  return u;
+}
 /** The fundamental voltage u_dq_V (without injection) is what gets applied. */
-void fw_foc_commit(fw_foc_t *f, fw_vec2_f32_t u_dq_V);
+static inline void fw_foc_commit(fw_foc_t *f, fw_vec2_f32_t u_dq_V) {
+  f->u_dq_prev_V[0] = u_dq_V.x;
+  f->u_dq_prev_V[1] = u_dq_V.y;
+}
 /** The i_q reference in use this period (kept for a bumpless SPEED switch). */
 static inline void fw_foc_commit_ref(fw_foc_t *f, float i_q_ref_A) { f->i_q_ref_A = i_q_ref_A; }
 /** Fundamental voltage committed last period (acts over this one). */
@@ -81,8 +96,14 @@ static inline const float *fw_foc_u_applied(const fw_foc_t *f) { return f->u_dq_
  * update delay), so the inverse Park uses theta_k + 1.5 w dt; then SVPWM on
  * u_dc. Returns the sine/cosine used (for other voltages of this period).
  */
-fw_sincos_f32_t fw_foc_output(fw_vec2_f32_t u_cmd_dq_V, float theta_k_rad, float w_radps,
-                              float dt_s, float u_dc_V, float duty_abc[3]);
+static inline fw_sincos_f32_t fw_foc_output(fw_vec2_f32_t u_cmd_dq_V, float theta_k_rad,
+                                            float w_radps, float dt_s, float u_dc_V,
+                                            float duty_abc[3]) {
+  const fw_sincos_f32_t sc_out = fw_sincos_f32(theta_k_rad + 1.5f * w_radps * dt_s);
+  const fw_vec2_f32_t u_ab = fw_inv_park_f32(u_cmd_dq_V, sc_out);
+  (void)fw_svpwm_f32(u_ab, u_dc_V, duty_abc, NULL);
+  return sc_out;
+}
 
 #ifdef __cplusplus
 }

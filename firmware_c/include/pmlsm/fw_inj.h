@@ -83,11 +83,32 @@ void fw_inj_set_extractor(fw_inj_t *j, const fw_config_t *cfg, fw_extractor_t ex
  */
 void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab_A, fw_sincos_f32_t sc_k,
                    float theta_hat_rad, float w_hat_radps, fw_inj_meas_t *m);
-/** Adaptive SOGI: k from kmin..kmax by r in [0, 1] (r = 1: widest band). */
-void fw_inj_adapt(fw_inj_t *j, const fw_config_t *cfg, float r);
+/** Adaptive SOGI: k from kmin..kmax by r in [0, 1] (r = 1: widest band);
+ *  the coefficients are recomputed only when k moves by more than
+ *  FW_INJ_SOGI_K_STEP. */
+static inline void fw_inj_adapt(fw_inj_t *j, const fw_config_t *cfg, float r) {
+  /* Observable adaptation (replaces eq. 13's theta - theta_hat): a wide band
+   * while the PLL error is large, a narrow one when locked. */
+  const float k = cfg->sogi_k_adapt_min + (cfg->sogi_k_adapt_max - cfg->sogi_k_adapt_min) * r;
+  const float dk = k - j->sogi_a.k;
+  if (dk > FW_INJ_SOGI_K_STEP || dk < -FW_INJ_SOGI_K_STEP) {
+    fw_inj_set_k(j, k);
+  }
+}
 /** Sign to command this period (+1/-1 by half injection period, 0 when off);
  *  advances the injection phase when on and ages the sign history. */
-float fw_inj_output(fw_inj_t *j, bool on);
+static inline float fw_inj_output(fw_inj_t *j, bool on) {
+  float s = 0.0f;
+  if (on) {
+    s = (j->inj_idx < j->n_inj / 2u) ? 1.0f : -1.0f;
+    j->inj_idx = (j->inj_idx + 1u == j->n_inj) ? 0u : j->inj_idx + 1u;
+  }
+  j->sign_hist[3] = j->sign_hist[2];
+  j->sign_hist[2] = j->sign_hist[1];
+  j->sign_hist[1] = j->sign_hist[0];
+  j->sign_hist[0] = s;
+  return s;
+}
 /** One full injection period of samples in the averages. */
 static inline bool fw_inj_settled(const fw_inj_t *j) { return j->ring_fill == j->n_inj; }
 /** Sign of the voltage that acted over the last sampled interval, s(k-2). */
