@@ -403,89 +403,95 @@ static void fill_snapshot_common(fw_ctrl_t *c, const fw_inputs_t *in, fw_vec2_f3
   s->duty_abc[2] = out->duty_abc[2];
 }
 
-void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
-  if (c == NULL || out == NULL) {
-    return;
-  }
-  outputs_off(out);
-  c->step_count++;
-  if (in == NULL) {
-    latch_fault(c, FW_FAULT_INPUT_INVALID);
-    return;
-  }
-  const fw_config_t *cfg = &c->cfg;
-  const float dt = c->dt_s;
-  const uint32_t n_inj = c->inj.n_inj;
-  c->theta_k = c->obs.pll.theta_rad; /* the estimate belonging to this sample */
+/** Signals of one period, passed between the stages of fw_step (each stage
+ *  is called once and inlined). Only values: what a block fills through a
+ *  pointer (inputs, monitor inputs, extraction results) lives in separate
+ *  locals, so this one stays in registers. */
+typedef struct {
+  fw_vec2_f32_t i_ab;      /**< measured alpha/beta current */
+  bool braking;            /**< controlled braking after a fault */
+  bool quick_stop;         /**< quick stop or fault braking */
+  bool pulses;             /**< polarity pulses instead of injection and current loop */
+  fw_sincos_f32_t sc;      /**< estimate at the sampling instant */
+  fw_vec2_f32_t i_dq;      /**< fundamental current, estimated frame */
+  float u_d_pulse;         /**< polarity pulse voltage */
+  fw_vec2_f32_t i_ref;     /**< current references */
+  fw_vec2_f32_t u_dq;      /**< fundamental voltage command */
+} fw_period_t;
 
-  /* ---- input checks ---- */
-  fw_fault_t f = fw_fault_check_inputs(cfg, in, fw_cia402_power_enabled(c->sm.state));
-  fw_inputs_t safe = *in;
+/** Input checks (fault on a bad sample; NaN never enters the state), offset
+ *  compensation, Clarke. */
+static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
+                         fw_mon_in_t *mi, fw_period_t *p) {
+  const fw_fault_t f =
+      fw_fault_check_inputs(&c->cfg, in, fw_cia402_power_enabled(c->sm.state));
+  *safe = *in;
   if (f != FW_FAULT_NONE) {
     latch_fault(c, f);
     if (f == FW_FAULT_INPUT_INVALID) {
-      memset(&safe, 0, sizeof(safe)); /* never propagate NaN into the state */
+      memset(safe, 0, sizeof(*safe)); /* never propagate NaN into the state */
     }
   }
-  c->u_dc_V = safe.u_dc_V; /* for the statusword's warning bit */
+  c->u_dc_V = safe->u_dc_V; /* for the statusword's warning bit */
   if (c->phase != FW_START_IDLE) {
-    fw_mon_compensate(&c->mon, safe.i_abc_A); /* offsets learnt at standstill */
+    fw_mon_compensate(&c->mon, safe->i_abc_A); /* offsets learnt at standstill */
   }
   /* monitor inputs: every field is written before fw_mon_update reads it
    * (no memset on the hot path) */
-  fw_mon_in_t mi;
-  mi.i_abc_A[0] = safe.i_abc_A[0];
-  mi.i_abc_A[1] = safe.i_abc_A[1];
-  mi.i_abc_A[2] = safe.i_abc_A[2];
-  fw_vec2_f32_t i_ab = fw_clarke_f32(safe.i_abc_A[0], safe.i_abc_A[1], safe.i_abc_A[2]);
+  mi->i_abc_A[0] = safe->i_abc_A[0];
+  mi->i_abc_A[1] = safe->i_abc_A[1];
+  mi->i_abc_A[2] = safe->i_abc_A[2];
+  p->i_ab = fw_clarke_f32(safe->i_abc_A[0], safe->i_abc_A[1], safe->i_abc_A[2]);
+}
 
-  /* ---- drive state: fault reaction (brake under control first, or switch
-   * off now: latch_fault), power stage off ---- */
-  bool braking = false;
+/** Fault reaction (brake under control first, or switch off now: latch_fault).
+ *  Returns false when the power stage is off. */
+static bool stage_power(fw_ctrl_t *c, fw_period_t *p) {
+  p->braking = false;
   if (c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE) {
     if (!c->fault.hard && c->phase == FW_START_RUN) {
-      braking = true;
+      p->braking = true;
     } else {
       fw_cia402_fault_reaction_done(&c->sm);
     }
   }
-  if (!(fw_cia402_power_enabled(c->sm.state) || braking) || c->phase == FW_START_IDLE) {
-    c->phase = FW_START_IDLE;
-    fw_mon_learn_offsets(&c->mon, safe.i_abc_A);
-    fw_protect_cool(&c->prot, cfg);
-    memset(&mi.e_hf_dq_A, 0, sizeof(mi) - offsetof(fw_mon_in_t, e_hf_dq_A));
-    fw_fault_t mf = fw_mon_update(&c->mon, &mi); /* current sum with PWM off */
-    if (mf != FW_FAULT_NONE) {
-      latch_fault(c, mf);
-    }
-    fw_obs_set_iq(&c->obs, 0.0f);
-    c->snap.mon_i_sum_A = c->mon.isum_f;
-    memset(c->snap.i_dq_A, 0, sizeof(c->snap.i_dq_A));
-    memset(c->snap.u_dq_V, 0, sizeof(c->snap.u_dq_V));
-    c->snap.u_inj_V = 0.0f;
-    fill_snapshot_common(c, &safe, i_ab, out);
-    return;
+  return (fw_cia402_power_enabled(c->sm.state) || p->braking) && c->phase != FW_START_IDLE;
+}
+
+/** Power stage off: current-sensor offsets and sum, i2t cools down. */
+static void stage_off(fw_ctrl_t *c, const fw_inputs_t *safe, fw_mon_in_t *mi) {
+  c->phase = FW_START_IDLE;
+  fw_mon_learn_offsets(&c->mon, safe->i_abc_A);
+  fw_protect_cool(&c->prot, &c->cfg);
+  memset(&mi->e_hf_dq_A, 0, sizeof(*mi) - offsetof(fw_mon_in_t, e_hf_dq_A));
+  const fw_fault_t mf = fw_mon_update(&c->mon, mi); /* current sum with PWM off */
+  if (mf != FW_FAULT_NONE) {
+    latch_fault(c, mf);
   }
+  fw_obs_set_iq(&c->obs, 0.0f);
+  c->snap.mon_i_sum_A = c->mon.isum_f;
+  memset(c->snap.i_dq_A, 0, sizeof(c->snap.i_dq_A));
+  memset(c->snap.u_dq_V, 0, sizeof(c->snap.u_dq_V));
+  c->snap.u_inj_V = 0.0f;
+}
 
-  c->phase_time_s += dt;
-  bool quick_stop = c->sm.state == FW_CIA402_QUICK_STOP_ACTIVE || braking;
-
-  /* ---- extraction and observer (not during the polarity pulses) ---- */
-  const bool pulses = c->phase == FW_START_POLARITY;
+/** Extraction and observer (not during the polarity pulses), Park of the
+ *  fundamental, back-EMF observer in closed loop. */
+static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
+  const fw_config_t *cfg = &c->cfg;
   /* theta_hat at the sampling instant: for the current Park and (advanced)
    * the output transform; the demodulation uses its own delayed frame */
-  const float theta_k = c->theta_k;
-  const fw_sincos_f32_t sc = fw_sincos_f32(theta_k);
-  fw_inj_meas_t hf;
-  hf.i_f_ab_A = i_ab;
-  hf.e_raw_dq_A.x = hf.e_raw_dq_A.y = 0.0f; /* raw HF difference, for the monitor */
-  hf.E_d_A = 0.0f;
-  if (!pulses) {
+  p->sc = fw_sincos_f32(c->theta_k);
+  hf->i_f_ab_A = p->i_ab;
+  hf->e_raw_dq_A.x = hf->e_raw_dq_A.y = 0.0f; /* raw HF difference, for the monitor */
+  hf->E_d_A = 0.0f;
+  if (!p->pulses) {
     const fw_extractor_t ex = (fw_extractor_t)cfg->extractor;
-    fw_inj_update(&c->inj, ex, i_ab, sc, c->obs.pll.theta_rad, c->obs.pll.w_i_radps, &hf);
+    fw_inj_update(&c->inj, ex, p->i_ab, p->sc, c->obs.pll.theta_rad, c->obs.pll.w_i_radps,
+                  hf);
     fw_obs_in_t oi;
-    oi.E_d_A = hf.E_d_A;
-    oi.E_q_A = hf.E_q_A;
+    oi.E_d_A = hf->E_d_A;
+    oi.E_q_A = hf->E_q_A;
     oi.hold = (uint8_t)(c->phase == FW_START_SALIENCY);
     oi.bemf_active = c->bemf.active;
     oi.bemf_err_rad = c->bemf.active ? fw_bemf_error(&c->bemf) : 0.0f;
@@ -497,29 +503,34 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
       fw_inj_adapt(&c->inj, cfg, adapt_r);
     }
     c->snap.pll_err_rad = eps;
-    c->snap.hf_amp_A = hf.E_d_A;
-    c->snap.hf_q_A = hf.E_q_A;
-    c->snap.i_h_ab_A[0] = hf.i_h_ab_A.x;
-    c->snap.i_h_ab_A[1] = hf.i_h_ab_A.y;
+    c->snap.hf_amp_A = hf->E_d_A;
+    c->snap.hf_q_A = hf->E_q_A;
+    c->snap.i_h_ab_A[0] = hf->i_h_ab_A.x;
+    c->snap.i_h_ab_A[1] = hf->i_h_ab_A.y;
   }
-  const fw_vec2_f32_t i_dq = fw_foc_measure(hf.i_f_ab_A, sc);
-  if (c->phase == FW_START_RUN && !pulses) {
-    const float i_dq_arr[2] = {i_dq.x, i_dq.y};
+  p->i_dq = fw_foc_measure(hf->i_f_ab_A, p->sc);
+  if (c->phase == FW_START_RUN && !p->pulses) {
+    const float i_dq_arr[2] = {p->i_dq.x, p->i_dq.y};
     fw_bemf_update(&c->bemf, fw_foc_u_applied(&c->foc), i_dq_arr, c->obs.pll.w_i_radps);
     fw_bemf_schedule(&c->bemf, c->obs.pll.w_i_radps, (uint8_t)fw_inj_settled(&c->inj));
   }
+}
 
-  /* ---- start-up and estimator supervision ---- */
-  float u_d_pulse = 0.0f;
-  if (pulses) {
-    u_d_pulse = polarity_step(c, i_dq.x);
+/** Start-up sequence (polarity pulses, flying start, end of the alignment,
+ *  saliency check) and the estimator supervision. */
+static void stage_startup(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p) {
+  const fw_config_t *cfg = &c->cfg;
+  const uint32_t n_inj = c->inj.n_inj;
+  p->u_d_pulse = 0.0f;
+  if (p->pulses) {
+    p->u_d_pulse = polarity_step(c, p->i_dq.x);
     if (c->phase == FW_START_RUN) {
       fw_mon_run_start(&c->mon);
     }
   } else if (c->phase != FW_START_SALIENCY && c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S &&
              fw_inj_settled(&c->inj)) {
     const fw_fault_t ef =
-        fw_obs_supervise(&c->obs, cfg, hf.E_d_A, c->bemf.inj_scale, c->phase == FW_START_RUN);
+        fw_obs_supervise(&c->obs, cfg, hf->E_d_A, c->bemf.inj_scale, c->phase == FW_START_RUN);
     if (ef != FW_FAULT_NONE) {
       latch_fault(c, ef);
     }
@@ -528,7 +539,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
    * needs is the back-EMF of a moving mover (judged once the loop and the
    * monitor's filter have settled, and again at the end). */
   if (c->phase == FW_START_ALIGN) {
-    fw_start_fly_observe(&c->start, cfg, dt, hf.i_f_ab_A, c->phase_time_s);
+    fw_start_fly_observe(&c->start, cfg, c->dt_s, hf->i_f_ab_A, c->phase_time_s);
   }
   if (c->phase == FW_START_ALIGN && c->phase_time_s >= FW_MOTION_CHECK_S &&
       fw_mon_motion(&c->mon, c->e_start_max_V) != FW_FAULT_NONE) {
@@ -542,118 +553,113 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     fw_start_saliency_begin(&c->start);
   }
   if (c->phase == FW_START_SALIENCY) {
-    fw_start_saliency_update(&c->start, n_inj, hf.e_raw_dq_A);
+    fw_start_saliency_update(&c->start, n_inj, hf->e_raw_dq_A);
   }
-  braking = braking && c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE;
-  if (!(fw_cia402_power_enabled(c->sm.state) || braking)) { /* a fault was latched above */
-    fill_snapshot_common(c, &safe, i_ab, out);
-    return;
-  }
+}
 
-  /* ---- references ---- */
-  float i_d_ref = 0.0f, i_q_ref = 0.0f;
+/** Current references (speed loop or FORCE), quick stop and fault braking
+ *  timing. Returns false when the braking has ended (PWM off). */
+static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
+  const fw_config_t *cfg = &c->cfg;
+  const float dt = c->dt_s;
+  p->i_ref.x = p->i_ref.y = 0.0f;
   if (c->phase == FW_START_RUN) {
-    float w_ref = quick_stop ? 0.0f : c->speed_ref_radps_e;
-    i_d_ref = c->i_d_ref_A;
+    const float w_ref = p->quick_stop ? 0.0f : c->speed_ref_radps_e;
+    p->i_ref.x = c->i_d_ref_A;
     if (c->mode == FW_MODE_SPEED) {
-      i_q_ref = fw_foc_speed_update(&c->foc, w_ref, c->obs.omega_f, dt);
+      p->i_ref.y = fw_foc_speed_update(&c->foc, w_ref, c->obs.omega_f, dt);
     } else {
-      i_q_ref = quick_stop ? 0.0f : c->i_q_ref_force_A;
+      p->i_ref.y = p->quick_stop ? 0.0f : c->i_q_ref_force_A;
     }
   }
-  if (quick_stop) {
+  if (p->quick_stop) {
     c->qs_time_s += dt;
-    bool still = c->mode == FW_MODE_FORCE || fabsf(c->obs.omega_f) < FW_QS_STILL_RADPS ||
-                 c->phase != FW_START_RUN;
+    const bool still = c->mode == FW_MODE_FORCE || fabsf(c->obs.omega_f) < FW_QS_STILL_RADPS ||
+                       c->phase != FW_START_RUN;
     c->qs_still_s = still ? c->qs_still_s + dt : 0.0f;
     /* braking after a fault is bounded by fault_brake_time_s: a lost
      * supervisor must see the power stage off soon, at any speed */
-    float t_max = braking ? cfg->fault_brake_time_s : cfg->quick_stop_time_s;
+    const float t_max = p->braking ? cfg->fault_brake_time_s : cfg->quick_stop_time_s;
     if (c->qs_still_s >= FW_QS_STILL_TIME_S || c->qs_time_s >= t_max) {
-      if (braking) {
+      if (p->braking) {
         fw_cia402_fault_reaction_done(&c->sm); /* stopped: PWM off, FAULT */
       } else {
         fw_cia402_quick_stop_done(&c->sm);
       }
       c->phase = FW_START_IDLE;
-      fill_snapshot_common(c, &safe, i_ab, out);
-      return;
+      return false;
     }
   }
+  return true;
+}
 
-  /* ---- current loop (estimated frame) ---- */
-  fw_vec2_f32_t u_dq;
-  if (pulses) {
-    u_dq.x = u_d_pulse;
-    u_dq.y = 0.0f;
-  } else {
-    const fw_vec2_f32_t i_ref = {i_d_ref, i_q_ref};
-    u_dq = fw_foc_current_update(&c->foc, i_ref, i_dq, c->obs.omega_f, safe.u_dc_V, dt);
+/** Integrity monitor and protections. Returns false when a hard fault
+ *  switches the power stage off now (braking faults go on braking). */
+static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_mon_in_t *mi,
+                          fw_period_t *p) {
+  const bool running = c->phase == FW_START_RUN;
+  const bool scale_full = c->bemf.inj_scale >= 1.0f;
+  const bool scale_steady = scale_full || c->bemf.inj_scale <= c->bemf.inj_share;
+  /* the HF witness judges the response per volt of injection: scale back (no
+   * division while the injection is full, the usual case) */
+  const float inv_scale = scale_full ? 1.0f : 1.0f / c->bemf.inj_scale;
+  const float *u_applied = fw_foc_u_applied(&c->foc);
+  mi->e_hf_dq_A[0] = hf->e_raw_dq_A.x * inv_scale;
+  mi->e_hf_dq_A[1] = hf->e_raw_dq_A.y * inv_scale;
+  mi->u_dq_V[0] = u_applied[0];
+  mi->u_dq_V[1] = u_applied[1];
+  mi->i_dq_A[0] = p->i_dq.x;
+  mi->i_dq_A[1] = p->i_dq.y;
+  mi->i_dq_ref_A[0] = p->i_ref.x;
+  mi->i_dq_ref_A[1] = p->i_ref.y;
+  mi->omega_hat_radps = c->obs.pll.w_i_radps;
+  mi->accel_dist_radps2 = c->obs.accel_dist;
+  mi->running = (uint8_t)running;
+  mi->hf_valid = (uint8_t)(running && !p->pulses && scale_steady && fw_inj_settled(&c->inj) &&
+                           c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S &&
+                           fw_inj_sign_applied(&c->inj) != 0.0f);
+  mi->pwm_on = 1u;
+  fw_fault_t mf = fw_mon_update(&c->mon, mi);
+  if (mf == FW_FAULT_NONE && running) {
+    mf = protect(c, p->i_dq, p->quick_stop);
   }
-
-  /* ---- integrity monitor and protections ---- */
-  {
-    const bool running = c->phase == FW_START_RUN;
-    const bool scale_full = c->bemf.inj_scale >= 1.0f;
-    const bool scale_steady = scale_full || c->bemf.inj_scale <= c->bemf.inj_share;
-    /* the HF witness judges the response per volt of injection: scale back (no
-     * division while the injection is full, the usual case) */
-    const float inv_scale = scale_full ? 1.0f : 1.0f / c->bemf.inj_scale;
-    const float *u_applied = fw_foc_u_applied(&c->foc);
-    mi.e_hf_dq_A[0] = hf.e_raw_dq_A.x * inv_scale;
-    mi.e_hf_dq_A[1] = hf.e_raw_dq_A.y * inv_scale;
-    mi.u_dq_V[0] = u_applied[0];
-    mi.u_dq_V[1] = u_applied[1];
-    mi.i_dq_A[0] = i_dq.x;
-    mi.i_dq_A[1] = i_dq.y;
-    mi.i_dq_ref_A[0] = i_d_ref;
-    mi.i_dq_ref_A[1] = i_q_ref;
-    mi.omega_hat_radps = c->obs.pll.w_i_radps;
-    mi.accel_dist_radps2 = c->obs.accel_dist;
-    mi.running = (uint8_t)running;
-    mi.hf_valid = (uint8_t)(running && !pulses && scale_steady && fw_inj_settled(&c->inj) &&
-                            c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S &&
-                            fw_inj_sign_applied(&c->inj) != 0.0f);
-    mi.pwm_on = 1u;
-    fw_fault_t mf = fw_mon_update(&c->mon, &mi);
-    if (mf == FW_FAULT_NONE && running) {
-      mf = protect(c, i_dq, quick_stop);
-    }
-    c->snap.mon_angle_hf_rad = c->mon.angle_hf_rad;
-    c->snap.mon_angle_bemf_rad = c->mon.angle_bemf_rad;
-    c->snap.mon_e_bemf_V = c->mon.e_bemf_V;
-    c->snap.mon_i_sum_A = c->mon.isum_f;
-    if (mf != FW_FAULT_NONE) {
-      latch_fault(c, mf);
-      if (c->fault.hard) { /* switch off now; braking faults go on braking */
-        fill_snapshot_common(c, &safe, i_ab, out);
-        return;
-      }
+  c->snap.mon_angle_hf_rad = c->mon.angle_hf_rad;
+  c->snap.mon_angle_bemf_rad = c->mon.angle_bemf_rad;
+  c->snap.mon_e_bemf_V = c->mon.e_bemf_V;
+  c->snap.mon_i_sum_A = c->mon.isum_f;
+  if (mf != FW_FAULT_NONE) {
+    latch_fault(c, mf);
+    if (c->fault.hard) {
+      return false;
     }
   }
-  fw_foc_commit(&c->foc, u_dq);
+  return true;
+}
 
-  /* ---- square-wave injection on the estimated d axis (on q^ in the second
-   * half of the saliency check) ---- */
-  const float s = fw_inj_output(&c->inj, !pulses && cfg->u_inj_V > 0.0f);
-  const bool inj_q = c->phase == FW_START_SALIENCY && fw_start_saliency_on_q(&c->start, n_inj);
+/** Square-wave injection on the estimated d axis (on q^ in the second half of
+ *  the saliency check) and the modulation. */
+static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_outputs_t *out) {
+  const fw_config_t *cfg = &c->cfg;
+  const float s = fw_inj_output(&c->inj, !p->pulses && cfg->u_inj_V > 0.0f);
+  const bool inj_q =
+      c->phase == FW_START_SALIENCY && fw_start_saliency_on_q(&c->start, c->inj.n_inj);
   const float u_inj = cfg->u_inj_V * c->bemf.inj_scale;
-  fw_vec2_f32_t u_cmd = {u_dq.x + (inj_q ? 0.0f : s * u_inj), u_dq.y + (inj_q ? s * u_inj : 0.0f)};
-
-  /* ---- modulation ---- */
+  const fw_vec2_f32_t u_dq = p->u_dq;
+  const fw_vec2_f32_t u_cmd = {u_dq.x + (inj_q ? 0.0f : s * u_inj),
+                               u_dq.y + (inj_q ? s * u_inj : 0.0f)};
   const fw_sincos_f32_t sc_out =
-      fw_foc_output(u_cmd, theta_k, c->obs.pll.w_hat_radps, dt, safe.u_dc_V, out->duty_abc);
+      fw_foc_output(u_cmd, c->theta_k, c->obs.pll.w_hat_radps, c->dt_s, u_dc_V, out->duty_abc);
   if (c->phase == FW_START_ALIGN) { /* fundamental only, for the flying-start observer */
     fw_start_fly_set_u(&c->start, fw_inv_park_f32(u_dq, sc_out));
   }
   out->pwm_enable = 1u;
 
-  fw_obs_set_iq(&c->obs, i_dq.y);
-  fw_foc_commit_ref(&c->foc, i_q_ref);
-  c->snap.i_dq_A[0] = i_dq.x;
-  c->snap.i_dq_A[1] = i_dq.y;
-  c->snap.i_dq_ref_A[0] = i_d_ref;
-  c->snap.i_dq_ref_A[1] = i_q_ref;
+  fw_obs_set_iq(&c->obs, p->i_dq.y);
+  fw_foc_commit_ref(&c->foc, p->i_ref.y);
+  c->snap.i_dq_A[0] = p->i_dq.x;
+  c->snap.i_dq_A[1] = p->i_dq.y;
+  c->snap.i_dq_ref_A[0] = p->i_ref.x;
+  c->snap.i_dq_ref_A[1] = p->i_ref.y;
   c->snap.u_dq_V[0] = u_dq.x;
   c->snap.u_dq_V[1] = u_dq.y;
   c->snap.u_inj_V = s * u_inj;
@@ -661,13 +667,62 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   c->snap.bemf_active = c->bemf.active;
   c->snap.flying_start = c->start.flying;
   c->snap.bemf_err_rad = fw_bemf_error(&c->bemf);
-  if (c->phase == FW_START_SALIENCY && fw_start_saliency_advance(&c->start, n_inj)) {
+}
+
+void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
+  if (c == NULL || out == NULL) {
+    return;
+  }
+  outputs_off(out);
+  c->step_count++;
+  if (in == NULL) {
+    latch_fault(c, FW_FAULT_INPUT_INVALID);
+    return;
+  }
+  c->theta_k = c->obs.pll.theta_rad; /* the estimate belonging to this sample */
+  fw_period_t p;
+  fw_inputs_t safe;
+  fw_mon_in_t mi;
+  stage_inputs(c, in, &safe, &mi, &p);
+  if (!stage_power(c, &p)) {
+    stage_off(c, &safe, &mi);
+    fill_snapshot_common(c, &safe, p.i_ab, out);
+    return;
+  }
+  c->phase_time_s += c->dt_s;
+  p.quick_stop = c->sm.state == FW_CIA402_QUICK_STOP_ACTIVE || p.braking;
+  p.pulses = c->phase == FW_START_POLARITY;
+
+  fw_inj_meas_t hf;
+  stage_estimate(c, &hf, &p);
+  stage_startup(c, &hf, &p);
+  p.braking = p.braking && c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE;
+  if (!(fw_cia402_power_enabled(c->sm.state) || p.braking) || /* a fault was latched above */
+      !stage_references(c, &p)) {                              /* quick stop / braking done */
+    fill_snapshot_common(c, &safe, p.i_ab, out);
+    return;
+  }
+  /* current loop in the estimated frame, or the polarity pulses */
+  if (p.pulses) {
+    p.u_dq.x = p.u_d_pulse;
+    p.u_dq.y = 0.0f;
+  } else {
+    p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, c->obs.omega_f, safe.u_dc_V,
+                                   c->dt_s);
+  }
+  if (!stage_monitor(c, &hf, &mi, &p)) { /* hard fault: switch off now */
+    fill_snapshot_common(c, &safe, p.i_ab, out);
+    return;
+  }
+  fw_foc_commit(&c->foc, p.u_dq);
+  stage_output(c, &p, safe.u_dc_V, out);
+  if (c->phase == FW_START_SALIENCY && fw_start_saliency_advance(&c->start, c->inj.n_inj)) {
     saliency_done(c);
     if (c->fault.hard) {
       outputs_off(out);
     }
   }
-  fill_snapshot_common(c, &safe, i_ab, out);
+  fill_snapshot_common(c, &safe, p.i_ab, out);
 }
 
 void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
