@@ -18,6 +18,7 @@ import gc
 import json
 import logging
 import os
+import re
 import signal
 import sys
 import time
@@ -140,6 +141,30 @@ def build_parser() -> argparse.ArgumentParser:
                    help="unit of --speed")
     p.add_argument("--duration", type=float, default=0.0,
                    help="stop after this many seconds of drive time (0 = until Ctrl-C)")
+
+    p = sub.add_parser("identify", help="measure the motor: R, L_d(i_d), L_q, psi_f, mass, "
+                       "friction; write a motor file and the drive configuration",
+                       description="The drive measures the motor it is connected to "
+                       "(docs/identify.md): standstill starts (L_d, L_q), d-axis DC steps (R), "
+                       "an HF bias sweep (L_d saturation), a speed profile in each direction "
+                       "(psi_f, mass, friction). Writes RUNS/<stamp>_identify/ with "
+                       "motor.toml, drive_config.json (for `bench config restore`), "
+                       "report.html and summary.json. The drive's configuration is restored "
+                       "afterwards unless --apply. The mover travels about --travel in each "
+                       "direction: the axis must be free. Exit 0 identified, 1 the "
+                       "identification stopped (a drive fault, named), 2 bad input, 3 "
+                       "connection error, 130 interrupted (drive disabled, configuration "
+                       "restored).")
+    _conn_args(p)
+    p.add_argument("--travel", type=float, default=0.3, metavar="M",
+                   help="free travel the motion runs may use (m, default 0.3)")
+    p.add_argument("--starts", type=int, default=4,
+                   help="standstill starts for L_d and L_q (default 4)")
+    p.add_argument("--name", default="identified", help="motor name in motor.toml")
+    p.add_argument("--apply", action="store_true",
+                   help="leave the identified configuration in the drive (gains derived "
+                        "from it); `bench config save` then stores it")
+    p.add_argument("--runs", default="runs", metavar="DIR", help="run folder root")
 
     p = sub.add_parser("info", help="connection, identity, firmware check, state",
                        description="Show what the bench is connected to, the drive identity, "
@@ -571,6 +596,56 @@ def cmd_live(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_identify(args: argparse.Namespace) -> int:
+    """``bench identify``: :func:`bench._identify.identify_drive` (the same code for
+    hardware and the simulated drive)."""
+    import math
+
+    from bench._identify import IdentifyError, identify_drive
+
+    if not (math.isfinite(args.travel) and 0.05 <= args.travel <= 10.0):
+        raise UserError(f"--travel {args.travel}: allowed range [0.05, 10] m")
+    if not 1 <= args.starts <= 20:
+        raise UserError(f"--starts {args.starts}: allowed range [1, 20]")
+    if not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}", args.name):
+        raise UserError(f"--name {args.name!r}: 1-64 letters, digits, '_', '.', '-'")
+    conn = _connect(args)
+    try:
+        out = identify_drive(conn, runs_root=args.runs, travel_m=args.travel,
+                             name=args.name, apply=args.apply, n_starts=args.starts)
+    except IdentifyError as e:
+        raise UserError(f"identify: {e}", EXIT_USAGE) from None
+    finally:
+        conn.close()
+    res = out.result
+    if res is not None:
+        from bench._identify import QUANTITIES
+
+        sim = out.truth is not None
+        print(f"identified{' [SIMULATED drive]' if sim else ''}: {out.run_dir}")
+        for k, (unit, _what) in QUANTITIES.items():
+            if k not in res.values:
+                continue
+            sig = res.sigma.get(k)
+            line = f"  {k:16s} {res.values[k]:12.5g} {unit:6s}" + (
+                f" +- {sig:<8.2g}" if sig is not None else " " * 12)
+            if sim and out.truth and out.truth.get(k):
+                line += f"   (simulator truth {out.truth[k]:.5g}, " \
+                        f"{100 * (res.values[k] / out.truth[k] - 1):+.2f} %)"
+            print(line)
+        print(f"  motor file: {out.files['motor']}\n  drive configuration: "
+              f"{out.files['config']} ({'applied' if args.apply else 'not applied'})")
+    if out.interrupted:
+        print("bench: interrupted; drive disabled, configuration restored", file=sys.stderr)
+        return EXIT_INTERRUPT
+    if out.error is not None:
+        print(f"bench: identify: {out.error}; drive disabled, configuration "
+              f"{'restored' if 'restoring' not in out.error else 'NOT restored'} "
+              f"({out.run_dir})", file=sys.stderr)
+        return EXIT_FAIL
+    return EXIT_OK
+
+
 def cmd_info(args: argparse.Namespace) -> int:
     conn = _connect(args)
     try:
@@ -792,6 +867,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     _sigterm_as_interrupt()
     handlers = {"run": cmd_run, "validate": cmd_validate, "live": cmd_live, "info": cmd_info,
+                "identify": cmd_identify,
                 "param": cmd_param, "config": cmd_config, "faults": cmd_faults,
                 "campaign": _campaign_cmd, "report": cmd_report, "sim": cmd_sim,
                 "shell": cmd_shell}

@@ -61,12 +61,18 @@ class Identified:
 
     def motor_toml(self, name: str, base: Motor) -> str:
         """A linear motor file with the identified values (controller section from base)."""
+        return self.motor_file(name, base.tau_m, base.pole_pairs, base.name, base.controller)
+
+    def motor_file(self, name: str, tau_m: float, pole_pairs: float, source: str,
+                   controller: dict[str, Any]) -> str:
+        """A linear motor file with the identified values; the pole pitch and pole pairs
+        are not identified (given), nor the ``[controller]`` section."""
         v = self.values
-        c = base.controller
+        c = controller
         return "\n".join([
-            "# Identified by the drive (sim_fallback/_identify.py); sigma in comments.",
+            "# Identified by the drive (docs/identify.md); one sigma in comments.",
             "[motor]", f'name = "{name}"', 'parameterization = "linear"',
-            f'description = "identified from {base.name}"', "",
+            f'description = "identified from {source}"', "",
             "[electrical]",
             f"R_ohm = {v['R_ohm']:.6g}  # +- {self.sigma['R_ohm']:.2g}",
             f"L_d_H = {v['L_d_H']:.6g}  # +- {self.sigma['L_d_H']:.2g}",
@@ -75,83 +81,209 @@ class Identified:
             f"dL_sat_H = {max(v['dL_sat_H'], 0.0):.6g}",
             f"I_sat_A = {max(v['I_sat_A'], 0.01):.6g}", "",
             "[mechanical]",
-            f"pole_pitch_m = {base.tau_m:.6g}",
+            f"pole_pitch_m = {tau_m:.6g}",
             f"mass_kg = {v['mass_kg']:.6g}  # +- {self.sigma['mass_kg']:.2g}",
             f"viscous_Ns_per_m = {max(v['b_visc_Ns_per_m'], 0.0):.6g}",
             f"coulomb_friction_N = {max(v['F_coulomb_N'], 0.0):.6g}",
             f"static_friction_N = {max(v['F_coulomb_N'], 0.0):.6g}",
-            f"pole_pairs = {base.pole_pairs:g}", "",
+            f"pole_pairs = {pole_pairs:g}", "",
             "[controller]",
             *[f"{k} = {val!r}" for k, val in c.items() if isinstance(val, (int, float))],
             "",
         ])
 
 
-class _Probe:
-    """The drive as identification sees it: commands in, averaged snapshot out."""
+#: What a probe's ``run`` returns, one sample per millisecond (the drive's telemetry):
+#: d/q current (A), commanded d/q voltage (V), HF response amplitude (A), position
+#: estimate (m).
+PROBE_SIGNALS = ("i_d_A", "i_q_A", "u_d_V", "u_q_V", "hf_amp_A", "pos_hat_m")
 
-    def __init__(self, sim: Sim) -> None:
-        self.sim = sim
-        self.L = sim._L
-        self.h = sim.firmware.handle
 
-    def run(self, seconds: float) -> list[dict[str, Any]]:
-        """Advance, one snapshot per millisecond (what telemetry would deliver)."""
+class Probe:
+    """The drive as identification sees it (one implementation per world): commands in,
+    what the drive measures out. :class:`SimProbe` drives the simulator in-process;
+    ``bench._identify.WireProbe`` a drive over CANopen and the serial telemetry link
+    (hardware or the simulated drive) with the same procedure."""
+
+    def standstill_start(self, k: int) -> tuple[float, float]:
+        """Start ``k`` at standstill (FORCE mode, no thrust) to closed loop; the smaller
+        and larger inductance its saliency check measured (H). Drive off afterwards."""
+        raise NotImplementedError
+
+    def start(self) -> None:
+        """Enable in FORCE mode with zero thrust; closed loop after 0.15 s, else raise."""
+        raise NotImplementedError
+
+    def run(self, seconds: float) -> dict[str, np.ndarray]:
+        """Let the drive run; :data:`PROBE_SIGNALS` at 1 kHz over those seconds. Raises
+        ``RuntimeError("drive fault 0x....")`` when the drive faulted."""
+        raise NotImplementedError
+
+    def set_id(self, amps: float) -> None:
+        """d-axis current reference (A), applied in closed loop."""
+        raise NotImplementedError
+
+    def reconfigure(self, fields: dict[str, float]) -> None:
+        """Drive off, write configuration fields (fw_config_t names), :meth:`start`."""
+        raise NotImplementedError
+
+    def follow_speed(self, t_s: np.ndarray, v_mps: np.ndarray) -> dict[str, np.ndarray]:
+        """SPEED mode following the profile (linear between points, from now), then
+        :meth:`run` over it."""
+        raise NotImplementedError
+
+    def ramp_speed(self, v_from: float, v_to: float, seconds: float) -> None:
+        """Speed reference ramp (m/s) over ``seconds`` (the drive keeps running)."""
+        raise NotImplementedError
+
+
+class SimProbe(Probe):
+    """:class:`Probe` on the simulator, in-process (the firmware snapshot at 1 kHz); each
+    standstill start is a fresh simulation at another position."""
+
+    def __init__(self, motor: Motor, fw: dict[str, float], plant: dict[str, Any] | None,
+                 seed: int) -> None:
+        self.motor, self.fw, self.plant, self.seed = motor, fw, plant, seed
+        self.sim: Sim | None = None
+
+    def __enter__(self) -> SimProbe:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.sim is not None:
+            self.sim.close()
+            self.sim = None
+
+    def _snaps(self, seconds: float) -> list[dict[str, Any]]:
+        sim = self.sim
+        assert sim is not None
         out = []
-        n = max(1, int(round(seconds / 0.001)))
-        for _ in range(n):
-            self.sim.advance(int(round(0.001 / self.sim.dt_s)), channels=["fault_code"])
-            out.append(self.sim.snapshot())
+        for _ in range(max(1, int(round(seconds / 0.001)))):
+            sim.advance(int(round(0.001 / sim.dt_s)), channels=["fault_code"])
+            out.append(sim.snapshot())
         if out[-1]["fault_code"]:
             raise RuntimeError(f"drive fault 0x{out[-1]['fault_code']:04X} during identification")
         return out
 
-    def ramp_id(self, target_A: float, seconds: float = 0.03) -> None:
-        """Move the d-axis current reference in small steps: a current step of several
-        amperes within one injection period would swamp the HF response."""
-        s = self.sim.snapshot()
-        start = float(s["i_dq_ref_A"][0])
-        n = max(1, int(round(seconds / 0.001)))
-        for k in range(1, n + 1):
-            self.L.fw_set_id_ref(self.h, start + (target_A - start) * k / n)
-            self.run(0.001)
+    def standstill_start(self, k: int) -> tuple[float, float]:
+        m = self.motor
+        with Sim(m, extractor="pseudo", seed=self.seed * 100 + k, plant=self.plant, fw=self.fw,
+                 x0_m=(0.13 + 0.37 * k) * m.tau_m) as sim:
+            self.sim = sim
+            try:
+                s = self._start()
+            finally:
+                self.sim = None
+        return s["L_small_meas_H"], s["L_large_meas_H"]
 
-    def mean(self, snaps: list[dict[str, Any]], key: str, idx: int | None = None) -> float:
-        v = [s[key][idx] if idx is not None else s[key] for s in snaps]
-        return float(np.mean(v))
+    def _start(self) -> dict[str, Any]:
+        sim = self.sim
+        assert sim is not None
+        sim.set_schedule(SIM_REF_FORCE, 0.0)
+        sim.enable("force")
+        self._snaps(0.15)
+        s = sim.snapshot()
+        if s["start_phase"] != 3:
+            raise RuntimeError("start-up did not reach closed loop")
+        return s
+
+    def start(self) -> None:
+        if self.sim is None:
+            self.sim = Sim(self.motor, extractor="pseudo", seed=self.seed * 100 + 99,
+                           plant=self.plant, fw=self.fw)
+        self._start()
+
+    def run(self, seconds: float) -> dict[str, np.ndarray]:
+        snaps = self._snaps(seconds)
+        pick = {"i_d_A": ("i_dq_A", 0), "i_q_A": ("i_dq_A", 1), "u_d_V": ("u_dq_V", 0),
+                "u_q_V": ("u_dq_V", 1), "hf_amp_A": ("hf_amp_A", None),
+                "pos_hat_m": ("pos_hat_m", None)}
+        return {k: np.array([q[key][j] if j is not None else q[key] for q in snaps])
+                for k, (key, j) in pick.items()}
+
+    def set_id(self, amps: float) -> None:
+        assert self.sim is not None
+        self.sim._L.fw_set_id_ref(self.sim.firmware.handle, float(amps))
+
+    def reconfigure(self, fields: dict[str, float]) -> None:
+        import ctypes as C
+
+        from . import _lib
+
+        sim = self.sim
+        assert sim is not None
+        L, h = sim._L, sim.firmware.handle
+        L.fw_controlword(h, 0x00)  # disable voltage
+        self._snaps(0.01)
+        cfg = _lib.FwConfig.from_buffer_copy(bytes(sim.cfg))
+        for k, v in fields.items():
+            setattr(cfg, k, float(v))
+        issue = _lib.FwConfigIssue()
+        if L.fw_set_config(h, C.byref(cfg), C.byref(issue)) != 0:
+            raise RuntimeError("the drive refused the identified electrical parameters")
+        sim.set_schedule(SIM_REF_FORCE, 0.0)
+        sim.enable("force")
+        self._snaps(0.15)
+
+    def follow_speed(self, t_s: np.ndarray, v_mps: np.ndarray) -> dict[str, np.ndarray]:
+        sim = self.sim
+        assert sim is not None
+        sim._L.fw_set_mode(sim.firmware.handle, 0)
+        t0 = sim.t_s
+        sim.set_schedule(SIM_REF_SPEED, {"t_s": list(t0 + t_s), "value": list(v_mps),
+                                         "ramp": True}, self.motor.mps_to_radps_e(1.0))
+        return self.run(float(t_s[-1]))
+
+    def ramp_speed(self, v_from: float, v_to: float, seconds: float) -> None:
+        sim = self.sim
+        assert sim is not None
+        sim.set_schedule(SIM_REF_SPEED, {"t_s": [sim.t_s, sim.t_s + seconds],
+                                         "value": [v_from, v_to], "ramp": True},
+                         self.motor.mps_to_radps_e(1.0))
 
 
-def _start(sim: Sim) -> dict[str, Any]:
-    sim.set_schedule(SIM_REF_FORCE, 0.0)
-    sim.enable("force")
-    p = _Probe(sim)
-    p.run(0.15)
-    s = sim.snapshot()
-    if s["start_phase"] != 3:
-        raise RuntimeError("start-up did not reach closed loop")
-    return s
+def ident_overrides(cfg0: Any) -> dict[str, float]:
+    """The configuration identification runs with, over the user's ``cfg0`` (any object
+    with fw_config_t attributes): :data:`IDENT_FW`, and for a linear motor the speed loop
+    scaled to :data:`IDENT_SPEED_BW` (k_P ~ bw, k_I ~ bw^2)."""
+    fw = dict(IDENT_FW)
+    s_bw = IDENT_SPEED_BW / float(cfg0.spd_bw_radps)
+    fw["spd_kp_A_per_radps"] = float(cfg0.spd_kp_A_per_radps) * s_bw
+    fw["spd_ki_A_per_rad"] = float(cfg0.spd_ki_A_per_rad) * s_bw * s_bw
+    return fw
 
 
 def identify(motor: Motor, seed: int = 0, travel_m: float = 0.3, n_starts: int = 4,
              plant: dict[str, Any] | None = None, guess: dict[str, float] | None = None
              ) -> Identified:
-    """Identify a motor on the simulated drive.
+    """Identify a motor on the simulated drive, in-process (:class:`SimProbe`).
 
     ``guess`` holds the configuration the user starts from (fw_config_t fields,
     e.g. a datasheet's values); by default the motor file's own. ``plant``
     overrides what the simulated motor *is* (the truth to be found).
     """
-    res = Identified()
     fw = dict(IDENT_FW)
     fw.update(guess or {})
     cfg0 = fw_config(motor, "pseudo", **fw)
     if motor.parameterization == "linear" and "spd_kp_A_per_radps" not in fw:
-        # a conservative speed loop while the motor is unknown (IDENT_SPEED_BW): the
-        # gains derived from the file's bandwidth, scaled (k_P ~ bw, k_I ~ bw^2)
-        s_bw = IDENT_SPEED_BW / float(cfg0.spd_bw_radps)
-        fw["spd_kp_A_per_radps"] = float(cfg0.spd_kp_A_per_radps) * s_bw
-        fw["spd_ki_A_per_rad"] = float(cfg0.spd_ki_A_per_rad) * s_bw * s_bw
+        # a conservative speed loop while the motor is unknown (IDENT_SPEED_BW)
+        o = ident_overrides(cfg0)
+        fw["spd_kp_A_per_radps"] = o["spd_kp_A_per_radps"]
+        fw["spd_ki_A_per_rad"] = o["spd_ki_A_per_rad"]
         cfg0 = fw_config(motor, "pseudo", **fw)
+    with SimProbe(motor, fw, plant, seed) as probe:
+        return run_identification(probe, cfg0, motor.tau_m, travel_m, n_starts)
+
+
+def run_identification(probe: Probe, cfg0: Any, tau_m: float, travel_m: float = 0.3,
+                       n_starts: int = 4) -> Identified:
+    """The identification procedure (module docstring) on any :class:`Probe`.
+
+    ``cfg0``: the configuration the drive runs with (fw_config_t attributes: i_max_A,
+    f_pwm_Hz, u_inj_V, L_d_H, L_q_H); ``tau_m``: the pole pitch (m); ``travel_m``: the
+    free travel the motion runs may use.
+    """
+    res = Identified()
     i_max = float(cfg0.i_max_A)
     Ts, u_inj = 1.0 / float(cfg0.f_pwm_Hz), float(cfg0.u_inj_V)
     q_larger = float(cfg0.L_q_H) > float(cfg0.L_d_H)
@@ -159,104 +291,92 @@ def identify(motor: Motor, seed: int = 0, travel_m: float = 0.3, n_starts: int =
     # 1. inductances from the standstill saliency check, several starts
     Ls, Ll = [], []
     for k in range(n_starts):
-        with Sim(motor, extractor="pseudo", seed=seed * 100 + k, plant=plant, fw=fw,
-                 x0_m=(0.13 + 0.37 * k) * motor.tau_m) as sim:
-            s = _start(sim)
-            Ls.append(s["L_small_meas_H"])
-            Ll.append(s["L_large_meas_H"])
+        small, large = probe.standstill_start(k)
+        Ls.append(small)
+        Ll.append(large)
     L_d_ss = float(np.mean(Ls if q_larger else Ll))
     L_q_ss = float(np.mean(Ll if q_larger else Ls))
 
-    with Sim(motor, extractor="pseudo", seed=seed * 100 + 99, plant=plant, fw=fw) as sim:
-        p = _Probe(sim)
-        _start(sim)
-        # 2. resistance: two d-axis current levels along the magnet (no thrust)
-        pts = []
-        for frac in (0.2, 0.4, 0.2, 0.4):
-            p.ramp_id(frac * i_max)
-            p.run(0.03)
-            snaps = p.run(0.04)
-            pts.append((p.mean(snaps, "i_dq_A", 0), p.mean(snaps, "u_dq_V", 0)))
-        i_arr, u_arr = np.array(pts).T
-        A = np.vstack([i_arr, np.ones_like(i_arr)]).T
-        (R, u0), resid, *_ = np.linalg.lstsq(A, u_arr, rcond=None)
-        res.values["R_ohm"] = float(R)
-        res.sigma["R_ohm"] = float(np.std(u_arr - A @ np.array([R, u0])) /
-                                   max(np.ptp(i_arr), 1e-9) * 2.0)
+    probe.start()
+    # 2. resistance: two d-axis current levels along the magnet (no thrust)
+    pts = []
+    for frac in (0.2, 0.4, 0.2, 0.4):
+        _ramp_id(probe, frac * i_max)
+        probe.run(0.03)
+        r = probe.run(0.04)
+        pts.append((float(np.mean(r["i_d_A"])), float(np.mean(r["u_d_V"]))))
+    i_arr, u_arr = np.array(pts).T
+    A = np.vstack([i_arr, np.ones_like(i_arr)]).T
+    (R, u0), resid, *_ = np.linalg.lstsq(A, u_arr, rcond=None)
+    res.values["R_ohm"] = float(R)
+    res.sigma["R_ohm"] = float(np.std(u_arr - A @ np.array([R, u0])) /
+                               max(np.ptp(i_arr), 1e-9) * 2.0)
 
-        # 3. L_d(i_d): raw HF response on d^ at bias currents
-        ids, lds = [], []
-        for frac in (-0.4, -0.2, 0.0, 0.2, 0.4):
-            p.ramp_id(frac * i_max)
-            p.run(0.02)
-            snaps = p.run(0.03)
-            ids.append(p.mean(snaps, "i_dq_A", 0))
-            lds.append(Ts * u_inj / p.mean(snaps, "hf_amp_A"))
-        p.ramp_id(0.0)
-        ids_a, lds_a = np.array(ids), np.array(lds)
-        best = None
-        for i_sat in np.geomspace(0.2, 50.0, 120) * max(i_max, 1e-3) / 10.0:
-            B = np.vstack([np.ones_like(ids_a), -np.tanh(ids_a / i_sat)]).T
-            coef, *_ = np.linalg.lstsq(B, lds_a, rcond=None)
-            err = float(np.sum((B @ coef - lds_a) ** 2))
-            if best is None or err < best[0]:
-                best = (err, coef, i_sat)
-        _, (L_d0, dL), i_sat = best
-        res.values["L_d_H"] = float(L_d0)
-        res.values["dL_sat_H"] = float(dL)
-        res.values["I_sat_A"] = float(i_sat)
-        res.sigma["L_d_H"] = float(abs(L_d0 - L_d_ss))  # two methods disagree by this
-        res.values["L_q_H"] = L_q_ss
-        res.sigma["L_q_H"] = float(np.std(Ll if q_larger else Ls) / math.sqrt(n_starts))
-        res.log.append(f"L_d from the saliency check {L_d_ss * 1e3:.3f} mH, from the bias "
-                       f"sweep {L_d0 * 1e3:.3f} mH")
+    # 3. L_d(i_d): raw HF response on d^ at bias currents
+    ids, lds = [], []
+    for frac in (-0.4, -0.2, 0.0, 0.2, 0.4):
+        _ramp_id(probe, frac * i_max)
+        probe.run(0.02)
+        r = probe.run(0.03)
+        ids.append(float(np.mean(r["i_d_A"])))
+        lds.append(Ts * u_inj / float(np.mean(r["hf_amp_A"])))
+    _ramp_id(probe, 0.0)
+    ids_a, lds_a = np.array(ids), np.array(lds)
+    best = None
+    for i_sat in np.geomspace(0.2, 50.0, 120) * max(i_max, 1e-3) / 10.0:
+        B = np.vstack([np.ones_like(ids_a), -np.tanh(ids_a / i_sat)]).T
+        coef, *_ = np.linalg.lstsq(B, lds_a, rcond=None)
+        err = float(np.sum((B @ coef - lds_a) ** 2))
+        if best is None or err < best[0]:
+            best = (err, coef, i_sat)
+    _, (L_d0, dL), i_sat = best
+    res.values["L_d_H"] = float(L_d0)
+    res.values["dL_sat_H"] = float(dL)
+    res.values["I_sat_A"] = float(i_sat)
+    res.sigma["L_d_H"] = float(abs(L_d0 - L_d_ss))  # two methods disagree by this
+    res.values["L_q_H"] = L_q_ss
+    res.sigma["L_q_H"] = float(np.std(Ll if q_larger else Ls) / math.sqrt(n_starts))
+    res.log.append(f"L_d from the saliency check {L_d_ss * 1e3:.3f} mH, from the bias "
+                   f"sweep {L_d0 * 1e3:.3f} mH")
 
-        # the motion experiments run on what was measured at standstill: the drive is
-        # reconfigured with R, L_d, L_q and the current loop tuned to them, then restarts
-        import ctypes as C
+    # the motion experiments run on what was measured at standstill: the drive is
+    # reconfigured with R, L_d, L_q and the current loop tuned to them, then restarts
+    probe.reconfigure({"R_ohm": float(R), "L_d_H": float(L_d0), "L_q_H": float(L_q_ss),
+                       "cur_kp_V_per_A": float(L_d0) * 1100.0,
+                       "cur_ki_V_per_As": float(R) * 1100.0})
 
-        from . import _lib
-        p.L.fw_controlword(p.h, 0x00)  # disable voltage
-        p.run(0.01)
-        cfg = _lib.FwConfig.from_buffer_copy(bytes(sim.cfg))
-        cfg.R_ohm, cfg.L_d_H, cfg.L_q_H = float(R), float(L_d0), float(L_q_ss)
-        cfg.cur_kp_V_per_A = float(L_d0) * 1100.0
-        cfg.cur_ki_V_per_As = float(R) * 1100.0
-        issue = _lib.FwConfigIssue()
-        if p.L.fw_set_config(p.h, C.byref(cfg), C.byref(issue)) != 0:
-            raise RuntimeError("the drive refused the identified electrical parameters")
-        sim.set_schedule(SIM_REF_FORCE, 0.0)
-        sim.enable("force")
-        p.run(0.15)
-
-        # 4 + 5. a speed profile in each direction: the speed loop follows a 3 Hz
-        # sinusoid around +v and around -v (the Coulomb term has one sign per run, the
-        # mover never sticks mid-run); the drive records its position estimate, the
-        # q-axis voltage it commands and the currents it measures, one sample per ms
-        k_w = motor.mps_to_radps_e(1.0)
-        p.L.fw_set_mode(p.h, 0)
-        v_mid = min(0.5, travel_m / 1.6)
-        runs = []
-        for sgn in (1.0, -1.0):
-            t_pts = np.arange(0.0, 0.9001, 0.01)
-            prof = sgn * v_mid * (1.0 + PROFILE[0] * np.sin(2 * math.pi * PROFILE[1] * t_pts)
-                                  ) * np.minimum(1.0, t_pts / 0.1)
-            t0 = sim.t_s
-            sim.set_schedule(SIM_REF_SPEED, {"t_s": list(t0 + t_pts), "value": list(prof),
-                                             "ramp": True}, k_w)
-            snaps = p.run(0.9)
-            runs.append({k: np.array([q[key][j] if j is not None else q[key] for q in snaps])
-                         for k, key, j in (("x", "pos_hat_m", None), ("i_q", "i_dq_A", 1),
-                                           ("i_d", "i_dq_A", 0), ("u_q", "u_dq_V", 1))})
-            sim.set_schedule(SIM_REF_SPEED, {"t_s": [sim.t_s, sim.t_s + 0.2],
-                                             "value": [prof[-1], 0.0], "ramp": True}, k_w)
-            p.run(0.45)  # back to rest under control
+    # 4 + 5. a speed profile in each direction: the speed loop follows a 3 Hz
+    # sinusoid around +v and around -v (the Coulomb term has one sign per run, the
+    # mover never sticks mid-run); the drive records its position estimate, the
+    # q-axis voltage it commands and the currents it measures, one sample per ms
+    v_mid = min(0.5, travel_m / 1.6)
+    runs = []
+    for sgn in (1.0, -1.0):
+        t_pts = np.arange(0.0, 0.9001, 0.01)
+        prof = sgn * v_mid * (1.0 + PROFILE[0] * np.sin(2 * math.pi * PROFILE[1] * t_pts)
+                              ) * np.minimum(1.0, t_pts / 0.1)
+        r = probe.follow_speed(t_pts, prof)
+        runs.append({"x": r["pos_hat_m"], "i_q": r["i_q_A"], "i_d": r["i_d_A"],
+                     "u_q": r["u_q_V"]})
+        probe.ramp_speed(float(prof[-1]), 0.0, 0.2)
+        probe.run(0.45)  # back to rest under control
     fit = _fit_motion(runs, dt=0.001, R=float(R), L_q=float(L_q_ss), L_d=float(L_d0),
-                      tau=motor.tau_m)
+                      tau=tau_m)
     res.values.update(fit.values)
     res.sigma.update(fit.sigma)
     res.log += fit.log
     return res
+
+
+def _ramp_id(probe: Probe, target_A: float, seconds: float = 0.03) -> None:
+    """Move the d-axis current reference in 1 ms steps: a current step of several
+    amperes within one injection period would swamp the HF response."""
+    start = getattr(probe, "id_ref_A", 0.0)
+    n = max(1, int(round(seconds / 0.001)))
+    for k in range(1, n + 1):
+        probe.set_id(start + (target_A - start) * k / n)
+        probe.run(0.001)
+    probe.id_ref_A = target_A  # type: ignore[attr-defined]
 
 
 def _gauss_kernels(dt: float, sigma_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -119,6 +119,7 @@ INDEX_BACK_EMF_OBSERVER = 0x2053
 INDEX_MACHINE_AND_LOOP_BANDWIDTHS = 0x2054
 INDEX_TELEMETRY = 0x2060
 INDEX_TRACE = 0x2070
+INDEX_IDENTIFICATION = 0x2080
 INDEX_ERROR_CODE = 0x603F
 INDEX_CONTROLWORD = 0x6040
 INDEX_STATUSWORD = 0x6041
@@ -380,6 +381,10 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2070, 13): 'Signal 6',
     (0x2070, 14): 'Signal 7',
     (0x2070, 15): 'Signal 8',
+    (0x2080, 0): 'Highest sub-index supported',
+    (0x2080, 1): 'd-axis current reference',
+    (0x2080, 2): 'Measured smaller inductance',
+    (0x2080, 3): 'Measured larger inductance',
     (0x603F, 0): 'Error code',
     (0x6040, 0): 'Controlword',
     (0x6041, 0): 'Statusword',

@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 261u
-#define CO_OD_RAM_SIZE 859u
+#define CO_OD_COUNT 265u
+#define CO_OD_RAM_SIZE 872u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -252,25 +252,29 @@
 #define CO_OD_2070_0D 239u /* Trace: Signal 6 */
 #define CO_OD_2070_0E 240u /* Trace: Signal 7 */
 #define CO_OD_2070_0F 241u /* Trace: Signal 8 */
-#define CO_OD_603F_00 242u /* Error code: Error code */
-#define CO_OD_6040_00 243u /* Controlword: Controlword */
-#define CO_OD_6041_00 244u /* Statusword: Statusword */
-#define CO_OD_605A_00 245u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 246u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 247u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 248u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 249u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 250u /* Following error window: Following error window */
-#define CO_OD_6066_00 251u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 252u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 253u /* Target torque: Target torque */
-#define CO_OD_6077_00 254u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 255u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 256u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 257u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 258u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 259u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 260u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2080_00 242u /* Identification: Highest sub-index supported */
+#define CO_OD_2080_01 243u /* Identification: d-axis current reference */
+#define CO_OD_2080_02 244u /* Identification: Measured smaller inductance */
+#define CO_OD_2080_03 245u /* Identification: Measured larger inductance */
+#define CO_OD_603F_00 246u /* Error code: Error code */
+#define CO_OD_6040_00 247u /* Controlword: Controlword */
+#define CO_OD_6041_00 248u /* Statusword: Statusword */
+#define CO_OD_605A_00 249u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 250u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 251u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 252u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 253u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 254u /* Following error window: Following error window */
+#define CO_OD_6066_00 255u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 256u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 257u /* Target torque: Target torque */
+#define CO_OD_6077_00 258u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 259u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 260u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 261u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 262u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 263u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 264u /* Supported drive modes: Supported drive modes */
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 

@@ -495,6 +495,11 @@ static co_abort_t fw_app_on_write(void *ctx, uint16_t index, uint8_t sub, const 
     fw_app_trace_command(app, (uint8_t)v);
     return CO_ABORT_NONE;
   }
+  if (index == 0x2080u && sub == 1u) { /* identification: d-axis current reference */
+    float x;
+    memcpy(&x, &v, sizeof x);
+    return fw_app_status_abort(fw_set_id_ref(&app->ctrl, x));
+  }
   if (index == 0x1010u && sub >= 1u) { /* signature checked by the node */
     return fw_app_nvm_save(app);
   }
@@ -754,6 +759,14 @@ static void fw_app_update_od(fw_app_t *app, const fw_snapshot_t *s) {
     co_node_set_u32(n, (uint16_t)(CO_OD_2030_01 + k), k < nh ? hist[k] : 0u);
   }
   co_node_set_u32(n, CO_OD_2070_02, (uint32_t)app->trace.state);
+  co_node_set_f32(n, CO_OD_2080_02, s->L_small_meas_H);
+  co_node_set_f32(n, CO_OD_2080_03, s->L_large_meas_H);
+  if (s->cia402_state != (uint8_t)FW_CIA402_OPERATION_ENABLED &&
+      co_node_get_f32(n, CO_OD_2080_01) != 0.0f) {
+    /* an identification's d-axis current never survives leaving OPERATION ENABLED */
+    co_node_set_f32(n, CO_OD_2080_01, 0.0f);
+    (void)fw_set_id_ref(&app->ctrl, 0.0f);
+  }
 }
 
 static void fw_app_faults(fw_app_t *app, const fw_snapshot_t *s) {

@@ -1,0 +1,340 @@
+"""``bench identify``: the drive measures the motor it is connected to.
+
+The procedure is :func:`sim_fallback._identify.run_identification` (one implementation;
+docs/identify.md); here it runs on a drive over the wire, through :class:`WireProbe`:
+CiA 402 commands, configuration and the d-axis current reference (0x2080:1) over SDO,
+the measured inductances of each standstill start from 0x2080:2/3, and everything else
+from the serial telemetry at 1 kHz. The same code runs on hardware and on the simulated
+drive; on the simulated drive the plant's truth is added to the report, never used.
+
+The drive is left as it was found: the configuration read at the start is written back
+at the end (also after a fault or Ctrl-C), unless ``apply`` asks for the identified one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim_fallback._identify import (
+    PROBE_SIGNALS,
+    Identified,
+    Probe,
+    ident_overrides,
+    run_identification,
+    truth_of,
+)
+
+#: Telemetry signals the probe asks for (one frame per millisecond).
+TEL_SIGNALS = (*PROBE_SIGNALS, "fault_code", "start_phase")
+
+#: Units and descriptions of the identified values (report and motor file).
+QUANTITIES: dict[str, tuple[str, str]] = {
+    "R_ohm": ("ohm", "phase resistance"),
+    "L_d_H": ("H", "d-axis inductance at zero current"),
+    "L_q_H": ("H", "q-axis inductance"),
+    "dL_sat_H": ("H", "d-axis saturation depth (L_d0 - L_d at large |i_d|)"),
+    "I_sat_A": ("A", "d-axis saturation current"),
+    "psi_f_Wb": ("Wb", "magnet flux linkage"),
+    "mass_kg": ("kg", "mover mass"),
+    "b_visc_Ns_per_m": ("N s/m", "viscous friction"),
+    "F_coulomb_N": ("N", "Coulomb friction"),
+}
+
+#: Identified value -> drive configuration field (fw_config_t, the OD parameter name).
+CONFIG_FIELDS = {"R_ohm": "R_ohm", "L_d_H": "L_d_H", "L_q_H": "L_q_H", "psi_f_Wb": "psi_f_Wb",
+                 "mass_kg": "mass_kg", "b_visc_Ns_per_m": "visc_Ns_per_m",
+                 "F_coulomb_N": "coulomb_N"}
+
+
+class IdentifyError(RuntimeError):
+    """Identification stopped (a drive fault, no closed loop, no telemetry): one line."""
+
+
+class WireProbe(Probe):
+    """:class:`sim_fallback._identify.Probe` over CANopen + the serial telemetry link.
+
+    ``logger`` (a :class:`bench._logging.RunLogger`) receives the telemetry as
+    ``tel.<signal>`` (the reader thread appends it); windows are cut on the drive's own
+    time base (control steps), so the bench's clock and SDO latency do not matter.
+    """
+
+    def __init__(self, conn: Any, logger: Any, wait_s: float = 2.0) -> None:
+        self.conn = conn
+        self.drive = conn.drive
+        self.clock = conn.drive.clock
+        self.logger = logger
+        self.wait_s = wait_s
+        self.id_ref_A = 0.0
+
+    # ---- telemetry windows ----------------------------------------------------------
+    def _t_last(self) -> float:
+        t, _ = self.logger.channel("tel.fault_code")
+        return float(t[-1]) if t.size else -math.inf
+
+    def _await(self, t_end: float) -> None:
+        deadline = time.monotonic() + self.wait_s
+        while self._t_last() < t_end - 1e-6:
+            if time.monotonic() > deadline:
+                raise IdentifyError(f"no telemetry up to t = {t_end:.3f} s on the serial "
+                                    f"link (last {self._t_last():.3f} s)")
+            time.sleep(0.001)
+
+    def _window(self, t0: float, t1: float) -> dict[str, np.ndarray]:
+        out: dict[str, np.ndarray] = {}
+        for s in TEL_SIGNALS:
+            t, v = self.logger.channel("tel." + s)
+            k = (t > t0 + 1e-9) & (t <= t1 + 1e-9)
+            out[s] = np.asarray(v[k], dtype=np.float64)
+        n = {a.size for a in out.values()}
+        if len(n) != 1:
+            raise IdentifyError(f"telemetry signals of unequal length in [{t0:.3f}, {t1:.3f}] "
+                                "s (frames lost on the serial link)")
+        codes = out["fault_code"][out["fault_code"] != 0]
+        if codes.size:
+            raise IdentifyError(f"drive fault 0x{int(codes[0]):04X} during identification")
+        return out
+
+    def run(self, seconds: float) -> dict[str, np.ndarray]:
+        t0 = self._t_last()
+        self.clock.sleep_until(self.clock.now() + seconds)
+        self._await(t0 + seconds)
+        return self._window(t0, t0 + seconds)
+
+    # ---- commands ---------------------------------------------------------------------
+    def _enable_force(self) -> None:
+        d = self.drive
+        d.enable("force")
+        d.set_force_N(0.0)
+        self.id_ref_A = 0.0
+        r = self.run(0.15)
+        if not r["start_phase"].size or int(r["start_phase"][-1]) != 3:
+            raise IdentifyError("start-up did not reach closed loop in 0.15 s")
+
+    def standstill_start(self, k: int) -> tuple[float, float]:
+        self._enable_force()
+        small = float(self.drive.read_raw(0x2080, 2))
+        large = float(self.drive.read_raw(0x2080, 3))
+        self.drive.disable()
+        self.run(0.02)
+        return small, large
+
+    def start(self) -> None:
+        self._enable_force()
+
+    def set_id(self, amps: float) -> None:
+        self.drive.write_raw(0x2080, 1, float(amps))
+
+    def reconfigure(self, fields: dict[str, float]) -> None:
+        self.drive.disable()
+        self.run(0.01)
+        for name, value in fields.items():
+            self.drive.set(name, float(value))
+        self._enable_force()
+
+    def follow_speed(self, t_s: np.ndarray, v_mps: np.ndarray) -> dict[str, np.ndarray]:
+        """The profile as a staircase of its points (the bench sends one target per
+        point, at the point's time on the drive clock)."""
+        d = self.drive
+        d.set_mode("speed")
+        t0_tel = self._t_last()
+        c0 = self.clock.now()
+        for k in range(len(t_s) - 1):
+            d.set_speed_mps(float(v_mps[k]))
+            self.clock.sleep_until(c0 + float(t_s[k + 1]))
+        T = float(t_s[-1])
+        self._await(t0_tel + T)
+        return self._window(t0_tel, t0_tel + T)
+
+    def ramp_speed(self, v_from: float, v_to: float, seconds: float) -> None:
+        n = max(1, int(round(seconds / 0.01)))
+        c0 = self.clock.now()
+        for k in range(1, n + 1):
+            self.drive.set_speed_mps(v_from + (v_to - v_from) * k / n)
+            self.clock.sleep_until(c0 + seconds * k / n)
+
+
+@dataclass
+class IdentifyOutput:
+    """What ``bench identify`` produced."""
+
+    result: Identified | None
+    run_dir: Path
+    error: str | None = None
+    truth: dict[str, float] | None = None
+    files: dict[str, str] = field(default_factory=dict)
+    interrupted: bool = False
+
+
+def _cfg_view(drive: Any) -> Any:
+    """The drive's configuration fields the procedure needs, read by SDO."""
+    class C:
+        pass
+
+    c = C()
+    for name in ("i_max_A", "f_pwm_Hz", "u_inj_V", "L_d_H", "L_q_H", "spd_bw_radps",
+                 "spd_kp_A_per_radps", "spd_ki_A_per_rad", "pole_pitch_m"):
+        setattr(c, name, float(drive.get(name)[0]))
+    return c
+
+
+def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
+                   name: str = "identified", apply: bool = False, n_starts: int = 4
+                   ) -> IdentifyOutput:
+    """Run the identification on a connected drive; write the run folder (motor file,
+    drive configuration, report, summary, logs). The drive's configuration is restored
+    at the end unless ``apply`` (then the identified configuration stays)."""
+    from bench._drive import DriveError
+    from bench._logging import RunLogger, run_dir_for
+    from bench._session import TelemetryReader
+    from protocols.serial_link import signal_names
+    from sim_fallback._motors import extractor_id
+
+    if conn.serial is None:
+        raise IdentifyError("identification needs the serial telemetry link (--serial PORT)")
+    run_dir = run_dir_for("identify", runs_root)
+    if conn.sim is not None:
+        conn.sim.wait_idle()
+    logger = RunLogger(run_dir, conn.network)
+    drive = conn.drive
+    out = IdentifyOutput(None, run_dir)
+    backup = {"drive": drive.identity(), "parameters": drive.backup()}
+    (run_dir / "config_before.json").write_text(json.dumps(backup, indent=2, default=float)
+                                                + "\n")
+    cfg0 = _cfg_view(drive)
+    tel = TelemetryReader(conn.serial, logger, cfg0.f_pwm_Hz)
+    tel.start()
+    conn.start_heartbeat()
+    keep = backup
+    try:
+        names = signal_names()
+        ids = [names.index(s) for s in TEL_SIGNALS]
+        drive.write_raw(0x2060, 1, 0)  # telemetry off while it is reconfigured
+        drive.write_raw(0x2060, 2, len(ids))
+        for k, i in enumerate(ids):
+            drive.write_raw(0x2060, 3 + k, i)
+        drive.write_raw(0x2060, 1, max(1, int(round(cfg0.f_pwm_Hz / 1000.0))))
+        # the bias sweep reads the raw HF response (E_d = T_s u_inj / L_dd): the
+        # pseudo-filter extraction, whatever the drive normally uses
+        drive.set("extractor", float(extractor_id("pseudo")))
+        for k, v in ident_overrides(cfg0).items():
+            drive.set(k, float(v))
+        cfg0 = _cfg_view(drive)
+        probe = WireProbe(conn, logger)
+        probe.run(0.02)  # telemetry flowing
+        res = run_identification(probe, cfg0, cfg0.pole_pitch_m, travel_m, n_starts)
+        out.result = res
+    except (IdentifyError, DriveError, RuntimeError) as e:
+        out.error = " ".join(str(e).split())
+    except KeyboardInterrupt:
+        out.interrupted = True
+        out.error = "interrupted"
+    finally:
+        try:
+            drive.disable()
+        except Exception as e:  # noqa: BLE001 - reported; the restore below still runs
+            out.error = (out.error + "; " if out.error else "") + f"disable failed: {e}"
+        if out.result is not None and apply:
+            keep = identified_config(backup, out.result)
+        try:
+            drive.restore(keep)
+        except Exception as e:  # noqa: BLE001 - one line in the result
+            out.error = (out.error + "; " if out.error else "") + (
+                f"restoring the drive configuration failed: {e}")
+        tel.stop()
+        logstats = logger.close()
+        logger.write_meta({"identify": {"travel_m": travel_m, "apply": apply,
+                                        "error": out.error}, "logging": logstats})
+    if conn.sim is not None:
+        out.truth = truth_of(conn.sim.motor)
+    _write_outputs(out, backup, name, conn)
+    return out
+
+
+def identified_config(backup: dict[str, Any], res: Identified) -> dict[str, Any]:
+    """The drive configuration document (``bench config restore``) with the identified
+    values and the gains derived from them (gains_auto 1)."""
+    doc = json.loads(json.dumps(backup, default=float))
+    params = doc["parameters"]
+    for k, f in CONFIG_FIELDS.items():
+        if k in res.values and f in params:
+            v = float(res.values[k])
+            params[f]["value"] = max(v, 0.0) if k in ("b_visc_Ns_per_m", "F_coulomb_N") else v
+    if "gains_auto" in params:
+        params["gains_auto"]["value"] = 1
+    return doc
+
+
+def _write_outputs(out: IdentifyOutput, backup: dict[str, Any], name: str, conn: Any
+                   ) -> None:
+    d = out.run_dir
+    res = out.result
+    rows = []
+    if res is not None:
+        ctrl = dict(conn.sim.motor.controller) if conn.sim is not None else {}
+        src = (f"{conn.sim.motor.name} on the simulated drive" if conn.sim is not None
+               else "the connected drive")
+        toml = res.motor_file(name, conn.units.pole_pitch_m, conn.units.pole_pairs, src, ctrl)
+        (d / "motor.toml").write_text(toml)
+        (d / "drive_config.json").write_text(
+            json.dumps(identified_config(backup, res), indent=2) + "\n")
+        out.files = {"motor": str(d / "motor.toml"), "config": str(d / "drive_config.json")}
+        for k, (unit, what) in QUANTITIES.items():
+            if k not in res.values:
+                continue
+            row = {"quantity": k, "what": what, "value": res.values[k],
+                   "sigma": res.sigma.get(k), "unit": unit}
+            if out.truth is not None and k in out.truth and out.truth[k]:
+                row["truth"] = out.truth[k]
+                row["error_pct"] = 100.0 * (res.values[k] - out.truth[k]) / out.truth[k]
+            rows.append(row)
+    summary = {"kind": "identify", "passed": res is not None and out.error is None,
+               "error": out.error, "simulated": out.truth is not None, "values": rows,
+               "log": res.log if res is not None else [], "files": out.files}
+    (d / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    _write_report(d / "report.html", summary)
+
+
+def _write_report(path: Path, summary: dict[str, Any]) -> None:
+    import html
+
+    def num(x: Any, fmt: str = ".5g") -> str:
+        return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else \
+            format(float(x), fmt)
+
+    sim = summary["simulated"]
+    head = ("<tr><th>quantity</th><th>what</th><th>value</th><th>&plusmn; 1&sigma;</th>"
+            "<th>unit</th>" + ("<th>simulator truth</th><th>error</th>" if sim else "") +
+            "</tr>")
+    body = "".join(
+        f"<tr><td>{html.escape(r['quantity'])}</td><td>{html.escape(r['what'])}</td>"
+        f"<td class=num>{num(r['value'])}</td><td class=num>{num(r['sigma'], '.2g')}</td>"
+        f"<td>{html.escape(r['unit'])}</td>"
+        + (f"<td class=num>{num(r.get('truth'))}</td><td class=num>"
+           f"{num(r.get('error_pct'), '+.2f')} %</td>" if sim else "") + "</tr>"
+        for r in summary["values"])
+    verdict = ("identified" if summary["passed"] else
+               f"FAILED: {html.escape(str(summary['error']))}")
+    banner = ("<p class=sim>SIMULATED DRIVE: the values come from the simulator; the "
+              "truth columns are the simulated plant's parameters (never used by the "
+              "procedure).</p>" if sim else "")
+    log = "".join(f"<li>{html.escape(x)}</li>" for x in summary["log"])
+    files = "".join(f"<li>{html.escape(k)}: <code>{html.escape(Path(v).name)}</code></li>"
+                    for k, v in summary["files"].items())
+    path.write_text(
+        "<!doctype html><meta charset=utf-8><title>bench identify</title><style>"
+        "body{font-family:sans-serif;margin:2em}td,th{border:1px solid #ccc;padding:4px 8px}"
+        "table{border-collapse:collapse}.num{text-align:right}.sim{background:#ffe08a;"
+        "padding:8px;border:2px solid #c80}</style>"
+        f"<h1>Motor identification: {verdict}</h1>{banner}"
+        f"<table>{head}{body}</table><h2>Notes</h2><ul>{log}</ul>"
+        f"<h2>Files</h2><ul>{files}</ul>"
+        "<p>Method: docs/identify.md. 1&sigma;: the fit's standard error (R, mass, "
+        "friction, &psi;<sub>f</sub>), the spread over the standstill starts (L<sub>q</sub>), "
+        "the difference between two methods (L<sub>d</sub>).</p>\n", encoding="utf-8")
