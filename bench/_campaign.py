@@ -602,7 +602,7 @@ def run_one(base: dict[str, Any], params: dict[str, Any],
 def run_chunk(base: dict[str, Any], chunk: list[dict[str, Any]],
               metrics: list[str]) -> list[dict[str, Any]]:
     """Several runs in one task: a run costs milliseconds, a task's round trip
-    through the scheduler about as much, so tasks carry chunks of runs."""
+    through the scheduler about as much, so tasks carry chunks of runs (_chunks)."""
     return [run_one(base, p, metrics) for p in chunk]
 
 
@@ -634,6 +634,62 @@ def _motor_and_config(motor: str, extractor: str) -> tuple[Any, Any]:
     from sim_fallback import fw_config, load_motor
     mot = load_motor(motor)
     return mot, fw_config(mot, extractor)
+
+
+#: The paper scenarios as sim_fallback.paper_scenario defines them (schedule arguments
+#: of run_scenario); tests/python/test_campaign.py checks _drive_metrics against it.
+_SCENARIO_ARGS: dict[str, dict[str, Any]] = {
+    "load_step": {"speed_ref": 100.0, "load": [(0.0, 0.0), (0.5, 2.0)], "t_end": 1.0},
+    "speed_reversal": {"speed_ref": [(0.0, 100.0), (0.5, -100.0)], "t_end": 1.0},
+    "startup": {"speed_ref": 100.0, "t_end": 0.5, "x0_m": "random"},
+}
+#: run_scenario's default settling time (s): start of the "settled" metric windows.
+_SETTLE_S = 0.15
+
+
+def _drive_metrics(scenario: str, motor: Any, extractor: str, seed: int,
+                   plant: dict[str, Any] | None, fw: dict[str, float] | None,
+                   metrics: list[str], **kw: Any) -> tuple[int, dict[str, float]]:
+    """(fault code, the requested drive metrics) of one paper-scenario run: the same
+    simulation and the same numbers as ``paper_scenario(...).metrics``, without
+    what a campaign throws away (the other metrics, their channels, the snapshot)."""
+    import sim_fallback._sim as S
+    from sim_fallback import config_error
+    from sim_fallback.metrics import METRIC_DEFS, compute_metrics, default_window
+
+    args = dict(_SCENARIO_ARGS[scenario])
+    args.update(kw)
+    x0 = args.get("x0_m", 0.0)
+    if x0 == "random":
+        x0 = float(np.random.default_rng([int(seed), 0x5EED]).uniform(0.0, 2.0 * motor.tau_m))
+    sim = S.Sim(motor, extractor=extractor, seed=seed, noise=float(args.get("noise", 1.0)),
+                x0_m=float(x0), plant=plant, fw=fw, strict=False)
+    try:
+        refused = config_error(sim.cfg)
+        sim.set_schedule(S.SIM_REF_SPEED, args["speed_ref"], motor.rpm_to_radps_e(1.0))
+        sim.set_schedule(S.SIM_REF_LOAD, args.get("load"), 1.0 / motor.radius_m)
+        sim.enable("speed")
+        n = int(round(float(args["t_end"]) / sim.dt_s))
+        known = [m for m in metrics if m in METRIC_DEFS]
+        ch = {"t_s", "fault_code", "start_phase"}
+        for m in known:
+            ch.update(METRIC_DEFS[m].channels)
+        data = sim.advance(n, int(args.get("record_decimation", 1)), sorted(ch))
+        fault = int(sim.firmware.fault_code())
+    finally:
+        sim.close()
+    fc = data["fault_code"]
+    # run_scenario's validity rule: refused, faulted or never in closed loop -> NaN
+    if refused is not None or fault or (fc.size and np.any(fc != 0)) or not np.any(
+            data["start_phase"] == 3):
+        return fault, {m: float("nan") for m in metrics}
+    t = data["t_s"]
+    end = float(t[-1]) if t.size else 0.0
+    out = {m: float("nan") for m in metrics}
+    for m in known:
+        out.update(compute_metrics(data, motor.tau_m, float(motor.pole_pairs),
+                                   default_window(m, _SETTLE_S, end), (m,)))
+    return fault, out
 
 
 def _simulate(base: dict[str, Any], params: dict[str, Any],
@@ -677,7 +733,13 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
         kw["noise"] = float(rest["noise"])
     if "x0_m" in rest:
         kw["x0_m"] = float(rest["x0_m"])
-    r = paper_scenario(base.get("scenario", "load_step"), extractor=extractor, motor=motor,
+    scenario = base.get("scenario", "load_step")
+    if not analysis and not tr and scenario in _SCENARIO_ARGS:
+        kw.pop("channels")
+        fault, vals = _drive_metrics(scenario, motor, extractor, seed, plant_abs or None,
+                                     fw_abs or None, metrics, **kw)
+        return {"fault": fault, **vals}
+    r = paper_scenario(scenario, extractor=extractor, motor=motor,
                        seed=seed, plant=plant_abs or None, fw=fw_abs or None, **kw)
     out: dict[str, Any] = {"fault": int(r.fault_code)}
     for m in metrics:
@@ -695,6 +757,74 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
 
 
 # ---- running -----------------------------------------------------------------
+
+
+def warm_worker(motors: tuple[str, ...] = ("paper_salient",),
+                extractors: tuple[str, ...] = ("sogi_adaptive",)) -> None:
+    """A worker's one-time costs (imports, loading the simulator library, parsing the
+    motor files), paid when the cluster starts rather than by its first runs."""
+    from sim_fallback import _lib
+    _lib.lib()
+    for m in motors:
+        for e in extractors:
+            _motor_and_config(m, e)
+
+
+#: Dask settings of the local cluster: its background work (the workers' statistical
+#: profiler sampling the busy thread every 10 ms, 20 ms event-loop ticks, 100 ms memory
+#: and work-stealing polls) took ~10 % of a core on an idle 2-core cluster, ~1.5 % with
+#: these. Workers run one thread and dask's nanny sets OMP/MKL/OPENBLAS_NUM_THREADS=1.
+LOCAL_CLUSTER_CONFIG = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "500ms",
+    "distributed.admin.system-monitor.interval": "2s",
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.scheduler.work-stealing-interval": "500ms",
+}
+
+
+def start_local_cluster(n_workers: int | None = None) -> tuple[Any, Any]:
+    """(cluster, client): one single-threaded worker process per core (or
+    ``n_workers``), with :data:`LOCAL_CLUSTER_CONFIG`, workers warmed up."""
+    import logging
+    import os
+
+    import dask
+    from dask.distributed import Client, LocalCluster
+    with dask.config.set(LOCAL_CLUSTER_CONFIG):
+        cluster = LocalCluster(n_workers=n_workers or os.cpu_count() or 1,
+                               threads_per_worker=1, processes=True, dashboard_address=None,
+                               host="127.0.0.1", silence_logs=logging.ERROR)
+        client = Client(cluster)
+    client.run(warm_worker)
+    return cluster, client
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident set size (MiB)."""
+    import resource
+    import sys
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return rss / 2**20 if sys.platform == "darwin" else rss / 1024
+
+
+def _chunks(todos: list[list[dict[str, Any]]], n_workers: int
+            ) -> list[tuple[int, list[dict[str, Any]]]]:
+    """(campaign index, runs) per task, guided: a task holds about 1/(2 workers) of the
+    runs still to hand out, at most 128 (~0.5 s of 0.5 s runs: what an interruption
+    loses per worker) and at least 8. Each task costs the client and scheduler ~3 ms
+    of CPU, taken from the workers on a small machine, so tasks are few while the work
+    lasts and short at the end, where a long one would leave the other workers idle."""
+    left = sum(len(t) for t in todos)
+    out = []
+    for i, todo in enumerate(todos):
+        k = 0
+        while k < len(todo):
+            size = max(8, min(128, -(-left // (2 * n_workers))))
+            out.append((i, todo[k:k + size]))
+            k += size
+            left -= len(out[-1][1])
+    return out
 
 
 def results_dir(c: Campaign, out: Path) -> Path:
@@ -724,14 +854,16 @@ def _write_part(rdir: Path, rows: list[dict[str, Any]]) -> None:
     tmp.replace(rdir / f"part-{k:06d}.parquet")  # atomic: a kill leaves no torn file
 
 
-def run_campaign(c: Campaign, out: Path, scheduler: str | None = None,
+def run_campaign(c: Campaign, out: Path, scheduler: Any = None,
                  workers: int | None = None, serial: bool = False, batch: int = 64,
                  progress: Callable[[int, int, float], None] | None = None) -> Path:
-    """Run every run not yet in the results; return the results folder."""
+    """Run every run not yet in the results; return the results folder. ``scheduler``:
+    None (a local cluster of ``workers`` processes, started and closed here), an
+    address, or a connected ``dask.distributed.Client`` (kept open)."""
     return run_campaigns([c], out, scheduler, workers, serial, batch, progress)[0]
 
 
-def run_campaigns(cs: list[Campaign], out: Path, scheduler: str | None = None,
+def run_campaigns(cs: list[Campaign], out: Path, scheduler: Any = None,
                   workers: int | None = None, serial: bool = False, batch: int = 64,
                   progress: Callable[[int, int, float], None] | None = None) -> list[Path]:
     """Several campaigns through one cluster at once (their chunks share the workers, so
@@ -768,35 +900,27 @@ def run_campaigns(cs: list[Campaign], out: Path, scheduler: str | None = None,
                 for r in todos[i]:
                     emit(i, run_one(bases[i], r, c.metrics))
         else:
-            from dask.distributed import Client, LocalCluster, as_completed
-            if scheduler:
+            from dask.distributed import Client, as_completed
+            cluster, own = None, not isinstance(scheduler, Client)
+            if not own:
+                client = scheduler
+            elif scheduler:
                 client = Client(scheduler)
-                cluster = None
             else:
-                import logging
-                import os
-                cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
-                                       threads_per_worker=1, processes=True,
-                                       dashboard_address=None, host="127.0.0.1",
-                                       silence_logs=logging.ERROR)
-                client = Client(cluster)
+                cluster, client = start_local_cluster(workers)
             try:
                 n_workers = max(1, len(client.scheduler_info().get("workers", {})) or 1)
-                size = max(1, min(64, total // (8 * n_workers)))
-                owner, chunks = [], []
-                for i, todo in enumerate(todos):
-                    for k in range(0, len(todo), size):
-                        owner.append(i)
-                        chunks.append(todo[k:k + size])
+                owner, chunks = zip(*_chunks(todos, n_workers), strict=True)
                 futs = client.map(run_chunk, [bases[i] for i in owner], chunks,
                                   [cs[i].metrics for i in owner], pure=False)
                 index = {f.key: i for f, i in zip(futs, owner, strict=True)}
-                for fut in as_completed(futs):
-                    for row in fut.result():
+                for fut, rows in as_completed(futs, with_results=True):
+                    for row in rows:
                         emit(index[fut.key], row)
                     fut.release()
             finally:
-                client.close()
+                if own:
+                    client.close()
                 if cluster is not None:
                     cluster.close()
     finally:

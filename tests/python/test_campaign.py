@@ -115,6 +115,46 @@ def test_dask_local_cluster_matches_serial(tmp_path):
                                   d["position_error_rms_rad"][order_d].astype(float))
 
 
+@pytest.mark.parametrize("scenario,extractor,seed,plant,fw,kw,valid", [
+    ("load_step", "sogi_adaptive", 3, None, None, {}, True),
+    ("speed_reversal", "pseudo", 1, {"adc_noise_counts": 2.0}, None, {}, True),
+    ("speed_reversal", "pseudo", 1, None, {"L_q_H": 0.006}, {}, False),  # faults
+    ("startup", "sogi", 4, None, None, {"noise": 0.5}, True),
+    ("load_step", "sogi_adaptive", 0, None, {"f_inj_Hz": 1e6}, {}, False),  # refused
+    ("load_step", "sogi_adaptive", 2, None, None, {"x0_m": 0.004, "record_decimation": 3},
+     True),
+])
+def test_campaign_runs_give_paper_scenario_numbers(scenario, extractor, seed, plant, fw, kw,
+                                                   valid):
+    """The campaign's lean run (only the requested metrics and their channels) gives
+    bit for bit what sim_fallback.paper_scenario gives."""
+    from bench._campaign import _drive_metrics, _motor_and_config
+    from sim_fallback import METRIC_NAMES, paper_scenario
+    motor, _ = _motor_and_config("paper_salient", extractor)
+    kw = {"t_end": 0.3, "record_decimation": 8, **kw}
+    r = paper_scenario(scenario, extractor=extractor, motor=motor, seed=seed, plant=plant,
+                       fw=fw, **kw)
+    for want in (list(METRIC_NAMES), ["position_error_rms_rad"], ["settling_time_s",
+                                                                   "no_such_metric"]):
+        fault, got = _drive_metrics(scenario, motor, extractor, seed, plant, fw, want, **kw)
+        assert fault == r.fault_code
+        ref = {m: r.metrics.get(m, float("nan")) for m in want}
+        np.testing.assert_array_equal(np.array(list(got.values())), np.array(list(ref.values())))
+        assert list(got) == want
+    assert r.valid == valid
+
+
+def test_tasks_cover_every_run_once_large_first():
+    from bench._campaign import _chunks
+    todos = [[{"run": k} for k in range(1000)], [], [{"run": k} for k in range(37)]]
+    tasks = _chunks(todos, 2)
+    for i, todo in enumerate(todos):
+        assert [r for j, rs in tasks if j == i for r in rs] == todo
+    sizes = [len(rs) for _, rs in tasks]
+    assert max(sizes) <= 128 and sizes[0] == 128 and len(tasks) < 30
+    assert sizes[-2] <= 8  # short tasks at the end: no worker waits on a long one
+
+
 def test_statistics_against_numpy():
     v = np.array([0.1, 0.2, float("nan"), 0.4])
     assert statistic(v, "p50") == pytest.approx(np.percentile([0.1, 0.2, 0.4], 50))
