@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from sim_fallback._identify import (
+    IDENT_RESTORED,
     PROBE_SIGNALS,
     Identified,
     Probe,
@@ -223,12 +224,14 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
         # the bias sweep reads the raw HF response (E_d = T_s u_inj / L_dd): the
         # pseudo-filter extraction, whatever the drive normally uses
         drive.set("extractor", float(extractor_id("pseudo")))
+        restore = {k: float(drive.get(k)[0]) for k in IDENT_RESTORED}
         for k, v in ident_overrides(cfg0).items():
             drive.set(k, float(v))
         cfg0 = _cfg_view(drive)
         probe = WireProbe(conn, logger)
         probe.run(0.02)  # telemetry flowing
-        res = run_identification(probe, cfg0, cfg0.pole_pitch_m, travel_m, n_starts)
+        res = run_identification(probe, cfg0, cfg0.pole_pitch_m, travel_m, n_starts,
+                                 restore)
         out.result = res
     except (IdentifyError, DriveError, RuntimeError) as e:
         out.error = " ".join(str(e).split())

@@ -37,7 +37,17 @@ IDENT_FW = {"mon_sal_tol": 10.0, "saliency_min": 0.05,
             # the paper's conservative observer while the motor is unknown: the derived
             # one assumes the configured mass, and at standstill with several amperes on
             # d a fast observer's angle jitter makes thrust that moves the mover
-            "gains_auto": 0, "pll_kp": 86.6, "pll_ki": 5000.0, "pll_kd": 1.0e5}
+            "gains_auto": 0, "pll_kp": 86.6, "pll_ki": 5000.0, "pll_kd": 1.0e5,
+            # the back-EMF witness's voltage residual uses R and L, which steps 1-3
+            # measure: off (threshold out of reach) until the drive is reconfigured with
+            # them; the motion runs have it back (:data:`IDENT_RESTORED`), its angle check
+            # does not depend on psi_f, still unknown then. With R 27 % off it faulted
+            # (EST_BEMF_MISMATCH) on the DC steps of the R measurement.
+            "mon_bemf_min_V": 1000.0}
+
+#: Settings of :data:`IDENT_FW` the drive gets back (the user's values) once R, L_d and
+#: L_q are measured, before the motion runs.
+IDENT_RESTORED = ("mon_bemf_min_V",)
 
 #: Speed-loop bandwidth (rad/s) while identifying: the motor file's may be tuned for a
 #: known motor (iron_core_linear: 80 rad/s); on an unknown one a slow loop is safer.
@@ -271,17 +281,21 @@ def identify(motor: Motor, seed: int = 0, travel_m: float = 0.3, n_starts: int =
         fw["spd_kp_A_per_radps"] = o["spd_kp_A_per_radps"]
         fw["spd_ki_A_per_rad"] = o["spd_ki_A_per_rad"]
         cfg0 = fw_config(motor, "pseudo", **fw)
+    user = fw_config(motor, "pseudo", **(guess or {}))
+    restore = {k: float(getattr(user, k)) for k in IDENT_RESTORED}
     with SimProbe(motor, fw, plant, seed) as probe:
-        return run_identification(probe, cfg0, motor.tau_m, travel_m, n_starts)
+        return run_identification(probe, cfg0, motor.tau_m, travel_m, n_starts, restore)
 
 
 def run_identification(probe: Probe, cfg0: Any, tau_m: float, travel_m: float = 0.3,
-                       n_starts: int = 4) -> Identified:
+                       n_starts: int = 4, restore: dict[str, float] | None = None
+                       ) -> Identified:
     """The identification procedure (module docstring) on any :class:`Probe`.
 
     ``cfg0``: the configuration the drive runs with (fw_config_t attributes: i_max_A,
     f_pwm_Hz, u_inj_V, L_d_H, L_q_H); ``tau_m``: the pole pitch (m); ``travel_m``: the
-    free travel the motion runs may use.
+    free travel the motion runs may use; ``restore``: the user's values of
+    :data:`IDENT_RESTORED`, given back before the motion runs.
     """
     res = Identified()
     i_max = float(cfg0.i_max_A)
@@ -343,7 +357,7 @@ def run_identification(probe: Probe, cfg0: Any, tau_m: float, travel_m: float = 
     # reconfigured with R, L_d, L_q and the current loop tuned to them, then restarts
     probe.reconfigure({"R_ohm": float(R), "L_d_H": float(L_d0), "L_q_H": float(L_q_ss),
                        "cur_kp_V_per_A": float(L_d0) * 1100.0,
-                       "cur_ki_V_per_As": float(R) * 1100.0})
+                       "cur_ki_V_per_As": float(R) * 1100.0, **(restore or {})})
 
     # 4 + 5. a speed profile in each direction: the speed loop follows a 3 Hz
     # sinusoid around +v and around -v (the Coulomb term has one sign per run, the

@@ -35,8 +35,10 @@ def test_randomized_motors_electrical_within_3_percent_or_a_named_fault():
     """Eight motors the drive has never seen, configured from the nominal file: each run
     either stops on a named drive fault (the integrity monitor refusing to work blind
     on a configuration that is too far off) or returns R, L_d, L_q within 3 %. Measured:
-    5 of 8 complete (R, L_d, L_q within 1.3 %), 3 stop on EST_HF_ANGLE or
-    EST_BEMF_MISMATCH."""
+    6 of 8 complete (R, L_d, L_q within 1.3 %), 2 stop at the first standstill start
+    (POLARITY_UNDETERMINED, EST_HF_ANGLE). Before the back-EMF witness waited for the
+    measured R and L, a third stopped on EST_BEMF_MISMATCH during the R steps (R 27 %
+    off)."""
     mot = load_motor("iron_core_linear")
     done = 0
     for seed in range(8):
@@ -50,7 +52,7 @@ def test_randomized_motors_electrical_within_3_percent_or_a_named_fault():
         err = r.rel_error(truth_of(mot, plant))
         for k in ELECTRICAL:
             assert abs(err[k]) <= 0.03, (seed, k, err[k])
-    assert done >= 5, done
+    assert done >= 6, done
 
 
 def _mechanical_cases():
