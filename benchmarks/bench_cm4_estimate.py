@@ -6,7 +6,9 @@ What it does
      target flags (-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard)
      plus the harness in benchmarks/cm4/ into a bare-metal image for QEMU's
      mps2-an386 board (a Cortex-M4F), once per optimisation level (-O2 and
-     -Os by default; -Os is what the project's MinSizeRel CM4 image uses).
+     -Os by default; -Os is what the project's MinSizeRel CM4 image uses),
+     with link-time optimisation (-flto) as the CM4 image is built
+     (firmware_c/CMakeLists.txt); --no-lto measures separate translation units.
   2. Runs it once untraced ("warm"): the locked-mover plant of
      benchmarks/bench_fw_step.c drives the core into closed-loop RUN (0.2 s +
      24 000 samples, same as the host benchmark); the controller state and
@@ -31,7 +33,7 @@ error, warm-up not reaching RUN, controller leaving RUN during the replay),
 3 when the sources changed during the run. Outputs go to benchmarks/out/cm4/.
 
 Usage: python3 benchmarks/bench_cm4_estimate.py [--opt O2,Os] [--batch 80]
-       [--batches 10] [--json out.json] [--keep-log]
+       [--batches 10] [--no-lto] [--json out.json] [--keep-log]
 
 CYCLE MODEL (Cortex-M4 TRM r0p1 table 3-1, FPv4-SP table 7-1; zero-wait-
 state instruction fetch, i.e. code in CCM SRAM or always hitting the
@@ -131,7 +133,7 @@ def source_fingerprint() -> str:
     return h.hexdigest()[:12]
 
 
-def build(opt: str, outdir: Path) -> Path:
+def build(opt: str, outdir: Path, lto: bool = True) -> Path:
     outdir.mkdir(parents=True, exist_ok=True)
     elf = outdir / "harness.elf"
     srcs = sorted(str(p) for p in (FW / "src").glob("*.c"))
@@ -139,6 +141,7 @@ def build(opt: str, outdir: Path) -> Path:
         "arm-none-eabi-gcc",
         *CPU_FLAGS,
         f"-{opt}",
+        *(["-flto"] if lto else []),  # as the CM4 image: inlining across the blocks
         "-std=c11",
         "-DNDEBUG",
         "-ffunction-sections",
@@ -527,6 +530,9 @@ def main() -> int:
         "(8 samples at the default config; default 80)",
     )
     ap.add_argument("--batches", type=int, default=10, help="number of batches (default 10)")
+    ap.add_argument(
+        "--no-lto", action="store_true", help="build without -flto (one object per source)"
+    )
     ap.add_argument("--json", type=Path, help="also write the results as JSON")
     ap.add_argument("--keep-log", action="store_true", help="keep the QEMU exec log")
     a = ap.parse_args()
@@ -539,7 +545,8 @@ def main() -> int:
     g = run(["arm-none-eabi-gcc", "--version"]).stdout.splitlines()[0]
     print(f"tools: {g}; {v}; board mps2-an386 (Cortex-M4F)")
     print(
-        f"flags: {' '.join(CPU_FLAGS)} -O<level> -DNDEBUG; budget {BUDGET:.0f} cycles, "
+        f"flags: {' '.join(CPU_FLAGS)} -O<level> -DNDEBUG{'' if a.no_lto else ' -flto'}; "
+        f"budget {BUDGET:.0f} cycles, "
         f"target <= {TARGET_SHARE * BUDGET:.0f}"
     )
     fp0 = source_fingerprint()
@@ -549,7 +556,7 @@ def main() -> int:
     if not modes or any(m not in ("force", "speed") for m in modes):
         die("--modes takes force and/or speed")
     for opt in [o.strip() for o in a.opt.split(",") if o.strip()]:
-        elf = build(opt, OUT / opt)
+        elf = build(opt, OUT / opt, lto=not a.no_lto)
         for mode in modes:
             res = measure(opt, mode, elf, a.batch, a.batches, a.keep_log)
             report(res)
@@ -570,6 +577,7 @@ def main() -> int:
         )
     for r in results:
         r["source_sha256_12"] = fp0
+        r["lto"] = not a.no_lto
     if a.json:
         a.json.write_text(json.dumps(results, indent=2))
     if source_fingerprint() != fp0:

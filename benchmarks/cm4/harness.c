@@ -45,13 +45,20 @@ static fw_inputs_t g_rec[N_REC];
 static fw_ctrl_t g_base, g_c;
 volatile float g_sink;
 
+/* The image is linked with -flto (as the CM4 firmware is). fw_step is called
+ * through a volatile pointer, so LTO can neither inline it into the loop below
+ * nor replace it by a specialised clone: the traced entry is the real fw_step. */
+static void (*volatile g_step)(fw_ctrl_t *, const fw_inputs_t *, fw_outputs_t *) = fw_step;
+
 /* The only caller of fw_step in `count` mode: the trace counter starts at
- * fw_step's first instruction and stops when control is back in here. */
-__attribute__((noinline)) void replay_batch(fw_ctrl_t *c, const fw_inputs_t *in, int n);
-__attribute__((noinline)) void replay_batch(fw_ctrl_t *c, const fw_inputs_t *in, int n) {
+ * fw_step's first instruction and stops when control is back in here. `used`
+ * and `noipa` keep the symbol under its name under LTO (the script looks it up). */
+__attribute__((used, noipa)) void replay_batch(fw_ctrl_t *c, const fw_inputs_t *in, int n);
+__attribute__((used, noipa)) void replay_batch(fw_ctrl_t *c, const fw_inputs_t *in, int n) {
   fw_outputs_t out;
+  void (*step)(fw_ctrl_t *, const fw_inputs_t *, fw_outputs_t *) = g_step;
   for (int k = 0; k < n; k++) {
-    fw_step(c, &in[k], &out);
+    step(c, &in[k], &out);
     g_sink += out.duty_abc[0];
   }
 }
