@@ -487,6 +487,20 @@ def _fit_motion(runs: list[dict[str, np.ndarray]], dt: float, R: float, L_q: flo
              f"filter sigma {sigma_s * 1e3:.0f} ms on both sides"])
 
 
+def randomized_plant(seed: int, base: str = "iron_core_linear") -> dict[str, float]:
+    """A motor the drive has never seen: ``base`` with R, L, psi_f and mass scaled by
+    random factors in [0.75, 1.3] (the saliency kept above the threshold); plant
+    overrides for :class:`Sim` / ``run_scenario``."""
+    from ._motors import load_motor
+
+    rng = np.random.default_rng(seed)
+    m = load_motor(base).plant
+    f = rng.uniform(0.75, 1.3, 5)
+    return {"R_ohm": m["R_ohm"] * f[0], "L_d0_H": m["L_d0_H"] * f[1],
+            "L_q_H": m["L_q_H"] * f[1] * f[2] ** 0.2, "psi_f_Wb": m["psi_f_Wb"] * f[3],
+            "mass_kg": m["mass_kg"] * f[4]}
+
+
 def truth_of(motor: Motor, plant: dict[str, Any] | None = None) -> dict[str, float]:
     """The simulated motor's parameters in the identified names (test verdicts only)."""
     pl = dict(motor.plant)

@@ -1,24 +1,16 @@
 """Motor identification by the drive (sim_fallback/_identify.py) against the simulated
 plant's truth, with 12-bit ADC noise: shipped motors and a randomized one."""
 
-import numpy as np
 import pytest
 
-from sim_fallback._identify import identify, truth_of
+from sim_fallback._identify import identify, randomized_plant, truth_of
 from sim_fallback._motors import load_motor
 
 ELECTRICAL = ("R_ohm", "L_d_H", "L_q_H")
 
 
 def _random_plant(seed: int) -> dict:
-    """A motor the drive has never seen: iron_core_linear with R, L, psi_f and mass
-    scaled by random factors (the saliency kept above the threshold)."""
-    rng = np.random.default_rng(seed)
-    m = load_motor("iron_core_linear").plant
-    f = rng.uniform(0.75, 1.3, 5)
-    return {"R_ohm": m["R_ohm"] * f[0], "L_d0_H": m["L_d0_H"] * f[1],
-            "L_q_H": m["L_q_H"] * f[1] * f[2] ** 0.2, "psi_f_Wb": m["psi_f_Wb"] * f[3],
-            "mass_kg": m["mass_kg"] * f[4]}
+    return randomized_plant(seed)
 
 
 @pytest.mark.parametrize("name", ["paper_salient", "iron_core_linear"])
