@@ -797,13 +797,29 @@ def start_local_cluster(n_workers: int | None = None) -> tuple[Any, Any]:
                                host="127.0.0.1", silence_logs=logging.ERROR)
         client = Client(cluster)
     client.run(warm_worker)
+    warm_writer()
     return cluster, client
 
 
+def warm_writer() -> None:
+    """The result writer's one-time cost in this process: pyarrow's first conversion
+    imports pandas (~0.2 s), which would otherwise hold the GIL of the process that
+    also runs the local scheduler while the first results arrive."""
+    import pyarrow as pa
+    pa.array([0.0])
+
+
 def peak_rss_mb() -> float:
-    """This process's peak resident set size (MiB)."""
+    """This process's peak resident set size (MiB). Linux: VmHWM, which starts afresh
+    at exec (ru_maxrss would include the parent's pages shared while the worker was
+    being spawned)."""
     import resource
     import sys
+    try:
+        with open("/proc/self/status") as f:
+            return next(int(ln.split()[1]) for ln in f if ln.startswith("VmHWM:")) / 1024
+    except (OSError, StopIteration, ValueError):
+        pass
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return rss / 2**20 if sys.platform == "darwin" else rss / 1024
 

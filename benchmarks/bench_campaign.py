@@ -41,6 +41,7 @@ from bench._campaign import (  # noqa: E402
     run_campaign,
     start_local_cluster,
     warm_worker,
+    warm_writer,
 )
 
 
@@ -68,7 +69,8 @@ def main() -> None:
     c = parse_campaign(yaml.safe_load(text), yaml.compose(text), None)
     sim_s = a.runs * a.t_end
     n_workers = os.cpu_count() or 1
-    warm_worker()  # the serial loop's one-time costs, as the workers' below
+    warm_worker()  # the serial loop's one-time costs, as the cluster's below
+    warm_writer()
     t0 = time.perf_counter()
     cl, client = start_local_cluster(n_workers)  # what bench campaign starts
     t_start = time.perf_counter() - t0
