@@ -636,62 +636,6 @@ def _motor_and_config(motor: str, extractor: str) -> tuple[Any, Any]:
     return mot, fw_config(mot, extractor)
 
 
-#: The paper scenarios as sim_fallback.paper_scenario defines them (schedule arguments
-#: of run_scenario); tests/python/test_campaign.py checks _drive_metrics against it.
-_SCENARIO_ARGS: dict[str, dict[str, Any]] = {
-    "load_step": {"speed_ref": 100.0, "load": [(0.0, 0.0), (0.5, 2.0)], "t_end": 1.0},
-    "speed_reversal": {"speed_ref": [(0.0, 100.0), (0.5, -100.0)], "t_end": 1.0},
-    "startup": {"speed_ref": 100.0, "t_end": 0.5, "x0_m": "random"},
-}
-#: run_scenario's default settling time (s): start of the "settled" metric windows.
-_SETTLE_S = 0.15
-
-
-def _drive_metrics(scenario: str, motor: Any, extractor: str, seed: int,
-                   plant: dict[str, Any] | None, fw: dict[str, float] | None,
-                   metrics: list[str], **kw: Any) -> tuple[int, dict[str, float]]:
-    """(fault code, the requested drive metrics) of one paper-scenario run: the same
-    simulation and the same numbers as ``paper_scenario(...).metrics``, without
-    what a campaign throws away (the other metrics, their channels, the snapshot)."""
-    import sim_fallback._sim as S
-    from sim_fallback import config_error
-    from sim_fallback.metrics import METRIC_DEFS, compute_metrics, default_window
-
-    args = dict(_SCENARIO_ARGS[scenario])
-    args.update(kw)
-    x0 = args.get("x0_m", 0.0)
-    if x0 == "random":
-        x0 = float(np.random.default_rng([int(seed), 0x5EED]).uniform(0.0, 2.0 * motor.tau_m))
-    sim = S.Sim(motor, extractor=extractor, seed=seed, noise=float(args.get("noise", 1.0)),
-                x0_m=float(x0), plant=plant, fw=fw, strict=False)
-    try:
-        refused = config_error(sim.cfg)
-        sim.set_schedule(S.SIM_REF_SPEED, args["speed_ref"], motor.rpm_to_radps_e(1.0))
-        sim.set_schedule(S.SIM_REF_LOAD, args.get("load"), 1.0 / motor.radius_m)
-        sim.enable("speed")
-        n = int(round(float(args["t_end"]) / sim.dt_s))
-        known = [m for m in metrics if m in METRIC_DEFS]
-        ch = {"t_s", "fault_code", "start_phase"}
-        for m in known:
-            ch.update(METRIC_DEFS[m].channels)
-        data = sim.advance(n, int(args.get("record_decimation", 1)), sorted(ch))
-        fault = int(sim.firmware.fault_code())
-    finally:
-        sim.close()
-    fc = data["fault_code"]
-    # run_scenario's validity rule: refused, faulted or never in closed loop -> NaN
-    if refused is not None or fault or (fc.size and np.any(fc != 0)) or not np.any(
-            data["start_phase"] == 3):
-        return fault, {m: float("nan") for m in metrics}
-    t = data["t_s"]
-    end = float(t[-1]) if t.size else 0.0
-    out = {m: float("nan") for m in metrics}
-    for m in known:
-        out.update(compute_metrics(data, motor.tau_m, float(motor.pole_pairs),
-                                   default_window(m, _SETTLE_S, end), (m,)))
-    return fault, out
-
-
 def _simulate(base: dict[str, Any], params: dict[str, Any],
               metrics: list[str]) -> dict[str, Any]:
     from sim_fallback import paper_scenario
@@ -734,11 +678,10 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
     if "x0_m" in rest:
         kw["x0_m"] = float(rest["x0_m"])
     scenario = base.get("scenario", "load_step")
-    if not analysis and not tr and scenario in _SCENARIO_ARGS:
+    if not analysis and not tr:
+        # the lean run: only the requested metrics and the channels they need
         kw.pop("channels")
-        fault, vals = _drive_metrics(scenario, motor, extractor, seed, plant_abs or None,
-                                     fw_abs or None, metrics, **kw)
-        return {"fault": fault, **vals}
+        kw["metrics"] = metrics
     r = paper_scenario(scenario, extractor=extractor, motor=motor,
                        seed=seed, plant=plant_abs or None, fw=fw_abs or None, **kw)
     out: dict[str, Any] = {"fault": int(r.fault_code)}

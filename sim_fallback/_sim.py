@@ -20,7 +20,7 @@ import numpy as np
 from . import _lib
 from ._firmware import Firmware, config_error
 from ._motors import Motor, extractor_id, fw_config, load_motor, plant_params
-from .metrics import METRIC_NAMES, TRUTH_CHANNELS, run_metrics, wrap_pi
+from .metrics import METRIC_DEFS, METRIC_NAMES, TRUTH_CHANNELS, run_metrics, wrap_pi
 
 SIM_REF_SPEED, SIM_REF_FORCE, SIM_REF_LOAD = 0, 1, 2
 CHANNELS = [name for name, *_ in _lib.RECORD_CHANNELS]
@@ -327,7 +327,8 @@ def run_scenario(motor: str | Path | Motor = "paper_salient",
                  x0_m: float | str = 0.0, settle_s: float = 0.15,
                  speed_unit: str = "rpm", load_unit: str = "Nm",
                  plant: dict[str, Any] | None = None, fw: dict[str, float] | None = None,
-                 channels: Sequence[str] | None = None) -> Result:
+                 channels: Sequence[str] | None = None,
+                 metrics: Sequence[str] | None = None) -> Result:
     """Run one closed-loop scenario and return time series and metrics.
 
     Schedules are a constant, a list of ``(t_s, value)`` breakpoints
@@ -342,6 +343,10 @@ def run_scenario(motor: str | Path | Motor = "paper_salient",
     force_ref : thrust schedule in N (force mode, the firmware converts to i_q).
     x0_m : initial true position in m, or "random" (uniform over one electrical
         period 2 tau, drawn from ``seed``).
+    channels : what to record (default: everything); the metrics' channels always.
+    metrics : which metrics to compute (default: all of :data:`METRIC_NAMES`; unknown
+        names are left out). Given without ``channels``, only the channels those metrics
+        need are recorded: the lean run of a campaign, with the same numbers.
     """
     mot = motor if isinstance(motor, Motor) else load_motor(motor)
     if x0_m == "random":
@@ -368,8 +373,15 @@ def run_scenario(motor: str | Path | Motor = "paper_salient",
         sim.set_schedule(SIM_REF_LOAD, load, ld_scale)
         status = sim.enable(mode)
         n = int(round(t_end / sim.dt_s))
-        need = {*TRUTH_CHANNELS, "fault_code", "start_phase"}
-        ch = None if channels is None else sorted(set(channels) | need)
+        names = METRIC_NAMES if metrics is None else tuple(
+            m for m in metrics if m in METRIC_DEFS)
+        if metrics is None:
+            need = {*TRUTH_CHANNELS, "fault_code", "start_phase"}
+        else:
+            need = {"t_s", "fault_code", "start_phase"}.union(
+                *(METRIC_DEFS[m].channels for m in names))
+        ch = (None if channels is None and metrics is None else
+              sorted(set(channels or ()) | need))
         data = sim.advance(n, record_decimation, ch)
         fault = int(sim.firmware.fault_code())
         info = {"statusword_after_enable": status, "x0_m": x0, "dt_s": sim.dt_s,
@@ -386,12 +398,13 @@ def run_scenario(motor: str | Path | Motor = "paper_salient",
         elif "start_phase" in data and not np.any(data["start_phase"] == 3):
             reason = "never reached closed loop (start_phase RUN)"
         # the project's metric definitions (sim_fallback.metrics), default windows
-        metrics, windows = run_metrics(data, mot.tau_m, float(mot.pole_pairs), settle_s)
-        info["metric_windows_s"] = windows
+        vals, windows = run_metrics(data, mot.tau_m, float(mot.pole_pairs), settle_s,
+                                    names=names)
         if reason is not None:
-            metrics = {k: float("nan") for k in METRIC_NAMES}
+            vals = {k: float("nan") for k in names}
+        info["metric_windows_s"] = windows
         info["invalid_reason"] = reason
-        return Result(data=data, metrics=metrics, motor=mot, extractor=ex_name, seed=seed,
+        return Result(data=data, metrics=vals, motor=mot, extractor=ex_name, seed=seed,
                       settle_s=settle_s, fault_code=fault, info=info)
     finally:
         sim.close()
@@ -400,6 +413,12 @@ def run_scenario(motor: str | Path | Motor = "paper_salient",
 # ---- the paper's scenarios (method.md section 2) -----------------------------
 
 PAPER_SCENARIOS = ("load_step", "speed_reversal", "startup")
+#: Their arguments of :func:`run_scenario`.
+PAPER_SCENARIO_ARGS: dict[str, dict[str, Any]] = {
+    "load_step": {"speed_ref": 100.0, "load": [(0.0, 0.0), (0.5, 2.0)], "t_end": 1.0},
+    "speed_reversal": {"speed_ref": [(0.0, 100.0), (0.5, -100.0)], "t_end": 1.0},
+    "startup": {"speed_ref": 100.0, "t_end": 0.5, "x0_m": "random"},
+}
 
 
 def paper_scenario(name: str, extractor: int | str = "sogi_adaptive",
@@ -407,13 +426,8 @@ def paper_scenario(name: str, extractor: int | str = "sogi_adaptive",
                    **kw: Any) -> Result:
     """load_step: 100 r/min, 2 N m at 0.5 s; speed_reversal: 100 -> -100 r/min at
     0.5 s; startup: 100 r/min from a random initial position (from ``seed``)."""
-    if name == "load_step":
-        args = dict(speed_ref=100.0, load=[(0.0, 0.0), (0.5, 2.0)], t_end=1.0)
-    elif name == "speed_reversal":
-        args = dict(speed_ref=[(0.0, 100.0), (0.5, -100.0)], t_end=1.0)
-    elif name == "startup":
-        args = dict(speed_ref=100.0, t_end=0.5, x0_m="random")
-    else:
+    if name not in PAPER_SCENARIO_ARGS:
         raise ValueError(f"unknown scenario '{name}'; choose from {PAPER_SCENARIOS}")
+    args = dict(PAPER_SCENARIO_ARGS[name])
     args.update(kw)
     return run_scenario(motor=motor, extractor=extractor, seed=seed, **args)

@@ -252,7 +252,8 @@ def compute_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pa
 
 
 def run_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pairs: float,
-                settle_s: float, t_end_s: float | None = None
+                settle_s: float, t_end_s: float | None = None,
+                names: tuple[str, ...] | list[str] = METRIC_NAMES
                 ) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
     """Every metric over its default window (the headline figures of a run).
 
@@ -266,6 +267,8 @@ def run_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pairs:
         End of the start-up (s).
     t_end_s : float, optional
         End of the run (s); the last sample if None.
+    names : sequence of str
+        Which metrics (default: all, in :data:`METRIC_NAMES` order).
 
     Returns
     -------
@@ -278,7 +281,7 @@ def run_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pairs:
     end = float(t_end_s) if t_end_s is not None else (float(t[-1]) if t.size else 0.0)
     out: dict[str, float] = {}
     windows: dict[str, tuple[float, float]] = {}
-    for name in METRIC_NAMES:
+    for name in names:
         w = default_window(name, settle_s, end)
         windows[name] = w
         out.update(compute_metrics(data, pole_pitch_m, pole_pairs, w, (name,)))

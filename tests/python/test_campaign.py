@@ -126,9 +126,9 @@ def test_dask_local_cluster_matches_serial(tmp_path):
 ])
 def test_campaign_runs_give_paper_scenario_numbers(scenario, extractor, seed, plant, fw, kw,
                                                    valid):
-    """The campaign's lean run (only the requested metrics and their channels) gives
-    bit for bit what sim_fallback.paper_scenario gives."""
-    from bench._campaign import _drive_metrics, _motor_and_config
+    """The lean run a campaign makes (``metrics=``: only those metrics and the channels
+    they need) gives bit for bit the full run's numbers."""
+    from bench._campaign import _motor_and_config
     from sim_fallback import METRIC_NAMES, paper_scenario
     motor, _ = _motor_and_config("paper_salient", extractor)
     kw = {"t_end": 0.3, "record_decimation": 8, **kw}
@@ -136,11 +136,18 @@ def test_campaign_runs_give_paper_scenario_numbers(scenario, extractor, seed, pl
                        fw=fw, **kw)
     for want in (list(METRIC_NAMES), ["position_error_rms_rad"], ["settling_time_s",
                                                                    "no_such_metric"]):
-        fault, got = _drive_metrics(scenario, motor, extractor, seed, plant, fw, want, **kw)
-        assert fault == r.fault_code
-        ref = {m: r.metrics.get(m, float("nan")) for m in want}
-        np.testing.assert_array_equal(np.array(list(got.values())), np.array(list(ref.values())))
-        assert list(got) == want
+        lean = paper_scenario(scenario, extractor=extractor, motor=motor, seed=seed,
+                              plant=plant, fw=fw, metrics=want, **kw)
+        assert lean.fault_code == r.fault_code
+        known = [m for m in want if m in METRIC_NAMES]
+        assert list(lean.metrics) == known
+        # only what those metrics need was recorded
+        from sim_fallback.metrics import METRIC_DEFS
+        need = {"t_s", "fault_code", "start_phase"}.union(
+            *(METRIC_DEFS[m].channels for m in known))
+        assert set(lean.data) == need
+        np.testing.assert_array_equal(np.array([lean.metrics[m] for m in known]),
+                                      np.array([r.metrics[m] for m in known]))
     assert r.valid == valid
 
 
