@@ -72,6 +72,14 @@ class DriveError(RuntimeError):
     """The drive refused a command or did not reach the requested state."""
 
 
+class DriveFault(DriveError):
+    """The drive latched a fault while the bench was running something (``code``: 0x603F)."""
+
+    def __init__(self, msg: str, code: int) -> None:
+        super().__init__(msg)
+        self.code = code
+
+
 class ParamError(DriveError):
     """A parameter read/write failed; the message explains the SDO abort code."""
 
@@ -383,6 +391,12 @@ class Drive:
             except Exception as e:  # keep going: disabling matters more
                 log.warning("zeroing 0x%04X failed: %s", idx, e)
         try:
+            if self.state == "FAULT":  # power stage already off; a reset is the user's call
+                self.enabled = False
+                return
+        except Exception:  # noqa: BLE001, S110 - the walk below reports what is wrong
+            pass
+        try:
             self._goto("SWITCH ON DISABLED", timeout_s)
         except Exception as e:
             log.warning("state walk to SWITCH ON DISABLED failed (%s); writing controlword", e)
@@ -666,6 +680,13 @@ class Drive:
         self.write_raw(0x2070, 1, 3)
 
     # ---- faults -----------------------------------------------------------------------
+    def active_fault(self) -> int:
+        """The newest fault the drive announced by EMCY and has not reset (0 if none):
+        no bus traffic (canopen's EMCY consumer keeps the list), so it can be asked
+        often while a sequence runs."""
+        active = list(getattr(self.node.emcy, "active", ()) or ())
+        return int(active[-1].code) if active else 0
+
     def fault_code(self) -> int:
         """Latched fault (0x603F), 0 if none."""
         return int(self.node.sdo[0x603F].raw)

@@ -255,7 +255,7 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
         logger.write_meta({"identify": {"travel_m": travel_m, "apply": apply,
                                         "error": out.error}, "logging": logstats})
     if conn.sim is not None:
-        out.truth = truth_of(conn.sim.motor)
+        out.truth = truth_of(conn.sim.motor, conn.sim.plant_overrides)
     _write_outputs(out, backup, name, conn)
     return out
 

@@ -256,15 +256,29 @@ class Runner:
         """Sequence time (s)."""
         return self.clock.now() - self._t0
 
+    def _check_fault(self) -> None:
+        """Stop the sequence when the drive announced a fault (EMCY): what follows would
+        run on a drive that has switched its power stage off, and every figure after it
+        would measure a coasting mover, not the estimator."""
+        active = getattr(self.drive, "active_fault", None)
+        code = active() if active is not None else 0
+        if code:
+            from bench._drive import DriveFault, fault_text
+
+            raise DriveFault(f"drive fault {fault_text(code)} at t = {self.now():.3f} s",
+                             code)
+
     def _sleep_until(self, t_seq: float, total: float) -> None:
-        """Sleep in slices so progress updates and Ctrl-C stay responsive."""
+        """Sleep in slices so progress updates, Ctrl-C and a drive fault stay responsive."""
         while True:
             now = self.now()
             if self.progress:
                 self.progress(min(now, total), total)
+            self._check_fault()
             if now >= t_seq - 1e-9:  # clocks advance in steps; avoid float ties
                 return
-            self.clock.sleep_until(self._t0 + min(t_seq, now + 0.05))
+            # 10 ms slices: a fault stops the sequence within 10 ms of the EMCY
+            self.clock.sleep_until(self._t0 + min(t_seq, now + 0.01))
 
     # ---- steps ------------------------------------------------------------------------
     def _speed(self, p: dict[str, Any], key: str = "value") -> float:
@@ -441,6 +455,8 @@ class Runner:
         self.rec.event(0.0, "start", {"sequence": seq.name})
         try:
             for step in seq.steps:
+                if step.kind != "enable":  # a fault before enable is enable's to report
+                    self._check_fault()
                 self.rec.event(self.now(), "step", {"index": step.index, "step": step.kind,
                                                     "params": step.params})
                 self._do(step, seq, result)

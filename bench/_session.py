@@ -174,17 +174,19 @@ def _say(msg: str) -> None:
 def open_sim(motor: str = "paper_salient", extractor: str = "sogi_adaptive", seed: int = 0,
              x0: float | str = 0.0, realtime: bool = False, node_id: int = 1,
              record_decimation: int = 1, read_pdos: bool = True,
-             chunk_s: float = 1e-3) -> Connection:
+             chunk_s: float = 1e-3, plant: dict[str, Any] | None = None) -> Connection:
     """Start the simulated drive on a fresh ``virtual`` channel and connect to it.
 
     ``chunk_s`` is the simulated time per C call, which is also the SYNC period (s).
+    ``plant``: plant overrides, a motor other than the configured ``motor`` (e.g.
+    ``sim_fallback._motors.machine_params(other)``).
     """
     from bench._simdrive import SimDrive, SimLoad
 
     channel = f"pmlsm-sim-{uuid.uuid4().hex[:8]}-vcan"  # no trailing digits (BLF channel)
     sim = SimDrive(channel, motor=motor, extractor=extractor, seed=seed, x0=x0,
                    node_id=node_id, realtime=realtime, chunk_s=chunk_s,
-                   record_decimation=record_decimation).start()
+                   record_decimation=record_decimation, plant=plant).start()
     try:
         bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         net = canopen.Network(bus)
@@ -196,7 +198,9 @@ def open_sim(motor: str = "paper_salient", extractor: str = "sogi_adaptive", see
         sim.close()
         raise
     units = MotorUnits(pole_pitch_m=sim.motor.tau_m, pole_pairs=float(sim.motor.pole_pairs))
-    desc = (f"SIMULATED drive (motor {sim.motor.name}, extractor {extractor}, seed {seed}, "
+    other = (f", simulating another motor than configured ({len(plant)} plant parameters "
+             "overridden)") if plant else ""
+    desc = (f"SIMULATED drive (motor {sim.motor.name}{other}, extractor {extractor}, seed {seed}, "
             f"{'paced to the wall clock' if realtime else 'as fast as possible'}) on "
             f"python-can virtual channel {channel}")
     return Connection(bus, net, drive, SimLoad(sim), units, desc, sim=sim, serial=sim.serial,
@@ -278,8 +282,12 @@ def connect(sim: bool = False, interface: str | None = None, channel: str | None
             extractor: str = "sogi_adaptive", seed: int = 0, x0: float | str = 0.0,
             node_id: int = 1, load_node: int | None = None, record_decimation: int = 1,
             say: Callable[[str], None] = _say, require_hardware: bool = False,
-            sim_server: Any = None) -> Connection:
+            sim_server: Any = None, sim_plant: dict[str, Any] | None = None
+            ) -> Connection:
     """Hardware if available and not ``sim``; else the simulated drive (announced).
+
+    ``sim_plant``: the simulated drive drives another motor than ``motor`` (plant
+    overrides, see :func:`open_sim`); only with ``sim``.
 
     With ``require_hardware`` (a rig's CI job) a missing drive raises
     :class:`NoHardware` instead of falling back. A fallback connection has
@@ -317,7 +325,8 @@ def connect(sim: bool = False, interface: str | None = None, channel: str | None
     if load_node:
         say(f"bench: --load-node {load_node} ignored: the simulated drive applies the load "
             "force in its plant")
-    c = open_sim(motor, extractor, seed, x0, realtime, node_id, record_decimation)
+    c = open_sim(motor, extractor, seed, x0, realtime, node_id, record_decimation,
+                 plant=sim_plant)
     c.info["fallback"] = fallback
     say(f"bench: using the {c.description}")
     return c

@@ -142,6 +142,9 @@ class SimDrive(DriveBridge):
         Receives each recorded chunk (truth + firmware signals).
     noise : float
         Scale of the motor file's ADC noise and offsets.
+    plant : dict, optional
+        Plant overrides (``sim_fallback.Sim``'s ``plant``): the motor actually simulated
+        differs from ``motor``, from which the drive is configured.
     """
 
     def __init__(self, channel: str, motor: str = "paper_salient",
@@ -149,8 +152,12 @@ class SimDrive(DriveBridge):
                  node_id: int = 1, realtime: bool = False, chunk_s: float = 1e-3,
                  record_decimation: int = 1,
                  sink: Callable[[np.ndarray, dict[str, np.ndarray], dict[str, str]], None]
-                 | None = None, noise: float = 1.0) -> None:
+                 | None = None, noise: float = 1.0,
+                 plant: dict[str, Any] | None = None) -> None:
         from sim_fallback import lib_path, load_motor
+
+        #: plant overrides: the motor actually simulated, when it is not the configured one
+        self.plant_overrides = dict(plant or {})
 
         # set before DriveBridge.__init__, which already calls _flush_tx (boot-up)
         self.channel = channel
@@ -181,7 +188,8 @@ class SimDrive(DriveBridge):
                              chunk_steps=max(1, int(round(chunk_s * mot.plant["f_pwm_Hz"]))),
                              realtime=0.0, sim_kwargs={"motor": mot, "extractor": extractor,
                                                        "seed": seed, "noise": noise,
-                                                       "x0_m": x0_m})
+                                                       "x0_m": x0_m,
+                                                       "plant": plant or None})
         except BaseException:
             bus.shutdown()
             raise

@@ -74,6 +74,12 @@ def _conn_args(p: argparse.ArgumentParser) -> None:
                    help="simulated drive: HF extractor (default: the sequence's)")
     g.add_argument("--seed", type=int, help="simulated drive: noise seed (default: the "
                                             "sequence's)")
+    g.add_argument("--sim-plant", metavar="MOTOR",
+                   help="simulated drive: the motor it actually drives, when it is not the "
+                        "one the drive is configured for (--motor): a motor name or file; its "
+                        "machine parameters (R, L, psi_f, pole pitch, mass, friction, "
+                        "cogging) replace the simulated plant's. For 'wrong motor' tests and "
+                        "`bench identify` on a motor the drive does not know")
     g.add_argument("--realtime", action="store_true",
                    help="simulated drive: pace to the wall clock (default: as fast as possible)")
 
@@ -336,13 +342,26 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
         raise UserError(f"{where} is {motor!r}, the simulated drive server simulates "
                         f"{server.motor!r}: restart it with `bench sim start --motor {motor}`")
     refusal = _check_motor(motor, extractor, where, sim_only=args.sim)
+    sim_plant = None
+    if getattr(args, "sim_plant", None):
+        if not args.sim or server is not None:
+            raise UserError(f"--sim-plant {args.sim_plant}: only with --sim (the in-process "
+                            "simulated drive)")
+        from sim_fallback import load_motor
+        from sim_fallback._motors import machine_params
+
+        try:
+            sim_plant = machine_params(load_motor(args.sim_plant))
+        except Exception as e:  # noqa: BLE001 - unknown name, broken file: one line
+            raise UserError(f"--sim-plant {args.sim_plant}: {' '.join(str(e).split())}"
+                            ) from None
     try:
         conn = connect(sim=args.sim, interface=args.interface, channel=args.channel,
                        bitrate=args.bitrate, serial_url=args.serial, realtime=args.realtime,
                        motor=motor, extractor=extractor, seed=seed, x0=x0,
                        node_id=args.node_id, load_node=args.load_node,
                        require_hardware=getattr(args, "require_hardware", False),
-                       sim_server=server)
+                       sim_server=server, sim_plant=sim_plant)
     except UserError:
         raise
     except Exception as e:  # noqa: BLE001 - the bus, the drive or the simulator library

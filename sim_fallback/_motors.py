@@ -280,6 +280,20 @@ def resolve_motor_path(motor: str | Path) -> Path:
     return cand
 
 
+#: Plant fields that describe the machine (what ``--sim-plant`` swaps in); the others
+#: (converter, sensing, integration: f_pwm_Hz, u_dc_V, dead time, ADC, n_sub, seed) belong
+#: to the drive and stay.
+MACHINE_FIELDS = ("R_ohm", "L_d0_H", "L_q_H", "dL_sat_H", "I_sat_A", "psi_f_Wb", "tau_m",
+                  "mass_kg", "b_visc_Ns_per_m", "F_coulomb_N", "F_static_N", "v_stick_mps",
+                  "cog_amp_N", "cog_period_m", "cog_phase_rad")
+
+
+def machine_params(motor: Motor) -> dict[str, Any]:
+    """The machine part of a motor's plant (:data:`MACHINE_FIELDS`): plant overrides that
+    make the simulated drive drive *this* motor whatever its configuration says."""
+    return {k: motor.plant[k] for k in MACHINE_FIELDS if k in motor.plant}
+
+
 def load_motor(motor: str | Path) -> Motor:
     """Load and validate a motor file.
 
