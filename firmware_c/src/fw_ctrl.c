@@ -478,6 +478,7 @@ static void stage_off(fw_ctrl_t *c, const fw_inputs_t *safe, fw_mon_in_t *mi) {
 /** Extraction and observer (not during the polarity pulses), Park of the
  *  fundamental, back-EMF observer in closed loop. */
 static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
+  fw_snapshot_t *const snap = &c->snap; /* one base address for the stores */
   const fw_config_t *cfg = &c->cfg;
   /* theta_hat at the sampling instant: for the current Park and (advanced)
    * the output transform; the demodulation uses its own delayed frame */
@@ -502,11 +503,11 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
     if (ex == FW_EXTRACTOR_SOGI_ADAPTIVE) {
       fw_inj_adapt(&c->inj, cfg, adapt_r);
     }
-    c->snap.pll_err_rad = eps;
-    c->snap.hf_amp_A = hf->E_d_A;
-    c->snap.hf_q_A = hf->E_q_A;
-    c->snap.i_h_ab_A[0] = hf->i_h_ab_A.x;
-    c->snap.i_h_ab_A[1] = hf->i_h_ab_A.y;
+    snap->pll_err_rad = eps;
+    snap->hf_amp_A = hf->E_d_A;
+    snap->hf_q_A = hf->E_q_A;
+    snap->i_h_ab_A[0] = hf->i_h_ab_A.x;
+    snap->i_h_ab_A[1] = hf->i_h_ab_A.y;
   }
   p->i_dq = fw_foc_measure(hf->i_f_ab_A, p->sc);
   if (c->phase == FW_START_RUN && !p->pulses) {
@@ -597,6 +598,7 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
  *  switches the power stage off now (braking faults go on braking). */
 static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_mon_in_t *mi,
                           fw_period_t *p) {
+  fw_snapshot_t *const snap = &c->snap; /* one base address for the stores */
   const bool running = c->phase == FW_START_RUN;
   const bool scale_full = c->bemf.inj_scale >= 1.0f;
   const bool scale_steady = scale_full || c->bemf.inj_scale <= c->bemf.inj_share;
@@ -623,10 +625,10 @@ static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_mon_in_t *mi
   if (mf == FW_FAULT_NONE && running) {
     mf = protect(c, p->i_dq, p->quick_stop);
   }
-  c->snap.mon_angle_hf_rad = c->mon.angle_hf_rad;
-  c->snap.mon_angle_bemf_rad = c->mon.angle_bemf_rad;
-  c->snap.mon_e_bemf_V = c->mon.e_bemf_V;
-  c->snap.mon_i_sum_A = c->mon.isum_f;
+  snap->mon_angle_hf_rad = c->mon.angle_hf_rad;
+  snap->mon_angle_bemf_rad = c->mon.angle_bemf_rad;
+  snap->mon_e_bemf_V = c->mon.e_bemf_V;
+  snap->mon_i_sum_A = c->mon.isum_f;
   if (mf != FW_FAULT_NONE) {
     latch_fault(c, mf);
     if (c->fault.hard) {
@@ -639,6 +641,7 @@ static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_mon_in_t *mi
 /** Square-wave injection on the estimated d axis (on q^ in the second half of
  *  the saliency check) and the modulation. */
 static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_outputs_t *out) {
+  fw_snapshot_t *const snap = &c->snap; /* one base address for the stores */
   const fw_config_t *cfg = &c->cfg;
   const float s = fw_inj_output(&c->inj, !p->pulses && cfg->u_inj_V > 0.0f);
   const bool inj_q =
@@ -648,7 +651,8 @@ static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_ou
   const fw_vec2_f32_t u_cmd = {u_dq.x + (inj_q ? 0.0f : s * u_inj),
                                u_dq.y + (inj_q ? s * u_inj : 0.0f)};
   const fw_sincos_f32_t sc_out =
-      fw_foc_output(u_cmd, c->theta_k, c->obs.pll.w_hat_radps, c->dt_s, u_dc_V, out->duty_abc);
+      fw_foc_output(u_cmd, p->sc, c->theta_k, c->obs.pll.w_hat_radps, c->dt_s, u_dc_V,
+                    out->duty_abc);
   if (c->phase == FW_START_ALIGN) { /* fundamental only, for the flying-start observer */
     fw_start_fly_set_u(&c->start, fw_inv_park_f32(u_dq, sc_out));
   }
@@ -656,17 +660,17 @@ static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_ou
 
   fw_obs_set_iq(&c->obs, p->i_dq.y);
   fw_foc_commit_ref(&c->foc, p->i_ref.y);
-  c->snap.i_dq_A[0] = p->i_dq.x;
-  c->snap.i_dq_A[1] = p->i_dq.y;
-  c->snap.i_dq_ref_A[0] = p->i_ref.x;
-  c->snap.i_dq_ref_A[1] = p->i_ref.y;
-  c->snap.u_dq_V[0] = u_dq.x;
-  c->snap.u_dq_V[1] = u_dq.y;
-  c->snap.u_inj_V = s * u_inj;
-  c->snap.inj_scale = c->bemf.inj_scale;
-  c->snap.bemf_active = c->bemf.active;
-  c->snap.flying_start = c->start.flying;
-  c->snap.bemf_err_rad = fw_bemf_error(&c->bemf);
+  snap->i_dq_A[0] = p->i_dq.x;
+  snap->i_dq_A[1] = p->i_dq.y;
+  snap->i_dq_ref_A[0] = p->i_ref.x;
+  snap->i_dq_ref_A[1] = p->i_ref.y;
+  snap->u_dq_V[0] = u_dq.x;
+  snap->u_dq_V[1] = u_dq.y;
+  snap->u_inj_V = s * u_inj;
+  snap->inj_scale = c->bemf.inj_scale;
+  snap->bemf_active = c->bemf.active;
+  snap->flying_start = c->start.flying;
+  snap->bemf_err_rad = fw_bemf_error(&c->bemf);
 }
 
 void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {

@@ -36,10 +36,7 @@ void fw_inj_reset(fw_inj_t *j, const fw_config_t *cfg) {
   memset(j->h_prev_sogi, 0, sizeof(j->h_prev_sogi));
   memset(j->sign_hist, 0, sizeof(j->sign_hist));
   restart_averages(j);
-  memset(j->ring_ed, 0, sizeof(j->ring_ed));
-  memset(j->ring_eq, 0, sizeof(j->ring_eq));
-  memset(j->ring_ia, 0, sizeof(j->ring_ia));
-  memset(j->ring_ib, 0, sizeof(j->ring_ib));
+  memset(j->ring, 0, sizeof(j->ring));
   j->inj_idx = 0u;
 }
 
@@ -56,19 +53,20 @@ void fw_inj_set_extractor(fw_inj_t *j, const fw_config_t *cfg, fw_extractor_t ex
 
 /** Moving average over one injection period (ring of n_inj samples). */
 static void ring_push(fw_inj_t *j, float ed, float eq, float ia, float ib) {
-  uint32_t i = j->ring_idx;
+  const uint32_t i = j->ring_idx;
+  float *row = j->ring[i];
   if (j->ring_fill == j->n_inj) {
-    j->sum_ed -= j->ring_ed[i];
-    j->sum_eq -= j->ring_eq[i];
-    j->sum_ia -= j->ring_ia[i];
-    j->sum_ib -= j->ring_ib[i];
+    j->sum_ed -= row[0];
+    j->sum_eq -= row[1];
+    j->sum_ia -= row[2];
+    j->sum_ib -= row[3];
   } else {
     j->ring_fill++;
   }
-  j->ring_ed[i] = ed;
-  j->ring_eq[i] = eq;
-  j->ring_ia[i] = ia;
-  j->ring_ib[i] = ib;
+  row[0] = ed;
+  row[1] = eq;
+  row[2] = ia;
+  row[3] = ib;
   j->sum_ed += ed;
   j->sum_eq += eq;
   j->sum_ia += ia;
@@ -112,7 +110,7 @@ void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab, fw_sincos
   if (ex != FW_EXTRACTOR_PSEUDO) {
     tau_s += j->sogi_gd_s;
   }
-  const fw_sincos_f32_t sc_d = fw_sincos_f32(theta_hat - w_hat * tau_s);
+  const fw_sincos_f32_t sc_d = fw_sincos_add_f32(sc_k, theta_hat, -w_hat * tau_s);
   const fw_vec2_f32_t dh_dq = fw_park_f32(dh, sc_d);
   ring_push(j, s * dh_dq.x, s * dh_dq.y, i_ab.x, i_ab.y);
   const float inv_n = j->ring_fill == j->n_inj ? j->inv_n_inj : 1.0f / (float)j->ring_fill;

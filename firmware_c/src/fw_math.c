@@ -25,22 +25,33 @@
 #define FW_TWO_OVER_PI 0.636619772367581343f  /* 2/pi */
 #define FW_SINCOS_R_MAX 0.8f                  /* |r| clamp, > pi/4 + slack */
 #define FW_SINCOS_K_MAX 16777216.0f           /* 2^24: k still integral */
+/* Fast path: |theta| <= 8192 rad (|k| <= 5216 < 2^13, the reduction is as
+ * exact as above). y + 1.5 * 2^23 - 1.5 * 2^23 rounds y (|y| < 2^22) to the
+ * nearest integer in two additions, no compare, no clamp (ties go to even;
+ * either neighbour leaves |r| <= pi/4). */
+#define FW_SINCOS_FAST_MAX 8192.0f
+#define FW_SINCOS_ROUND 12582912.0f /* 1.5 * 2^23 */
 
 fw_sincos_f32_t fw_sincos_f32(float theta_rad) {
   fw_sincos_f32_t out = {0.0f, 1.0f};
-  if (!fw_isfinite_f32(theta_rad)) {
-    return out;
+  float kf, r;
+  if (fabsf(theta_rad) <= FW_SINCOS_FAST_MAX) { /* false for NaN */
+    kf = (theta_rad * FW_TWO_OVER_PI + FW_SINCOS_ROUND) - FW_SINCOS_ROUND;
+    r = ((theta_rad - kf * FW_PIO2_1) - kf * FW_PIO2_2) - kf * FW_PIO2_3;
+  } else {
+    if (!fw_isfinite_f32(theta_rad)) {
+      return out;
+    }
+    /* Nearest quadrant by float->int conversion (no floorf call: Cortex-M4
+     * has no VRINT); the clamp keeps any finite input inside int32. */
+    const float y = fw_clampf(theta_rad * FW_TWO_OVER_PI, -FW_SINCOS_K_MAX, FW_SINCOS_K_MAX);
+    kf = (float)(int32_t)(y + (y >= 0.0f ? 0.5f : -0.5f));
+    r = ((theta_rad - kf * FW_PIO2_1) - kf * FW_PIO2_2) - kf * FW_PIO2_3;
+    /* Only reachable when the reduction has lost all meaning (|theta| >~ 1e7):
+     * keeps the polynomials inside their domain so |s|, |c| <= 1. */
+    r = fw_clampf(r, -FW_SINCOS_R_MAX, FW_SINCOS_R_MAX);
   }
-  /* Nearest quadrant by float->int conversion (no floorf call: Cortex-M4
-   * has no VRINT); the clamp keeps any finite input inside int32. */
-  const float y = fw_clampf(theta_rad * FW_TWO_OVER_PI, -FW_SINCOS_K_MAX, FW_SINCOS_K_MAX);
-  const int32_t k = (int32_t)(y + (y >= 0.0f ? 0.5f : -0.5f));
-  const float kf = (float)k;
-  float r = ((theta_rad - kf * FW_PIO2_1) - kf * FW_PIO2_2) - kf * FW_PIO2_3;
-  /* Only reachable when the reduction has lost all meaning (|theta| >~ 1e7):
-   * keeps the polynomials inside their domain so |s|, |c| <= 1. */
-  r = fw_clampf(r, -FW_SINCOS_R_MAX, FW_SINCOS_R_MAX);
-  const uint32_t quad = (uint32_t)k & 3u; /* k mod 4, two's complement */
+  const uint32_t quad = (uint32_t)(int32_t)kf & 3u; /* k mod 4, two's complement */
 
   const float z = r * r;
   const float s = r + r * z * (-1.6666654611e-1f +
@@ -48,12 +59,26 @@ fw_sincos_f32_t fw_sincos_f32(float theta_rad) {
   const float c = 1.0f - 0.5f * z +
                   z * z * (4.166664568298827e-2f +
                            z * (-1.388731625493765e-3f + z * 2.443315711809948e-5f));
-  switch (quad) {
-  case 0u: out.s = s;  out.c = c;  break;
-  case 1u: out.s = c;  out.c = -s; break;
-  case 2u: out.s = -s; out.c = -c; break;
-  default: out.s = -c; out.c = s;  break;
+  /* quadrant without a jump table: swap for odd k, sin negative for k = 2, 3
+   * (mod 4), cos negative for k = 1, 2 */
+  const bool swap = (quad & 1u) != 0u;
+  const float sv = swap ? c : s;
+  const float cv = swap ? s : c;
+  out.s = (quad & 2u) != 0u ? -sv : sv;
+  out.c = ((quad + 1u) & 2u) != 0u ? -cv : cv;
+  return out;
+}
+
+fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, float theta0_rad, float d_rad) {
+  if (!(fabsf(d_rad) <= FW_SINCOS_ADD_MAX_RAD)) { /* also NaN */
+    return fw_sincos_f32(theta0_rad + d_rad);
   }
+  const float d2 = d_rad * d_rad;
+  const float sd = d_rad + d_rad * d2 * (-1.6666667e-1f + d2 * 8.3333333e-3f);
+  const float cd = 1.0f + d2 * (-0.5f + d2 * 4.1666668e-2f);
+  fw_sincos_f32_t out;
+  out.s = sc0.s * cd + sc0.c * sd;
+  out.c = sc0.c * cd - sc0.s * sd;
   return out;
 }
 
@@ -150,17 +175,19 @@ bool fw_svpwm_f32(fw_vec2_f32_t u_ab_V, float u_dc_V, float duty_abc[3],
                   fw_vec2_f32_t *u_ab_out_V) {
   bool limited = false;
   fw_vec2_f32_t u = u_ab_V;
-  if (!(u_dc_V > 0.0f) || !fw_isfinite_f32(u_dc_V) || !fw_isfinite_f32(u.x) ||
-      !fw_isfinite_f32(u.y)) {
+  /* one test for the three finiteness checks: x - x is 0 for a finite x,
+   * NaN for NaN and inf, and NaN absorbs the sum */
+  const float nf = (u.x - u.x) + (u.y - u.y) + (u_dc_V - u_dc_V);
+  if (!(nf == 0.0f && u_dc_V > 0.0f)) {
     u.x = 0.0f;
     u.y = 0.0f;
     u_dc_V = 1.0f;
     limited = true;
   } else {
     const float u_max_V = u_dc_V * FW_INV_SQRT3_F32; /* inscribed circle */
-    const float mag_V = sqrtf(u.x * u.x + u.y * u.y);
-    if (mag_V > u_max_V) {
-      const float scale = u_max_V / mag_V; /* keep the direction */
+    const float mag2 = u.x * u.x + u.y * u.y;
+    if (mag2 > u_max_V * u_max_V) { /* the square root only when limiting */
+      const float scale = u_max_V / sqrtf(mag2); /* keep the direction */
       u.x *= scale;
       u.y *= scale;
       limited = true;
@@ -213,8 +240,9 @@ void fw_pi_reset_f32(fw_pi_f32_t *pi) {
 }
 
 float fw_pi_step_f32(fw_pi_f32_t *pi, float e, float ff, float dt_s) {
-  if (!fw_isfinite_f32(e) || !fw_isfinite_f32(ff) || !fw_isfinite_f32(dt_s) ||
-      dt_s < 0.0f) {
+  /* finite e, ff, dt_s in one test (x - x: 0 or NaN), dt_s >= 0 */
+  const float nf = (e - e) + (ff - ff) + (dt_s - dt_s);
+  if (!(nf == 0.0f && dt_s >= 0.0f)) {
     return pi->out;
   }
   const float p = pi->kp * e;

@@ -80,6 +80,7 @@ fw_fault_t fw_mon_enable(fw_mon_t *m) {
   m->e_ref_A = 0.0f;
   m->e_d_f = m->e_q_f = m->r_d_f = m->r_q_f = m->ictrl_f = m->w_f = 0.0f;
   m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
+  m->verdict = FW_FAULT_NONE;
   m->angle_hf_rad = m->angle_bemf_rad = m->e_bemf_V = 0.0f;
   return FW_FAULT_NONE;
 }
@@ -136,7 +137,25 @@ void fw_mon_run_start(fw_mon_t *m) {
   m->e_q_f = 0.0f;
   m->r_d_f = m->r_q_f = m->ictrl_f = m->w_f = 0.0f;
   m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
+  m->verdict = FW_FAULT_NONE;
   m->eval_k = 0u;
+}
+
+/** First timed-out witness of those judged every MON_EVAL_STEPS periods. */
+static fw_fault_t judge(const fw_mon_t *m) {
+  if (m->t_ctrl >= m->detect_s) {
+    return FW_FAULT_CURRENT_CONTROL;
+  }
+  if (m->t_hf >= m->detect_s) {
+    return FW_FAULT_EST_HF_ANGLE;
+  }
+  if (m->t_bemf >= m->detect_s) {
+    return FW_FAULT_EST_BEMF_MISMATCH;
+  }
+  if (m->t_accel >= m->detect_s) {
+    return FW_FAULT_EST_ACCEL_IMPLAUSIBLE;
+  }
+  return FW_FAULT_NONE;
 }
 
 fw_fault_t fw_mon_motion(const fw_mon_t *m, float e_start_max_V) {
@@ -174,6 +193,7 @@ fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in) {
 
   if (!in->running) {
     m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
+    m->verdict = FW_FAULT_NONE;
     m->eval_k = 0u;
   } else {
     /* filters every period (cheap) */
@@ -226,23 +246,12 @@ fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in) {
 
       /* current control */
       m->t_ctrl = persist(m->t_ctrl, m->ictrl_f > m->i_ctrl_max_A * m->i_ctrl_max_A, dte);
+      m->verdict = (uint32_t)judge(m); /* the four timers change only here */
     }
   }
 
   if (m->t_sum >= m->detect_s) {
     return FW_FAULT_CURRENT_SENSOR_SUM;
   }
-  if (m->t_ctrl >= m->detect_s) {
-    return FW_FAULT_CURRENT_CONTROL;
-  }
-  if (m->t_hf >= m->detect_s) {
-    return FW_FAULT_EST_HF_ANGLE;
-  }
-  if (m->t_bemf >= m->detect_s) {
-    return FW_FAULT_EST_BEMF_MISMATCH;
-  }
-  if (m->t_accel >= m->detect_s) {
-    return FW_FAULT_EST_ACCEL_IMPLAUSIBLE;
-  }
-  return FW_FAULT_NONE;
+  return (fw_fault_t)m->verdict;
 }

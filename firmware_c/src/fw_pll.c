@@ -25,7 +25,8 @@ void fw_pll_reset_f32(fw_pll_f32_t *p, float theta_rad, float w_radps) {
 void fw_pll_step_f32(fw_pll_f32_t *p, float e_rad, float dt_s) {
   /* A non-finite error or time step holds the state (coasting would need a
    * valid dt; the caller sees the fault upstream). */
-  if (!fw_isfinite_f32(e_rad) || !fw_isfinite_f32(dt_s) || dt_s < 0.0f) {
+  const float nf = (e_rad - e_rad) + (dt_s - dt_s); /* 0 when both are finite, else NaN */
+  if (!(nf == 0.0f && dt_s >= 0.0f)) {
     return;
   }
   /* w_i(k+1) = clamp(w_i(k) + ki e dt, +-w_max)   (rad/s) */

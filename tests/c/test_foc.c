@@ -110,7 +110,7 @@ static void test_output(void) {
   const float th = 0.4f, w = 500.0f, dt = 1.0f / 24000.0f, u_dc = 300.0f;
   const fw_vec2_f32_t u_dq = {20.0f, 30.0f};
   float duty[3];
-  const fw_sincos_f32_t sc = fw_foc_output(u_dq, th, w, dt, u_dc, duty);
+  const fw_sincos_f32_t sc = fw_foc_output(u_dq, fw_sincos_f32(th), th, w, dt, u_dc, duty);
   const double a = 0.4 + 1.5 * 500.0 / 24000.0;
   TT_CHECK_NEAR(sc.s, sin(a), 2e-6);
   TT_CHECK_NEAR(sc.c, cos(a), 2e-6);

@@ -94,6 +94,69 @@ static void test_sincos_special(void) {
   }
 }
 
+/* fw_sincos_add_f32: the rotation of fw_sincos_f32(theta0) by a small d
+ * against libm at theta0 + d, for theta0 over |theta0| < 1e4 (1.3e5 points)
+ * and d over +-1.5 FW_SINCOS_ADD_MAX_RAD (beyond the limit: the full
+ * fw_sincos_f32 of theta0 + d). Bound: FW_SINCOS_MAX_ERR, as fw_sincos_f32. */
+static void test_sincos_add(void) {
+  double max_err = 0.0, worst_th = 0.0, worst_d = 0.0;
+  const float d_max = 1.5f * FW_SINCOS_ADD_MAX_RAD;
+  for (int32_t i = -65536; i <= 65536; i++) {
+    const float th0 = (float)((double)i * (1.0e4 / 65536.0) + 1.7e-3);
+    const fw_sincos_f32_t sc0 = fw_sincos_f32(th0);
+    for (int j = -24; j <= 24; j++) {
+      const float d = d_max * (float)j / 24.0f + 1.0e-4f * (float)(i & 7);
+      const fw_sincos_f32_t sc = fw_sincos_add_f32(sc0, th0, d);
+      /* the rotation reaches th0 + d exactly; the fallback sees th0 + d
+       * rounded to float (its ulp is 1e-3 rad near 1e4, as for any caller) */
+      const double a = fabsf(d) <= FW_SINCOS_ADD_MAX_RAD ? (double)th0 + (double)d
+                                                         : (double)(th0 + d);
+      const double es = fabs((double)sc.s - sin(a));
+      const double ec = fabs((double)sc.c - cos(a));
+      const double e = es > ec ? es : ec;
+      if (e > max_err) {
+        max_err = e;
+        worst_th = (double)th0;
+        worst_d = (double)d;
+      }
+    }
+  }
+  printf("  sincos_add max abs error |theta0|<1e4, |d|<=%.3g: %.3e at theta0 = %.9g, d = %.6g "
+         "(bound %.1e)\n",
+         (double)d_max, max_err, worst_th, worst_d, (double)FW_SINCOS_MAX_ERR);
+  TT_CHECK(max_err <= (double)FW_SINCOS_MAX_ERR);
+  TT_CHECK(max_err > 0.0);
+  /* d = 0 returns sc0 unchanged; a non-finite d falls back (NaN angle: s 0, c 1) */
+  const fw_sincos_f32_t sc0 = fw_sincos_f32(0.7f);
+  fw_sincos_f32_t sc = fw_sincos_add_f32(sc0, 0.7f, 0.0f);
+  TT_CHECK(sc.s == sc0.s && sc.c == sc0.c);
+  sc = fw_sincos_add_f32(sc0, 0.7f, NAN);
+  TT_CHECK(sc.s == 0.0f && sc.c == 1.0f);
+  sc = fw_sincos_add_f32(sc0, 0.7f, INFINITY);
+  TT_CHECK(sc.s == 0.0f && sc.c == 1.0f);
+}
+
+/* Fast path (|theta| <= 8192 rad) and the clamped path beyond it agree at the
+ * boundary; fw_isfinite_f32 as a single subtraction. */
+static void test_sincos_paths_and_isfinite(void) {
+  double max_err = 0.0;
+  for (int side = -1; side <= 1; side += 2) {
+    float th = (float)side * 8192.0f;
+    for (int j = 0; j < 64; j++) {
+      th = nextafterf(th, -FLT_MAX);
+    }
+    for (int j = 0; j < 129; j++) {
+      const double e = sincos_err(th);
+      max_err = e > max_err ? e : max_err;
+      th = nextafterf(th, FLT_MAX);
+    }
+  }
+  TT_CHECK(max_err <= (double)FW_SINCOS_MAX_ERR);
+  TT_CHECK(fw_isfinite_f32(0.0f) && fw_isfinite_f32(-FLT_MAX) && fw_isfinite_f32(FLT_MIN));
+  TT_CHECK(fw_isfinite_f32(1.0e-45f) && fw_isfinite_f32(-3.5f));
+  TT_CHECK(!fw_isfinite_f32(NAN) && !fw_isfinite_f32(INFINITY) && !fw_isfinite_f32(-INFINITY));
+}
+
 /* wrapped difference in double, for comparisons modulo 2 pi */
 static double wrapd(double x) { return x - 2.0 * PI_D * floor((x + PI_D) / (2.0 * PI_D)); }
 
@@ -340,6 +403,8 @@ static void test_pi_antiwindup(void) {
 int main(void) {
   TT_RUN(test_sincos_sweep);
   TT_RUN(test_sincos_special);
+  TT_RUN(test_sincos_add);
+  TT_RUN(test_sincos_paths_and_isfinite);
   TT_RUN(test_wrap);
   TT_RUN(test_transforms_ref);
   TT_RUN(test_transforms_props);

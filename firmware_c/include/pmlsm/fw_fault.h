@@ -64,6 +64,14 @@ bool fw_fault_brakes_first(uint32_t fault_reaction_option, fw_fault_t code);
  */
 static inline fw_fault_t fw_fault_check_inputs(const fw_config_t *cfg, const fw_inputs_t *in,
                                                bool power_enabled) {
+  /* usual case first: every sample inside its limits (each comparison is
+   * false for NaN, and for inf against the finite limits) */
+  const float u_min = power_enabled ? cfg->u_dc_min_V : -cfg->u_dc_max_V;
+  if (fabsf(in->i_abc_A[0]) <= cfg->i_trip_A && fabsf(in->i_abc_A[1]) <= cfg->i_trip_A &&
+      fabsf(in->i_abc_A[2]) <= cfg->i_trip_A && in->u_dc_V <= cfg->u_dc_max_V &&
+      in->u_dc_V >= u_min) {
+    return FW_FAULT_NONE;
+  }
   for (int i = 0; i < 3; i++) {
     if (!fw_isfinite_f32(in->i_abc_A[i])) {
       return FW_FAULT_INPUT_INVALID;

@@ -94,12 +94,13 @@ static inline const float *fw_foc_u_applied(const fw_foc_t *f) { return f->u_dq_
 /**
  * Output transform of one period: the voltage acts over [k+1, k+2] (one-period
  * update delay), so the inverse Park uses theta_k + 1.5 w dt; then SVPWM on
- * u_dc. Returns the sine/cosine used (for other voltages of this period).
+ * u_dc. sc_k = fw_sincos_f32(theta_k_rad), rotated by 1.5 w dt. Returns the
+ * sine/cosine used (for other voltages of this period).
  */
-static inline fw_sincos_f32_t fw_foc_output(fw_vec2_f32_t u_cmd_dq_V, float theta_k_rad,
-                                            float w_radps, float dt_s, float u_dc_V,
-                                            float duty_abc[3]) {
-  const fw_sincos_f32_t sc_out = fw_sincos_f32(theta_k_rad + 1.5f * w_radps * dt_s);
+static inline fw_sincos_f32_t fw_foc_output(fw_vec2_f32_t u_cmd_dq_V, fw_sincos_f32_t sc_k,
+                                            float theta_k_rad, float w_radps, float dt_s,
+                                            float u_dc_V, float duty_abc[3]) {
+  const fw_sincos_f32_t sc_out = fw_sincos_add_f32(sc_k, theta_k_rad, 1.5f * w_radps * dt_s);
   const fw_vec2_f32_t u_ab = fw_inv_park_f32(u_cmd_dq_V, sc_out);
   (void)fw_svpwm_f32(u_ab, u_dc_V, duty_abc, NULL);
   return sc_out;

@@ -52,10 +52,9 @@ typedef struct {
   float sign_hist[4];     /**< injection signs; [0] = newest commanded */
   float h_prev_raw[2];    /**< previous raw alpha/beta current (pseudo-filter) */
   float h_prev_sogi[2];   /**< previous SOGI output */
-  float ring_ed[FW_INJ_MAX_SAMPLES]; /**< moving average over one injection period */
-  float ring_eq[FW_INJ_MAX_SAMPLES];
-  float ring_ia[FW_INJ_MAX_SAMPLES];
-  float ring_ib[FW_INJ_MAX_SAMPLES];
+  /** moving average over one injection period: E_d, E_q, i_a, i_b per sample
+   *  (one row per sample: one address for the four) */
+  float ring[FW_INJ_MAX_SAMPLES][4];
   float sum_ed, sum_eq, sum_ia, sum_ib;
   uint32_t ring_idx, ring_fill;
 } fw_inj_t;
@@ -79,7 +78,8 @@ void fw_inj_set_extractor(fw_inj_t *j, const fw_config_t *cfg, fw_extractor_t ex
 /**
  * One sample: raw difference for the monitor, SOGIs, difference, demodulation
  * at theta_hat - w_hat tau (tau = dt/2 [+ SOGI group delay]), averages.
- * sc_k: sine/cosine of the estimate at this sampling instant.
+ * sc_k: sine/cosine of the estimate at this sampling instant, theta_hat_rad
+ * (the demodulation frame is sc_k rotated by -w_hat tau).
  */
 void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab_A, fw_sincos_f32_t sc_k,
                    float theta_hat_rad, float w_hat_radps, fw_inj_meas_t *m);

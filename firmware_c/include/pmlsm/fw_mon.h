@@ -80,6 +80,10 @@ typedef struct {
   /* persistence timers */
   float t_hf, t_bemf, t_accel, t_sum, t_ctrl;
   uint32_t eval_k;    /**< periods since the last judgement */
+  /** first of t_ctrl, t_hf, t_bemf, t_accel over mon_detect_time_s (those
+   *  timers change only at a judgement or when cleared): FW_FAULT_NONE or
+   *  the fault fw_mon_update returns after the current sum's */
+  uint32_t verdict;
 } fw_mon_t;
 
 /** Copy thresholds and parameters from the configuration; forget what was learnt. */
