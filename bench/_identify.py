@@ -322,8 +322,15 @@ def _write_report(path: Path, summary: dict[str, Any]) -> None:
         + (f"<td class=num>{num(r.get('truth'))}</td><td class=num>"
            f"{num(r.get('error_pct'), '+.2f')} %</td>" if sim else "") + "</tr>"
         for r in summary["values"])
-    verdict = ("identified" if summary["passed"] else
-               f"FAILED: {html.escape(str(summary['error']))}")
+    verdict = "identified" if summary["passed"] else "FAILED"
+    why = ("" if summary["passed"] else
+           f"<p class=fail>{html.escape(str(summary['error']))}. "
+           + ("Nothing was identified; " if not summary["values"] else "")
+           + ("the power stage is off; the configuration could NOT be restored: restore "
+              "config_before.json with `bench config restore`."
+              if "restoring the drive configuration failed" in str(summary["error"]) else
+              "the power stage is off and the drive's configuration restored (config_before.json).")
+           + "</p>")
     banner = ("<p class=sim>SIMULATED DRIVE: the values come from the simulator; the "
               "truth columns are the simulated plant's parameters (never used by the "
               "procedure).</p>" if sim else "")
@@ -334,10 +341,12 @@ def _write_report(path: Path, summary: dict[str, Any]) -> None:
         "<!doctype html><meta charset=utf-8><title>bench identify</title><style>"
         "body{font-family:sans-serif;margin:2em}td,th{border:1px solid #ccc;padding:4px 8px}"
         "table{border-collapse:collapse}.num{text-align:right}.sim{background:#ffe08a;"
-        "padding:8px;border:2px solid #c80}</style>"
-        f"<h1>Motor identification: {verdict}</h1>{banner}"
-        f"<table>{head}{body}</table><h2>Notes</h2><ul>{log}</ul>"
-        f"<h2>Files</h2><ul>{files}</ul>"
+        "padding:8px;border:2px solid #c80}.fail{background:#fdd;padding:8px;"
+        "border:2px solid #c00}</style>"
+        f"<h1>Motor identification: {verdict}</h1>{banner}{why}"
+        + (f"<table>{head}{body}</table>" if body else "")
+        + (f"<h2>Notes</h2><ul>{log}</ul>" if log else "")
+        + (f"<h2>Files</h2><ul>{files}</ul>" if files else "") +
         "<p>Method: docs/identify.md. 1&sigma;: the fit's standard error (R, mass, "
         "friction, &psi;<sub>f</sub>), the spread over the standstill starts (L<sub>q</sub>), "
         "the difference between two methods (L<sub>d</sub>).</p>\n", encoding="utf-8")
