@@ -277,8 +277,10 @@ class Runner:
             self._check_fault()
             if now >= t_seq - 1e-9:  # clocks advance in steps; avoid float ties
                 return
-            # 10 ms slices: a fault stops the sequence within 10 ms of the EMCY
-            self.clock.sleep_until(self._t0 + min(t_seq, now + 0.01))
+            # slices of the clock's choice (10 ms on hardware): a fault stops the
+            # sequence within one slice of its EMCY
+            self.clock.sleep_until(self._t0 + min(t_seq, now + getattr(
+                self.clock, "slice_s", 0.01)))
 
     # ---- steps ------------------------------------------------------------------------
     def _speed(self, p: dict[str, Any], key: str = "value") -> float:

