@@ -63,7 +63,8 @@ static float pos_hat_m(const fw_ctrl_t *c) {
   return fw_obs_pos_e(&c->obs) * c->cfg.pole_pitch_m / FW_PI_F32;
 }
 
-static void foc_param(const fw_config_t *cfg, fw_foc_param_t *p) {
+static void foc_param(const fw_config_t *cfg, float dt_s, fw_foc_param_t *p) {
+  p->dt_s = dt_s;
   p->cur_kp_V_per_A = cfg->cur_kp_V_per_A;
   p->cur_ki_V_per_As = cfg->cur_ki_V_per_As;
   p->spd_kp_A_per_radps = cfg->spd_kp_A_per_radps;
@@ -80,7 +81,7 @@ static void foc_param(const fw_config_t *cfg, fw_foc_param_t *p) {
 static void reset_dynamics(fw_ctrl_t *c) {
   const fw_config_t *cfg = &c->cfg;
   fw_foc_param_t fp;
-  foc_param(cfg, &fp);
+  foc_param(cfg, c->dt_s, &fp);
   fw_foc_reset(&c->foc, &fp);
   fw_inj_reset(&c->inj, cfg);
   fw_obs_reset(&c->obs, cfg);
@@ -499,7 +500,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
     oi.settled = (uint8_t)!(!fw_inj_settled(&c->inj) || c->phase_time_s < FW_EST_SETTLE_S);
     oi.running = (uint8_t)(c->phase == FW_START_RUN);
     float adapt_r;
-    const float eps = fw_obs_update(&c->obs, cfg, &oi, &adapt_r);
+    const float eps = fw_obs_update(&c->obs, &oi, &adapt_r);
     if (ex == FW_EXTRACTOR_SOGI_ADAPTIVE) {
       fw_inj_adapt(&c->inj, cfg, adapt_r);
     }
@@ -568,7 +569,7 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
     const float w_ref = p->quick_stop ? 0.0f : c->speed_ref_radps_e;
     p->i_ref.x = c->i_d_ref_A;
     if (c->mode == FW_MODE_SPEED) {
-      p->i_ref.y = fw_foc_speed_update(&c->foc, w_ref, c->obs.omega_f, dt);
+      p->i_ref.y = fw_foc_speed_update(&c->foc, w_ref, c->obs.omega_f);
     } else {
       p->i_ref.y = p->quick_stop ? 0.0f : c->i_q_ref_force_A;
     }
@@ -711,8 +712,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     p.u_dq.x = p.u_d_pulse;
     p.u_dq.y = 0.0f;
   } else {
-    p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, c->obs.omega_f, safe.u_dc_V,
-                                   c->dt_s);
+    p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, c->obs.omega_f, safe.u_dc_V);
   }
   if (!stage_monitor(c, &hf, &mi, &p)) { /* hard fault: switch off now */
     fill_snapshot_common(c, &safe, p.i_ab, out);

@@ -64,6 +64,11 @@ void fw_protect_config(fw_protect_t *p, const fw_config_t *cfg, float dt_s) {
   p->dt_s = dt_s;
   p->w_vmax_radps = fw_units_mps_to_radps_e(cfg, cfg->v_max_mps);
   p->w_follow_radps = fw_units_mps_to_radps_e(cfg, cfg->follow_err_mps);
+  /* the step's products of configuration values, once */
+  p->ir2_A2 = cfg->i_rated_A * cfg->i_rated_A;
+  p->i2t_max_A2s = (cfg->i_max_A * cfg->i_max_A - p->ir2_A2) * cfg->i2t_time_s;
+  p->i2t_on = (uint8_t)(cfg->i_rated_A < cfg->i_max_A);
+  p->pos_on = (uint8_t)(cfg->pos_limit_min_m < cfg->pos_limit_max_m);
 }
 
 void fw_protect_init(fw_protect_t *p, const fw_config_t *cfg, float dt_s) {
@@ -81,17 +86,17 @@ void fw_protect_cool(fw_protect_t *p, const fw_config_t *cfg) {
 
 fw_fault_t fw_protect_update(fw_protect_t *p, const fw_config_t *cfg, const fw_protect_in_t *in) {
   const float dt = p->dt_s;
-  const float ir2 = cfg->i_rated_A * cfg->i_rated_A;
-  p->i2t_A2s += (in->i_dq_A[0] * in->i_dq_A[0] + in->i_dq_A[1] * in->i_dq_A[1] - ir2) * dt;
-  p->i2t_A2s = p->i2t_A2s > 0.0f ? p->i2t_A2s : 0.0f;
-  if (cfg->i_rated_A < cfg->i_max_A &&
-      p->i2t_A2s > (cfg->i_max_A * cfg->i_max_A - ir2) * cfg->i2t_time_s) {
+  float i2t = p->i2t_A2s +
+              (in->i_dq_A[0] * in->i_dq_A[0] + in->i_dq_A[1] * in->i_dq_A[1] - p->ir2_A2) * dt;
+  i2t = i2t > 0.0f ? i2t : 0.0f;
+  p->i2t_A2s = i2t;
+  if (p->i2t_on && i2t > p->i2t_max_A2s) {
     return FW_FAULT_I2T;
   }
   if (fabsf(in->omega_hat_radps) > p->w_vmax_radps) {
     return FW_FAULT_OVERSPEED;
   }
-  if (cfg->pos_limit_min_m < cfg->pos_limit_max_m) {
+  if (p->pos_on) {
     const float x = in->pos_m;
     if ((x > cfg->pos_limit_max_m && !(in->cmd < 0.0f)) ||
         (x < cfg->pos_limit_min_m && !(in->cmd > 0.0f))) {

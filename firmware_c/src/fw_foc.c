@@ -13,6 +13,9 @@ void fw_foc_reset(fw_foc_t *f, const fw_foc_param_t *p) {
   fw_pi_init_f32(&f->pi_q, p->cur_kp_V_per_A, p->cur_ki_V_per_As, -u_lim, u_lim);
   fw_pi_init_f32(&f->pi_spd, p->spd_kp_A_per_radps, p->spd_ki_A_per_rad, -p->i_max_A,
                  p->i_max_A);
+  fw_pi_set_dt_f32(&f->pi_d, p->dt_s); /* ki dt once, not every period */
+  fw_pi_set_dt_f32(&f->pi_q, p->dt_s);
+  fw_pi_set_dt_f32(&f->pi_spd, p->dt_s);
   f->u_dq_prev_V[0] = 0.0f;
   f->u_dq_prev_V[1] = 0.0f;
 }
@@ -22,8 +25,8 @@ void fw_foc_init(fw_foc_t *f, const fw_foc_param_t *p) {
   f->i_q_ref_A = 0.0f;
 }
 
-float fw_foc_speed_update(fw_foc_t *f, float w_ref_radps, float w_radps, float dt_s) {
-  return fw_pi_step_f32(&f->pi_spd, w_ref_radps - w_radps, 0.0f, dt_s);
+float fw_foc_speed_update(fw_foc_t *f, float w_ref_radps, float w_radps) {
+  return fw_pi_step_cfg_f32(&f->pi_spd, w_ref_radps - w_radps, 0.0f, f->p.i_max_A);
 }
 
 void fw_foc_speed_bumpless(fw_foc_t *f) {

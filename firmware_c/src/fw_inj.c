@@ -51,26 +51,35 @@ void fw_inj_set_extractor(fw_inj_t *j, const fw_config_t *cfg, fw_extractor_t ex
   restart_averages(j); /* the demodulated history belongs to the old path */
 }
 
-/** Moving average over one injection period (ring of n_inj samples). */
-static void ring_push(fw_inj_t *j, float ed, float eq, float ia, float ib) {
+/** Moving average over one injection period (ring of n_inj samples). The
+ *  current columns only for the pseudo extractor, the only one that reads
+ *  their average (an extractor change restarts the averages, so every row is
+ *  rewritten before it is subtracted). */
+static FW_ALWAYS_INLINE void ring_push(fw_inj_t *j, float ed, float eq, float ia, float ib,
+                                       bool currents) {
   const uint32_t i = j->ring_idx;
   float *row = j->ring[i];
-  if (j->ring_fill == j->n_inj) {
+  const bool full = j->ring_fill == j->n_inj;
+  if (full) {
     j->sum_ed -= row[0];
     j->sum_eq -= row[1];
-    j->sum_ia -= row[2];
-    j->sum_ib -= row[3];
   } else {
     j->ring_fill++;
   }
   row[0] = ed;
   row[1] = eq;
-  row[2] = ia;
-  row[3] = ib;
   j->sum_ed += ed;
   j->sum_eq += eq;
-  j->sum_ia += ia;
-  j->sum_ib += ib;
+  if (currents) {
+    if (full) {
+      j->sum_ia -= row[2];
+      j->sum_ib -= row[3];
+    }
+    row[2] = ia;
+    row[3] = ib;
+    j->sum_ia += ia;
+    j->sum_ib += ib;
+  }
   j->ring_idx = (i + 1u == j->n_inj) ? 0u : i + 1u;
 }
 
@@ -112,7 +121,7 @@ void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab, fw_sincos
   }
   const fw_sincos_f32_t sc_d = fw_sincos_add_f32(sc_k, theta_hat, -w_hat * tau_s);
   const fw_vec2_f32_t dh_dq = fw_park_f32(dh, sc_d);
-  ring_push(j, s * dh_dq.x, s * dh_dq.y, i_ab.x, i_ab.y);
+  ring_push(j, s * dh_dq.x, s * dh_dq.y, i_ab.x, i_ab.y, ex == FW_EXTRACTOR_PSEUDO);
   const float inv_n = j->ring_fill == j->n_inj ? j->inv_n_inj : 1.0f / (float)j->ring_fill;
   m->E_d_A = j->sum_ed * inv_n;
   m->E_q_A = j->sum_eq * inv_n;

@@ -118,9 +118,9 @@ static float fw_wrap_core(float theta_rad, float lo) {
   return r;
 }
 
-float fw_wrap_pi_f32(float theta_rad) {
+float fw_wrap_pi_slow_f32(float theta_rad) {
   if (theta_rad >= -FW_PI_F32 && theta_rad < FW_PI_F32) {
-    return theta_rad; /* hot path: already wrapped (also false for NaN) */
+    return theta_rad; /* already wrapped (also false for NaN) */
   }
   if (!fw_isfinite_f32(theta_rad)) {
     return 0.0f;
@@ -229,6 +229,7 @@ void fw_pi_init_f32(fw_pi_f32_t *pi, float kp, float ki, float out_min,
                     float out_max) {
   pi->kp = kp;
   pi->ki = ki;
+  pi->ki_dt = 0.0f;
   pi->out_min = out_min;
   pi->out_max = out_max;
   fw_pi_reset_f32(pi);
@@ -239,24 +240,13 @@ void fw_pi_reset_f32(fw_pi_f32_t *pi) {
   pi->out = 0.0f;
 }
 
+void fw_pi_set_dt_f32(fw_pi_f32_t *pi, float dt_s) { pi->ki_dt = pi->ki * dt_s; }
+
 float fw_pi_step_f32(fw_pi_f32_t *pi, float e, float ff, float dt_s) {
   /* finite e, ff, dt_s in one test (x - x: 0 or NaN), dt_s >= 0 */
   const float nf = (e - e) + (ff - ff) + (dt_s - dt_s);
   if (!(nf == 0.0f && dt_s >= 0.0f)) {
     return pi->out;
   }
-  const float p = pi->kp * e;
-  const float di = pi->ki * e * dt_s;
-  float integ = pi->integ + di;
-  const float u_try = p + integ + ff;
-  if (u_try > pi->out_max && di > 0.0f) {
-    const float i_lim = pi->out_max - p - ff;
-    integ = i_lim > pi->integ ? i_lim : pi->integ; /* max */
-  } else if (u_try < pi->out_min && di < 0.0f) {
-    const float i_lim = pi->out_min - p - ff;
-    integ = i_lim < pi->integ ? i_lim : pi->integ; /* min */
-  }
-  pi->integ = fw_clampf(integ, pi->out_min, pi->out_max);
-  pi->out = fw_clampf(p + pi->integ + ff, pi->out_min, pi->out_max);
-  return pi->out;
+  return fw_pi_core_f32(pi, e, ff, pi->ki * e * dt_s, pi->out_min, pi->out_max);
 }

@@ -32,12 +32,29 @@
 #define MON_BEMF_RATIO 2.0f   /* |r| / (|w^| psi_f) must lie in [1/2, 2] */
 #define MON_CTRL_SHARE 0.5f   /* current-error limit as a share of i_max_A */
 #define MON_ACCEL_MARGIN 2.0f
-#define MON_EVAL_STEPS 8u
+#define MON_EVAL_STEPS FW_MON_EVAL_STEPS
 #define MON_SUM_SHARE 0.03f   /* current-sum limit grows by this share of sum |i_k| */     /* witnesses judged every 8 periods (3 kHz at 24 kHz) */ /* disturbance limit: 2 x the thrust acceleration at i_max */
+
+_Static_assert(sizeof(((fw_mon_t *)0)->inv_n) / sizeof(float) == MON_EVAL_STEPS + 1u,
+               "block tables hold n = 0..MON_EVAL_STEPS");
 
 static float lp_coef(float tau_s, float dt_s) { return 1.0f - expf(-dt_s / tau_s); }
 
 static float persist(float t, bool over, float dt) { return over ? t + dt : 0.0f; }
+
+/** Clear the sums of the running witnesses' block (closed loop (re)starts). */
+static void sums_clear_run(fw_mon_t *m) {
+  m->s_rd = m->s_rq = m->s_w = m->s_ed = m->s_eq = m->s_ictrl = 0.0f;
+  m->n_pwm = m->n_hf = m->n_run = 0u;
+}
+
+/** Closed loop (re)starts: the block's running sums restart; the residual's
+ *  L di/dt restarts from the last current. */
+static void sums_restart(fw_mon_t *m) {
+  sums_clear_run(m);
+  m->i_prev_A[0] = m->i_last_A[0];
+  m->i_prev_A[1] = m->i_last_A[1];
+}
 
 void fw_mon_init(fw_mon_t *m, const fw_config_t *cfg, float dt_s) {
   memset(m, 0, sizeof(*m));
@@ -55,9 +72,13 @@ void fw_mon_init(fw_mon_t *m, const fw_config_t *cfg, float dt_s) {
   m->L_d_H = cfg->L_d_H;
   m->L_q_H = cfg->L_q_H;
   m->psi_f_Wb = cfg->psi_f_Wb;
-  m->a_hf = lp_coef(MON_HF_TAU_S, dt_s);
-  m->a_slow = lp_coef(MON_SLOW_TAU_S, dt_s);
   m->a_off = lp_coef(MON_OFF_TAU_S, dt_s);
+  /* block low-passes: n periods of a per-period low-pass with a constant input */
+  for (uint32_t n = 0u; n <= MON_EVAL_STEPS; n++) {
+    m->a_hf_n[n] = lp_coef(MON_HF_TAU_S, (float)n * dt_s);
+    m->a_slow_n[n] = lp_coef(MON_SLOW_TAU_S, (float)n * dt_s);
+    m->inv_n[n] = n > 0u ? 1.0f / (float)n : 0.0f;
+  }
 }
 
 void fw_mon_learn_offsets(fw_mon_t *m, const float i_abc_A[3]) {
@@ -82,6 +103,7 @@ fw_fault_t fw_mon_enable(fw_mon_t *m) {
   m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
   m->verdict = FW_FAULT_NONE;
   m->angle_hf_rad = m->angle_bemf_rad = m->e_bemf_V = 0.0f;
+  sums_restart(m);
   return FW_FAULT_NONE;
 }
 
@@ -138,7 +160,7 @@ void fw_mon_run_start(fw_mon_t *m) {
   m->r_d_f = m->r_q_f = m->ictrl_f = m->w_f = 0.0f;
   m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
   m->verdict = FW_FAULT_NONE;
-  m->eval_k = 0u;
+  sums_restart(m);
 }
 
 /** First timed-out witness of those judged every MON_EVAL_STEPS periods. */
@@ -158,100 +180,92 @@ static fw_fault_t judge(const fw_mon_t *m) {
   return FW_FAULT_NONE;
 }
 
+/** x low-passed over n periods of constant input u (n <= MON_EVAL_STEPS):
+ *  x + (1 - (1 - a)^n) (u - x), coefficients from the table a_n. */
+static float lp_n(float x, float sum, uint32_t n, const float *a_n, const float *inv_n) {
+  return x + a_n[n] * (sum * inv_n[n] - x);
+}
+
+/** End of a block of MON_EVAL_STEPS periods: the low-passes on the block
+ *  means, then the judgements (atan2, sqrt): the filters are far slower than
+ *  a block, the detection budget is 20 ms. */
+FW_NOINLINE void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float accel_dist_radps2) {
+  const float dte = m->dt_s * (float)MON_EVAL_STEPS;
+  const float *inv_n = m->inv_n;
+  /* current sum, every period of the block (PWM on or off) */
+  const float inv8 = 1.0f / (float)MON_EVAL_STEPS;
+  const float a8 = m->a_slow_n[MON_EVAL_STEPS];
+  m->isum_f += a8 * (m->s_isum * inv8 - m->isum_f);
+  m->imag_f += a8 * (m->s_imag * inv8 - m->imag_f); /* mean of the three = 4/pi |i|_peak / ... */
+  m->s_isum = m->s_imag = 0.0f;
+  m->t_sum = persist(m->t_sum,
+                     pwm_on && m->isum_f > m->i_sum_max_A + MON_SUM_SHARE * m->imag_f, dte);
+  m->sum_bad = (uint32_t)(m->t_sum >= m->detect_s);
+  /* back-EMF residual over the periods with PWM on: L di/dt summed is
+   * L (i_last - i_prev) / T */
+  const uint32_t np = m->n_pwm;
+  if (np > 0u) {
+    const float sd = m->s_rd - m->L_d_H * (m->i_last_A[0] - m->i_prev_A[0]) * m->inv_dt;
+    const float sq = m->s_rq - m->L_q_H * (m->i_last_A[1] - m->i_prev_A[1]) * m->inv_dt;
+    m->i_prev_A[0] = m->i_last_A[0];
+    m->i_prev_A[1] = m->i_last_A[1];
+    m->r_d_f = lp_n(m->r_d_f, sd, np, m->a_slow_n, inv_n);
+    m->r_q_f = lp_n(m->r_q_f, sq, np, m->a_slow_n, inv_n);
+    m->w_f = lp_n(m->w_f, m->s_w, np, m->a_slow_n, inv_n);
+  }
+  const uint32_t nh = m->n_hf, nr = m->n_run;
+  if (nh > 0u) {
+    m->e_d_f = lp_n(m->e_d_f, m->s_ed, nh, m->a_hf_n, inv_n);
+    m->e_q_f = lp_n(m->e_q_f, m->s_eq, nh, m->a_hf_n, inv_n);
+  }
+  if (nr > 0u) {
+    m->ictrl_f = lp_n(m->ictrl_f, m->s_ictrl, nr, m->a_slow_n, inv_n);
+  }
+  sums_clear_run(m);
+  if (!running) {
+    return;
+  }
+  /* HF angle */
+  if (m->e_ref_A > 0.0f) {
+    float g = (m->rho + 1.0f) / m->e_ref_A;
+    float c2 = m->e_d_f * g - m->rho;
+    float s2 = m->e_q_f * g;
+    m->angle_hf_rad = 0.5f * fabsf(atan2f(s2, c2));
+  }
+  m->t_hf = persist(m->t_hf, m->angle_hf_rad > m->angle_max_rad, dte);
+
+  /* back-EMF residual */
+  float e_hat = fabsf(m->w_f) * m->psi_f_Wb;
+  float e_meas = sqrtf(m->r_d_f * m->r_d_f + m->r_q_f * m->r_q_f);
+  m->e_bemf_V = e_meas;
+  bool bad = false;
+  if (e_hat > m->bemf_min_V || e_meas > m->bemf_min_V) {
+    if (e_hat * MON_BEMF_RATIO < e_meas || e_meas * MON_BEMF_RATIO < e_hat) {
+      bad = true;
+      m->angle_bemf_rad = FW_PI_F32; /* magnitude disagrees: no angle to speak of */
+    } else {
+      float ang = atan2f(-m->r_d_f, m->r_q_f);
+      if (m->w_f < 0.0f) {
+        ang = fw_wrap_pi_f32(ang + FW_PI_F32);
+      }
+      m->angle_bemf_rad = fabsf(ang);
+      bad = m->angle_bemf_rad > m->bemf_max_rad;
+    }
+  } else {
+    m->angle_bemf_rad = 0.0f;
+  }
+  m->t_bemf = persist(m->t_bemf, bad, dte);
+
+  /* acceleration plausibility */
+  m->t_accel = persist(
+      m->t_accel, m->accel_max > 0.0f && fabsf(accel_dist_radps2) > m->accel_max, dte);
+
+  /* current control */
+  m->t_ctrl = persist(m->t_ctrl, m->ictrl_f > m->i_ctrl_max_A * m->i_ctrl_max_A, dte);
+  m->verdict = (uint32_t)judge(m); /* the four timers change only here */
+}
+
 fw_fault_t fw_mon_motion(const fw_mon_t *m, float e_start_max_V) {
   float e = sqrtf(m->r_d_f * m->r_d_f + m->r_q_f * m->r_q_f);
   return e > e_start_max_V ? FW_FAULT_MOVING_AT_ENABLE : FW_FAULT_NONE;
-}
-
-fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in) {
-  const float dt = m->dt_s;
-  /* current sum: a star-connected winding has i_a + i_b + i_c = 0. Judged with
-   * the power stage on, after offset compensation (with PWM off a constant
-   * sum is an offset: the per-phase offset check at enable names it). */
-  float isum = fabsf(in->i_abc_A[0] + in->i_abc_A[1] + in->i_abc_A[2]);
-  m->isum_f += m->a_slow * (isum - m->isum_f);
-  /* limit: a floor plus a share of the phase current amplitude (a gain error g on
-   * one phase gives a sum of about 0.64 g |i|) */
-  float imag = fabsf(in->i_abc_A[0]) + fabsf(in->i_abc_A[1]) + fabsf(in->i_abc_A[2]);
-  m->imag_f += m->a_slow * (imag - m->imag_f); /* mean of the three = 4/pi |i|_peak / ... */
-  m->t_sum = persist(m->t_sum,
-                     in->pwm_on && m->isum_f > m->i_sum_max_A + MON_SUM_SHARE * m->imag_f, dt);
-
-  if (in->pwm_on) {
-    m->off_time_s = 0.0f;
-    /* L di/dt as a per-sample difference: noisy alone, clean once low-passed */
-    float r[2];
-    fw_bemf_residual(in->u_dq_V, in->i_dq_A, m->i_prev_A, m->inv_dt, in->omega_hat_radps,
-                     m->R_ohm, m->L_d_H, m->L_q_H, r);
-    m->r_d_f += m->a_slow * (r[0] - m->r_d_f);
-    m->r_q_f += m->a_slow * (r[1] - m->r_q_f);
-    /* the speed the residual is compared with goes through the same low-pass:
-     * otherwise the 5 ms lag of the residual alone reads as a mismatch whenever
-     * the speed changes fast (2 m/s -> 0 in 10 ms at full thrust) */
-    m->w_f += m->a_slow * (in->omega_hat_radps - m->w_f);
-  }
-
-  if (!in->running) {
-    m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
-    m->verdict = FW_FAULT_NONE;
-    m->eval_k = 0u;
-  } else {
-    /* filters every period (cheap) */
-    if (in->hf_valid) {
-      m->e_d_f += m->a_hf * (in->e_hf_dq_A[0] - m->e_d_f);
-      m->e_q_f += m->a_hf * (in->e_hf_dq_A[1] - m->e_q_f);
-    }
-    float ed = in->i_dq_ref_A[0] - in->i_dq_A[0];
-    float eq = in->i_dq_ref_A[1] - in->i_dq_A[1];
-    m->ictrl_f += m->a_slow * (ed * ed + eq * eq - m->ictrl_f); /* mean-square error */
-    /* judgements (atan2, sqrt) once every MON_EVAL_STEPS periods: the filters
-     * are far slower than that, the detection budget is 20 ms */
-    if (++m->eval_k >= MON_EVAL_STEPS) {
-      m->eval_k = 0u;
-      const float dte = dt * (float)MON_EVAL_STEPS;
-      /* HF angle */
-      if (m->e_ref_A > 0.0f) {
-        float g = (m->rho + 1.0f) / m->e_ref_A;
-        float c2 = m->e_d_f * g - m->rho;
-        float s2 = m->e_q_f * g;
-        m->angle_hf_rad = 0.5f * fabsf(atan2f(s2, c2));
-      }
-      m->t_hf = persist(m->t_hf, m->angle_hf_rad > m->angle_max_rad, dte);
-
-      /* back-EMF residual */
-      float e_hat = fabsf(m->w_f) * m->psi_f_Wb;
-      float e_meas = sqrtf(m->r_d_f * m->r_d_f + m->r_q_f * m->r_q_f);
-      m->e_bemf_V = e_meas;
-      bool bad = false;
-      if (e_hat > m->bemf_min_V || e_meas > m->bemf_min_V) {
-        if (e_hat * MON_BEMF_RATIO < e_meas || e_meas * MON_BEMF_RATIO < e_hat) {
-          bad = true;
-          m->angle_bemf_rad = FW_PI_F32; /* magnitude disagrees: no angle to speak of */
-        } else {
-          float ang = atan2f(-m->r_d_f, m->r_q_f);
-          if (m->w_f < 0.0f) {
-            ang = fw_wrap_pi_f32(ang + FW_PI_F32);
-          }
-          m->angle_bemf_rad = fabsf(ang);
-          bad = m->angle_bemf_rad > m->bemf_max_rad;
-        }
-      } else {
-        m->angle_bemf_rad = 0.0f;
-      }
-      m->t_bemf = persist(m->t_bemf, bad, dte);
-
-      /* acceleration plausibility */
-      m->t_accel = persist(
-          m->t_accel, m->accel_max > 0.0f && fabsf(in->accel_dist_radps2) > m->accel_max, dte);
-
-      /* current control */
-      m->t_ctrl = persist(m->t_ctrl, m->ictrl_f > m->i_ctrl_max_A * m->i_ctrl_max_A, dte);
-      m->verdict = (uint32_t)judge(m); /* the four timers change only here */
-    }
-  }
-
-  if (m->t_sum >= m->detect_s) {
-    return FW_FAULT_CURRENT_SENSOR_SUM;
-  }
-  return (fw_fault_t)m->verdict;
 }

@@ -17,7 +17,7 @@ static float lp_alpha(float f_Hz, float dt_s) {
 /** Add d (|d| <= pi) to the unwrapped position, kept as whole electrical
  *  turns plus a remainder in [-pi, pi): a single float would lose the
  *  increments once the position is large (ulp 0.06 rad at 1e6 rad). */
-static void pos_add(fw_obs_t *o, float d) {
+static FW_ALWAYS_INLINE void pos_add(fw_obs_t *o, float d) {
   float x = o->pos_unwrapped_e + d;
   if (x >= FW_PI_F32) {
     x -= FW_TWO_PI_F32;
@@ -37,6 +37,14 @@ void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s) {
   o->eps_gain = cfg->L_q_H / (cfg->L_q_H - cfg->L_d_H);
   o->inv_adapt_err = 1.0f / cfg->sogi_adapt_err_rad;
   o->hf_min_A = cfg->hf_min_ratio * dt_s * cfg->u_inj_V / cfg->L_q_H;
+  /* the observer's gains and products, so the step reads nothing from cfg */
+  o->bw_min = cfg->pll_bw_min;
+  o->bw_span = 1.0f - cfg->pll_bw_min;
+  o->kp0 = cfg->pll_kp;
+  o->ki0 = cfg->pll_ki;
+  o->ki0_dt = cfg->pll_ki * dt_s;
+  o->kd_dt = dt_s * cfg->pll_kd;
+  o->accel_per_A = cfg->pll_accel_per_A;
 }
 
 void fw_obs_reset(fw_obs_t *o, const fw_config_t *cfg) {
@@ -72,7 +80,7 @@ void fw_obs_flip(fw_obs_t *o) {
 
 void fw_obs_hold(fw_obs_t *o, float t_s) { o->est_hold_s = t_s; }
 
-float fw_obs_update(fw_obs_t *o, const fw_config_t *cfg, const fw_obs_in_t *in, float *adapt_r) {
+float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
   const float dt = o->dt_s;
   float eps = 0.0f;
   const float floor_A = 1e-6f;
@@ -100,25 +108,37 @@ float fw_obs_update(fw_obs_t *o, const fw_config_t *cfg, const fw_obs_in_t *in, 
     eps = 0.0f; /* filters still settling: extrapolate, do not correct */
   }
   /* Bandwidth scheduling: all observer poles scaled by lambda in [bw_min, 1],
-   * lambda rising with the tracking error (same observable as the SOGI). */
-  const float lam = cfg->pll_bw_min + (1.0f - cfg->pll_bw_min) * r;
+   * lambda rising with the tracking error (same observable as the SOGI). The
+   * PLL step (fw_pll_step_f32) inline, with ki dt precomputed. */
+  const float lam = o->bw_min + o->bw_span * r;
+  const float lam2 = lam * lam;
+  const float kp = o->kp0 * lam;
   o->pll_scale = lam;
-  o->pll.kp = cfg->pll_kp * lam;
-  o->pll.ki = cfg->pll_ki * lam * lam;
-  fw_pll_step_f32(&o->pll, eps, dt);
+  o->pll.kp = kp;
+  o->pll.ki = o->ki0 * lam2;
+  fw_pll_f32_t *const pll = &o->pll;
+  const float w_max = pll->w_max_radps;
+  float w_i = pll->w_i_radps;
+  if (eps - eps == 0.0f) { /* a non-finite error holds the PLL (as fw_pll_step_f32) */
+    w_i = fw_clampf(w_i + (o->ki0_dt * lam2) * eps, -w_max, w_max);
+    const float w_hat = w_i + kp * eps;
+    pll->w_hat_radps = w_hat;
+    pll->theta_rad = fw_wrap_pi_f32(pll->theta_rad + w_hat * dt);
+  }
   /* Mechanical observer extension of the PLL: the speed state also
    * integrates the acceleration the measured thrust current predicts, plus
    * an estimated disturbance (load, friction) driven by the same error.
    * Error dynamics: e''' + kp e'' + ki e' + kd e = (disturbance changes). */
   if (in->running) {
-    o->pll.w_i_radps += dt * (cfg->pll_accel_per_A * o->i_q_ff_A + o->accel_dist);
-    o->pll.w_i_radps = fw_clampf(o->pll.w_i_radps, -cfg->speed_max_radps_e, cfg->speed_max_radps_e);
-    o->accel_dist += dt * cfg->pll_kd * o->pll_scale * o->pll_scale * o->pll_scale * eps;
+    w_i += dt * (o->accel_per_A * o->i_q_ff_A + o->accel_dist);
+    w_i = fw_clampf(w_i, -w_max, w_max); /* w_max = speed_max_radps_e (checked > 0) */
+    o->accel_dist += o->kd_dt * lam * lam * lam * eps;
   }
+  pll->w_i_radps = w_i;
   const float dth = fw_wrap_pi_f32(o->pll.theta_rad - o->theta_prev);
   pos_add(o, dth);
   o->theta_prev = o->pll.theta_rad;
-  o->omega_f += o->spd_alpha * (o->pll.w_i_radps - o->omega_f);
+  o->omega_f += o->spd_alpha * (w_i - o->omega_f);
   return eps;
 }
 

@@ -18,6 +18,7 @@ static fw_foc_param_t params(void) {
   p.L_d_H = 0.01f;
   p.L_q_H = 0.02f;
   p.psi_f_Wb = 0.2f;
+  p.dt_s = 1e-3f;
   return p;
 }
 
@@ -50,20 +51,19 @@ static void test_current_pi(void) {
   const fw_foc_param_t p = params();
   fw_foc_t f;
   fw_foc_init(&f, &p);
-  const float dt = 1e-3f;
-  /* w = 0: u = kp e + ki e dt per axis */
+  /* dt = 1e-3 s (params); w = 0: u = kp e + ki e dt per axis */
   fw_vec2_f32_t i_ref = {1.0f, -0.5f}, i = {0.0f, 0.0f};
-  fw_vec2_f32_t u = fw_foc_current_update(&f, i_ref, i, 0.0f, 300.0f, dt);
+  fw_vec2_f32_t u = fw_foc_current_update(&f, i_ref, i, 0.0f, 300.0f);
   TT_CHECK_NEAR(u.x, 2.0 * 1.0 + 100.0 * 1.0 * 1e-3, 1e-5);
   TT_CHECK_NEAR(u.y, 2.0 * -0.5 + 100.0 * -0.5 * 1e-3, 1e-5);
   /* second period: the integral doubles */
-  u = fw_foc_current_update(&f, i_ref, i, 0.0f, 300.0f, dt);
+  u = fw_foc_current_update(&f, i_ref, i, 0.0f, 300.0f);
   TT_CHECK_NEAR(u.x, 2.0 + 2.0 * 0.1, 1e-5);
   /* decoupling: zero error, w = 100: u_d = -w L_q i_q, u_q = w (L_d i_d + psi_f) */
   fw_foc_reset(&f, &p);
   i.x = 0.5f;
   i.y = 1.5f;
-  u = fw_foc_current_update(&f, i, i, 100.0f, 300.0f, dt);
+  u = fw_foc_current_update(&f, i, i, 100.0f, 300.0f);
   TT_CHECK_NEAR(u.x, -100.0 * 0.02 * 1.5, 1e-5);
   TT_CHECK_NEAR(u.y, 100.0 * (0.01 * 0.5 + 0.2), 1e-5);
   /* limit: +-0.9 u_dc / sqrt(3) */
@@ -71,7 +71,7 @@ static void test_current_pi(void) {
   i_ref.x = 1000.0f;
   i_ref.y = -1000.0f;
   i.x = i.y = 0.0f;
-  u = fw_foc_current_update(&f, i_ref, i, 0.0f, 100.0f, dt);
+  u = fw_foc_current_update(&f, i_ref, i, 0.0f, 100.0f);
   const double lim = 0.9 * 100.0 / sqrt(3.0);
   TT_CHECK_NEAR(u.x, lim, 1e-4);
   TT_CHECK_NEAR(u.y, -lim, 1e-4);
@@ -87,21 +87,21 @@ static void test_speed_pi(void) {
   fw_foc_t f;
   fw_foc_init(&f, &p);
   /* i_q = kp e + ki e dt */
-  TT_CHECK_NEAR(fw_foc_speed_update(&f, 10.0f, 8.0f, 1e-3f), 0.5 * 2.0 + 20.0 * 2.0 * 1e-3, 1e-6);
+  TT_CHECK_NEAR(fw_foc_speed_update(&f, 10.0f, 8.0f), 0.5 * 2.0 + 20.0 * 2.0 * 1e-3, 1e-6);
   /* clamped to i_max */
-  TT_CHECK_NEAR(fw_foc_speed_update(&f, 100.0f, 0.0f, 1e-3f), 5.0, 1e-6);
+  TT_CHECK_NEAR(fw_foc_speed_update(&f, 100.0f, 0.0f), 5.0, 1e-6);
   /* bumpless: the integrator starts from the committed i_q reference ... */
   fw_foc_reset(&f, &p);
   fw_foc_commit_ref(&f, 1.25f);
   fw_foc_speed_bumpless(&f);
-  TT_CHECK_NEAR(fw_foc_speed_update(&f, 0.0f, 0.0f, 1e-3f), 1.25, 1e-6);
+  TT_CHECK_NEAR(fw_foc_speed_update(&f, 0.0f, 0.0f), 1.25, 1e-6);
   /* ... clamped to i_max; kept over a reset */
   fw_foc_commit_ref(&f, -7.0f);
   fw_foc_reset(&f, &p);
   fw_foc_speed_bumpless(&f);
-  TT_CHECK_NEAR(fw_foc_speed_update(&f, 0.0f, 0.0f, 1e-3f), -5.0, 1e-6);
+  TT_CHECK_NEAR(fw_foc_speed_update(&f, 0.0f, 0.0f), -5.0, 1e-6);
   fw_foc_speed_clear(&f);
-  TT_CHECK_NEAR(fw_foc_speed_update(&f, 0.0f, 0.0f, 1e-3f), 0.0, 1e-9);
+  TT_CHECK_NEAR(fw_foc_speed_update(&f, 0.0f, 0.0f), 0.0, 1e-9);
 }
 
 static void test_output(void) {

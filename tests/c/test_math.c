@@ -400,6 +400,29 @@ static void test_pi_antiwindup(void) {
   TT_CHECK(memcmp(&pi, &before, sizeof pi) == 0);
 }
 
+/* The configured variant (ki dt precomputed, symmetric limits per call) follows
+ * fw_pi_step_f32 within rounding on a sequence that saturates both ways. */
+static void test_pi_cfg(void) {
+  fw_pi_f32_t a, b;
+  const float dt = 1.0f / 24000.0f, lim = 2.0f;
+  fw_pi_init_f32(&a, 0.7f, 900.0f, -lim, lim);
+  fw_pi_init_f32(&b, 0.7f, 900.0f, -1.0f, 1.0f); /* stored limits unused */
+  fw_pi_set_dt_f32(&b, dt);
+  TT_CHECK(b.ki_dt == 900.0f * dt);
+  for (int k = 0; k < 2000; k++) {
+    const float e = 4.0f * sinf(0.01f * (float)k), ff = 0.3f * cosf(0.003f * (float)k);
+    const float oa = fw_pi_step_f32(&a, e, ff, dt);
+    const float ob = fw_pi_step_cfg_f32(&b, e, ff, lim);
+    TT_CHECK_NEAR(ob, oa, 1e-5);
+    TT_CHECK(ob <= lim && ob >= -lim);
+  }
+  TT_CHECK_NEAR(b.integ, a.integ, 1e-5);
+  const fw_pi_f32_t before = b;
+  TT_CHECK(fw_pi_step_cfg_f32(&b, NAN, 0.0f, lim) == before.out);
+  TT_CHECK(fw_pi_step_cfg_f32(&b, 1.0f, INFINITY, lim) == before.out);
+  TT_CHECK(b.integ == before.integ);
+}
+
 int main(void) {
   TT_RUN(test_sincos_sweep);
   TT_RUN(test_sincos_special);
@@ -412,5 +435,6 @@ int main(void) {
   TT_RUN(test_svpwm_props);
   TT_RUN(test_pi_ref);
   TT_RUN(test_pi_antiwindup);
+  TT_RUN(test_pi_cfg);
   return TT_SUMMARY();
 }

@@ -34,7 +34,7 @@ static void test_error(void) {
   TT_CHECK_NEAR(o.eps_gain, 3.0, 1e-5);
   float r;
   fw_obs_in_t in = hf_in(0.05f, 0.001f);
-  TT_CHECK_NEAR(fw_obs_update(&o, &cfg, &in, &r), 0.02 * 3.0, 1e-6);
+  TT_CHECK_NEAR(fw_obs_update(&o, &in, &r), 0.02 * 3.0, 1e-6);
   TT_CHECK_NEAR(o.err_f, alpha * 0.06, 1e-8);
   TT_CHECK_NEAR(r, alpha * 0.06 / 0.02, 1e-6); /* |err_f| / sogi_adapt_err_rad */
   /* bandwidth scheduling: kp = pll_kp lam, ki = pll_ki lam^2, lam = bw_min + (1 - bw_min) r */
@@ -43,23 +43,23 @@ static void test_error(void) {
   TT_CHECK_NEAR(o.pll.ki, cfg.pll_ki * lam * lam, 1e-2);
   /* clamp to +-1 rad */
   in = hf_in(0.05f, -0.05f);
-  TT_CHECK_NEAR(fw_obs_update(&o, &cfg, &in, &r), -1.0, 0.0);
+  TT_CHECK_NEAR(fw_obs_update(&o, &in, &r), -1.0, 0.0);
   /* floor: no HF response, no error */
   in = hf_in(1e-7f, 1e-7f);
-  TT_CHECK(fw_obs_update(&o, &cfg, &in, &r) == 0.0f);
+  TT_CHECK(fw_obs_update(&o, &in, &r) == 0.0f);
   /* hold (saliency check) outranks the back-EMF */
   in = hf_in(0.05f, 0.01f);
   in.hold = 1u;
   in.bemf_active = 1u;
   in.bemf_err_rad = 0.3f;
-  TT_CHECK(fw_obs_update(&o, &cfg, &in, &r) == 0.0f);
+  TT_CHECK(fw_obs_update(&o, &in, &r) == 0.0f);
   in.hold = 0u;
-  TT_CHECK(fw_obs_update(&o, &cfg, &in, &r) == 0.3f);
+  TT_CHECK(fw_obs_update(&o, &in, &r) == 0.3f);
   /* not settled: the PLL is not corrected, but the filter sees the error */
   setup(&o, &cfg);
   in = hf_in(0.05f, 0.001f);
   in.settled = 0u;
-  TT_CHECK(fw_obs_update(&o, &cfg, &in, &r) == 0.0f);
+  TT_CHECK(fw_obs_update(&o, &in, &r) == 0.0f);
   TT_CHECK_NEAR(o.err_f, alpha * 0.06, 1e-8);
   TT_CHECK(o.pll.theta_rad == 0.0f && o.pll.w_i_radps == 0.0f);
   /* extractor switch: held for the given time */
@@ -68,7 +68,7 @@ static void test_error(void) {
   in = hf_in(0.05f, 0.001f);
   int n_zero = 0;
   for (int k = 0; k < 30; k++) {
-    n_zero += fw_obs_update(&o, &cfg, &in, &r) == 0.0f;
+    n_zero += fw_obs_update(&o, &in, &r) == 0.0f;
   }
   TT_CHECK(n_zero >= 24 && n_zero <= 25);
 }
@@ -78,12 +78,13 @@ static void test_mechanical_extension(void) {
   fw_obs_t o;
   setup(&o, &cfg);
   cfg.pll_accel_per_A = 100.0f;
+  fw_obs_init(&o, &cfg, o.dt_s); /* the observer copies its constants at init */
   fw_obs_set_iq(&o, 2.0f);
   fw_obs_in_t in = hf_in(0.0f, 0.0f); /* no error: only the feed-forward acts */
   in.running = 1u;
   float r;
   for (int k = 0; k < 2400; k++) {
-    (void)fw_obs_update(&o, &cfg, &in, &r);
+    (void)fw_obs_update(&o, &in, &r);
   }
   /* w = 200 rad/s^2 * 0.1 s; theta = w t^2 / 2 (PI part sees no error) */
   TT_CHECK_NEAR(o.pll.w_i_radps, 20.0, 1e-3);
@@ -93,7 +94,7 @@ static void test_mechanical_extension(void) {
   /* not running: no feed-forward */
   const float w = o.pll.w_i_radps;
   in.running = 0u;
-  (void)fw_obs_update(&o, &cfg, &in, &r);
+  (void)fw_obs_update(&o, &in, &r);
   TT_CHECK(o.pll.w_i_radps == w);
 }
 
@@ -122,7 +123,7 @@ static void test_position(void) {
   fw_obs_set(&o, 0.0f, 0.0f);
   o.pll.w_i_radps = o.pll.w_hat_radps = th1 * 24000.0f / 100.0f; /* test set-up: a ramp */
   for (int k = 0; k < 100; k++) {
-    (void)fw_obs_update(&o, &cfg, &in, &r); /* ... re-converging from 0 to th1 does */
+    (void)fw_obs_update(&o, &in, &r); /* ... re-converging from 0 to th1 does */
   }
   TT_CHECK_NEAR(o.pll.theta_rad, th1, 1e-4);
   TT_CHECK_NEAR(fw_obs_pos_e(&o), p1, 1e-4);

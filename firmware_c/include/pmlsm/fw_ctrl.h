@@ -332,7 +332,6 @@ typedef struct {
   fw_fault_latch_t fault;
   fw_protect_t prot;
   fw_start_t start;
-  fw_inj_t inj;
   union {
     fw_obs_t obs;
     /* The observer's PLL and error filter under their former names, for tests
@@ -346,6 +345,9 @@ typedef struct {
   fw_foc_t foc;
   fw_mon_t mon;
   fw_bemf_t bemf;
+  /* last: its rings are large, the hot blocks above stay within the FPU's
+   * 1 KB load/store offset from the controller's address */
+  fw_inj_t inj;
   /* last signals for the snapshot (written only, never read back) */
   fw_snapshot_t snap;
 } fw_ctrl_t;

@@ -101,6 +101,10 @@ typedef struct {
   float w_vmax_radps;    /**< v_max_mps in electrical rad/s */
   float w_follow_radps;  /**< follow_err_mps in electrical rad/s */
   float dt_s;
+  float ir2_A2;          /**< i_rated_A^2 */
+  float i2t_max_A2s;     /**< (i_max_A^2 - i_rated_A^2) i2t_time_s */
+  uint8_t i2t_on;        /**< i_rated_A < i_max_A */
+  uint8_t pos_on;        /**< pos_limit_min_m < pos_limit_max_m */
 } fw_protect_t;
 
 /** Inputs of one closed-loop period. */

@@ -35,6 +35,7 @@ typedef struct {
   float spd_kp_A_per_radps, spd_ki_A_per_rad;
   float i_max_A;          /**< speed PI output limit */
   float R_ohm, L_d_H, L_q_H, psi_f_Wb; /**< for the decoupling feed-forward */
+  float dt_s;             /**< control period (the PIs' ki dt are precomputed) */
 } fw_foc_param_t;
 
 /** Loop state (caller-owned). */
@@ -57,7 +58,7 @@ static inline fw_vec2_f32_t fw_foc_measure(fw_vec2_f32_t i_ab_A, fw_sincos_f32_t
 }
 
 /** Speed PI: i_q reference from the speed error (A). */
-float fw_foc_speed_update(fw_foc_t *f, float w_ref_radps, float w_radps, float dt_s);
+float fw_foc_speed_update(fw_foc_t *f, float w_ref_radps, float w_radps);
 /** Bumpless switch to SPEED mode: the speed integrator starts from the last
  *  i_q reference (clamped to i_max_A). */
 void fw_foc_speed_bumpless(fw_foc_t *f);
@@ -70,15 +71,13 @@ void fw_foc_speed_clear(fw_foc_t *f);
  */
 static inline fw_vec2_f32_t fw_foc_current_update(fw_foc_t *f, fw_vec2_f32_t i_ref_dq_A,
                                                   fw_vec2_f32_t i_dq_A, float w_radps,
-                                                  float u_dc_V, float dt_s) {
-  const float u_lim = FW_FOC_VOLTAGE_SHARE * u_dc_V * FW_INV_SQRT3_F32;
-  f->pi_d.out_min = f->pi_q.out_min = -u_lim;
-  f->pi_d.out_max = f->pi_q.out_max = u_lim;
+                                                  float u_dc_V) {
+  const float u_lim = FW_FOC_VOLTAGE_SHARE * FW_INV_SQRT3_F32 * u_dc_V;
   const float ff_d = -w_radps * f->p.L_q_H * i_dq_A.y;
   const float ff_q = w_radps * (f->p.L_d_H * i_dq_A.x + f->p.psi_f_Wb);
   fw_vec2_f32_t u;
-  u.x = fw_pi_step_f32(&f->pi_d, i_ref_dq_A.x - i_dq_A.x, ff_d, dt_s);
-  u.y = fw_pi_step_f32(&f->pi_q, i_ref_dq_A.y - i_dq_A.y, ff_q, dt_s);
+  u.x = fw_pi_step_cfg_f32(&f->pi_d, i_ref_dq_A.x - i_dq_A.x, ff_d, u_lim);
+  u.y = fw_pi_step_cfg_f32(&f->pi_q, i_ref_dq_A.y - i_dq_A.y, ff_q, u_lim);
   return u;
 }
 /** The fundamental voltage u_dq_V (without injection) is what gets applied. */

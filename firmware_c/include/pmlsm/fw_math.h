@@ -64,8 +64,8 @@ fw_sincos_f32_t fw_sincos_f32(float theta_rad);
  */
 fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, float theta0_rad, float d_rad);
 
-/** Wrap an angle into [-pi, pi). Non-finite input returns 0. */
-float fw_wrap_pi_f32(float theta_rad);
+/** fw_wrap_pi_f32 for an angle outside [-pi, pi) (any float). */
+float fw_wrap_pi_slow_f32(float theta_rad);
 
 /** Wrap an angle into [0, 2 pi). Non-finite input returns 0. */
 float fw_wrap_2pi_f32(float theta_rad);
@@ -111,6 +111,7 @@ typedef struct {
   float out_max;  /**< upper output limit */
   float integ;    /**< integrator state (output units) */
   float out;      /**< last output */
+  float ki_dt;    /**< ki * dt of the configured time step (fw_pi_set_dt_f32) */
 } fw_pi_f32_t;
 
 /** Initialise gains and limits, clear state. */
@@ -127,6 +128,11 @@ void fw_pi_reset_f32(fw_pi_f32_t *pi);
  */
 float fw_pi_step_f32(fw_pi_f32_t *pi, float e, float ff, float dt_s);
 
+/** Configure the fixed time step of fw_pi_step_cfg_f32 (ki * dt_s is
+ *  precomputed; call again after changing ki). fw_pi_init_f32 sets dt 0. */
+void fw_pi_set_dt_f32(fw_pi_f32_t *pi, float dt_s);
+
+
 /** Clamp helper. */
 static inline float fw_clampf(float x, float lo, float hi) {
   return x < lo ? lo : (x > hi ? hi : x);
@@ -136,9 +142,18 @@ static inline float fw_clampf(float x, float lo, float hi) {
  *  out of line: fw_isfinite_f32 cost ~140 instructions per step on the M4). */
 #if defined(__GNUC__) || defined(__clang__)
 #define FW_ALWAYS_INLINE __attribute__((always_inline)) inline
+#define FW_NOINLINE __attribute__((noinline))
 #else
 #define FW_ALWAYS_INLINE inline
+#define FW_NOINLINE
 #endif
+
+/** Wrap an angle into [-pi, pi). Non-finite input returns 0. Inline: the
+ *  usual angle is already in range (one compare pair, no call). */
+static FW_ALWAYS_INLINE float fw_wrap_pi_f32(float theta_rad) {
+  return (theta_rad >= -FW_PI_F32 && theta_rad < FW_PI_F32) ? theta_rad
+                                                            : fw_wrap_pi_slow_f32(theta_rad);
+}
 
 /** True for a finite float (not NaN, not inf), without libm: x - x is 0 for
  *  a finite x and NaN for NaN and +-inf (one subtraction, one compare). To
@@ -146,6 +161,44 @@ static inline float fw_clampf(float x, float lo, float hi) {
  *  NaN. */
 static FW_ALWAYS_INLINE bool fw_isfinite_f32(float x) {
   return x - x == 0.0f;
+}
+
+/** PI step (see fw_pi_step_f32) once e, ff are known finite and di = ki e dt
+ *  is formed. */
+static FW_ALWAYS_INLINE float fw_pi_core_f32(fw_pi_f32_t *pi, float e, float ff, float di,
+                                             float out_min, float out_max) {
+  const float p = pi->kp * e;
+  const float integ0 = pi->integ;
+  float integ = integ0 + di;
+  const float u_try = p + integ + ff;
+  if (u_try > out_max && di > 0.0f) {
+    const float i_lim = out_max - p - ff;
+    integ = i_lim > integ0 ? i_lim : integ0; /* max */
+  } else if (u_try < out_min && di < 0.0f) {
+    const float i_lim = out_min - p - ff;
+    integ = i_lim < integ0 ? i_lim : integ0; /* min */
+  }
+  integ = fw_clampf(integ, out_min, out_max);
+  pi->integ = integ;
+  const float out = fw_clampf(p + integ + ff, out_min, out_max);
+  pi->out = out;
+  return out;
+}
+
+/**
+ * The same step over the configured time step (fw_pi_set_dt_f32) with
+ * symmetric output limits +-lim given per call (out_min/out_max are not
+ * used and not updated): the integral increment is (ki dt) e instead of
+ * ki e dt (rounding may differ in the last bit). Non-finite e or ff leave the
+ * state alone and return the last output. Inline (a call per current axis
+ * cost ~10 instructions on the M4).
+ */
+static FW_ALWAYS_INLINE float fw_pi_step_cfg_f32(fw_pi_f32_t *pi, float e, float ff, float lim) {
+  const float nf = (e - e) + (ff - ff); /* 0 when both are finite, else NaN */
+  if (!(nf == 0.0f)) {
+    return pi->out;
+  }
+  return fw_pi_core_f32(pi, e, ff, pi->ki_dt * e, -lim, lim);
 }
 
 #ifdef __cplusplus

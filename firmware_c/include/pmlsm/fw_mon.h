@@ -21,12 +21,18 @@
  * | saliency | eigenvalues of the 2x2 HF admittance measured at standstill | saliency_min, configured saliency within a factor 1 + mon_sal_tol | SALIENCY_MISMATCH |
  * | motion at enable | |u_dq| needed to hold zero current = |omega| psi_f | start_speed_max_mps | MOVING_AT_ENABLE |
  *
- * Each running witness must exceed its limit for mon_detect_time_s in a row;
- * the filters run every period, the judgements every 8 periods.
+ * Each witness must exceed its limit for mon_detect_time_s in a row. Every
+ * period only sums its inputs; once per block of 8 periods the low-passes
+ * advance on the block means (a first-order low-pass over n periods of a
+ * constant input: coefficient 1 - exp(-n T / tau)) and the witnesses are
+ * judged, the current sum included. A detection can therefore come up to one
+ * block (8 periods) later than with per-period filters and judgements.
  */
 #ifndef PMLSM_FW_MON_H
 #define PMLSM_FW_MON_H
 
+#include <math.h>
+#include <stdbool.h>
 #include <stdint.h>
 
 #ifdef __cplusplus
@@ -38,6 +44,10 @@ extern "C" {
 #ifndef PMLSM_FW_CTRL_H
 #error "include pmlsm/fw_ctrl.h"
 #endif
+
+/** Periods per block: the monitor's filters advance and its witnesses are
+ *  judged once per block (3 kHz at 24 kHz). */
+#define FW_MON_EVAL_STEPS 8u
 
 /** Inputs of one control period (all observable). */
 typedef struct {
@@ -61,14 +71,23 @@ typedef struct {
   float i_sum_max_A, i_offset_max_A, i_ctrl_max_A, accel_max;
   float rho;          /**< (L_q + L_d) / (L_q - L_d) */
   float R_ohm, L_d_H, L_q_H, psi_f_Wb;
-  float a_hf, a_slow, a_off; /**< low-pass coefficients */
+  float a_off;        /**< offset low-pass coefficient (per period) */
+  /** block low-passes over n = 0..8 periods: 1 - exp(-n T / tau), and 1 / n */
+  float a_hf_n[9], a_slow_n[9], inv_n[9];
   /* learnt at start-up */
   float e_ref_A;      /**< raw HF response along d^ when locked (0: not learnt) */
   /* filtered signals */
   float e_d_f, e_q_f;
   float r_d_f, r_q_f;
   float w_f;          /**< |w^| through the residual's low-pass (like compared with like) */
-  float i_prev_A[2];  /**< last fundamental current (for L di/dt) */
+  float i_prev_A[2];  /**< fundamental current at the end of the last block (for L di/dt) */
+  float i_last_A[2];  /**< last fundamental current with PWM on */
+  /* sums over the present block of MON_EVAL_STEPS periods */
+  float s_isum, s_imag;       /**< |i_a + i_b + i_c|, |i_a| + |i_b| + |i_c| (every period) */
+  float s_rd, s_rq, s_w;      /**< residual without L di/dt, speed (PWM on) */
+  float s_ed, s_eq;           /**< raw HF response (HF valid) */
+  float s_ictrl;              /**< |i_ref - i|^2 (closed loop) */
+  uint32_t n_pwm, n_hf, n_run; /**< periods in those sums */
   float isum_f, ictrl_f;
   float imag_f;       /**< low-passed |i_a| + |i_b| + |i_c| */
   float off_f[3];
@@ -79,7 +98,8 @@ typedef struct {
   float sal_meas, L_small_meas_H, L_large_meas_H, sal_axis_rad;
   /* persistence timers */
   float t_hf, t_bemf, t_accel, t_sum, t_ctrl;
-  uint32_t eval_k;    /**< periods since the last judgement */
+  uint32_t eval_k;    /**< periods since the last block end */
+  uint32_t sum_bad;   /**< current-sum witness over mon_detect_time_s (set at block ends) */
   /** first of t_ctrl, t_hf, t_bemf, t_accel over mon_detect_time_s (those
    *  timers change only at a judgement or when cleared): FW_FAULT_NONE or
    *  the fault fw_mon_update returns after the current sum's */
@@ -118,9 +138,63 @@ fw_fault_t fw_mon_motion(const fw_mon_t *m, float e_start_max_V);
 /** Closed loop starts: forget the filtered signals of the start-up pulses. */
 void fw_mon_run_start(fw_mon_t *m);
 
-/** One control period of the running witnesses; returns the first witness
- *  over its limit for mon_detect_time_s, else FW_FAULT_NONE. */
-fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in);
+/** End of a block of FW_MON_EVAL_STEPS periods (called by fw_mon_update):
+ *  low-passes on the block means, judgements. pwm_on, running and the
+ *  disturbance are those of the block's last period. */
+void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float accel_dist_radps2);
+
+/** One control period of the witnesses: sums its inputs, and every
+ *  FW_MON_EVAL_STEPS periods advances the filters and judges (fw_mon_block).
+ *  Returns the first witness over its limit for mon_detect_time_s (the
+ *  current sum first), else FW_FAULT_NONE. Inline: the caller's input struct
+ *  then stays in registers. */
+static FW_ALWAYS_INLINE fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t *in) {
+  /* Every period: sums only. The low-passes and the judgements run once per
+   * block of FW_MON_EVAL_STEPS periods on the block means (fw_mon.h). */
+  const float ia = in->i_abc_A[0], ib = in->i_abc_A[1], ic = in->i_abc_A[2];
+  /* current sum: a star-connected winding has i_a + i_b + i_c = 0. Judged with
+   * the power stage on, after offset compensation (with PWM off a constant
+   * sum is an offset: the per-phase offset check at enable names it). */
+  m->s_isum += fabsf(ia + ib + ic);
+  /* limit: a floor plus a share of the phase current amplitude (a gain error g on
+   * one phase gives a sum of about 0.64 g |i|) */
+  m->s_imag += fabsf(ia) + fabsf(ib) + fabsf(ic);
+  if (in->pwm_on) {
+    m->off_time_s = 0.0f;
+    /* voltage-equation residual without its L di/dt part, which telescopes
+     * over the block (sum of the differences = last - first) */
+    const float w = in->omega_hat_radps;
+    const float id = in->i_dq_A[0], iq = in->i_dq_A[1];
+    m->s_rd += in->u_dq_V[0] - m->R_ohm * id + w * m->L_q_H * iq;
+    m->s_rq += in->u_dq_V[1] - m->R_ohm * iq - w * m->L_d_H * id;
+    /* the speed the residual is compared with goes through the same low-pass:
+     * otherwise the 5 ms lag of the residual alone reads as a mismatch whenever
+     * the speed changes fast (2 m/s -> 0 in 10 ms at full thrust) */
+    m->s_w += w;
+    m->i_last_A[0] = id;
+    m->i_last_A[1] = iq;
+    m->n_pwm++;
+  }
+  if (!in->running) {
+    m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
+    m->verdict = FW_FAULT_NONE;
+  } else {
+    if (in->hf_valid) {
+      m->s_ed += in->e_hf_dq_A[0];
+      m->s_eq += in->e_hf_dq_A[1];
+      m->n_hf++;
+    }
+    const float ed = in->i_dq_ref_A[0] - in->i_dq_A[0];
+    const float eq = in->i_dq_ref_A[1] - in->i_dq_A[1];
+    m->s_ictrl += ed * ed + eq * eq; /* mean-square error */
+    m->n_run++;
+  }
+  if (++m->eval_k >= FW_MON_EVAL_STEPS) {
+    m->eval_k = 0u;
+    fw_mon_block(m, in->pwm_on != 0u, in->running != 0u, in->accel_dist_radps2);
+  }
+  return m->sum_bad ? FW_FAULT_CURRENT_SENSOR_SUM : (fw_fault_t)m->verdict;
+}
 
 #ifdef __cplusplus
 }

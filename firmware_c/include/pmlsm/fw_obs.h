@@ -43,6 +43,10 @@ typedef struct {
   float eps_gain;         /**< L_q / (L_q - L_d): ratio -> angle error */
   float inv_adapt_err;    /**< 1 / sogi_adapt_err_rad */
   float hf_min_A;         /**< HF-loss threshold hf_min_ratio T u_inj / L_q */
+  float bw_min, bw_span;  /**< pll_bw_min and 1 - pll_bw_min (bandwidth scheduling) */
+  float kp0, ki0, ki0_dt; /**< pll_kp, pll_ki, pll_ki dt (scaled by lambda, lambda^2) */
+  float kd_dt;            /**< dt pll_kd (scaled by lambda^3) */
+  float accel_per_A;      /**< pll_accel_per_A */
   /* state */
   float est_hold_s;       /**< the error is held at 0 while > 0 (after an extractor switch) */
   float accel_dist;       /**< estimated disturbance acceleration (el. rad/s^2) */
@@ -91,7 +95,7 @@ static inline void fw_obs_set_iq(fw_obs_t *o, float i_q_A) { o->i_q_ff_A = i_q_A
  * *adapt_r: |filtered error| / sogi_adapt_err_rad clamped to [0, 1], the
  * adaptation signal for the SOGI.
  */
-float fw_obs_update(fw_obs_t *o, const fw_config_t *cfg, const fw_obs_in_t *in, float *adapt_r);
+float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r);
 
 /** Loss of lock: HF amplitude below hf_min_A * inj_scale, or (running) the
  *  filtered error above pll_err_max_rad for longer than pll_err_time_s. */
