@@ -35,6 +35,8 @@ void fw_bemf_reset(fw_bemf_t *b) {
   b->t_full_s = 0.0f;
   b->e_d_f = b->e_q_f = 0.0f;
   b->err_rad = 0.0f;
+  b->err_fresh = 1u;
+  b->w_neg = 0u;
   b->i_prev_A[0] = b->i_prev_A[1] = 0.0f;
 }
 
@@ -48,6 +50,17 @@ void fw_bemf_catch(fw_bemf_t *b, float w0, const float i_dq_A[2]) {
   b->i_prev_A[1] = i_dq_A[1];
 }
 
+/** Angle error of the filtered back-EMF (0 below half the switch-off level). */
+static float angle(const fw_bemf_t *b) {
+  const float e2 = b->e_d_f * b->e_d_f + b->e_q_f * b->e_q_f;
+  const float e_min = 0.5f * b->w_off * b->psi_f_Wb;
+  if (e2 < e_min * e_min) {
+    return 0.0f;
+  }
+  const float ang = atan2f(-b->e_d_f, b->e_q_f);
+  return b->w_neg ? fw_wrap_pi_f32(ang + FW_PI_F32) : ang;
+}
+
 void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat) {
   float e[2];
   fw_bemf_residual(u_dq_V, i_dq_A, b->i_prev_A, b->inv_dt, w_hat, b->R_ohm, b->L_d_H,
@@ -55,22 +68,21 @@ void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], 
   if (!b->active && fabsf(w_hat) < 0.5f * b->w_off) {
     b->e_d_f = b->e_q_f = 0.0f; /* far below the handover: nothing to observe */
     b->err_rad = 0.0f;
+    b->err_fresh = 1u;
     return;
   }
   b->e_d_f += b->a_f * (e[0] - b->e_d_f);
   b->e_q_f += b->a_f * (e[1] - b->e_q_f);
-  /* the angle error for this period (used by the PLL and the snapshot) */
-  float e2 = b->e_d_f * b->e_d_f + b->e_q_f * b->e_q_f;
-  float e_min = 0.5f * b->w_off * b->psi_f_Wb;
-  if (e2 < e_min * e_min) {
-    b->err_rad = 0.0f;
-  } else {
-    float ang = atan2f(-b->e_d_f, b->e_q_f);
-    b->err_rad = w_hat < 0.0f ? fw_wrap_pi_f32(ang + FW_PI_F32) : ang;
+  b->w_neg = (uint8_t)(w_hat < 0.0f);
+  /* the angle error for this period: now when the PLL uses it (next period),
+   * else on demand (fw_bemf_error; fw_bemf_schedule when it hands over) */
+  b->err_fresh = b->active;
+  if (b->active) {
+    b->err_rad = angle(b);
   }
 }
 
-float fw_bemf_error(const fw_bemf_t *b) { return b->err_rad; }
+float fw_bemf_error(const fw_bemf_t *b) { return b->err_fresh ? b->err_rad : angle(b); }
 
 void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled) {
   const float w = fabsf(w_hat);
@@ -85,6 +97,8 @@ void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled) {
     b->t_cond_s += b->dt_s;
     if (b->t_cond_s >= BEMF_HOLD_S) {
       b->active = 1u; /* both estimates valid here: switch the PLL, then reduce injection */
+      b->err_rad = angle(b); /* the PLL reads it next period */
+      b->err_fresh = 1u;
       b->going_up = 1u;
       b->t_cond_s = 0.0f;
     }

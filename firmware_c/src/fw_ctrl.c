@@ -671,7 +671,6 @@ static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_ou
   snap->inj_scale = c->bemf.inj_scale;
   snap->bemf_active = c->bemf.active;
   snap->flying_start = c->start.flying;
-  snap->bemf_err_rad = fw_bemf_error(&c->bemf);
 }
 
 void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
@@ -769,6 +768,7 @@ void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
   snap->pos_hat_mech_rad = pos_e / cfg->pole_pairs;
   snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, ctrl->obs.pll.w_i_radps);
   snap->sogi_k_eff = fw_inj_k(&ctrl->inj);
+  snap->bemf_err_rad = fw_bemf_error(&ctrl->bemf); /* an atan2f: on demand */
   snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
   snap->force_hat_N = fw_units_force_per_A(cfg) * snap->i_dq_A[1];
   snap->torque_hat_Nm = 1.5f * cfg->pole_pairs * cfg->psi_f_Wb * snap->i_dq_A[1];

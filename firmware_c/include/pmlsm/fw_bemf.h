@@ -38,7 +38,10 @@ typedef struct {
   float inj_share;      /**< injection scale while on back-EMF */
   float i_prev_A[2];
   float e_d_f, e_q_f;   /**< filtered back-EMF in the estimated frame, V */
-  float err_rad;        /**< angle error from the last update */
+  float err_rad;        /**< angle error from the last update, when err_fresh */
+  uint8_t err_fresh;    /**< err_rad is computed (always while active; otherwise
+                         *   fw_bemf_error computes it on demand from the filters) */
+  uint8_t w_neg;        /**< speed estimate negative at the last update */
   float inv_dt;
   uint8_t active;       /**< PLL driven by the back-EMF error */
   uint8_t going_up;     /**< injection ramping down (1) or up (0) */
@@ -71,7 +74,9 @@ void fw_bemf_reset(fw_bemf_t *b);
 /** Filter the back-EMF from the applied voltage and the fundamental current. */
 void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat);
 /** Angle error dtheta seen by the back-EMF at the last update (rad, [-pi, pi)); 0 when
- *  |E| is too small or the speed far below the handover (not observed there). */
+ *  |E| is too small or the speed far below the handover (not observed there).
+ *  Computed in the update only while the PLL tracks it (active); otherwise here,
+ *  on demand (an atan2f the control step does not need). */
 float fw_bemf_error(const fw_bemf_t *b);
 /** Flying start: the PLL is set on a moving mover at speed w0 (el. rad/s):
  *  the observer starts locked at |E| = |w0| psi_f, injection ramps down. */

@@ -285,7 +285,8 @@ typedef struct {
   float L_small_meas_H;     /**< smaller inductance measured at start-up */
   float L_large_meas_H;     /**< larger inductance measured at start-up */
   /* back-EMF observer (fw_bemf.h) */
-  float bemf_err_rad;       /**< angle error seen by the back-EMF */
+  float bemf_err_rad;       /**< angle error seen by the back-EMF (its observer's present
+                             *   value, computed by fw_get_snapshot) */
   float inj_scale;          /**< injection amplitude in use, share of u_inj_V */
   uint8_t bemf_active;      /**< 1: the PLL tracks the back-EMF, 0: the HF response */
   uint8_t flying_start;     /**< 1: closed loop was entered on a moving mover */
