@@ -382,8 +382,10 @@ static void outputs_off(fw_outputs_t *out) {
   out->pwm_enable = 0u;
 }
 
-/** Raw signals of this step into the snapshot; unit conversions and the
- *  statusword are derived on demand in fw_get_snapshot (off the hot path). */
+/** Raw signals of this step into the snapshot; unit conversions, the
+ *  statusword and the estimator's states (angle, speeds, error, disturbance:
+ *  only fw_step and the commands that restart the estimator change them) are
+ *  read in fw_get_snapshot (off the hot path). */
 static void fill_snapshot_common(fw_ctrl_t *c, const fw_inputs_t *in, fw_vec2_f32_t i_ab,
                                  const fw_outputs_t *out) {
   fw_snapshot_t *s = &c->snap;
@@ -391,11 +393,6 @@ static void fill_snapshot_common(fw_ctrl_t *c, const fw_inputs_t *in, fw_vec2_f3
   s->cia402_state = (uint8_t)c->sm.state;
   s->start_phase = (uint8_t)c->phase;
   s->fault_code = (uint16_t)c->fault.code;
-  s->theta_hat_rad = c->theta_k;
-  s->omega_hat_radps = c->obs.pll.w_i_radps;
-  s->omega_f_radps = c->obs.omega_f;
-  s->pll_err_f_rad = c->obs.err_f;
-  s->accel_dist_radps2 = c->obs.accel_dist;
   s->i_ab_A[0] = i_ab.x;
   s->i_ab_A[1] = i_ab.y;
   s->u_dc_V = in->u_dc_V;
@@ -759,6 +756,11 @@ void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
   }
   const fw_config_t *cfg = &ctrl->cfg;
   *snap = ctrl->snap;
+  snap->theta_hat_rad = ctrl->theta_k;
+  snap->omega_hat_radps = ctrl->obs.pll.w_i_radps;
+  snap->omega_f_radps = ctrl->obs.omega_f;
+  snap->pll_err_f_rad = ctrl->obs.err_f;
+  snap->accel_dist_radps2 = ctrl->obs.accel_dist;
   snap->extractor = (uint8_t)cfg->extractor;
   snap->mode = (uint8_t)ctrl->mode;
   snap->polarity_flipped = ctrl->polarity_flipped;
