@@ -62,15 +62,17 @@ static float angle(const fw_bemf_t *b) {
 }
 
 void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat) {
-  float e[2];
-  fw_bemf_residual(u_dq_V, i_dq_A, b->i_prev_A, b->inv_dt, w_hat, b->R_ohm, b->L_d_H,
-                   b->L_q_H, e);
   if (!b->active && fabsf(w_hat) < 0.5f * b->w_off) {
     b->e_d_f = b->e_q_f = 0.0f; /* far below the handover: nothing to observe */
     b->err_rad = 0.0f;
     b->err_fresh = 1u;
+    b->i_prev_A[0] = i_dq_A[0]; /* the residual's L di/dt needs only the last current */
+    b->i_prev_A[1] = i_dq_A[1];
     return;
   }
+  float e[2];
+  fw_bemf_residual(u_dq_V, i_dq_A, b->i_prev_A, b->inv_dt, w_hat, b->R_ohm, b->L_d_H,
+                   b->L_q_H, e);
   b->e_d_f += b->a_f * (e[0] - b->e_d_f);
   b->e_q_f += b->a_f * (e[1] - b->e_q_f);
   b->w_neg = (uint8_t)(w_hat < 0.0f);

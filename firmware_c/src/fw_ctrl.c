@@ -367,7 +367,7 @@ static fw_fault_t protect(fw_ctrl_t *c, fw_vec2_f32_t i_dq, bool quick_stop) {
   pi.omega_hat_radps = c->obs.pll.w_i_radps;
   pi.omega_f_radps = c->obs.omega_f;
   /* the position (a division) only when the limits are on */
-  pi.pos_m = cfg->pos_limit_min_m < cfg->pos_limit_max_m ? pos_hat_m(c) : 0.0f;
+  pi.pos_m = c->prot.pos_on ? pos_hat_m(c) : 0.0f;
   pi.cmd = c->mode == FW_MODE_SPEED ? c->speed_ref_radps_e : c->i_q_ref_force_A;
   pi.speed_ref_radps_e = c->speed_ref_radps_e;
   pi.speed_mode = (uint8_t)(c->mode == FW_MODE_SPEED);
