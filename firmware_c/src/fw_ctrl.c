@@ -383,9 +383,10 @@ static void outputs_off(fw_outputs_t *out) {
 }
 
 /** Raw signals of this step into the snapshot; unit conversions, the
- *  statusword and the estimator's states (angle, speeds, error, disturbance:
- *  only fw_step and the commands that restart the estimator change them) are
- *  read in fw_get_snapshot (off the hot path). */
+ *  statusword and the blocks' states (the estimator's angle, speeds, error and
+ *  disturbance, the monitor's outputs, the injection scale and the back-EMF
+ *  flags: only fw_step and the commands that restart the blocks change them)
+ *  are read in fw_get_snapshot (off the hot path). */
 static void fill_snapshot_common(fw_ctrl_t *c, const fw_inputs_t *in, fw_vec2_f32_t i_ab,
                                  const fw_outputs_t *out) {
   fw_snapshot_t *s = &c->snap;
@@ -467,7 +468,6 @@ static void stage_off(fw_ctrl_t *c, const fw_inputs_t *safe, fw_mon_in_t *mi) {
     latch_fault(c, mf);
   }
   fw_obs_set_iq(&c->obs, 0.0f);
-  c->snap.mon_i_sum_A = c->mon.isum_f;
   memset(c->snap.i_dq_A, 0, sizeof(c->snap.i_dq_A));
   memset(c->snap.u_dq_V, 0, sizeof(c->snap.u_dq_V));
   c->snap.u_inj_V = 0.0f;
@@ -596,7 +596,6 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
  *  switches the power stage off now (braking faults go on braking). */
 static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_mon_in_t *mi,
                           fw_period_t *p) {
-  fw_snapshot_t *const snap = &c->snap; /* one base address for the stores */
   const bool running = c->phase == FW_START_RUN;
   const bool scale_full = c->bemf.inj_scale >= 1.0f;
   const bool scale_steady = scale_full || c->bemf.inj_scale <= c->bemf.inj_share;
@@ -623,10 +622,6 @@ static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_mon_in_t *mi
   if (mf == FW_FAULT_NONE && running) {
     mf = protect(c, p->i_dq, p->quick_stop);
   }
-  snap->mon_angle_hf_rad = c->mon.angle_hf_rad;
-  snap->mon_angle_bemf_rad = c->mon.angle_bemf_rad;
-  snap->mon_e_bemf_V = c->mon.e_bemf_V;
-  snap->mon_i_sum_A = c->mon.isum_f;
   if (mf != FW_FAULT_NONE) {
     latch_fault(c, mf);
     if (c->fault.hard) {
@@ -665,9 +660,6 @@ static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_ou
   snap->u_dq_V[0] = u_dq.x;
   snap->u_dq_V[1] = u_dq.y;
   snap->u_inj_V = s * u_inj;
-  snap->inj_scale = c->bemf.inj_scale;
-  snap->bemf_active = c->bemf.active;
-  snap->flying_start = c->start.flying;
 }
 
 void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
@@ -761,6 +753,13 @@ void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
   snap->omega_f_radps = ctrl->obs.omega_f;
   snap->pll_err_f_rad = ctrl->obs.err_f;
   snap->accel_dist_radps2 = ctrl->obs.accel_dist;
+  snap->mon_angle_hf_rad = ctrl->mon.angle_hf_rad; /* the monitor's outputs change */
+  snap->mon_angle_bemf_rad = ctrl->mon.angle_bemf_rad; /* once per block */
+  snap->mon_e_bemf_V = ctrl->mon.e_bemf_V;
+  snap->mon_i_sum_A = ctrl->mon.isum_f;
+  snap->inj_scale = ctrl->bemf.inj_scale;
+  snap->bemf_active = ctrl->bemf.active;
+  snap->flying_start = ctrl->start.flying;
   snap->extractor = (uint8_t)cfg->extractor;
   snap->mode = (uint8_t)ctrl->mode;
   snap->polarity_flipped = ctrl->polarity_flipped;
