@@ -18,6 +18,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -72,7 +73,6 @@ class WireProbe(Probe):
         self.clock = conn.drive.clock
         self.logger = logger
         self.wait_s = wait_s
-        self.id_ref_A = 0.0
 
     # ---- telemetry windows ----------------------------------------------------------
     def _t_last(self) -> float:
@@ -173,16 +173,13 @@ class IdentifyOutput:
     interrupted: bool = False
 
 
-def _cfg_view(drive: Any) -> Any:
-    """The drive's configuration fields the procedure needs, read by SDO."""
-    class C:
-        pass
-
-    c = C()
-    for name in ("i_max_A", "f_pwm_Hz", "u_inj_V", "L_d_H", "L_q_H", "spd_bw_radps",
-                 "spd_kp_A_per_radps", "spd_ki_A_per_rad", "pole_pitch_m"):
-        setattr(c, name, float(drive.get(name)[0]))
-    return c
+def _cfg_view(drive: Any) -> SimpleNamespace:
+    """The drive's configuration fields the procedure needs, read by SDO (the
+    identification overrides do not touch them)."""
+    return SimpleNamespace(**{
+        name: float(drive.get(name)[0])
+        for name in ("i_max_A", "f_pwm_Hz", "u_inj_V", "L_d_H", "L_q_H", "spd_bw_radps",
+                     "spd_kp_A_per_radps", "spd_ki_A_per_rad", "pole_pitch_m")})
 
 
 def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
@@ -224,10 +221,9 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
         # the bias sweep reads the raw HF response (E_d = T_s u_inj / L_dd): the
         # pseudo-filter extraction, whatever the drive normally uses
         drive.set("extractor", float(extractor_id("pseudo")))
-        restore = {k: float(drive.get(k)[0]) for k in IDENT_RESTORED}
+        restore = {k: float(backup["parameters"][k]["value"]) for k in IDENT_RESTORED}
         for k, v in ident_overrides(cfg0).items():
             drive.set(k, float(v))
-        cfg0 = _cfg_view(drive)
         probe = WireProbe(conn, logger)
         probe.run(0.02)  # telemetry flowing
         res = run_identification(probe, cfg0, cfg0.pole_pitch_m, travel_m, n_starts,

@@ -115,6 +115,9 @@ class Probe:
     ``bench._identify.WireProbe`` a drive over CANopen and the serial telemetry link
     (hardware or the simulated drive) with the same procedure."""
 
+    #: the d-axis current reference last ramped to (A); a start resets it to 0
+    id_ref_A: float = 0.0
+
     def standstill_start(self, k: int) -> tuple[float, float]:
         """Start ``k`` at standstill (FORCE mode, no thrust) to closed loop; the smaller
         and larger inductance its saliency check measured (H). Drive off afterwards."""
@@ -385,12 +388,12 @@ def run_identification(probe: Probe, cfg0: Any, tau_m: float, travel_m: float = 
 def _ramp_id(probe: Probe, target_A: float, seconds: float = 0.03) -> None:
     """Move the d-axis current reference in 1 ms steps: a current step of several
     amperes within one injection period would swamp the HF response."""
-    start = getattr(probe, "id_ref_A", 0.0)
+    start = probe.id_ref_A
     n = max(1, int(round(seconds / 0.001)))
     for k in range(1, n + 1):
         probe.set_id(start + (target_A - start) * k / n)
         probe.run(0.001)
-    probe.id_ref_A = target_A  # type: ignore[attr-defined]
+    probe.id_ref_A = target_A
 
 
 def _gauss_kernels(dt: float, sigma_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
