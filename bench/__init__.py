@@ -91,7 +91,7 @@ _EXPORTS: dict[str, str] = {
     "Connection": "bench._session", "NoHardware": "bench._session",
     "connect": "bench._session", "open_sim": "bench._session",
     "run_sequence": "bench._session",
-    "LayoutMismatch": "bench._simdrive", "SimDrive": "bench._simdrive",
+    "SimDrive": "bench._simdrive",
     "SimLoad": "bench._simdrive",
     "MotorUnits": "bench._units",
     "METRIC_NAMES": "sim_fallback.metrics", "compute_metrics": "sim_fallback.metrics",

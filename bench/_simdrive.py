@@ -4,12 +4,15 @@
 
 * the plant and the batch loop of ``sim_fallback`` (``sim_t``, truth), and
 * the drive application of ``firmware_c/comm`` (``fw_app_t``: the firmware
-  core + the C CANopen slave + the serial link), attached to the loop as its
-  controller, so the firmware that runs is the firmware that ships.
+  core + the C CANopen slave + the serial link) behind the simulator's port
+  (``sim_port.c``): its control interrupt on the loop's ADC counts, its
+  background loop between the control periods, through the same board glue
+  (``fw_board.c``) as the MCU image, so the firmware that runs is the
+  firmware that ships, shaped as it runs there.
 
 It is a :class:`protocols.sim_bridge.DriveBridge` (library loading, the
-configuration copied into the application's own ``fw_config_t`` by field
-name, the controller port, the boot-up message) extended for the bench: a
+configuration taken over by field name, the controller port, the boot-up
+message) extended for the bench: a
 background thread steps it in chunks (default 1 ms of simulated time, one C
 call each); between chunks it forwards CAN frames between the virtual bus and
 the C slave, produces SYNC (it is the bus's SYNC producer, period = one
@@ -60,10 +63,6 @@ SIM_CHANNELS: dict[str, str] = {
     "hf_amp_A": "A", "sogi_k_eff": "", "i_dq_hat_A": "A", "speed_ref_radps_e": "rad/s",
     "cia402_state": "", "start_phase": "", "fault_code": "",
 }
-
-
-class LayoutMismatch(RuntimeError):
-    """The simulator library and the drive application were built from different headers."""
 
 
 class SimSerial:
@@ -157,8 +156,9 @@ class SimDrive(DriveBridge):
                  record_decimation: int = 1,
                  sink: Callable[[np.ndarray, dict[str, np.ndarray], dict[str, str]], None]
                  | None = None, noise: float = 1.0,
-                 plant: dict[str, Any] | None = None) -> None:
-        from sim_fallback import lib_path, load_motor
+                 plant: dict[str, Any] | None = None, nvm_path: Any = None,
+                 background_every: int = 1) -> None:
+        from sim_fallback import load_motor
 
         #: plant overrides: the motor actually simulated, when it is not the configured one
         self.plant_overrides = dict(plant or {})
@@ -193,22 +193,12 @@ class SimDrive(DriveBridge):
                              realtime=0.0, sim_kwargs={"motor": mot, "extractor": extractor,
                                                        "seed": seed, "noise": noise,
                                                        "x0_m": x0_m,
-                                                       "plant": plant or None})
+                                                       "plant": plant or None},
+                             background_every=background_every, nvm_path=nvm_path)
         except BaseException:
             bus.shutdown()
             raise
         assert self.sim is not None
-        self._L.fw_ctrl_sizeof.restype = C.c_size_t
-        n_sim, n_app = int(self.sim._L.fw_ctrl_sizeof()), int(self._L.fw_ctrl_sizeof())
-        if n_sim != n_app:
-            path = lib_path()
-            super().close()
-            bus.shutdown()
-            raise LayoutMismatch(
-                f"sizeof(fw_ctrl_t) is {n_sim} in the simulator library ({path}) but {n_app} "
-                "in the drive application built by protocols/_clib: they were compiled from "
-                "different firmware headers. Rebuild the simulator library (cmake --build "
-                "build/<dir> --target pmlsm_sim, or set PMLSM_SIM_LIB).")
         self.node_id = node_id
         self.motor = self.sim.motor
         self.dt_s = self.sim.dt_s
@@ -313,7 +303,7 @@ class SimDrive(DriveBridge):
             f.dlc = min(msg.dlc, 8)
             f.rtr = 1 if msg.is_remote_frame else 0
             C.memmove(f.data, bytes(msg.data).ljust(8, b"\0"), 8)
-            if not self._L.fw_app_can_rx(self._app, C.byref(f)):
+            if not self._can_rx(f):
                 self.rx_dropped += 1
             n += 1
         self.frames_from_bus += n
@@ -323,13 +313,13 @@ class SimDrive(DriveBridge):
         """Frames from the C slave to the bus, stamped with the simulated time."""
         f = FwCanFrame()
         ts = self.epoch + self._t
-        while self._L.fw_app_can_tx_pop(self._app, C.byref(f)):
+        while self._can_pop(f):
             self.bus.send(can.Message(arbitration_id=f.id, data=bytes(f.data[: f.dlc]),
                                       is_extended_id=False, is_remote_frame=bool(f.rtr),
                                       timestamp=ts))
             self.frames_to_bus += 1
             self.sent_by_id[f.id] = self.sent_by_id.get(f.id, 0) + 1
-        n = self._L.fw_app_uart_read(self._app, self._uart_buf, len(self._uart_buf))
+        n = self._uart_read(self._uart_buf, len(self._uart_buf))
         if n:
             self.serial.feed(self._uart_buf.raw[:n])
 
@@ -359,7 +349,7 @@ class SimDrive(DriveBridge):
         assert self.sim is not None
         self._flush_rx(None if self.paced else 1)
         self._apply_pending()
-        self._L.fw_app_can_rx(self._app, C.byref(self._sync))  # we are the SYNC producer
+        self._can_rx(self._sync)  # we are the SYNC producer
         self.bus.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False,
                                   timestamp=self.epoch + self._t))
         self.syncs_sent += 1

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import ctypes as C
 import json
 import logging
 import os
@@ -184,37 +183,6 @@ def check_running(folder: Path | None = None) -> ServerState:
 
 
 # ---- the server process --------------------------------------------------------------
-
-
-class _FwAppNvm(C.Structure):
-    """Mirror of ``fw_app_nvm_t``."""
-
-    _fields_ = [("port", C.c_void_p), ("read", C.c_void_p), ("write", C.c_void_p)]
-
-
-def attach_nvm(sim: Any, path: Path) -> int:
-    """Give the simulated drive its non-volatile memory (a file) and boot from it.
-
-    Must run before the drive's first control step. Returns the
-    ``fw_app_nvm_state_t`` of the boot (:data:`NVM_STATES`).
-    """
-    simlib, app = sim.sim._L, sim._L
-    try:
-        simlib.sim_nvm_port_sizeof.restype = C.c_size_t
-        simlib.sim_nvm_port_init.argtypes = [C.c_void_p, C.c_char_p]
-        app.fw_app_attach_nvm.argtypes = [C.c_void_p, C.POINTER(_FwAppNvm)]
-        app.fw_app_attach_nvm.restype = C.c_int
-        read_fn, write_fn = simlib.fw_port_nvm_read, simlib.fw_port_nvm_write
-    except AttributeError as e:  # libraries built before the NVM existed
-        raise RuntimeError(f"the simulator libraries have no non-volatile memory ({e}); "
-                           "rebuild them (cmake --build build/<dir>)") from None
-    port = C.create_string_buffer(int(simlib.sim_nvm_port_sizeof()))
-    if simlib.sim_nvm_port_init(port, os.fsencode(path)) != 0:
-        raise RuntimeError(f"NVM file path too long: {path}")
-    nvm = _FwAppNvm(C.cast(port, C.c_void_p),
-                    C.cast(read_fn, C.c_void_p), C.cast(write_fn, C.c_void_p))
-    sim._nvm_port = port  # the C side keeps a pointer to it
-    return int(app.fw_app_attach_nvm(sim._app, C.byref(nvm)))
 
 
 def frame_text(msg: Any) -> bytes:
@@ -431,13 +399,13 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
     vchan = f"pmlsm-simserver-{os.getpid()}-vcan"  # no trailing digits (BLF channel names)
+    nvm.parent.mkdir(parents=True, exist_ok=True)
     sim = SimDrive(vchan, motor=motor, extractor=extractor, seed=seed, node_id=node_id,
-                   realtime=True)
+                   realtime=True, nvm_path=nvm)  # boots from the file
     server = None
     bus = None
     try:
-        nvm.parent.mkdir(parents=True, exist_ok=True)
-        nvm_state = NVM_STATES.get(attach_nvm(sim, nvm), "unknown")
+        nvm_state = NVM_STATES.get(sim.nvm_state(), "unknown")
         log.warning("simulated drive: motor %s, extractor %s, seed %d, node %d; NVM %s: %s",
                     sim.motor.name, extractor, seed, node_id, nvm, nvm_state)
         bus = can.Bus(interface="virtual", channel=vchan, receive_own_messages=False)

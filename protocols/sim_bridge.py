@@ -1,12 +1,23 @@
 """Bridge a python-can bus to the drive application (fw_app) running in C.
 
 The drive application (control core + CANopen node + serial link,
-``firmware_c/comm``) is compiled into a shared library and stepped either
-in closed loop with the simulated plant of ``sim_fallback`` (when that
-library is available) or against a null plant (zero currents, constant
-DC link; enough for NMT/SDO/PDO/heartbeat/EMCY). CAN frames are forwarded
-both ways once per chunk of control periods; the simulation is paced to
-wall-clock time by default so that CANopen timeouts keep their meaning.
+``firmware_c/comm``) runs either in closed loop with the simulated plant of
+``sim_fallback`` (when that library is available) or against a null plant
+(zero currents, constant DC link; enough for NMT/SDO/PDO/heartbeat/EMCY).
+
+With the plant it runs as on the MCU: the simulator library holds the whole
+drive behind its own implementation of the port (``sim_fallback/src/
+sim_port.c``, ``sim_app_*``): the batch loop's ADC counts go through the
+board glue's control interrupt (``fw_board_control_isr``: the firmware's one
+ADC conversion, the step, the duties) and the background loop
+(``fw_board_background``: CANopen, OD, EMCY, telemetry) runs every
+``background_every`` control periods in between; the frames and UART bytes
+it sends through the port are collected here. The null plant steps the
+application library's ``fw_app_step`` (both halves in one call).
+
+CAN frames are forwarded both ways once per chunk of control periods; the
+simulation is paced to wall-clock time by default so that CANopen timeouts
+keep their meaning.
 
 Example::
 
@@ -20,6 +31,7 @@ from __future__ import annotations
 
 import ctypes as C
 import logging
+import os
 import threading
 import time
 from collections.abc import Sequence
@@ -73,6 +85,9 @@ class FwConfigIssue(C.Structure):
 
 
 def _declare(lib: C.CDLL) -> None:
+    """The functions the bridge calls. ``lib`` is a handle of its own: ctypes keeps
+    argument types per handle, so these never change another module's declarations
+    of the same library (sim_fallback declares the simulator library its own way)."""
     V = C.c_void_p
     lib.fw_app_sizeof.restype = C.c_size_t
     lib.fw_app_init.argtypes = [V, V, C.c_uint8]
@@ -89,6 +104,24 @@ def _declare(lib: C.CDLL) -> None:
     lib.fw_config_field_find.restype = C.POINTER(FwConfigField)
     lib.fw_config_check.argtypes = [V, C.POINTER(FwConfigIssue)]
     lib.fw_config_check.restype = C.c_int
+    if hasattr(lib, "sim_app_new"):  # the simulator library: the drive behind sim_port.c
+        lib.sim_app_new.argtypes = [V, C.c_uint8, C.c_char_p, C.POINTER(C.c_int)]
+        lib.sim_app_new.restype = V
+        lib.sim_app_free.argtypes = [V]
+        lib.sim_app_controller.argtypes = [V, C.c_uint32, V]
+        lib.sim_app_can_rx.argtypes = [V, C.POINTER(FwCanFrame)]
+        lib.sim_app_can_rx.restype = C.c_bool
+        lib.sim_app_can_pop.argtypes = [V, C.POINTER(FwCanFrame)]
+        lib.sim_app_can_pop.restype = C.c_bool
+        lib.sim_app_uart_read.argtypes = [V, C.c_char_p, C.c_size_t]
+        lib.sim_app_uart_read.restype = C.c_size_t
+        lib.sim_app_background_now.argtypes = [V]
+        lib.sim_app_fw_app.argtypes = [V]
+        lib.sim_app_fw_app.restype = V
+        lib.sim_app_nvm_state.argtypes = [V]
+        lib.sim_app_nvm_state.restype = C.c_int
+        lib.sim_app_crit_unbalanced.argtypes = [V]
+        lib.sim_app_crit_unbalanced.restype = C.c_uint32
 
 
 class DriveBridge:
@@ -109,19 +142,23 @@ class DriveBridge:
         Wall-clock pacing factor for :meth:`start` (1.0 = real time, 0 = as fast as possible).
     sim_kwargs : dict
         Passed to ``sim_fallback.Sim`` (motor, seed, noise, x0_m, ...).
+    background_every : int
+        With the plant: control periods per pass of the drive's background loop.
+    nvm_path : str or Path, optional
+        With the plant: the drive's non-volatile memory (a file; booted from at
+        construction). None: a drive without storage.
     """
 
     def __init__(self, bus: can.BusABC, node_id: int = 5, plant: str = "auto",
                  chunk_steps: int = 24, realtime: float = 1.0,
-                 sim_kwargs: dict[str, Any] | None = None) -> None:
+                 sim_kwargs: dict[str, Any] | None = None, background_every: int = 1,
+                 nvm_path: Any = None) -> None:
         self.bus = bus
         self.node_id = node_id
         self.chunk_steps = chunk_steps
         self.realtime = realtime
-        self._L = _clib.load_app()
-        _declare(self._L)
-        self._app = C.create_string_buffer(self._L.fw_app_sizeof())
         self.sim = None
+        self._drive = None  # sim_app_t * (with the plant)
         if plant in ("auto", "sim"):
             try:
                 from sim_fallback import _lib as simlib
@@ -132,27 +169,38 @@ class DriveBridge:
                 if plant == "sim":
                     raise
                 self.sim = None
+        # with the plant, the simulator library holds the drive application too
+        self._L = (C.CDLL(self.sim._L._name) if self.sim is not None  # own handle: _declare
+                   else _clib.load_app())
+        _declare(self._L)
         # Our own fw_config_t (this library's layout), defaults first, then the
         # simulated motor's values copied field by field by name, so that the
         # two libraries never have to agree on the struct layout.
         self._cfg = C.create_string_buffer(4096)
         self._L.fw_config_default(self._cfg)
-        if self.sim is not None:
-            self._copy_config(self.sim.cfg)
-        rc = self._L.fw_app_init(self._app, self._cfg, node_id)
-        if rc != 0:
-            raise RuntimeError(f"fw_app_init returned fw_status_t {rc} (configuration refused)")
         self.f_pwm_Hz = 24000.0
         if self.sim is not None:
+            self._copy_config(self.sim.cfg)
+            st = C.c_int(0)
+            path = os.fsencode(str(nvm_path)) if nvm_path else None
+            self._drive = self._L.sim_app_new(self._cfg, node_id, path, C.byref(st))
+            if not self._drive:
+                self.sim.close()
+                raise RuntimeError(f"fw_app_init returned fw_status_t {st.value} "
+                                   "(configuration refused)")
             self.f_pwm_Hz = 1.0 / self.sim.dt_s
             port = simlib.SimController()
-            port.ctx = C.cast(self._app, C.c_void_p)
-            port.step = C.cast(self._L.fw_app_step, C.c_void_p)
-            port.step_adc = None
-            port.snapshot = C.cast(self._L.fw_app_snapshot, C.c_void_p)
-            port.set_ref = None
+            self._L.sim_app_controller(self._drive, max(1, int(background_every)),
+                                       C.addressof(port))
             self._port = port
             self.sim._L.sim_set_controller(self.sim._h, C.byref(port))
+            self._L.sim_app_background_now(self._drive)  # the boot-up message
+        else:
+            self._app = C.create_string_buffer(self._L.fw_app_sizeof())
+            rc = self._L.fw_app_init(self._app, self._cfg, node_id)
+            if rc != 0:
+                raise RuntimeError(f"fw_app_init returned fw_status_t {rc} "
+                                   "(configuration refused)")
         self._in = FwInputs()
         self._in.u_dc_V = 300.0
         self._out = FwOutputs()
@@ -194,6 +242,35 @@ class DriveBridge:
                         issue.field.decode(), issue.value, issue.min, issue.max)
             self._cfg[off:off + 4] = dflt.raw[off:off + 4]
 
+    # ---- the drive's CAN and UART ----------------------------------------
+    def _can_rx(self, f: FwCanFrame) -> bool:
+        """A frame into the drive's receive queue (its CAN RX interrupt)."""
+        if self._drive is not None:
+            return bool(self._L.sim_app_can_rx(self._drive, C.byref(f)))
+        return bool(self._L.fw_app_can_rx(self._app, C.byref(f)))
+
+    def _can_pop(self, f: FwCanFrame) -> bool:
+        """The next frame the drive sent, into f; False when none."""
+        if self._drive is not None:
+            return bool(self._L.sim_app_can_pop(self._drive, C.byref(f)))
+        return bool(self._L.fw_app_can_tx_pop(self._app, C.byref(f)))
+
+    def _uart_read(self, buf: Any, cap: int) -> int:
+        """Bytes the drive wrote to its UART, into buf."""
+        if self._drive is not None:
+            return int(self._L.sim_app_uart_read(self._drive, buf, cap))
+        return int(self._L.fw_app_uart_read(self._app, buf, cap))
+
+    def _app_ptr(self) -> int:
+        """Address of the drive's ``fw_app_t`` (for tests that read its object dictionary)."""
+        if self._drive is not None:
+            return int(self._L.sim_app_fw_app(self._drive))
+        return C.addressof(self._app)
+
+    def nvm_state(self) -> int:
+        """``fw_app_nvm_state_t`` of the drive's boot (0: no storage)."""
+        return int(self._L.sim_app_nvm_state(self._drive)) if self._drive is not None else 0
+
     # ---- stepping --------------------------------------------------------
     def _flush_rx(self) -> None:
         while True:
@@ -208,16 +285,16 @@ class DriveBridge:
             f.rtr = 1 if msg.is_remote_frame else 0
             for i, b in enumerate(bytes(msg.data)[:8]):
                 f.data[i] = b
-            self._L.fw_app_can_rx(self._app, C.byref(f))
+            self._can_rx(f)
 
     def _flush_tx(self) -> None:
         f = FwCanFrame()
-        while self._L.fw_app_can_tx_pop(self._app, C.byref(f)):
+        while self._can_pop(f):
             msg = can.Message(arbitration_id=f.id, is_extended_id=False,
                               data=bytes(f.data[: f.dlc]), is_remote_frame=bool(f.rtr))
             self.bus.send(msg)
         buf = C.create_string_buffer(4096)
-        n = self._L.fw_app_uart_read(self._app, buf, 4096)
+        n = self._uart_read(buf, 4096)
         if n:
             self.uart += buf.raw[:n]
 
@@ -299,8 +376,11 @@ class DriveBridge:
     def close(self) -> None:
         self.stop()
         if self.sim is not None:
-            self.sim.close()
+            self.sim.close()  # first: the loop's controller points into the drive
             self.sim = None
+        if self._drive is not None:
+            self._L.sim_app_free(self._drive)
+            self._drive = None
 
     def __enter__(self) -> DriveBridge:
         return self

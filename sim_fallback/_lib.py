@@ -153,7 +153,8 @@ class SimController(C.Structure):
     """Mirror of ``sim_controller_t`` (function pointers kept opaque)."""
 
     _fields_ = [("ctx", C.c_void_p), ("step", C.c_void_p), ("step_adc", C.c_void_p),
-                ("snapshot", C.c_void_p), ("set_ref", C.c_void_p)]
+                ("snapshot", C.c_void_p), ("set_ref", C.c_void_p),
+                ("background", C.c_void_p), ("background_every", C.c_uint32)]
 
 
 _PD = C.POINTER(_d)

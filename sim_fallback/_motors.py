@@ -461,8 +461,15 @@ def plant_params(motor: Motor, **overrides: Any) -> _lib.SimPlantParams:
     return p
 
 
+#: The drive's own sensing chain: ADC resolution and full scales. They are the drive
+#: board's design, which its firmware is built for, so the drive's ADC scaling follows
+#: the simulated board's (a plant override of them is a different board, configured
+#: accordingly); its offsets, gains errors and noise stay unknown to the drive.
+SENSING_SCALE_KEYS = ("adc_bits", "adc_i_fullscale_A", "udc_fullscale_V")
+
+
 def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
-              **overrides: float) -> _lib.FwConfig:
+              sensing: dict[str, float] | None = None, **overrides: float) -> _lib.FwConfig:
     """``fw_config_t`` for a motor: nominal parameters and the paper's gain rules.
 
     Current PI: kp = L_d 1100 V/A, ki = R 1100 V/(A s). Speed PI (rotary files):
@@ -470,7 +477,8 @@ def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
     with 1 r/min = 2 pi p / 60 rad/s; linear files: kp = m w_bw / K_f (A per m/s),
     ki = kp w_bw / 6, converted with v = w_e tau / pi. PLL 86.6 / 5000. ADC
     scaling matches the plant's ADC (the drive knows its nominal scaling, not
-    the offset or gain errors).
+    the offset or gain errors): the motor file's, or ``sensing``
+    (:data:`SENSING_SCALE_KEYS`) when the simulated board differs from it.
     """
     L = _lib.lib()
     cfg = _lib.FwConfig()
@@ -511,10 +519,11 @@ def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
         # (fw_config_derive: current and speed PI, observer incl. its bandwidth)
         cfg.spd_bw_radps = motor.controller["speed_bw_radps"]
         L.fw_config_derive(cfg)
-    full = 2.0 ** pl["adc_bits"]
-    cfg.adc_A_per_count = 2.0 * pl["adc_i_fullscale_A"] / full
+    sens = {k: pl[k] for k in SENSING_SCALE_KEYS} | dict(sensing or {})
+    full = 2.0 ** sens["adc_bits"]
+    cfg.adc_A_per_count = 2.0 * sens["adc_i_fullscale_A"] / full
     cfg.adc_offset_counts = full / 2.0
-    cfg.adc_V_per_count = pl["udc_fullscale_V"] / full
+    cfg.adc_V_per_count = sens["udc_fullscale_V"] / full
     cfg.adc_max_count = int(full - 1)
     cfg.extractor = extractor_id(extractor)
     for k, v in overrides.items():

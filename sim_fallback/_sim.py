@@ -19,7 +19,7 @@ import numpy as np
 
 from . import _lib
 from ._firmware import Firmware, config_error
-from ._motors import Motor, extractor_id, fw_config, load_motor, plant_params
+from ._motors import SENSING_SCALE_KEYS, Motor, extractor_id, fw_config, load_motor, plant_params
 from .metrics import METRIC_DEFS, METRIC_NAMES, TRUTH_CHANNELS, run_metrics, wrap_pi
 
 SIM_REF_SPEED, SIM_REF_FORCE, SIM_REF_LOAD = 0, 1, 2
@@ -123,7 +123,9 @@ class Sim:
         if not self._h:
             raise MemoryError("sim_new failed")
         self.dt_s = 1.0 / self.params.f_pwm_Hz
-        self.cfg = fw_config(self.motor, extractor, **(fw or {}))
+        self.cfg = fw_config(self.motor, extractor,  # the drive knows its own board's ADC
+                             sensing={k: getattr(self.params, k) for k in SENSING_SCALE_KEYS},
+                             **(fw or {}))
         self.firmware = Firmware(self.cfg, strict=strict)
         self._port = _lib.SimController()
         self._L.sim_fw_port(self.firmware.handle, C.byref(self._port))

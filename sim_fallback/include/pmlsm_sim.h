@@ -19,6 +19,7 @@
 #include <stdint.h>
 
 #include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_port.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -93,8 +94,11 @@ typedef struct {
 
 /**
  * Controller port. step() receives physical units after quantisation;
- * step_adc (optional, used instead of step when non-NULL and use_adc_counts
- * is set in sim_t) receives the raw counts. set_ref may be NULL.
+ * step_adc (used instead of step when non-NULL and use_adc_counts is set in
+ * sim_t, or when step is NULL) receives the raw counts. set_ref may be NULL.
+ * background (optional) is the drive's background loop: called before the
+ * control step of every background_every-th period (0 counts as 1), so it
+ * runs at its own rate, interleaved with the control interrupts.
  */
 typedef struct {
   void *ctx;
@@ -102,6 +106,8 @@ typedef struct {
   void (*step_adc)(void *ctx, const fw_adc_inputs_t *in, fw_outputs_t *out);
   void (*snapshot)(const void *ctx, fw_snapshot_t *snap);
   void (*set_ref)(void *ctx, sim_ref_kind_t kind, double value);
+  void (*background)(void *ctx);
+  uint32_t background_every;
 } sim_controller_t;
 
 /**
@@ -216,6 +222,33 @@ void sim_fw_port(fw_ctrl_t *ctrl, sim_controller_t *port);
 /** Heap fw_ctrl_t (zeroed) for bindings; free with sim_fw_free. */
 fw_ctrl_t *sim_fw_new(void);
 void sim_fw_free(fw_ctrl_t *ctrl);
+
+/**
+ * The whole drive (fw_app: core + CANopen + serial) behind the simulator's
+ * port, sim_port.c: the simulated drive the bench talks to. sim_app_new
+ * initialises it with cfg and node_id and boots from nvm_path (NULL or "":
+ * no storage); NULL on a refused configuration (*status: fw_status_t).
+ */
+typedef struct sim_app sim_app_t;
+sim_app_t *sim_app_new(const fw_config_t *cfg, uint8_t node_id, const char *nvm_path,
+                       int *status);
+void sim_app_free(sim_app_t *d);
+/** Fill a sim_controller_t: control interrupt on ADC counts + background loop. */
+void sim_app_controller(sim_app_t *d, uint32_t background_every, sim_controller_t *c);
+/** The CAN receive interrupt (a frame from the bus). False when the queue is full. */
+bool sim_app_can_rx(sim_app_t *d, const fw_can_frame_t *frame);
+/** Next frame the drive sent through its port; false when none. */
+bool sim_app_can_pop(sim_app_t *d, fw_can_frame_t *frame);
+/** Bytes the drive wrote to its UART (at most cap). */
+size_t sim_app_uart_read(sim_app_t *d, uint8_t *buf, size_t cap);
+/** One background pass now (outside the batch loop: after boot, at close). */
+void sim_app_background_now(sim_app_t *d);
+/** The drive's fw_app_t (a void * here: this header does not need fw_app.h), for tests. */
+void *sim_app_fw_app(sim_app_t *d);
+/** fw_app_nvm_state_t of the boot. */
+int sim_app_nvm_state(const sim_app_t *d);
+/** Unbalanced critical sections seen (0 in a correct firmware). */
+uint32_t sim_app_crit_unbalanced(const sim_app_t *d);
 
 /* ---- layout checks for bindings -------------------------------------- */
 

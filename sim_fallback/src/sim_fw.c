@@ -32,7 +32,8 @@ void sim_fw_set_ref(void *ctx, sim_ref_kind_t kind, double value) {
 void sim_fw_port(fw_ctrl_t *ctrl, sim_controller_t *port) {
   memset(port, 0, sizeof *port);
   port->ctx = ctrl;
-  port->step = sim_fw_step;
+  /* raw counts only: the firmware's own ADC conversion and range check
+   * (fw_step_adc), the one the MCU runs; the plant never converts for it */
   port->step_adc = sim_fw_step_adc;
   port->snapshot = sim_fw_snapshot;
   port->set_ref = sim_fw_set_ref;

@@ -59,6 +59,7 @@ struct sim_s {
   /* controller */
   sim_controller_t ctrl;
   int use_adc;
+  uint32_t bg_in; /**< control periods until the controller's next background pass */
   sim_sched_store_t sched[SIM_REF_COUNT];
   /* Expansion points for cheap stage evaluations (see sim_plant.c): exact
    * sin/cos of theta_e and of the cogging angle at x0 (refreshed when x

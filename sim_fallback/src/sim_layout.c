@@ -178,6 +178,8 @@ static const layout_row_t k_rows[] = {
     ROW(sim_controller_t, ctx),
     ROW(sim_controller_t, step),
     ROW(sim_controller_t, step_adc),
+    ROW(sim_controller_t, background),
+    ROW(sim_controller_t, background_every),
     ROW(sim_controller_t, snapshot),
     ROW(sim_controller_t, set_ref),
     ROW(sim_record_t, t_s),

@@ -95,7 +95,10 @@ void sim_free(sim_t *s) {
 }
 
 void sim_set_controller(sim_t *s, const sim_controller_t *c) {
-  if (s && c) s->ctrl = *c;
+  if (s && c) {
+    s->ctrl = *c;
+    s->bg_in = 0u;
+  }
 }
 
 void sim_set_use_adc_counts(sim_t *s, int on) {
@@ -215,7 +218,7 @@ static inline double sanitize_duty(float d) {
 }
 
 int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *rec) {
-  if (!s || !s->ctrl.step || decimation == 0u) return -1;
+  if (!s || (!s->ctrl.step && !s->ctrl.step_adc) || decimation == 0u) return -1;
   const uint32_t cap = rec ? rec->capacity : 0u;
   const int want_snap =
       rec && (rec->theta_hat_rad || rec->omega_hat_radps || rec->omega_f_radps || rec->pll_err_rad ||
@@ -230,7 +233,8 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
   fw_outputs_t out;
   fw_snapshot_t snap;
   memset(&snap, 0, sizeof snap);
-  const int adc_mode = s->use_adc && s->ctrl.step_adc;
+  const int adc_mode = s->ctrl.step_adc && (s->use_adc || !s->ctrl.step);
+  const uint32_t bg_every = s->ctrl.background_every > 0u ? s->ctrl.background_every : 1u;
 
   for (uint64_t n = 0; n < n_steps; ++n) {
     /* 1. references for this period */
@@ -245,15 +249,26 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
         sc->last_sent = v;
       }
     }
-    /* 2. sample, 3. controller */
-    sim_sample(s, &in, &adc);
+    /* 2. the drive's background loop, at its own rate between control
+     * interrupts: in the slot before this period's interrupt, so a command
+     * that arrived before the period takes effect in it */
+    if (s->ctrl.background) {
+      if (s->bg_in == 0u) {
+        s->ctrl.background(s->ctrl.ctx);
+        s->bg_in = bg_every - 1u;
+      } else {
+        s->bg_in--;
+      }
+    }
+    /* 3. sample, 4. controller (the control interrupt) */
+    sim_sample(s, adc_mode ? NULL : &in, &adc); /* the drive converts counts itself */
     memset(&out, 0, sizeof out);
     if (adc_mode)
       s->ctrl.step_adc(s->ctrl.ctx, &adc, &out);
     else
       s->ctrl.step(s->ctrl.ctx, &in, &out);
 
-    /* 4. record (truth at t_k, controller view at t_k) */
+    /* 5. record (truth at t_k, controller view at t_k) */
     const int rec_now = (rec_in == 0u);
     rec_in = rec_now ? decimation - 1u : rec_in - 1u;
     if (rec_now && n_rec < cap) {
@@ -295,9 +310,9 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
       if (rec->fault_code) rec->fault_code[r] = snap.fault_code;
     }
 
-    /* 5. plant over [t_k, t_k+1) with the duties from step k-1 */
+    /* 6. plant over [t_k, t_k+1) with the duties from step k-1 */
     sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
-    /* 6. latch the new duties for the next period */
+    /* 7. latch the new duties for the next period */
     s->pwm_on = out.pwm_enable ? 1 : 0;
     for (int j = 0; j < 3; ++j) s->duty[j] = sanitize_duty(out.duty_abc[j]);
     s->k++;

@@ -97,7 +97,7 @@ class _ObservedDrive(DriveBridge):
         self._L.co_node_read.argtypes = [C.c_void_p, C.c_uint16, C.c_uint8,
                                          C.POINTER(C.c_uint8), C.POINTER(C.c_size_t)]
         self._L.co_node_read.restype = C.c_uint32
-        self._node = self._L.fw_app_node(C.cast(self._app, C.c_void_p))
+        self._node = self._L.fw_app_node(self._app_ptr())
         self.log: list[dict[str, Any]] = []
         self.log_lock = threading.Lock()
 

@@ -182,7 +182,9 @@ void co_od_reset(uint8_t *ram, size_t ram_size, uint8_t node_id) {
   }
   for (uint16_t pos = 0u; pos < CO_OD_COUNT; pos++) {
     const co_od_entry_t *e = &co_od_table[pos];
-    uint8_t buf[4];
+    /* 8, not 4: GCC's -O3 LTO build (the simulator library) unrolls
+       co_le_put past its n <= 4 guard and warns (-Wstringop-overflow) */
+    uint8_t buf[8];
     if (!co_od_in_ram(e, ram_size)) {
       continue;
     }

@@ -67,6 +67,36 @@ static void fw_app_advance_time(fw_app_t *app) {
   app->us_rem %= f;
 }
 
+/* The background's changes of the core happen inside this lock (fw_app.h). */
+static uint32_t fw_app_lock(fw_app_t *app) {
+  return app->lock.enter != NULL ? app->lock.enter(app->lock.port) : 0u;
+}
+
+static void fw_app_unlock(fw_app_t *app, uint32_t key) {
+  if (app->lock.exit != NULL) {
+    app->lock.exit(app->lock.port, key);
+  }
+}
+
+void fw_app_attach_lock(fw_app_t *app, const fw_app_lock_t *lock) {
+  if (app == NULL) {
+    return;
+  }
+  if (lock == NULL || lock->enter == NULL || lock->exit == NULL) {
+    memset(&app->lock, 0, sizeof app->lock);
+  } else {
+    app->lock = *lock;
+  }
+}
+
+/* Periods the interrupt published and the background has not processed are
+ * dropped when the core restarts (they describe the drive before it). */
+static void fw_app_ring_discard(fw_app_t *app) {
+  atomic_store_explicit(&app->ring_tail,
+                        atomic_load_explicit(&app->ring_head, memory_order_acquire),
+                        memory_order_release);
+}
+
 static const co_od_cfg_link_t *fw_app_cfg_link(uint16_t index, uint8_t sub) {
   uint16_t pos;
   if (co_od_find(index, sub, &pos) != CO_OD_OK) {
@@ -179,9 +209,15 @@ static void fw_app_trace_command(fw_app_t *app, uint8_t cmd) {
                        (fw_trace_edge_t)co_node_get_u32(n, CO_OD_2070_05), dt);
     break;
   }
-  case 2u:
-    fw_trace_trigger(&app->trace, app->step);
+  case 2u: {
+    /* at the next period the trace will sample: the oldest one the background
+       has not processed yet, or the next the interrupt will publish */
+    uint32_t tail = atomic_load_explicit(&app->ring_tail, memory_order_relaxed);
+    uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_acquire);
+    fw_trace_trigger(&app->trace,
+                     tail != head ? app->ring[tail % FW_APP_SNAP_RING].step : app->step);
     break;
+  }
   case 3u:
     (void)fw_trace_upload_start(&app->trace);
     break;
@@ -460,6 +496,8 @@ co_abort_t fw_app_nvm_erase(fw_app_t *app) {
 
 /* ---- CANopen hooks --------------------------------------------------------- */
 
+static co_abort_t fw_app_write_locked(fw_app_t *app, uint16_t index, uint8_t sub, uint32_t v);
+
 static co_abort_t fw_app_on_write(void *ctx, uint16_t index, uint8_t sub, const uint8_t *data,
                                   size_t len) {
   fw_app_t *app = (fw_app_t *)ctx;
@@ -467,6 +505,21 @@ static co_abort_t fw_app_on_write(void *ctx, uint16_t index, uint8_t sub, const 
     return CO_ABORT_GENERAL;
   }
   uint32_t v = co_le_get(data, len > 4u ? 4u : len);
+  /* storage is written with the power stage off and outside the lock: a
+     flash erase must not hold the control interrupt off */
+  if (index == 0x1010u && sub >= 1u) { /* signature checked by the node */
+    return fw_app_nvm_save(app);
+  }
+  if (index == 0x1011u && sub >= 1u) {
+    return fw_app_nvm_erase(app);
+  }
+  uint32_t key = fw_app_lock(app);
+  co_abort_t r = fw_app_write_locked(app, index, sub, v);
+  fw_app_unlock(app, key);
+  return r;
+}
+
+static co_abort_t fw_app_write_locked(fw_app_t *app, uint16_t index, uint8_t sub, uint32_t v) {
   if (index == 0x6040u) {
     if (app->cw_pending) {
       (void)fw_controlword(&app->ctrl, app->cw); /* keep every command, in order */
@@ -499,12 +552,6 @@ static co_abort_t fw_app_on_write(void *ctx, uint16_t index, uint8_t sub, const 
     float x;
     memcpy(&x, &v, sizeof x);
     return fw_app_status_abort(fw_set_id_ref(&app->ctrl, x));
-  }
-  if (index == 0x1010u && sub >= 1u) { /* signature checked by the node */
-    return fw_app_nvm_save(app);
-  }
-  if (index == 0x1011u && sub >= 1u) {
-    return fw_app_nvm_erase(app);
   }
   const co_od_cfg_link_t *link = fw_app_cfg_link(index, sub);
   if (link != NULL) {
@@ -578,12 +625,19 @@ static void fw_app_reboot(fw_app_t *app) {
   app->last_fault = 0u; /* a restarted node has nothing to reset: no EMCY */
 }
 
+static void fw_app_event_locked(fw_app_t *app, co_event_t ev, uint32_t arg);
+
 static void fw_app_on_event(void *ctx, co_event_t ev, uint32_t arg) {
   fw_app_t *app = (fw_app_t *)ctx;
-  (void)arg;
   if (app == NULL) {
     return;
   }
+  uint32_t key = fw_app_lock(app);
+  fw_app_event_locked(app, ev, arg);
+  fw_app_unlock(app, key);
+}
+
+static void fw_app_event_locked(fw_app_t *app, co_event_t ev, uint32_t arg) {
   switch (ev) {
   case CO_EV_HB_LOST:
     app->count.hb_lost++;
@@ -604,6 +658,7 @@ static void fw_app_on_event(void *ctx, co_event_t ev, uint32_t arg) {
   case CO_EV_RESET_COMM:
     if (ev == CO_EV_RESET_NODE) {
       fw_app_reboot(app);
+      fw_app_ring_discard(app);
     } else {
       fw_app_power_off(app);
       (void)fw_app_nvm_boot(app, true); /* the stored communication objects are their power-on values */
@@ -715,6 +770,7 @@ const fw_app_counters_t *fw_app_counters(const fw_app_t *app) {
 static void fw_app_apply_commands(fw_app_t *app) {
   co_node_t *n = &app->node;
   const fw_config_t *cfg = fw_get_config(&app->ctrl);
+  uint32_t key = fw_app_lock(app);
   if (app->cw_pending) {
     app->cw_pending = 0u;
     (void)fw_controlword(&app->ctrl, app->cw);
@@ -724,13 +780,32 @@ static void fw_app_apply_commands(fw_app_t *app) {
   if (app->mode_applied != (int32_t)m && fw_set_mode(&app->ctrl, m) == FW_OK) {
     app->mode_applied = (int32_t)m;
   }
-  if (cfg == NULL) {
-    return;
+  if (cfg != NULL) {
+    float v_mps = (float)co_node_get_i32(n, CO_OD_60FF_00) * 1.0e-6f;
+    (void)fw_set_speed_ref(&app->ctrl, fw_units_mps_to_radps_e(cfg, v_mps));
+    float t_pm = (float)co_node_get_i32(n, CO_OD_6071_00);
+    (void)fw_set_iq_ref(&app->ctrl, t_pm * 1.0e-3f * cfg->i_max_A);
   }
-  float v_mps = (float)co_node_get_i32(n, CO_OD_60FF_00) * 1.0e-6f;
-  (void)fw_set_speed_ref(&app->ctrl, fw_units_mps_to_radps_e(cfg, v_mps));
-  float t_pm = (float)co_node_get_i32(n, CO_OD_6071_00);
-  (void)fw_set_iq_ref(&app->ctrl, t_pm * 1.0e-3f * cfg->i_max_A);
+  /* a fault reset does not clear a heartbeat that is still missing, nor an
+     RPDO deadline that is still missed (once enabled again) */
+  if (fw_fault_code(&app->ctrl) == FW_FAULT_NONE) {
+    for (uint32_t k = 0u; k < CO_HB_CONSUMERS; k++) {
+      if (app->node.hb[k].lost) {
+        fw_raise_fault(&app->ctrl, FW_FAULT_HEARTBEAT_LOST);
+        break;
+      }
+    }
+  }
+  if (fw_fault_code(&app->ctrl) == FW_FAULT_NONE &&
+      fw_state(&app->ctrl) == FW_CIA402_OPERATION_ENABLED) {
+    for (uint32_t k = 0u; k < CO_OD_NR_RPDO; k++) {
+      if (app->node.rpdo[k].timed_out) {
+        fw_raise_fault(&app->ctrl, FW_FAULT_RPDO_TIMEOUT);
+        break;
+      }
+    }
+  }
+  fw_app_unlock(app, key);
 }
 
 static void fw_app_update_od(fw_app_t *app, const fw_snapshot_t *s) {
@@ -765,7 +840,9 @@ static void fw_app_update_od(fw_app_t *app, const fw_snapshot_t *s) {
       co_node_get_f32(n, CO_OD_2080_01) != 0.0f) {
     /* an identification's d-axis current never survives leaving OPERATION ENABLED */
     co_node_set_f32(n, CO_OD_2080_01, 0.0f);
+    uint32_t key = fw_app_lock(app);
     (void)fw_set_id_ref(&app->ctrl, 0.0f);
+    fw_app_unlock(app, key);
   }
 }
 
@@ -784,10 +861,10 @@ static void fw_app_faults(fw_app_t *app, const fw_snapshot_t *s) {
   app->last_fault = code;
 }
 
-static void fw_app_serial(fw_app_t *app, const fw_snapshot_t *s) {
+static void fw_app_serial(fw_app_t *app, const fw_snapshot_t *s, uint32_t step) {
   co_node_t *n = &app->node;
   uint32_t dec = co_node_get_u32(n, CO_OD_2060_01);
-  if (dec > 0u && app->step % dec == 0u) {
+  if (dec > 0u && step % dec == 0u) {
     uint8_t ids[FW_SERIAL_MAX_SIGNALS];
     uint8_t cnt = (uint8_t)co_node_get_u32(n, CO_OD_2060_02);
     uint8_t payload[FW_SERIAL_MAX_PAYLOAD];
@@ -818,9 +895,75 @@ static void fw_app_serial(fw_app_t *app, const fw_snapshot_t *s) {
   }
 }
 
+/* ---- the control interrupt ----------------------------------------------------- */
+
+/* After the step: publish the period to the background, advance the time base. */
+static void fw_app_publish(fw_app_t *app) {
+  uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
+  uint32_t tail = atomic_load_explicit(&app->ring_tail, memory_order_acquire);
+  if (head - tail < FW_APP_SNAP_RING) {
+    fw_app_period_t *p = &app->ring[head % FW_APP_SNAP_RING];
+    fw_get_snapshot(&app->ctrl, &p->snap);
+    p->step = app->step;
+    atomic_store_explicit(&app->ring_head, head + 1u, memory_order_release);
+  } else {
+    app->count.snap_overruns++; /* the background is behind: it never sees this period */
+  }
+  app->step++;
+  fw_app_advance_time(app);
+  atomic_store_explicit(&app->isr_now_us, app->now_us, memory_order_release);
+}
+
+void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *out) {
+  fw_app_t *app = (fw_app_t *)ctx;
+  if (app == NULL || adc == NULL || out == NULL) {
+    if (out != NULL) {
+      memset(out, 0, sizeof *out);
+    }
+    return;
+  }
+  fw_step_adc(&app->ctrl, adc, out); /* the core's one ADC conversion and range check */
+  fw_app_publish(app);
+}
+
+/* ---- the background loop ------------------------------------------------------- */
+
+/* Input half: frames in, commands to the core. */
+static void fw_app_bg_input(fw_app_t *app, uint32_t now) {
+  co_node_process_rx(&app->node, now);
+  fw_app_apply_commands(app);
+}
+
+/* Output half: every published period in order, the OD, frames out. The
+ * newest period's slot is released only after the OD was written from it. */
+static void fw_app_bg_output(fw_app_t *app, uint32_t now) {
+  uint32_t tail = atomic_load_explicit(&app->ring_tail, memory_order_relaxed);
+  uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_acquire);
+  while (tail != head) {
+    const fw_app_period_t *p = &app->ring[tail % FW_APP_SNAP_RING];
+    fw_app_faults(app, &p->snap);
+    fw_app_serial(app, &p->snap, p->step);
+    if (tail + 1u == head) {
+      fw_app_update_od(app, &p->snap);
+    }
+    tail++;
+    atomic_store_explicit(&app->ring_tail, tail, memory_order_release);
+  }
+  co_node_process_tx(&app->node, now);
+}
+
+void fw_app_background(void *ctx) {
+  fw_app_t *app = (fw_app_t *)ctx;
+  if (app == NULL) {
+    return;
+  }
+  uint32_t now = atomic_load_explicit(&app->isr_now_us, memory_order_acquire);
+  fw_app_bg_input(app, now);
+  fw_app_bg_output(app, now);
+}
+
 void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
   fw_app_t *app = (fw_app_t *)ctx;
-  fw_snapshot_t snap;
   if (app == NULL || in == NULL || out == NULL) {
     if (out != NULL) {
       memset(out, 0, sizeof *out);
@@ -828,33 +971,8 @@ void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
     return;
   }
   uint32_t now = app->now_us;
-  co_node_process_rx(&app->node, now);
-  fw_app_apply_commands(app);
-  /* a fault reset does not clear a heartbeat that is still missing, nor an
-     RPDO deadline that is still missed (once enabled again) */
-  if (fw_fault_code(&app->ctrl) == FW_FAULT_NONE) {
-    for (uint32_t k = 0u; k < CO_HB_CONSUMERS; k++) {
-      if (app->node.hb[k].lost) {
-        fw_raise_fault(&app->ctrl, FW_FAULT_HEARTBEAT_LOST);
-        break;
-      }
-    }
-  }
-  if (fw_fault_code(&app->ctrl) == FW_FAULT_NONE &&
-      fw_state(&app->ctrl) == FW_CIA402_OPERATION_ENABLED) {
-    for (uint32_t k = 0u; k < CO_OD_NR_RPDO; k++) {
-      if (app->node.rpdo[k].timed_out) {
-        fw_raise_fault(&app->ctrl, FW_FAULT_RPDO_TIMEOUT);
-        break;
-      }
-    }
-  }
+  fw_app_bg_input(app, now);
   fw_step(&app->ctrl, in, out);
-  fw_get_snapshot(&app->ctrl, &snap);
-  fw_app_update_od(app, &snap);
-  fw_app_faults(app, &snap);
-  fw_app_serial(app, &snap);
-  co_node_process_tx(&app->node, now);
-  app->step++;
-  fw_app_advance_time(app);
+  fw_app_publish(app);
+  fw_app_bg_output(app, now);
 }

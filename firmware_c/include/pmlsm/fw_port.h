@@ -3,16 +3,25 @@
  * @brief The one hardware contract of the firmware.
  *
  * Everything hardware-shaped crosses this header: PWM, ADC, CAN frames,
- * UART bytes, time, critical sections and the non-volatile parameter memory. The control core (fw_ctrl.h) does
- * not call any of it: it is a pure step function. The application glue
- * (fw_app.c: interrupt -> fw_step -> PWM, CAN/UART queues) calls the port.
+ * UART bytes, critical sections and the non-volatile parameter memory. The
+ * control core (fw_ctrl.h) does not call any of it: it is a pure step
+ * function. The board glue (comm/src/fw_board.c: control interrupt ->
+ * fw_app_isr -> PWM; background loop -> fw_app_background -> CAN/UART) is
+ * the one caller of the port, in every world.
+ *
+ * There is no timer function: the drive's time base is the count of control
+ * interrupts (fw_app.h), the same in simulation and on the MCU.
  *
  * A port defines `struct fw_port` with whatever it needs and implements
  * every function below. Ports in this repository:
  *   - port/blank/fw_port_blank.c : compiles anywhere, does nothing; proves the
- *     core has no hidden dependency (built for host and Cortex-M4F).
- *   - sim_fallback/src : the simulated drive (plant + ADC + inverter model);
- *     sim_nvm.c is its non-volatile memory: one file per simulated drive.
+ *     core has no hidden dependency (built for host and Cortex-M4F; the
+ *     Cortex-M4F image links it).
+ *   - sim_fallback/src/sim_port.c : the simulated drive: the ADC samples and
+ *     duties of the plant's batch loop, CAN and UART queues read by the
+ *     bench, one file per simulated drive as non-volatile memory.
+ *   - tests/c/test_board.c : a test port that refuses frames and takes
+ *     bytes piecemeal, to test the board glue.
  *
  * Non-volatile memory: the drive application stores one parameter block
  * (CiA 301 0x1010 'save', see fw_app.h). It does not call the two nvm
@@ -21,7 +30,8 @@
  * without storage returns FW_NVM_UNSUPPORTED (the drive then answers 'save'
  * with SDO abort 0x08000020 and reads 0 from 0x1010:1).
  *
- * Interrupt handlers copy and flag; work happens in the step function.
+ * Interrupt handlers copy and flag; the work happens in fw_app_isr (fixed
+ * cost) and in the background loop (everything else).
  */
 #ifndef PMLSM_FW_PORT_H
 #define PMLSM_FW_PORT_H
@@ -53,16 +63,15 @@ void fw_port_pwm_write(fw_port_t *port, const float duty_abc[3], bool enable);
 /** Read the ADC samples taken at the start of this PWM period. */
 bool fw_port_adc_read(fw_port_t *port, fw_adc_inputs_t *adc);
 
-/** Monotonic time in microseconds (wraps). */
-uint32_t fw_port_time_us(fw_port_t *port);
-
 /** Queue a CAN frame for transmission; false when the TX queue is full. */
 bool fw_port_can_send(fw_port_t *port, const fw_can_frame_t *frame);
 
 /** Queue bytes on the UART; returns the number accepted. */
 size_t fw_port_uart_write(fw_port_t *port, const uint8_t *data, size_t len);
 
-/** Enter / leave a critical section (disable / restore interrupts). */
+/** Enter / leave a critical section (disable / restore interrupts; the key
+ *  is what enter returned, so sections nest). The background's changes of
+ *  the control core are made inside one (fw_app_attach_lock). */
 uint32_t fw_port_critical_enter(fw_port_t *port);
 void fw_port_critical_exit(fw_port_t *port, uint32_t key);
 
@@ -85,8 +94,9 @@ fw_nvm_status_t fw_port_nvm_read(fw_port_t *port, uint8_t *buf, size_t cap, size
  * Replace the stored parameter block by data[0..len) - atomically where the
  * medium allows it (a torn write must read back as a block whose CRC fails,
  * never as a mix that passes). len == 0 erases it (FW_NVM_EMPTY afterwards).
- * Called from the SDO server in the control task while the power stage is
- * off; a port whose medium is slow (flash erase) may take milliseconds.
+ * Called from the SDO server in the background loop, outside any critical
+ * section, while the power stage is off; a port whose medium is slow (flash
+ * erase) may take milliseconds.
  */
 fw_nvm_status_t fw_port_nvm_write(fw_port_t *port, const uint8_t *data, size_t len);
 

@@ -6,7 +6,7 @@
 #include "pmlsm/fw_port.h"
 
 struct fw_port {
-  uint32_t time_us;
+  uint32_t unused;
 };
 
 void fw_port_pwm_write(fw_port_t *port, const float duty_abc[3], bool enable) {
@@ -23,8 +23,6 @@ bool fw_port_adc_read(fw_port_t *port, fw_adc_inputs_t *adc) {
   adc->u_dc_counts = 0u;
   return false;
 }
-
-uint32_t fw_port_time_us(fw_port_t *port) { return port ? port->time_us : 0u; }
 
 bool fw_port_can_send(fw_port_t *port, const fw_can_frame_t *frame) {
   (void)port;

@@ -7,25 +7,47 @@
  *
  *     fw_app_t app;
  *     fw_app_init(&app, &cfg, 5);
- *     CAN ISR:      fw_app_can_rx(&app, &frame);          // queue only
- *     PWM/ADC ISR:  fw_app_step(&app, &in, &out);          // one control period
- *                   while (fw_app_can_tx_pop(&app, &f)) can_send(&f);
- *                   n = fw_app_uart_read(&app, buf, sizeof buf); uart_write(buf, n);
+ *     CAN RX interrupt:  fw_app_can_rx(&app, &frame);           // queue only
+ *     control interrupt: fw_app_isr(&app, &adc, &out);          // ADC -> step -> duties
+ *     background loop:   fw_app_background(&app);               // CANopen, OD, EMCY, telemetry
+ *                        while (fw_app_can_tx_pop(&app, &f)) can_send(&f);
+ *                        n = fw_app_uart_read(&app, buf, sizeof buf); uart_write(buf, n);
  *
- * fw_app_step and fw_app_snapshot have the signatures of the simulated
- * drive's batch loop (step(ctx, in, out), snapshot(ctx, snap)), so the sim
- * can run the whole application in place of the bare core.
+ * A board does not write that glue itself: fw_board.h is it, once, over
+ * fw_port.h (the Cortex-M4F image and the simulated drive both use it).
  *
- * Per step: queued CAN frames are processed (NMT, SDO, SYNC, RPDO,
- * heartbeats); a written controlword is applied with fw_controlword();
+ * Interrupt and background. fw_app_isr is what the control interrupt does,
+ * and nothing else: the core's one ADC conversion and range check
+ * (fw_step_adc), the control step, and a copy of the core's snapshot into a
+ * lock-free single-producer ring (FW_APP_SNAP_RING entries); its cost does
+ * not depend on bus traffic. fw_app_background, called by the background
+ * loop at its own rate, does the rest: it processes the queued CAN frames
+ * (NMT, SDO, SYNC, RPDO, heartbeats) and applies what they command, then
+ * drains the ring in order - an EMCY per fault change, a telemetry frame
+ * every 0x2060:1 periods and a trace sample per period, all from the
+ * snapshot of the period they describe - writes the newest snapshot to the
+ * OD (statusword, actual values) and produces TPDOs and heartbeat. Where the
+ * background changes the core (controlword, mode, references, configuration,
+ * a fault raised by a heartbeat or RPDO deadline) it does so inside the
+ * lock attached with fw_app_attach_lock (fw_board: the port's critical
+ * section), so a control interrupt never sees half an update. When the
+ * background falls behind by more than the ring, the oldest unprocessed
+ * periods are lost and counted (fw_app_counters_t.snap_overruns): the
+ * control interrupt never waits.
+ *
+ * fw_app_step(app, in, out) is both halves in one call, with inputs already
+ * in physical units: the background's input half, the control step, the
+ * background's output half. It is for tests and for a controller without an
+ * ADC (the null-plant bridge); no board uses it.
+ *
+ * What the background applies: a written controlword with fw_controlword();
  * modes (0x6060: 9 CSV -> FW_MODE_SPEED, 10 CST -> FW_MODE_FORCE), target
- * velocity (0x60FF, um/s) and target torque (0x6071, per mille of i_max_A)
- * are applied; fw_step() runs; statusword and actual values are written
- * back to the OD; a new fault sends an EMCY (and its reset an EMCY 0x0000);
- * telemetry and trace frames are queued on the UART; TPDOs and heartbeat
- * are produced. Time is step_count / f_pwm_Hz. A lost supervisor heartbeat
- * (0x1016) raises FW_FAULT_HEARTBEAT_LOST through fw_raise_fault(); a missed
- * RPDO deadline (0x1400+n:5) while OPERATION ENABLED raises 0x8250.
+ * velocity (0x60FF, um/s) and target torque (0x6071, per mille of i_max_A).
+ * Time is control periods / f_pwm_Hz, counted by the control interrupt (no
+ * port timer: the PWM is the drive's clock, in simulation as on the MCU). A
+ * lost supervisor heartbeat (0x1016) raises FW_FAULT_HEARTBEAT_LOST through
+ * fw_raise_fault(); a missed RPDO deadline (0x1400+n:5) while OPERATION
+ * ENABLED raises 0x8250.
  *
  * NMT and the power stage: NMT stop and reset communication switch the
  * power stage off in the same control period (CiA 402 "disable voltage":
@@ -53,6 +75,7 @@
 #ifndef PMLSM_FW_APP_H
 #define PMLSM_FW_APP_H
 
+#include <stdatomic.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -71,6 +94,9 @@ extern "C" {
 #endif
 #ifndef FW_APP_UART_LEN
 #define FW_APP_UART_LEN 4096u /**< UART TX ring (bytes, power of two) */
+#endif
+#ifndef FW_APP_SNAP_RING
+#define FW_APP_SNAP_RING 8u /**< control periods the background may lag (power of two) */
 #endif
 #ifndef FW_APP_NVM_LEN
 #define FW_APP_NVM_LEN 2048u /**< largest stored parameter block (bytes) */
@@ -95,6 +121,23 @@ typedef enum {
   FW_APP_NVM_READ_ERROR = 7   /**< the medium failed */
 } fw_app_nvm_state_t;
 
+/**
+ * The lock the background takes around every change of the core (see
+ * above); fw_board attaches the port's critical section. Without one
+ * (tests, a single-threaded host) the background runs unlocked.
+ */
+typedef struct {
+  fw_port_t *port;
+  uint32_t (*enter)(fw_port_t *port);
+  void (*exit)(fw_port_t *port, uint32_t key);
+} fw_app_lock_t;
+
+/** One control period as the background sees it. */
+typedef struct {
+  fw_snapshot_t snap;
+  uint32_t step; /**< the application's period index */
+} fw_app_period_t;
+
 /** Application counters (diagnostics, tests). */
 typedef struct {
   uint32_t telemetry_sent;
@@ -102,6 +145,7 @@ typedef struct {
   uint32_t emcy;
   uint32_t hb_lost;
   uint32_t rpdo_timeouts; /**< RPDO event-timer deadlines missed (0x1400+n:5) */
+  uint32_t snap_overruns; /**< periods the background never saw (ring full) */
 } fw_app_counters_t;
 
 /** The drive application. Treat the members as private. */
@@ -114,10 +158,15 @@ typedef struct {
   float trace_buf[FW_APP_TRACE_FLOATS];
   uint8_t uart[FW_APP_UART_LEN];
   uint32_t uart_head, uart_tail;
-  uint32_t step;       /**< control periods since init */
+  uint32_t step;       /**< control periods since init (written by the interrupt) */
   uint32_t f_pwm_Hz;   /**< integer PWM rate for the time base */
   uint32_t now_us;     /**< time base: floor(steps * 1e6 / f_pwm_Hz), modulo 2^32 */
   uint32_t us_rem;     /**< remainder of that division (< f_pwm_Hz) */
+  fw_app_period_t ring[FW_APP_SNAP_RING]; /**< interrupt -> background */
+  _Atomic uint32_t ring_head; /**< written by the interrupt only */
+  _Atomic uint32_t ring_tail; /**< written by the background only */
+  _Atomic uint32_t isr_now_us; /**< now_us as published by the interrupt */
+  fw_app_lock_t lock;
   int32_t mode_applied; /**< fw_mode_t last accepted by fw_set_mode, -1 none */
   uint8_t cw_pending;
   uint16_t cw;
@@ -140,8 +189,20 @@ fw_status_t fw_app_init(fw_app_t *app, const fw_config_t *cfg, uint8_t node_id);
 /** CAN receive path (ISR side): queue the frame. False when the queue is full. */
 bool fw_app_can_rx(fw_app_t *app, const fw_can_frame_t *frame);
 
-/** One control period (app is a fw_app_t *). */
+/**
+ * The control interrupt (app is a fw_app_t *): raw ADC counts in, duties
+ * out (the signature of the simulator's step_adc).
+ */
+void fw_app_isr(void *app, const fw_adc_inputs_t *adc, fw_outputs_t *out);
+
+/** The background loop's work (app is a fw_app_t *); see above. */
+void fw_app_background(void *app);
+
+/** Both halves in one call, physical inputs (tests, null plant; see above). */
 void fw_app_step(void *app, const fw_inputs_t *in, fw_outputs_t *out);
+
+/** Attach the lock of the background's core changes (copied; NULL detaches). */
+void fw_app_attach_lock(fw_app_t *app, const fw_app_lock_t *lock);
 
 /** Next CAN frame to send; false when none. */
 bool fw_app_can_tx_pop(fw_app_t *app, fw_can_frame_t *frame);

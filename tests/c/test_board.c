@@ -1,0 +1,253 @@
+/**
+ * @file test_board.c
+ * @brief The board glue (fw_board.c) over a port written here: a third world
+ *        beside the blank port and the simulator's. The port refuses CAN
+ *        frames when its mailbox is full and takes UART bytes a few at a
+ *        time, counts its critical sections and notes whether the control
+ *        interrupt ever ran inside one.
+ *
+ * Checked: the control interrupt reads the ADC and latches the duties and
+ * takes no lock; frames and bytes the port refuses are held and delivered
+ * later, in order, never lost or doubled (against a drive on an unlimited
+ * port fed the same inputs); the background's changes of the core are
+ * made inside balanced critical sections; a background that falls behind
+ * loses the oldest periods, counted, while the control interrupt runs on;
+ * and an interrupt that arrives in the middle of the background (outside
+ * its lock) neither reorders nor drops a published period.
+ */
+#include <string.h>
+
+#include "pmlsm/fw_app.h"
+#include "pmlsm/fw_board.h"
+#include "pmlsm/fw_port.h"
+#include "tinytest.h"
+
+#define NID 4u
+#define CAN_BOX 64u
+#define UART_MAX 4096u
+
+struct fw_port {
+  fw_adc_inputs_t adc;
+  uint32_t adc_reads;
+  float duty[3];
+  int pwm_on;
+  uint32_t pwm_writes;
+  fw_can_frame_t can[CAN_BOX];
+  uint32_t can_n;
+  uint32_t can_room; /* frames it accepts before refusing */
+  uint8_t uart[UART_MAX];
+  uint32_t uart_n;
+  uint32_t uart_per_call; /* 0: unlimited */
+  uint32_t depth, enters, unbalanced;
+  uint32_t isr_in_lock; /* control interrupts that ran inside a critical section */
+  fw_board_t *preempt;  /* run a control interrupt from inside uart_write (once) */
+};
+
+void fw_port_pwm_write(fw_port_t *p, const float duty_abc[3], bool enable) {
+  memcpy(p->duty, duty_abc, sizeof p->duty);
+  p->pwm_on = enable;
+  p->pwm_writes++;
+}
+
+bool fw_port_adc_read(fw_port_t *p, fw_adc_inputs_t *adc) {
+  if (p->depth != 0u) p->isr_in_lock++;
+  *adc = p->adc;
+  p->adc_reads++;
+  return true;
+}
+
+bool fw_port_can_send(fw_port_t *p, const fw_can_frame_t *f) {
+  if (p->can_room == 0u || p->can_n >= CAN_BOX) return false;
+  p->can[p->can_n++] = *f;
+  p->can_room--;
+  return true;
+}
+
+size_t fw_port_uart_write(fw_port_t *p, const uint8_t *data, size_t len) {
+  if (p->preempt != NULL) { /* the control interrupt fires in the middle of the background */
+    fw_board_t *b = p->preempt;
+    p->preempt = NULL;
+    fw_board_control_isr(b);
+  }
+  size_t n = len;
+  if (p->uart_per_call != 0u && n > p->uart_per_call) n = p->uart_per_call;
+  if (n > UART_MAX - p->uart_n) n = UART_MAX - p->uart_n;
+  memcpy(&p->uart[p->uart_n], data, n);
+  p->uart_n += (uint32_t)n;
+  return n;
+}
+
+uint32_t fw_port_critical_enter(fw_port_t *p) {
+  p->enters++;
+  return p->depth++;
+}
+
+void fw_port_critical_exit(fw_port_t *p, uint32_t key) {
+  if (p->depth == 0u || key != p->depth - 1u) p->unbalanced++;
+  p->depth = key;
+}
+
+fw_nvm_status_t fw_port_nvm_read(fw_port_t *p, uint8_t *buf, size_t cap, size_t *len) {
+  (void)p;
+  (void)buf;
+  (void)cap;
+  *len = 0u;
+  return FW_NVM_UNSUPPORTED;
+}
+
+fw_nvm_status_t fw_port_nvm_write(fw_port_t *p, const uint8_t *data, size_t len) {
+  (void)p;
+  (void)data;
+  (void)len;
+  return FW_NVM_UNSUPPORTED;
+}
+
+/* two drives: A on the difficult port, B on an unlimited one */
+static fw_app_t g_a, g_b;
+static fw_board_t g_ba, g_bb;
+static struct fw_port g_pa, g_pb;
+
+static void boot(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  memset(&g_pa, 0, sizeof g_pa);
+  memset(&g_pb, 0, sizeof g_pb);
+  TT_CHECK(fw_app_init(&g_a, &cfg, NID) == FW_OK);
+  TT_CHECK(fw_app_init(&g_b, &cfg, NID) == FW_OK);
+  TT_CHECK(fw_board_init(&g_ba, &g_a, &g_pa) == FW_APP_NVM_NONE);
+  TT_CHECK(fw_board_init(&g_bb, &g_b, &g_pb) == FW_APP_NVM_NONE);
+  for (int j = 0; j < 3; j++) {
+    g_pa.adc.i_abc_counts[j] = g_pb.adc.i_abc_counts[j] = 2048u;
+  }
+  g_pa.adc.u_dc_counts = g_pb.adc.u_dc_counts = 2458u; /* ~300 V at the default scaling */
+  g_pb.can_room = CAN_BOX;
+}
+
+static void rx_both(uint16_t id, const uint8_t d[8]) {
+  fw_can_frame_t f;
+  memset(&f, 0, sizeof f);
+  f.id = id;
+  f.dlc = 8u;
+  memcpy(f.data, d, 8u);
+  TT_CHECK(fw_board_can_rx_isr(&g_ba, &f));
+  TT_CHECK(fw_board_can_rx_isr(&g_bb, &f));
+}
+
+static void period_both(void) {
+  fw_board_control_isr(&g_ba);
+  fw_board_control_isr(&g_bb);
+  fw_board_background(&g_ba);
+  fw_board_background(&g_bb);
+}
+
+static int frames_equal(const fw_can_frame_t *x, const fw_can_frame_t *y) {
+  return x->id == y->id && x->dlc == y->dlc && memcmp(x->data, y->data, x->dlc) == 0;
+}
+
+static void test_isr_reads_adc_latches_duties_no_lock(void) {
+  boot();
+  uint32_t r0 = g_pa.adc_reads;
+  for (int k = 0; k < 10; k++) fw_board_control_isr(&g_ba);
+  TT_CHECK(g_pa.adc_reads == r0 + 10u);
+  TT_CHECK(g_pa.pwm_writes == 10u);
+  TT_CHECK(g_pa.pwm_on == 0); /* SWITCH ON DISABLED: power stage off */
+  TT_CHECK(g_pa.enters == 0u); /* the control interrupt takes no lock */
+  TT_CHECK(g_ba.adc_failed == 0u);
+}
+
+static void test_refused_frames_and_bytes_arrive_later_in_order(void) {
+  boot();
+  g_pa.can_room = 0u;       /* the controller is full */
+  g_pa.uart_per_call = 7u;  /* the UART takes a few bytes per call */
+  /* enable over SDO on both drives (controlword 6, 7, 15 in CSV) */
+  const uint16_t cws[3] = {0x06, 0x07, 0x0F};
+  for (int i = 0; i < 3; i++) {
+    uint8_t req[8] = {0x2B, 0x40, 0x60, 0x00, (uint8_t)cws[i], 0, 0, 0};
+    rx_both((uint16_t)(0x600 + NID), req);
+    for (int k = 0; k < 3; k++) period_both();
+  }
+  for (int k = 0; k < 600; k++) period_both(); /* 25 ms: telemetry, heartbeat */
+  TT_CHECK(g_pa.can_n == 0u && g_ba.tx_is_held == 1u); /* held, not dropped */
+  /* the controller frees up one frame per background pass */
+  for (int k = 0; k < 4000 && (g_ba.tx_is_held || g_pa.uart_n < g_pb.uart_n); k++) {
+    g_pa.can_room = 1u;
+    fw_board_background(&g_ba);
+  }
+  TT_CHECK(g_pa.uart_n == g_pb.uart_n && g_pb.uart_n > 200u);
+  TT_CHECK(memcmp(g_pa.uart, g_pb.uart, g_pb.uart_n) == 0);
+  /* A's frames are B's, in order; A may lack only B's newest (queue depth) */
+  TT_CHECK(g_pa.can_n > 3u);
+  uint32_t n = g_pa.can_n < g_pb.can_n ? g_pa.can_n : g_pb.can_n;
+  int same = 1;
+  for (uint32_t i = 0; i < n; i++) same = same && frames_equal(&g_pa.can[i], &g_pb.can[i]);
+  TT_CHECK(same);
+  TT_CHECK(g_pa.can[0].id == 0x700 + NID && g_pa.can[0].data[0] == 0u); /* boot-up first */
+  /* the same control on both sides */
+  TT_CHECK(g_pa.pwm_on == g_pb.pwm_on);
+  TT_CHECK(fw_app_counters(&g_a)->snap_overruns == 0u);
+}
+
+static void test_background_changes_core_in_balanced_lock(void) {
+  boot();
+  uint8_t req[8] = {0x2B, 0x40, 0x60, 0x00, 0x06, 0, 0, 0}; /* controlword: shutdown */
+  rx_both((uint16_t)(0x600 + NID), req);
+  uint32_t e0 = g_pa.enters;
+  period_both();
+  period_both();
+  TT_CHECK(g_pa.enters > e0);
+  TT_CHECK(g_pa.unbalanced == 0u && g_pa.depth == 0u);
+  TT_CHECK(g_pa.isr_in_lock == 0u);
+  TT_CHECK((fw_statusword(fw_app_ctrl(&g_a)) & 0x6Fu) == 0x21u); /* READY TO SWITCH ON */
+}
+
+static void test_lagging_background_loses_oldest_counted(void) {
+  boot();
+  for (uint32_t k = 0; k < FW_APP_SNAP_RING + 9u; k++) fw_board_control_isr(&g_ba);
+  TT_CHECK(fw_app_counters(&g_a)->snap_overruns == 9u);
+  TT_CHECK(g_pa.pwm_writes == FW_APP_SNAP_RING + 9u); /* the interrupt never waited */
+  fw_board_background(&g_ba);
+  fw_board_control_isr(&g_ba);
+  fw_board_background(&g_ba);
+  TT_CHECK(fw_app_counters(&g_a)->snap_overruns == 9u); /* room again */
+}
+
+static void test_interrupt_inside_background_keeps_order(void) {
+  boot();
+  g_pb.preempt = NULL;
+  /* B: every period in order; A: a control interrupt fires inside A's
+     background (while it moves UART bytes) every time */
+  uint32_t inside = 0u;
+  for (int k = 0; k < 480; k++) {
+    fw_board_control_isr(&g_bb);
+    fw_board_background(&g_bb);
+    if (g_pa.preempt != NULL) { /* no UART write in the last pass: it fires now */
+      g_pa.preempt = NULL;
+      fw_board_control_isr(&g_ba);
+    } else if (k > 0) {
+      inside++;
+    }
+    g_pa.preempt = &g_ba; /* one interrupt per period, inside the next UART write */
+    g_pa.can_room = CAN_BOX;
+    fw_board_background(&g_ba);
+  }
+  if (g_pa.preempt == NULL) inside++;
+  g_pa.preempt = NULL;
+  for (int k = 0; k < 8; k++) fw_board_background(&g_ba);
+  TT_CHECK(inside >= 15u); /* it did fire inside the background (every telemetry frame) */
+  /* the telemetry frames carry the period they describe: A's bytes decode to
+     the same stream as B's prefix (same frames, same order) */
+  uint32_t n = g_pa.uart_n < g_pb.uart_n ? g_pa.uart_n : g_pb.uart_n;
+  TT_CHECK(n > 200u);
+  TT_CHECK(memcmp(g_pa.uart, g_pb.uart, n) == 0);
+  TT_CHECK(fw_app_counters(&g_a)->snap_overruns == 0u);
+  TT_CHECK(g_pa.isr_in_lock == 0u);
+}
+
+int main(void) {
+  TT_RUN(test_isr_reads_adc_latches_duties_no_lock);
+  TT_RUN(test_refused_frames_and_bytes_arrive_later_in_order);
+  TT_RUN(test_background_changes_core_in_balanced_lock);
+  TT_RUN(test_lagging_background_loses_oldest_counted);
+  TT_RUN(test_interrupt_inside_background_keeps_order);
+  return TT_SUMMARY();
+}
