@@ -201,8 +201,10 @@ static inline void flux_select(sim_t *s, double i_d_A) {
   }
   const double q = i_d_A * s->inv_flux_grid_A;
   if (fabs(q) < (double)SIM_FLUX_TAB_HALF) {
+    /* No "same grid point as before?" test: the HF injection moves i_d across
+     * grid points in most periods, and that branch was mispredicted often;
+     * the point and its coefficients are the same values either way. */
     const int32_t k = (int32_t)lrint(q);
-    if (k == s->flux_k) return;
     const size_t j = (size_t)(k + SIM_FLUX_TAB_HALF);
     s->b_id0 = (double)k * s->flux_grid_A;
     if (!s->flux_ok[j]) {
@@ -306,6 +308,10 @@ double sim_plant_force(const sim_t *s, const sim_plant_state_t *st) {
 typedef struct {
   double u_dq0_V[2];  /**< stator voltage in the rotor frame at the basis angle */
   double F_load_N;
+  /** F_em + load_add = (F_em + 0.0) - F_load_N for every F_em (no cogging):
+   * -F_load_N, or +0.0 when F_load_N is a zero (x - (+0.0) keeps x = -0.0,
+   * the + 0.0 of the cogging-free sum does not) */
+  double load_add;
   int mech_dir;       /**< 0: stuck/locked; +1/-1: sliding direction (Coulomb sign) */
   int elec_open;      /**< 1: PWM off and currents extinct: i held at 0 */
 } substep_in_t;
@@ -368,7 +374,8 @@ SIM_INLINE double deriv_t(const sim_t *s, const double y[4], const substep_in_t 
     /* sin of the cogging angle, as sim_rot */
     F_cog = p->cog_amp_N * (s->b_cs0 * cd + s->b_cc0 * sd);
   }
-  const double F_drive = (F_em + F_cog) - in->F_load_N;
+  /* without cogging one addition instead of two, the same value (see load_add) */
+  const double F_drive = cog ? (F_em + F_cog) - in->F_load_N : F_em + in->load_add;
   if (slide) {
     dy[2] = y[3];
     dy[3] = ((F_drive - p->b_visc_Ns_per_m * y[3]) - p->F_coulomb_N * (double)in->mech_dir) *
@@ -476,6 +483,7 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
   basis_ensure(s, st->x_m, st->i_d_A);
   substep_in_t in;
   in.F_load_N = s->F_load_N;
+  in.load_add = (s->F_load_N == 0.0) ? 0.0 : -s->F_load_N;
   in.elec_open = 0;
   double u_ab[2];
   double i_al = 0.0, i_be = 0.0;
@@ -661,6 +669,39 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
   st->v_mps = y1[3];
 }
 
+/**
+ * The common sub-step (PWM on without dead time, no cogging, no open phase,
+ * mover sliding and still sliding the same way at the end, clear of the stick
+ * band), with the same operations as substep() in that case but none of its
+ * event handling. Returns 0 without touching the state when the sub-step is
+ * not that case: the caller then runs substep() from the same start (the
+ * basis update done here is idempotent).
+ */
+static int substep_fast(sim_t *s, double h, const double u_ab[2]) {
+  const sim_plant_params_t *p = &s->p;
+  sim_plant_state_t *st = &s->st;
+  if (st->stuck || st->v_mps == 0.0) return 0;
+  basis_ensure(s, st->x_m, st->i_d_A);
+  substep_in_t in;
+  in.F_load_N = s->F_load_N;
+  in.load_add = (s->F_load_N == 0.0) ? 0.0 : -s->F_load_N;
+  in.elec_open = 0;
+  in.u_dq0_V[0] = s->b_c0 * u_ab[0] + s->b_s0 * u_ab[1];
+  in.u_dq0_V[1] = -s->b_s0 * u_ab[0] + s->b_c0 * u_ab[1];
+  in.mech_dir = st->v_mps > 0.0 ? 1 : -1;
+  const double y0[4] = {st->i_d_A, st->i_q_A, st->x_m, st->v_mps};
+  double y1[4];
+  rk4_slide(s, &in, y0, h, y1);
+  /* substep()'s end-of-sliding tests: velocity reversal or stick band */
+  const int crossed = (in.mech_dir > 0) ? (y1[3] <= 0.0) : (y1[3] >= 0.0);
+  if (crossed || fabs(y1[3]) < p->v_stick_mps) return 0;
+  st->i_d_A = y1[0];
+  st->i_q_A = y1[1];
+  st->x_m = y1[2];
+  st->v_mps = y1[3];
+  return 1;
+}
+
 void sim_plant_period(sim_t *s, const double duty[3], int pwm_on, double dt_s,
                       uint32_t n_sub) {
   if (n_sub == 0u) n_sub = 1u;
@@ -674,5 +715,7 @@ void sim_plant_period(sim_t *s, const double duty[3], int pwm_on, double dt_s,
     u_ab[1] = (ub - uc) * (1.0 / SIM_SQRT3);
     u_fixed = u_ab;
   }
-  for (uint32_t j = 0; j < n_sub; ++j) substep(s, duty, pwm_on, h, u_fixed);
+  const int fast = u_fixed && !s->p.locked && s->p.cog_amp_N == 0.0 && !s->p.open_phase_mask;
+  for (uint32_t j = 0; j < n_sub; ++j)
+    if (!(fast && substep_fast(s, h, u_fixed))) substep(s, duty, pwm_on, h, u_fixed);
 }
