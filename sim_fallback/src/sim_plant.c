@@ -393,12 +393,19 @@ SIM_INLINE void rk4_body(const sim_t *s, const substep_in_t *in, const double y0
                          int *far) {
   double k1[4], k2[4], k3[4], k4[4], yt[4];
   const double hh = 0.5 * h, h6 = h * (1.0 / 6.0);
+  /* Stuck (slide == 0): k[2] = k[3] = 0.0 and hh * 0.0 == h * 0.0 for every h
+   * (the same signed zero, or the same NaN), so stages 2..4 see one x and v:
+   * written as one expression, their angle terms are evaluated once. */
+  const double z = hh * 0.0;
   (void)deriv_t(s, y0, in, k1, cog, elec, slide, far);
   for (int j = 0; j < 4; ++j) yt[j] = y0[j] + hh * k1[j];
+  if (!slide) yt[2] = y0[2] + z, yt[3] = y0[3] + z;
   (void)deriv_t(s, yt, in, k2, cog, elec, slide, far);
   for (int j = 0; j < 4; ++j) yt[j] = y0[j] + hh * k2[j];
+  if (!slide) yt[2] = y0[2] + z, yt[3] = y0[3] + z;
   (void)deriv_t(s, yt, in, k3, cog, elec, slide, far);
   for (int j = 0; j < 4; ++j) yt[j] = y0[j] + h * k3[j];
+  if (!slide) yt[2] = y0[2] + z, yt[3] = y0[3] + z;
   (void)deriv_t(s, yt, in, k4, cog, elec, slide, far);
   for (int j = 0; j < 4; ++j) y1[j] = y0[j] + h6 * ((k1[j] + k4[j]) + 2.0 * (k2[j] + k3[j]));
 }
