@@ -677,17 +677,17 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
 }
 
 /**
- * The common sub-step (PWM on without dead time, no cogging, no open phase,
- * mover sliding and still sliding the same way at the end, clear of the stick
- * band), with the same operations as substep() in that case but none of its
- * event handling. Returns 0 without touching the state when the sub-step is
- * not that case: the caller then runs substep() from the same start (the
- * basis update done here is idempotent).
+ * The common sub-steps (PWM on without dead time, no cogging, no open phase):
+ * the mover sliding and still sliding the same way at the end, clear of the
+ * stick band; or held by static friction over the whole sub-step. The same
+ * operations as substep() in those cases, without its event handling. Returns
+ * 0 without touching the state when the sub-step is not one of them: the
+ * caller then runs substep() from the same start (the basis update done here
+ * is idempotent).
  */
 static int substep_fast(sim_t *s, double h, const double u_ab[2]) {
   const sim_plant_params_t *p = &s->p;
   sim_plant_state_t *st = &s->st;
-  if (st->stuck || st->v_mps == 0.0) return 0;
   basis_ensure(s, st->x_m, st->i_d_A);
   substep_in_t in;
   in.F_load_N = s->F_load_N;
@@ -695,9 +695,22 @@ static int substep_fast(sim_t *s, double h, const double u_ab[2]) {
   in.elec_open = 0;
   in.u_dq0_V[0] = s->b_c0 * u_ab[0] + s->b_s0 * u_ab[1];
   in.u_dq0_V[1] = -s->b_s0 * u_ab[0] + s->b_c0 * u_ab[1];
-  in.mech_dir = st->v_mps > 0.0 ? 1 : -1;
-  const double y0[4] = {st->i_d_A, st->i_q_A, st->x_m, st->v_mps};
+  double y0[4] = {st->i_d_A, st->i_q_A, st->x_m, st->v_mps};
   double y1[4];
+  if (st->stuck || st->v_mps == 0.0) {
+    in.mech_dir = 0;
+    if (fabs(drive_force(s, y0, &in)) > p->F_static_N) return 0; /* breaks away */
+    y0[3] = 0.0;
+    rk4_stuck(s, &in, y0, h, y1);
+    if (fabs(drive_force(s, y1, &in)) > p->F_static_N) return 0; /* breaks away inside */
+    st->stuck = 1;
+    st->i_d_A = y1[0];
+    st->i_q_A = y1[1];
+    st->x_m = y1[2];
+    st->v_mps = y1[3];
+    return 1;
+  }
+  in.mech_dir = st->v_mps > 0.0 ? 1 : -1;
   rk4_slide(s, &in, y0, h, y1);
   /* substep()'s end-of-sliding tests: velocity reversal or stick band */
   const int crossed = (in.mech_dir > 0) ? (y1[3] <= 0.0) : (y1[3] >= 0.0);
