@@ -87,7 +87,8 @@ def fw_step_ns() -> float | None:
 
 
 def plant_ns() -> dict[str, float]:
-    """ns per period of the plant alone for n_sub = 1, 2, 4 (bench_sim_plant), if built."""
+    """ns per period of the plant alone for n_sub = 1, 2, 4 and at standstill
+    (bench_sim_plant), if built."""
     exe = Path(lib_path()).resolve().parent / "bench_sim_plant"
     if not exe.is_file():
         return {}
@@ -96,8 +97,12 @@ def plant_ns() -> dict[str, float]:
                              check=True).stdout
     except (OSError, subprocess.SubprocessError):
         return {}
-    return {f"plant_ns_nsub{m.group(1)}": float(m.group(2))
-            for m in re.finditer(r"n_sub=(\d+): ([0-9.]+) ns", out)}
+    res = {f"plant_ns_nsub{m.group(1)}": float(m.group(2))
+           for m in re.finditer(r"alone, n_sub=(\d+): ([0-9.]+) ns", out)}
+    m = re.search(r"standstill.*?: ([0-9.]+) ns", out)
+    if m:
+        res["plant_ns_standstill"] = float(m.group(1))
+    return res
 
 
 def main() -> None:
@@ -145,8 +150,9 @@ def main() -> None:
     pl = plant_ns()
     out.update(pl)
     if pl:
-        print("plant alone (bench_sim_plant, CPU min of 7): " + ", ".join(
-            f"n_sub={k[-1]}: {v:.0f} ns" for k, v in pl.items()) + " per period")
+        print("plant alone (bench_sim_plant, CPU median of 7): " + ", ".join(
+            f"n_sub={k[-1]}: {v:.0f} ns" if k[-1].isdigit() else f"standstill: {v:.0f} ns"
+            for k, v in pl.items()) + " per period")
     child = subprocess.run([sys.executable, __file__, "--child-rss"], capture_output=True,
                            text=True, check=True, env={**os.environ})
     rss = json.loads(child.stdout.strip().splitlines()[-1])

@@ -98,16 +98,21 @@ struct sim_s {
 #define SIM_BASIS_FAR_DTH 0.06
 
 /** cos d, sin d: Taylor to d^6 / d^7 (truncation < 5e-15 for |d| <=
- * SIM_BASIS_FAR_DTH), libm beyond. */
+ * SIM_BASIS_FAR_DTH; the caller checks the range). */
+SIM_INLINE void sim_cs_poly(double d, double *cd, double *sd) {
+  const double d2 = d * d, d4 = d2 * d2;
+  *cd = (1.0 - 0.5 * d2) + d4 * ((1.0 / 24.0) - d2 * (1.0 / 720.0));
+  *sd = d * ((1.0 - d2 * (1.0 / 6.0)) + d4 * ((1.0 / 120.0) - d2 * (1.0 / 5040.0)));
+}
+
+/** cos d, sin d: sim_cs_poly when |d| <= SIM_BASIS_FAR_DTH, libm beyond. */
 SIM_INLINE void sim_cs_small(double d, double *cd, double *sd) {
   if (fabs(d) > SIM_BASIS_FAR_DTH) { /* far (huge step): exact */
     *cd = cos(d);
     *sd = sin(d);
     return;
   }
-  const double d2 = d * d, d4 = d2 * d2;
-  *cd = (1.0 - 0.5 * d2) + d4 * ((1.0 / 24.0) - d2 * (1.0 / 720.0));
-  *sd = d * ((1.0 - d2 * (1.0 / 6.0)) + d4 * ((1.0 / 120.0) - d2 * (1.0 / 5040.0)));
+  sim_cs_poly(d, cd, sd);
 }
 
 /** cos, sin of (angle0 + d) from cos/sin of angle0. */

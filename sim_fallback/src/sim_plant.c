@@ -201,8 +201,10 @@ static inline void flux_select(sim_t *s, double i_d_A) {
   }
   const double q = i_d_A * s->inv_flux_grid_A;
   if (fabs(q) < (double)SIM_FLUX_TAB_HALF) {
+    /* No "same grid point as before?" test: the HF injection moves i_d across
+     * grid points in most periods, and that branch was mispredicted often;
+     * the point and its coefficients are the same values either way. */
     const int32_t k = (int32_t)lrint(q);
-    if (k == s->flux_k) return;
     const size_t j = (size_t)(k + SIM_FLUX_TAB_HALF);
     s->b_id0 = (double)k * s->flux_grid_A;
     if (!s->flux_ok[j]) {
@@ -259,13 +261,9 @@ typedef double sim_v2d __attribute__((vector_size(16), may_alias));
 #define SIM_VECTOR 0
 #endif
 
-/** psi_d and 1 / L_dd from the basis expansion (libm when far). */
-SIM_INLINE void d_axis_flux(const sim_t *s, double i_d, double *psi_d, double *inv_L_dd) {
-  const double di = i_d - s->b_id0;
-  if (fabs(di) > s->flux_far_A) { /* far stage (huge step): exact */
-    d_axis_flux_exact(&s->p, i_d, psi_d, inv_L_dd);
-    return;
-  }
+/** psi_d and 1 / L_dd from the basis expansion at di = i_d - b_id0 (the caller
+ * checks |di| <= flux_far_A). */
+SIM_INLINE void d_axis_flux_poly(const sim_t *s, double di, double *psi_d, double *inv_L_dd) {
   const double d2 = di * di, d4 = d2 * d2;
   const sim_flux_coef_t *fc = s->fc;
   /* Estrin: (c0 + c1 x) + x^2 (c2 + c3 x) + x^4 ((c4 + c5 x) + x^2 (c6 + c7 x)) */
@@ -287,6 +285,16 @@ SIM_INLINE void d_axis_flux(const sim_t *s, double i_d, double *psi_d, double *i
 #endif
 }
 
+/** psi_d and 1 / L_dd from the basis expansion (libm when far). */
+SIM_INLINE void d_axis_flux(const sim_t *s, double i_d, double *psi_d, double *inv_L_dd) {
+  const double di = i_d - s->b_id0;
+  if (fabs(di) > s->flux_far_A) { /* far stage (huge step): exact */
+    d_axis_flux_exact(&s->p, i_d, psi_d, inv_L_dd);
+    return;
+  }
+  d_axis_flux_poly(s, di, psi_d, inv_L_dd);
+}
+
 double sim_plant_force(const sim_t *s, const sim_plant_state_t *st) {
   double psi_d, inv_L_dd;
   if (s->basis_valid)
@@ -300,6 +308,10 @@ double sim_plant_force(const sim_t *s, const sim_plant_state_t *st) {
 typedef struct {
   double u_dq0_V[2];  /**< stator voltage in the rotor frame at the basis angle */
   double F_load_N;
+  /** F_em + load_add = (F_em + 0.0) - F_load_N for every F_em (no cogging):
+   * -F_load_N, or +0.0 when F_load_N is a zero (x - (+0.0) keeps x = -0.0,
+   * the + 0.0 of the cogging-free sum does not) */
+  double load_add;
   int mech_dir;       /**< 0: stuck/locked; +1/-1: sliding direction (Coulomb sign) */
   int elec_open;      /**< 1: PWM off and currents extinct: i held at 0 */
 } substep_in_t;
@@ -307,20 +319,38 @@ typedef struct {
 /**
  * dy/dt for y = {i_d, i_q, x, v}; returns the net drive force (without
  * friction). cog / elec / slide are compile-time constants at the
- * specialised call sites (rk4_*), so the common case carries no branches
- * but the far-stage checks. Inlined so that k1..k4 stay in registers.
+ * specialised call sites (rk4_*), so the common case carries no branches.
+ * far == NULL: a far stage (|di| > flux_far_A, angle offset beyond
+ * SIM_BASIS_FAR_DTH) takes libm; else the expansions are used whatever the
+ * distance and *far is set when a stage was far (the caller then redoes the
+ * step with far == NULL: the same values as checking every stage, without
+ * libm calls, and the register spills they cost, in the common code).
+ * Inlined so that k1..k4 stay in registers.
  */
 SIM_INLINE double deriv_t(const sim_t *s, const double y[4], const substep_in_t *in,
-                          double dy[4], const int cog, const int elec, const int slide) {
+                          double dy[4], const int cog, const int elec, const int slide,
+                          int *far) {
   const sim_plant_params_t *p = &s->p;
   const double dx = y[2] - s->b_x0;
   double psi_d, inv_L_dd;
-  d_axis_flux(s, y[0], &psi_d, &inv_L_dd);
+  if (far) {
+    const double di = y[0] - s->b_id0;
+    *far |= fabs(di) > s->flux_far_A;
+    d_axis_flux_poly(s, di, &psi_d, &inv_L_dd);
+  } else {
+    d_axis_flux(s, y[0], &psi_d, &inv_L_dd);
+  }
   if (elec) {
     /* rotor-frame voltage: the basis-frame voltage rotated back by the
      * stage's angle offset d (cos/sin(-d) = cos d, -sin d) */
     double cd, sd;
-    sim_cs_small(s->k_theta * dx, &cd, &sd);
+    const double d = s->k_theta * dx;
+    if (far) {
+      *far |= fabs(d) > SIM_BASIS_FAR_DTH;
+      sim_cs_poly(d, &cd, &sd);
+    } else {
+      sim_cs_small(d, &cd, &sd);
+    }
     const double u_d = cd * in->u_dq0_V[0] + sd * in->u_dq0_V[1];
     const double u_q = cd * in->u_dq0_V[1] - sd * in->u_dq0_V[0];
     const double w = s->k_theta * y[3];
@@ -333,11 +363,19 @@ SIM_INLINE double deriv_t(const sim_t *s, const double y[4], const substep_in_t 
   const double F_em = s->k_force * (psi_d * y[1] - p->L_q_H * y[1] * y[0]);
   double F_cog = 0.0;
   if (cog) {
-    double cc, cs;
-    sim_rot(s->b_cc0, s->b_cs0, s->k_cog * dx, &cc, &cs);
-    F_cog = p->cog_amp_N * cs;
+    double cd, sd;
+    const double d = s->k_cog * dx;
+    if (far) {
+      *far |= fabs(d) > SIM_BASIS_FAR_DTH;
+      sim_cs_poly(d, &cd, &sd);
+    } else {
+      sim_cs_small(d, &cd, &sd);
+    }
+    /* sin of the cogging angle, as sim_rot */
+    F_cog = p->cog_amp_N * (s->b_cs0 * cd + s->b_cc0 * sd);
   }
-  const double F_drive = (F_em + F_cog) - in->F_load_N;
+  /* without cogging one addition instead of two, the same value (see load_add) */
+  const double F_drive = cog ? (F_em + F_cog) - in->F_load_N : F_em + in->load_add;
   if (slide) {
     dy[2] = y[3];
     dy[3] = ((F_drive - p->b_visc_Ns_per_m * y[3]) - p->F_coulomb_N * (double)in->mech_dir) *
@@ -349,23 +387,48 @@ SIM_INLINE double deriv_t(const sim_t *s, const double y[4], const substep_in_t 
   return F_drive;
 }
 
-/** One classical RK4 step of length h from y0 to y1. */
-SIM_INLINE void rk4_t(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
-                      double y1[4], const int cog, const int elec, const int slide) {
+/** One classical RK4 step of length h from y0 to y1 (far: see deriv_t). */
+SIM_INLINE void rk4_body(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
+                         double y1[4], const int cog, const int elec, const int slide,
+                         int *far) {
   double k1[4], k2[4], k3[4], k4[4], yt[4];
   const double hh = 0.5 * h, h6 = h * (1.0 / 6.0);
-  (void)deriv_t(s, y0, in, k1, cog, elec, slide);
+  /* Stuck (slide == 0): k[2] = k[3] = 0.0 and hh * 0.0 == h * 0.0 for every h
+   * (the same signed zero, or the same NaN), so stages 2..4 see one x and v:
+   * written as one expression, their angle terms are evaluated once. */
+  const double z = hh * 0.0;
+  (void)deriv_t(s, y0, in, k1, cog, elec, slide, far);
   for (int j = 0; j < 4; ++j) yt[j] = y0[j] + hh * k1[j];
-  (void)deriv_t(s, yt, in, k2, cog, elec, slide);
+  if (!slide) yt[2] = y0[2] + z, yt[3] = y0[3] + z;
+  (void)deriv_t(s, yt, in, k2, cog, elec, slide, far);
   for (int j = 0; j < 4; ++j) yt[j] = y0[j] + hh * k2[j];
-  (void)deriv_t(s, yt, in, k3, cog, elec, slide);
+  if (!slide) yt[2] = y0[2] + z, yt[3] = y0[3] + z;
+  (void)deriv_t(s, yt, in, k3, cog, elec, slide, far);
   for (int j = 0; j < 4; ++j) yt[j] = y0[j] + h * k3[j];
-  (void)deriv_t(s, yt, in, k4, cog, elec, slide);
+  if (!slide) yt[2] = y0[2] + z, yt[3] = y0[3] + z;
+  (void)deriv_t(s, yt, in, k4, cog, elec, slide, far);
   for (int j = 0; j < 4; ++j) y1[j] = y0[j] + h6 * ((k1[j] + k4[j]) + 2.0 * (k2[j] + k3[j]));
 }
 
-/* Specialisations: the two common cases (no cogging, PWM on, sliding or
- * stuck) and a generic one. */
+/** The step with every stage checked (libm for far stages): any case. */
+#if defined(__GNUC__)
+__attribute__((noinline, cold))
+#endif
+static void rk4_exact(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
+                      double y1[4]) {
+  rk4_body(s, in, y0, h, y1, s->p.cog_amp_N != 0.0, !in->elec_open, in->mech_dir != 0, NULL);
+}
+
+/** The step on the expansions; redone by rk4_exact when a stage was far. */
+SIM_INLINE void rk4_t(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
+                      double y1[4], const int cog, const int elec, const int slide) {
+  int far = 0;
+  rk4_body(s, in, y0, h, y1, cog, elec, slide, &far);
+  if (far) rk4_exact(s, in, y0, h, y1);
+}
+
+/* Specialisations: the common cases (PWM on, without or with cogging, sliding
+ * or stuck) and a generic one. */
 static void rk4_slide(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
                       double y1[4]) {
   rk4_t(s, in, y0, h, y1, 0, 1, 1);
@@ -373,6 +436,14 @@ static void rk4_slide(const sim_t *s, const substep_in_t *in, const double y0[4]
 static void rk4_stuck(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
                       double y1[4]) {
   rk4_t(s, in, y0, h, y1, 0, 1, 0);
+}
+static void rk4_cog_slide(const sim_t *s, const substep_in_t *in, const double y0[4],
+                          double h, double y1[4]) {
+  rk4_t(s, in, y0, h, y1, 1, 1, 1);
+}
+static void rk4_cog_stuck(const sim_t *s, const substep_in_t *in, const double y0[4],
+                          double h, double y1[4]) {
+  rk4_t(s, in, y0, h, y1, 1, 1, 0);
 }
 static void rk4_generic(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
                         double y1[4]) {
@@ -384,19 +455,23 @@ static double drive_force(const sim_t *s, const double y[4], const substep_in_t 
   double dtmp[4];
   substep_in_t in0 = *in;
   in0.mech_dir = 0;
-  return deriv_t(s, y, &in0, dtmp, s->p.cog_amp_N != 0.0, 0, 0);
+  return deriv_t(s, y, &in0, dtmp, s->p.cog_amp_N != 0.0, 0, 0, NULL);
 }
 
 /** RK4 step with the specialisation matching the sub-step's inputs. */
 static inline void rk4_dispatch(const sim_t *s, const substep_in_t *in, const double y0[4],
                                 double h, double y1[4]) {
-  if (s->p.cog_amp_N == 0.0 && !in->elec_open) {
+  if (in->elec_open) {
+    rk4_generic(s, in, y0, h, y1);
+  } else if (s->p.cog_amp_N == 0.0) {
     if (in->mech_dir != 0)
       rk4_slide(s, in, y0, h, y1);
     else
       rk4_stuck(s, in, y0, h, y1);
+  } else if (in->mech_dir != 0) {
+    rk4_cog_slide(s, in, y0, h, y1);
   } else {
-    rk4_generic(s, in, y0, h, y1);
+    rk4_cog_stuck(s, in, y0, h, y1);
   }
 }
 
@@ -415,6 +490,7 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
   basis_ensure(s, st->x_m, st->i_d_A);
   substep_in_t in;
   in.F_load_N = s->F_load_N;
+  in.load_add = (s->F_load_N == 0.0) ? 0.0 : -s->F_load_N;
   in.elec_open = 0;
   double u_ab[2];
   double i_al = 0.0, i_be = 0.0;
@@ -600,6 +676,60 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
   st->v_mps = y1[3];
 }
 
+/**
+ * The common sub-steps (PWM on without dead time, no cogging, no open phase):
+ * the mover sliding and still sliding the same way at the end, clear of the
+ * stick band; or held by static friction over the whole sub-step. The same
+ * operations as substep() in those cases, without its event handling. Returns
+ * 0 without touching the state when the sub-step is not one of them: the
+ * caller then runs substep() from the same start (the basis update done here
+ * is idempotent).
+ */
+static int substep_fast(sim_t *s, double h, const double u_ab[2]) {
+  const sim_plant_params_t *p = &s->p;
+  sim_plant_state_t *st = &s->st;
+  basis_ensure(s, st->x_m, st->i_d_A);
+  substep_in_t in;
+  in.F_load_N = s->F_load_N;
+  in.load_add = (s->F_load_N == 0.0) ? 0.0 : -s->F_load_N;
+  in.elec_open = 0;
+  in.u_dq0_V[0] = s->b_c0 * u_ab[0] + s->b_s0 * u_ab[1];
+  in.u_dq0_V[1] = -s->b_s0 * u_ab[0] + s->b_c0 * u_ab[1];
+  double y0[4] = {st->i_d_A, st->i_q_A, st->x_m, st->v_mps};
+  double y1[4];
+  if (st->stuck || st->v_mps == 0.0) {
+    in.mech_dir = 0;
+    if (fabs(drive_force(s, y0, &in)) > p->F_static_N) return 0; /* breaks away */
+    y0[3] = 0.0;
+    rk4_stuck(s, &in, y0, h, y1);
+    if (fabs(drive_force(s, y1, &in)) > p->F_static_N) return 0; /* breaks away inside */
+    st->stuck = 1;
+    st->i_d_A = y1[0];
+    st->i_q_A = y1[1];
+    st->x_m = y1[2];
+    st->v_mps = y1[3];
+    return 1;
+  }
+  in.mech_dir = st->v_mps > 0.0 ? 1 : -1;
+  rk4_slide(s, &in, y0, h, y1);
+  /* substep()'s end-of-sliding tests: velocity reversal or stick band */
+  const int crossed = (in.mech_dir > 0) ? (y1[3] <= 0.0) : (y1[3] >= 0.0);
+  if (crossed || fabs(y1[3]) < p->v_stick_mps) return 0;
+  st->i_d_A = y1[0];
+  st->i_q_A = y1[1];
+  st->x_m = y1[2];
+  st->v_mps = y1[3];
+  return 1;
+}
+
+/* Not inlined into sim_run (link-time optimisation did that when this function
+ * was smaller): inlined there, one process in two ran the closed loop ~11 %
+ * slower (262 instead of 235 ns per period, paper_salient load step), which of
+ * the two set by where the stack landed (address-space randomisation); called,
+ * every process runs at the fast figure. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
 void sim_plant_period(sim_t *s, const double duty[3], int pwm_on, double dt_s,
                       uint32_t n_sub) {
   if (n_sub == 0u) n_sub = 1u;
@@ -613,5 +743,7 @@ void sim_plant_period(sim_t *s, const double duty[3], int pwm_on, double dt_s,
     u_ab[1] = (ub - uc) * (1.0 / SIM_SQRT3);
     u_fixed = u_ab;
   }
-  for (uint32_t j = 0; j < n_sub; ++j) substep(s, duty, pwm_on, h, u_fixed);
+  const int fast = u_fixed && !s->p.locked && s->p.cog_amp_N == 0.0 && !s->p.open_phase_mask;
+  for (uint32_t j = 0; j < n_sub; ++j)
+    if (!(fast && substep_fast(s, h, u_fixed))) substep(s, duty, pwm_on, h, u_fixed);
 }
