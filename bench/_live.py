@@ -839,8 +839,10 @@ class LiveFeed:
             if deadline is not None and now >= deadline:
                 self._flush(pending, put_times)
                 pending, put_times, deadline = {}, [], None
-            elif drained:  # asleep until the batch is due (or one batch period: new items)
-                self._wake.wait(self.batch_s if deadline is None else deadline - now)
+            elif drained:  # asleep until the batch is due, waking 4 times a batch to take
+                # what came (spreads the work: the batch is not all converted at its end)
+                self._wake.wait(self.batch_s / 4 if deadline is None else
+                                min(deadline - now, self.batch_s / 4))
 
     def _flush(self, pending: dict[str, tuple[list[np.ndarray], list[np.ndarray]]],
                put_times: list[float]) -> None:
