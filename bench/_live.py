@@ -482,8 +482,8 @@ class RerunSink:
 
     The .rrd holds the samples and the recording's name only. The blueprint (the views,
     the legend names and colours) goes to the viewer with the stream and, for the file, to
-    ``X.rbl`` beside ``X.rrd`` (:func:`view_command` opens both): a fixed ~0.2 MB that
-    every recording would otherwise carry.
+    ``X.rbl`` beside ``X.rrd`` (:func:`view_command` opens both): a fixed size (~0.2 MB
+    with the legend overrides) that does not grow with drive time.
     """
 
     def __init__(self, spec: RerunSpec, path: Path, name: str = "bench",
