@@ -12,11 +12,16 @@ Data flow::
                                             column per entity -> RerunSink.send()
                                                                         |
                                      viewer stream (spawn / serve / connect) at once,
-                                     .rrd file stream in 1 s columns, compacted at close
+                                     .rrd file stream in 1 s columns, compacted at close;
+                                     the views (blueprint) go to the viewer and to X.rbl
+                                     beside X.rrd (``rerun X.rrd X.rbl`` opens both)
 
 The threads that talk to the drive only call :meth:`LiveFeed.put` (a C ``SimpleQueue``,
 bounded by its size: no Python-level lock the sender could hold); a full queue drops the
-item and counts it, it never waits. Everything else (mapping to entities, unit conversion,
+item and counts it, it never waits. The sender never waits on the queue either: it sleeps
+until a batch is due and takes what is there (``get_nowait``), so a put never has a waiter
+to wake (waking the sender on every item was what made puts slow under CPU load: 170-250
+stalls per 10 s run, none after). Everything else (mapping to entities, unit conversion,
 decimation, ``rr.send_columns``) happens on the sender thread. The feed can start before
 rerun is open (``LiveFeed(None)`` + :meth:`LiveFeed.attach`): ``bench live`` enables the
 drive while a recording-only sink opens; items wait in the queue meanwhile.
@@ -151,12 +156,33 @@ _STYLE: dict[str, tuple[str, tuple[int, int, int] | None]] = {
 }
 
 
+def _matches(entity: str, pattern: str) -> bool:
+    """``entity`` (no leading /) is selected by a view's content ``pattern`` ("/a/**" or
+    "/a/b")."""
+    pat = pattern.lstrip("/")
+    if pat.endswith("/**"):
+        return entity == pat[:-3] or entity.startswith(pat[:-2])
+    return entity == pat
+
+
 def blueprint() -> Any:
-    """The bench's default rerun blueprint: wire estimates with the truth beside them."""
+    """The bench's default rerun blueprint: wire estimates with the truth beside them.
+
+    The legend name and colour of the known entities (:data:`_STYLE`) are overrides in the
+    blueprint, not data in the recording: the .rrd holds only the samples (and the
+    recording's name), the blueprint is the .rbl beside it (and what a viewer is sent)."""
+    import rerun as rr
     import rerun.blueprint as rrb
 
     def view(name: str, *contents: str) -> Any:
-        return rrb.TimeSeriesView(origin="/", contents=[f"+ {c}" for c in contents], name=name)
+        overrides = {}
+        for entity, (label, color) in _STYLE.items():
+            if any(_matches(entity, c) for c in contents):
+                arch = (rr.SeriesLines(names=label, colors=color) if color is not None
+                        else rr.SeriesLines(names=label))
+                overrides["/" + entity] = arch.visualizer()
+        return rrb.TimeSeriesView(origin="/", contents=[f"+ {c}" for c in contents], name=name,
+                                  overrides=overrides or None)
 
     return rrb.Blueprint(
         rrb.Vertical(
@@ -433,6 +459,19 @@ def spawn_viewer(grpc_port: int) -> str:
 # ---- the transport: rerun recording streams ---------------------------------------------
 
 
+def blueprint_path(rrd: Path) -> Path:
+    """The blueprint file written beside a recording: ``X.rrd`` -> ``X.rbl``."""
+    return Path(rrd).with_suffix(".rbl")
+
+
+def view_command(rrd: Path) -> str:
+    """The command that opens a recording with the bench's views (rerun loads the .rbl
+    beside it as the blueprint of the same application id)."""
+    import shlex
+
+    return f"rerun {shlex.quote(str(rrd))} {shlex.quote(str(blueprint_path(rrd)))}"
+
+
 class RerunSink:
     """The rerun side: a viewer stream (spawn / serve / connect; none for save or a
     headless spawn) and an .rrd file stream, both of one recording.
@@ -440,6 +479,11 @@ class RerunSink:
     :meth:`send` goes to the viewer at once and to the file in ``file_batch_s`` columns;
     :meth:`close` compacts the file (rerun's chunk optimiser: a few large chunks instead of
     one per entity and batch). Every server binds 127.0.0.1 only.
+
+    The .rrd holds the samples and the recording's name only. The blueprint (the views,
+    the legend names and colours) goes to the viewer with the stream and, for the file, to
+    ``X.rbl`` beside ``X.rrd`` (:func:`view_command` opens both): a fixed size (~0.2 MB
+    with the legend overrides) that does not grow with drive time.
     """
 
     def __init__(self, spec: RerunSpec, path: Path, name: str = "bench",
@@ -462,6 +506,7 @@ class RerunSink:
         self._file_buf: dict[str, tuple[list[np.ndarray], list[np.ndarray]]] = {}
         self._file_t0 = time.monotonic()
         self.bp = blueprint()
+        self.blueprint_path = blueprint_path(self.path)
         self.viewer: Any = None
         mode = spec.mode
         if mode == "spawn" and not _display():
@@ -479,35 +524,19 @@ class RerunSink:
             self.url = spec.url
             self.notes.append(f"streaming to the viewer at {self.url}")
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.bp.save(app_id, self.blueprint_path)
         self.file = rr.RecordingStream(app_id, recording_id=self.recording_id)
-        self.file.set_sinks(rr.FileSink(str(self.path)), default_blueprint=self.bp)
+        self.file.set_sinks(rr.FileSink(str(self.path)))
         self.file.send_recording_name(name)
-        self._styled: set[str] = set()  # entities whose legend name/colour went out
         if self.url is not None:
             self.viewer = rr.RecordingStream(app_id, recording_id=self.recording_id)
             self.viewer.set_sinks(rr.GrpcSink(self.url), default_blueprint=self.bp)
             self.viewer.send_recording_name(name)
-        self.notes.append(f"recording -> {self.path}")
-
-    def _style(self, entity: str) -> None:
-        """The legend name and colour of a known entity, once, when it first has data (a
-        static costs ~2 kB of the .rrd: only for the entities there are)."""
-        self._styled.add(entity)
-        style = _STYLE.get(entity)
-        if style is None:
-            return
-        label, color = style
-        rr = self.rr
-        arch = (rr.SeriesLines(names=label, colors=color) if color is not None
-                else rr.SeriesLines(names=label))
-        for stream in (self.file, self.viewer):
-            if stream is not None:
-                stream.log(entity, arch, static=True)
+        self.notes.append(f"recording -> {self.path} (views: {self.blueprint_path.name}; "
+                          f"open with: {view_command(self.path)})")
 
     def send(self, entity: str, t: np.ndarray, v: np.ndarray) -> None:
         """One column: to the viewer now, to the file in ``file_batch_s`` columns."""
-        if entity not in self._styled:
-            self._style(entity)
         if self.viewer is not None:
             self._send(self.viewer, entity, t, v)
         b = self._file_buf.setdefault(entity, ([], []))
@@ -543,27 +572,29 @@ class RerunSink:
                 pass
         self.file.flush()
         self.file.disconnect()
-        out: dict[str, Any] = {"path": str(self.path), "bytes_raw": self.path.stat().st_size}
+        out: dict[str, Any] = {"path": str(self.path), "bytes_raw": self.path.stat().st_size,
+                               "blueprint": str(self.blueprint_path),
+                               "blueprint_bytes": self.blueprint_path.stat().st_size}
         if self.compact:
             try:
-                compact_rrd(self.path, self.app_id, self.recording_id, self.bp)
+                compact_rrd(self.path, self.app_id, self.recording_id)
             except Exception as e:  # noqa: BLE001 - the raw file stays, valid and complete
                 out["compact_error"] = f"{type(e).__name__}: {e}"
         out["bytes"] = self.path.stat().st_size
         return out
 
 
-def compact_rrd(path: Path, app_id: str, recording_id: str, bp: Any = None) -> None:
+def compact_rrd(path: Path, app_id: str, recording_id: str) -> None:
     """Rewrite ``path`` with rerun's chunk optimiser (object-store profile: chunks of up to
-    2 MiB), the blueprint kept; atomic (a temporary file, then a rename)."""
+    2 MiB); atomic (a temporary file, then a rename). Only the recording is kept (the
+    blueprint is the .rbl beside it)."""
     import rerun as rr
     from rerun.chunk import OptimizationProfile, RrdReader
 
     store = RrdReader(path).stream().collect(optimize=OptimizationProfile.OBJECT_STORE)
     tmp = path.with_name(path.name + ".tmp")
     rec = rr.RecordingStream(app_id, recording_id=recording_id, send_properties=False)
-    rec.set_sinks(rr.FileSink(str(tmp)), default_blueprint=bp if bp is not None else
-                  blueprint())
+    rec.set_sinks(rr.FileSink(str(tmp)))
     rr.send_chunks(store, recording=rec)
     rec.flush()
     rec.disconnect()
@@ -692,6 +723,7 @@ class LiveFeed:
         self._t_start_pc = time.perf_counter()
         self._t_attach = self._t_start
         self._attached = threading.Event()
+        self._wake = threading.Event()  #: set by close(): the sender stops sleeping
         if transport is not None:
             self._attached.set()
         self.rpm = 60.0 / (_TWO_PI * pole_pairs)
@@ -774,32 +806,24 @@ class LiveFeed:
         put_times: list[float] = []
         deadline: float | None = None
         stopping = False
-        taken_due = 0  # items taken after the batch fell due (bounded: the queue's size)
+        # never blocks on the queue (get_nowait only): a put then never wakes this thread (no
+        # waiter to release, no GIL hand-off per item); it sleeps until the batch is due
         while True:
-            due = deadline is not None and time.monotonic() >= deadline
-            if stopping or due:  # take what is there now, without waiting
+            hw = self._q.qsize()  # the backlog when the sender wakes
+            if hw > self.stats.queue_high_water:
+                self.stats.queue_high_water = hw
+            drained = False
+            for _ in range(self.stats.queue_max + 1):  # what is queued now (bounded)
                 try:
                     item = self._q.get_nowait()
                 except queue.Empty:
-                    item = _STOP if stopping else None
-            else:
-                timeout = None if deadline is None else max(0.0, deadline - time.monotonic())
-                try:
-                    item = self._q.get(timeout=timeout)
-                except queue.Empty:
-                    item = None
-            if item is _STOP:
-                if not stopping:  # drain what is still queued, then stop
+                    drained = True
+                    break
+                if item is _STOP:  # drain what is still queued, then stop
                     stopping = True
                     continue
-                self._flush(pending, put_times)
-                return
-            if item is not None:
                 prefix, t, values, t_put = item
                 self.stats.items_in += 1
-                hw = self._q.qsize()
-                if hw > self.stats.queue_high_water:
-                    self.stats.queue_high_water = hw
                 tt = np.atleast_1d(np.asarray(t, dtype=np.float64))
                 for k, v in values.items():
                     b = pending.setdefault(prefix + k, ([], []))
@@ -808,15 +832,17 @@ class LiveFeed:
                 put_times.append(max(t_put, self._t_attach))
                 if deadline is None:
                     deadline = max(t_put, self._t_attach) + self.batch_s
-                if stopping or not due:
-                    continue
-                taken_due += 1
-                if taken_due < self.stats.queue_max:
-                    continue
-            if deadline is not None and time.monotonic() >= deadline:
-                # due, and the queue is empty or a queue's worth was taken: send the batch
+            if stopping and drained:
                 self._flush(pending, put_times)
-                pending, put_times, deadline, taken_due = {}, [], None, 0
+                return
+            now = time.monotonic()
+            if deadline is not None and now >= deadline:
+                self._flush(pending, put_times)
+                pending, put_times, deadline = {}, [], None
+            elif drained:  # asleep until the batch is due, waking 4 times a batch to take
+                # what came (spreads the work: the batch is not all converted at its end)
+                self._wake.wait(self.batch_s / 4 if deadline is None else
+                                min(deadline - now, self.batch_s / 4))
 
     def _flush(self, pending: dict[str, tuple[list[np.ndarray], list[np.ndarray]]],
                put_times: list[float]) -> None:
@@ -925,6 +951,7 @@ class LiveFeed:
         if not self._closed:
             self._closed = True
             self._q.put(_STOP)  # the stop marker gets in even when the queue is full
+            self._wake.set()
             self._thread.join(timeout_s)
         return self.stats
 
@@ -949,7 +976,7 @@ def summary_line(stats: FeedStats, rec: dict[str, Any] | None = None,
         s += f"; recording {rec['path']} ({mb:.2f} MB"
         if drive_time_s and drive_time_s > 0:
             s += f", {mb / drive_time_s * 60:.2f} MB/min"
-        s += ")"
+        s += f"); view: {view_command(Path(rec['path']))}"
     return s
 
 

@@ -5,9 +5,11 @@ start, imports, simulated drive paced to the wall clock, rerun, exit) and prints
 and as medians: the wall time, the feed's latency (p50 / p95 / max, from the moment a
 sample is decoded to the end of the batch's ``send_columns`` calls), the items dropped
 (bounded queue full), the drive-thread stalls (a ``put`` slower than 1 ms) with the longest
-put, and the .rrd size per minute of drive time. Then one longer run (``--long``, default
-60 s) for the size per minute of a steady recording (the fixed ~80 kB of blueprint and
-properties weigh less). Prints figures; asserts nothing.
+put, the .rrd size per minute of drive time and the size of the blueprint file written
+beside it (``X.rbl``: the views, a fixed size, not counted in the .rrd's MB/min). Then one
+longer run (``--long``, default 60 s) for the size per minute of a steady recording (the
+.rrd's fixed part, ~15 kB of recording properties and chunk index, weighs less). Prints
+figures; asserts nothing.
 
     python benchmarks/bench_live.py [-n 3] [--duration 10] [--long 60]
 
@@ -59,19 +61,22 @@ def run_once(duration_s: float, tmp: Path, k: int) -> dict[str, Any]:
     if m is None or d is None:
         raise SystemExit(f"no summary in the output:\n{r.stderr}\n{r.stdout}")
     size = rrd.stat().st_size
+    rbl = rrd.with_suffix(".rbl")
     drive = float(d["s"])
     return {"wall_s": wall, "p50_ms": float(m["p50"]), "p95_ms": float(m["p95"]),
             "max_ms": float(m["max"]), "dropped": int(m["dropped"]),
             "stalls": int(m["stalls"]), "put_max_ms": float(m["put_ms"]),
             "rows": int(m["rows"]), "batches": int(m["batches"]), "bytes": size,
-            "drive_s": drive, "mb_per_min": size / 1e6 / drive * 60.0}
+            "drive_s": drive, "mb_per_min": size / 1e6 / drive * 60.0,
+            "rbl_bytes": rbl.stat().st_size if rbl.exists() else 0}
 
 
 def show(tag: str, x: dict[str, Any]) -> None:
     print(f"  {tag:>6}: wall {x['wall_s']:6.2f} s | latency p50/p95/max {x['p50_ms']:.0f}/"
           f"{x['p95_ms']:.0f}/{x['max_ms']:.0f} ms | dropped {x['dropped']} | stalls "
           f"{x['stalls']} (longest put {x['put_max_ms']:.2f} ms) | .rrd {x['bytes'] / 1e6:.3f}"
-          f" MB for {x['drive_s']:.2f} s of drive = {x['mb_per_min']:.2f} MB/min | "
+          f" MB for {x['drive_s']:.2f} s of drive = {x['mb_per_min']:.2f} MB/min (+ .rbl "
+          f"{x['rbl_bytes'] / 1e6:.3f} MB) | "
           f"{x['rows']} samples in {x['batches']} batches")
 
 

@@ -7,6 +7,12 @@ Usage::
 
     PYTHONPATH=. python tools/check_web_viewer.py [--out web_viewer.png] [--wait 20]
         [--duration 40] [--grpc-port PORT] [--web-port PORT] [--chromium PATH]
+    PYTHONPATH=. python tools/check_web_viewer.py --recording [--duration 10] ...
+
+``--recording`` checks a saved recording instead of the live stream: ``bench live --sim
+--duration D --rerun save X.rrd`` runs to its end, then the command it printed to open the
+recording (``rerun X.rrd X.rbl``: the .rrd and the blueprint beside it) is run as a web
+viewer server (``--serve-web --bind 127.0.0.1`` added) and opened in the browser.
 
 Exit 0 when the screenshot shows plots with data, 1 when it does not, 2 for bad options,
 busy ports, a bench that did not start or no Chromium found (``apt-get install
@@ -204,6 +210,44 @@ def start_bench(duration_s: float, grpc_port: int, web_port: int, cwd: Path
                        " | ".join(lines[-3:]))
 
 
+VIEW_RE = re.compile(r"; view: (rerun .+)$", re.M)
+
+
+def serve_recording(duration_s: float, grpc_port: int, web_port: int, cwd: Path
+                    ) -> tuple[subprocess.Popen[str], str, list[str]]:
+    """``bench live --sim --rerun save X.rrd`` to its end, then the viewer command it
+    printed, served to the web viewer on 127.0.0.1; returns the server, the URL and the
+    bench's stderr lines."""
+    import shlex
+
+    if str(ROOT) not in sys.path:
+        sys.path.insert(0, str(ROOT))
+    from bench._live import _wait_port, rerun_exe, web_viewer_url
+
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get(
+        "PYTHONPATH", "")}
+    for v in ("DISPLAY", "WAYLAND_DISPLAY"):
+        env.pop(v, None)
+    r = subprocess.run([sys.executable, "-m", "bench.cli", "live", "--sim", "--duration",
+                        str(duration_s), "--rerun", "save", str(cwd / "x.rrd")], cwd=cwd,
+                       env=env, stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                       timeout=duration_s + 120)
+    lines = r.stderr.splitlines()
+    m = VIEW_RE.search(r.stderr)
+    if r.returncode != 0 or m is None:
+        raise RuntimeError(f"bench live (exit {r.returncode}) printed no viewer command; "
+                           "its stderr: " + " | ".join(lines[-3:]))
+    argv = shlex.split(m.group(1))
+    lines.append(f"bench printed: {m.group(1)}")
+    proc = subprocess.Popen([rerun_exe(), "--serve-web", "--bind", "127.0.0.1", "--port",
+                             str(grpc_port), "--web-viewer-port", str(web_port), *argv[1:]],
+                            cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, text=True)
+    _wait_port(grpc_port, proc, "server")
+    _wait_port(web_port, proc, "server")
+    return proc, web_viewer_url(f"rerun+http://127.0.0.1:{grpc_port}/proxy", web_port), lines
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -219,6 +263,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--min-pixels", type=int, default=2000,
                     help="saturated plot pixels needed to pass (default 2000)")
     ap.add_argument("--chromium", help="Chromium binary (default: $CHROMIUM, else PATH)")
+    ap.add_argument("--recording", action="store_true",
+                    help="check a saved recording opened with the command the bench printed "
+                         "(bench live --rerun save) instead of the live stream")
     args = ap.parse_args(argv)
     for name, v, lo, hi in (("--wait", args.wait, 1.0, 600.0),
                             ("--duration", args.duration, 5.0, 3600.0)):
@@ -226,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"check_web_viewer: {name} {v}: allowed range [{lo:g}, {hi:g}] s",
                   file=sys.stderr)
             return 2
-    if args.duration < args.wait + 5.0:
+    if args.duration < args.wait + 5.0 and not args.recording:
         print(f"check_web_viewer: --duration {args.duration}: allowed range >= --wait + 5 "
               f"s ({args.wait + 5:g} s): the drive must still stream at the screenshot",
               file=sys.stderr)
@@ -247,11 +294,17 @@ def main(argv: list[str] | None = None) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="bench-webcheck-") as tmp:
         try:
-            bench, url, lines = start_bench(args.duration, grpc_port, web_port, Path(tmp))
+            if args.recording:
+                bench, url, lines = serve_recording(args.duration, grpc_port, web_port,
+                                                    Path(tmp))
+                print(lines[-1])
+            else:
+                bench, url, lines = start_bench(args.duration, grpc_port, web_port,
+                                                Path(tmp))
+                print(f"bench printed: {url}")
         except RuntimeError as e:
             print(f"check_web_viewer: {' '.join(str(e).split())}", file=sys.stderr)
             return 2
-        print(f"bench printed: {url}")
         browser = None
         try:
             browser = Browser(exe)
@@ -261,13 +314,14 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             if browser is not None:
                 browser.close()
-            bench.send_signal(signal.SIGINT)  # Ctrl-C: the drive is disabled, .rrd saved
+            # Ctrl-C: the drive is disabled, .rrd saved (--recording: the viewer server ends)
+            bench.send_signal(signal.SIGTERM if args.recording else signal.SIGINT)
             try:
                 _, err = bench.communicate(timeout=30)
             except subprocess.TimeoutExpired:
                 bench.kill()
                 _, err = bench.communicate()
-            lines += err.splitlines()
+            lines += (err or "").splitlines()
         summary = next((ln for ln in lines if "batches" in ln), "")
         if summary:
             print(summary)

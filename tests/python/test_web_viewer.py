@@ -1,6 +1,7 @@
 """rerun's web viewer in a real browser (tools/check_web_viewer.py): ``bench live --sim
 --rerun serve`` streams, headless Chromium opens the URL the bench printed, and the
-screenshot must show plots with data. Skipped without Chromium or the simulator."""
+screenshot must show plots with data; the same for a saved recording opened with the
+command the bench printed. Skipped without Chromium or the simulator."""
 
 from __future__ import annotations
 
@@ -31,6 +32,24 @@ def test_web_viewer_shows_plots_with_data(tmp_path: Path) -> None:
     assert r.returncode == 0, r.stdout + r.stderr
     assert "bench printed: http://127.0.0.1:" in r.stdout
     n, cols, rows = plot_pixels(png)  # the tool's verdict, checked on the file itself
+    assert n >= 2000 and cols >= 0.5 and rows >= 0.25, (n, cols, rows)
+
+
+@pytest.mark.skipif(find_chromium() is None,
+                    reason="no Chromium (apt-get install chromium, or set CHROMIUM=PATH)")
+@needs_sim
+def test_saved_recording_opened_with_the_printed_command_shows_plots(tmp_path: Path) -> None:
+    """``bench live --rerun save X.rrd`` keeps the views in ``X.rbl`` beside the .rrd: the
+    command the bench printed (``rerun X.rrd X.rbl``) must give the plots with data."""
+    png = tmp_path / "recording.png"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    r = subprocess.run([sys.executable, str(ROOT / "tools" / "check_web_viewer.py"),
+                        "--recording", "--out", str(png), "--wait", "15", "--duration", "6"],
+                       capture_output=True, text=True, cwd=tmp_path, env=env, timeout=240)
+    assert "Traceback" not in r.stderr, r.stderr
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "bench printed: rerun " in r.stdout and ".rbl" in r.stdout, r.stdout
+    n, cols, rows = plot_pixels(png)
     assert n >= 2000 and cols >= 0.5 and rows >= 0.25, (n, cols, rows)
 
 
