@@ -125,7 +125,8 @@ def one_insn_per_tb_args() -> list[str]:
 def source_fingerprint() -> str:
     """sha256 (12 hex) over the core's sources and headers and the harness."""
     h = hashlib.sha256()
-    files = [*(FW / "src").glob("*.c"), *(FW / "include").rglob("*.h"), *CM4.glob("*")]
+    files = [*(FW / "src").glob("*.c"), *(FW / "include").rglob("*.h"), *CM4.glob("*"),
+             *(FW / "comm" / "src").glob("*.c"), *(FW / "comm" / "include").rglob("*.h")]
     for p in sorted(files):
         if p.is_file():
             h.update(p.name.encode())
@@ -133,10 +134,24 @@ def source_fingerprint() -> str:
     return h.hexdigest()[:12]
 
 
+def harness_sources() -> tuple[list[str], list[str]]:
+    """Sources and include flags of the harness (M4 image and host build alike): the
+    core, and the drive application around it for the control interrupt (fw_app_isr;
+    the rest of the application is dropped by --gc-sections)."""
+    srcs = sorted(str(p) for p in (FW / "src").glob("*.c"))
+    srcs += sorted(str(p) for p in (FW / "comm" / "src").glob("*.c")
+                   if p.name != "fw_board.c")  # the board glue needs a port: not here
+    srcs += sorted(str(p) for p in (FW / "comm" / "generated").glob("*.c"))
+    srcs.append(str(CM4 / "harness.c"))
+    incs = [f"-I{FW / 'include'}", f"-I{FW / 'comm' / 'include'}",
+            f"-I{FW / 'comm' / 'generated'}"]
+    return srcs, incs
+
+
 def build(opt: str, outdir: Path, lto: bool = True) -> Path:
     outdir.mkdir(parents=True, exist_ok=True)
     elf = outdir / "harness.elf"
-    srcs = sorted(str(p) for p in (FW / "src").glob("*.c"))
+    srcs, incs = harness_sources()
     cmd = [
         "arm-none-eabi-gcc",
         *CPU_FLAGS,
@@ -149,9 +164,8 @@ def build(opt: str, outdir: Path, lto: bool = True) -> Path:
         "-Wall",
         "-Wextra",
         "-g",
-        f"-I{FW / 'include'}",
+        *incs,
         *srcs,
-        str(CM4 / "harness.c"),
         str(CM4 / "startup.c"),
         "-T",
         str(CM4 / "cm4.ld"),
@@ -324,13 +338,13 @@ def classify(mn: str, ops: str) -> tuple[str, int, int, bool]:
     return "alu", 1, 1, False
 
 
-def parse_trace(log: Path, insns, syms, batch: int, nb: int):
-    """Walk the exec log; count per step from fw_step's entry until the PC is
-    back in replay_batch. Returns per-step insn counts and low/high cycles,
-    per-class and per-function totals."""
+def parse_trace(log: Path, insns, syms, batch: int, nb: int, isr: bool = False):
+    """Walk the exec log; count per step from fw_step's entry (``isr``: fw_app_isr's)
+    until the PC is back in replay_batch (replay_isr_batch). Returns per-step insn
+    counts and low/high cycles, per-class and per-function totals."""
     by_name = {name: (a, s) for a, s, name in syms}
-    entry = by_name["fw_step"][0]
-    rb_lo, rb_sz = by_name["replay_batch"]
+    entry = by_name["fw_app_isr" if isr else "fw_step"][0]
+    rb_lo, rb_sz = by_name["replay_isr_batch" if isr else "replay_batch"]
     rb_hi = rb_lo + rb_sz
     starts = [a for a, _, _ in syms]
 
@@ -408,7 +422,8 @@ def batch_medians(v: list[int], batch: int) -> float:
     return statistics.median(per)
 
 
-def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool) -> dict:
+def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool,
+            isr: bool = False) -> dict:
     outdir = elf.parent
     state = outdir / f"state_{mode}.bin"
     r = qemu(elf, ["warm", str(state), str(batch * nb), mode], [], timeout=600)
@@ -417,7 +432,7 @@ def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool)
     log = outdir / f"exec_{mode}.log"
     r = qemu(
         elf,
-        ["count", str(state), str(batch), str(nb)],
+        ["count_isr" if isr else "count", str(state), str(batch), str(nb)],
         [*one_insn_per_tb_args(), "-d", "exec,nochain", "-D", str(log)],
         timeout=900,
     )
@@ -429,7 +444,7 @@ def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool)
     syms = symbols(elf)
     insns = disassemble(elf)
     (steps_n, steps_lo, steps_hi, steps_flow, steps_bytes, footprint, cls, fns, unknown) = (
-        parse_trace(log, insns, syms, batch, nb)
+        parse_trace(log, insns, syms, batch, nb, isr)
     )
     # flash fetch bound with no accelerator hits: 64-bit lines, 1 + WS cycles each,
     # one extra line per change of flow
@@ -439,7 +454,7 @@ def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool)
     total = sum(steps_n)
     res = {
         "opt": opt,
-        "mode": mode,
+        "mode": mode + ("+isr" if isr else ""),
         "steps": len(steps_n),
         "batch": batch,
         "batches": nb,
@@ -467,8 +482,10 @@ def report(res: dict) -> None:
     opt = res["opt"]
     lo, hi = res["cycles_low_median"], res["cycles_high_median"]
     what = {"force": "FORCE mode as bench_fw_step.c", "speed": "SPEED mode, speed loop on"}
+    isr = res["mode"].endswith("+isr")
     print(
-        f"\n== fw_step on Cortex-M4F, -{opt}, {what[res['mode']]} "
+        f"\n== {'fw_app_isr (the control interrupt)' if isr else 'fw_step'}"
+        f" on Cortex-M4F, -{opt}, {what[res['mode'].removesuffix('+isr')]} "
         f"({res['steps']} closed-loop RUN steps, "
         f"{res['batches']} batches of {res['batch']}) =="
     )
@@ -533,6 +550,9 @@ def main() -> int:
     ap.add_argument(
         "--no-lto", action="store_true", help="build without -flto (one object per source)"
     )
+    ap.add_argument("--isr", action="store_true",
+                    help="also measure the whole control interrupt (fw_app_isr: ADC "
+                    "conversion, fw_step, publication to the background)")
     ap.add_argument("--json", type=Path, help="also write the results as JSON")
     ap.add_argument("--keep-log", action="store_true", help="keep the QEMU exec log")
     a = ap.parse_args()
@@ -558,9 +578,10 @@ def main() -> int:
     for opt in [o.strip() for o in a.opt.split(",") if o.strip()]:
         elf = build(opt, OUT / opt, lto=not a.no_lto)
         for mode in modes:
-            res = measure(opt, mode, elf, a.batch, a.batches, a.keep_log)
-            report(res)
-            results.append(res)
+            for isr in ([False, True] if a.isr else [False]):
+                res = measure(opt, mode, elf, a.batch, a.batches, a.keep_log, isr)
+                report(res)
+                results.append(res)
     print(
         "\nsummary (instructions/step median; cycles/step low..high; % of budget incl. ISR "
         "entry/exit):"

@@ -102,10 +102,9 @@ def build_host(outdir: Path) -> Path:
     """The replay harness for this host, from the same sources as the M4 image."""
     outdir.mkdir(parents=True, exist_ok=True)
     exe = outdir / "harness_host"
-    srcs = sorted(str(p) for p in (ROOT / "firmware_c/src").glob("*.c"))
-    r = subprocess.run(["cc", "-O2", "-std=c11", "-DNDEBUG", "-Wall", "-Wextra",
-                        f"-I{ROOT / 'firmware_c/include'}", *srcs,
-                        str(ROOT / "benchmarks/cm4/harness.c"), "-lm", "-o", str(exe)],
+    srcs, incs = cm4.harness_sources()
+    r = subprocess.run(["cc", "-O2", "-std=c11", "-DNDEBUG", "-Wall", "-Wextra", *incs, *srcs,
+                        "-lm", "-o", str(exe)],
                        capture_output=True, text=True)
     if r.returncode != 0:
         raise RuntimeError(f"host build failed:\n{r.stderr}")

@@ -17,6 +17,16 @@
  *                           -singlestep`; the script counts the instructions
  *                           executed between fw_step's entry and its return
  *                           to replay_batch().
+ *   harness count_isr STATE B NB  as count, but through the whole control
+ *                           interrupt of the drive application: fw_app_isr
+ *                           (ADC counts -> the core's conversion -> fw_step
+ *                           -> the period's snapshot into the background's
+ *                           ring -> time base) on the recorded inputs turned
+ *                           back into ADC counts with the configured scaling;
+ *                           the script counts from fw_app_isr's entry to its
+ *                           return to replay_isr_batch(). The ring is emptied
+ *                           between periods as the background would (not
+ *                           counted).
  *   harness replay TRACE OUT  processor-in-the-loop: read a trace (magic
  *                           "PILT", n steps, n events, sizeof(fw_config_t),
  *                           the configuration, events {step, kind, value}
@@ -35,6 +45,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "pmlsm/fw_app.h"
 #include "pmlsm/fw_ctrl.h"
 #include "../locked_mover.h"
 
@@ -61,6 +72,34 @@ __attribute__((used, noipa)) void replay_batch(fw_ctrl_t *c, const fw_inputs_t *
     step(c, &in[k], &out);
     g_sink += out.duty_abc[0];
   }
+}
+
+/* The control interrupt of the drive application, traced the same way. */
+static fw_app_t g_app;
+static fw_adc_inputs_t g_adc[N_MAX];
+static void (*volatile g_isr)(void *, const fw_adc_inputs_t *, fw_outputs_t *) = fw_app_isr;
+
+__attribute__((used, noipa)) void replay_isr_batch(fw_app_t *app, const fw_adc_inputs_t *adc,
+                                                   int n);
+__attribute__((used, noipa)) void replay_isr_batch(fw_app_t *app, const fw_adc_inputs_t *adc,
+                                                   int n) {
+  fw_outputs_t out;
+  void (*isr)(void *, const fw_adc_inputs_t *, fw_outputs_t *) = g_isr;
+  for (int k = 0; k < n; k++) {
+    isr(app, &adc[k], &out);
+    g_sink += out.duty_abc[0];
+    /* the background drains the ring (not counted) */
+    atomic_store_explicit(&app->ring_tail, atomic_load_explicit(&app->ring_head,
+                                                                memory_order_acquire),
+                          memory_order_release);
+  }
+}
+
+static uint16_t to_counts(float x, float per_count, float offset, uint32_t max) {
+  float c = x / per_count + offset;
+  if (!(c > 0.0f)) return 0u;
+  if (c > (float)max) return (uint16_t)max;
+  return (uint16_t)lrintf(c);
 }
 
 static int in_run(const fw_ctrl_t *c) {
@@ -201,7 +240,54 @@ int main(int argc, char **argv) {
            batch, all_run ? "yes" : "NO", (int)g_c.phase, (unsigned)fw_fault_code(&g_c));
     return all_run ? 0 : 1;
   }
+  if (argc >= 5 && strcmp(argv[1], "count_isr") == 0) {
+    int batch = atoi(argv[3]), nb = atoi(argv[4]);
+    if (batch < 1 || nb < 1 || batch * nb > N_MAX) {
+      printf("CM4: bad batch sizes\n");
+      return 1;
+    }
+    FILE *f = fopen(argv[2], "rb");
+    if (f == NULL) {
+      printf("CM4: cannot open %s\n", argv[2]);
+      return 1;
+    }
+    size_t ok = fread(&g_base, sizeof g_base, 1, f);
+    ok += fread(g_rec, sizeof g_rec[0], (size_t)(batch * nb), f);
+    fclose(f);
+    if (ok != 1u + (size_t)(batch * nb)) {
+      printf("CM4: short read\n");
+      return 1;
+    }
+    const fw_config_t *cfg = &g_base.cfg;
+    for (int k = 0; k < batch * nb; k++) {
+      for (int j = 0; j < 3; j++) {
+        g_adc[k].i_abc_counts[j] = to_counts(g_rec[k].i_abc_A[j], cfg->adc_A_per_count,
+                                             cfg->adc_offset_counts, cfg->adc_max_count);
+      }
+      g_adc[k].u_dc_counts = to_counts(g_rec[k].u_dc_V, cfg->adc_V_per_count, 0.0f,
+                                       cfg->adc_max_count);
+    }
+    if (fw_app_init(&g_app, cfg, 1u) != FW_OK) {
+      printf("CM4: fw_app_init refused the configuration\n");
+      return 1;
+    }
+    int period = (int)(cfg->f_pwm_Hz / cfg->f_inj_Hz + 0.5f);
+    if (period < 1 || batch % period != 0) {
+      printf("CM4: batch %d is not a multiple of the injection period %d\n", batch, period);
+      return 1;
+    }
+    int all_run = 1;
+    fw_ctrl_t *c = fw_app_ctrl(&g_app);
+    for (int b = 0; b < nb; b++) {
+      memcpy(c, &g_base, sizeof *c);
+      replay_isr_batch(&g_app, &g_adc[b * batch], batch);
+      if (!in_run(c)) all_run = 0;
+    }
+    printf("CM4: count done batches=%d batch=%d closed_loop=%s phase=%d fault=0x%04x\n", nb,
+           batch, all_run ? "yes" : "NO", (int)c->phase, (unsigned)fw_fault_code(c));
+    return all_run ? 0 : 1;
+  }
   printf("usage: harness warm STATE N [force|speed] | harness count STATE BATCH NB | "
-         "harness replay TRACE OUT\n");
+         "harness count_isr STATE BATCH NB | harness replay TRACE OUT\n");
   return 2;
 }
