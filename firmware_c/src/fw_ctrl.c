@@ -102,7 +102,7 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   fw_inj_init(&c->inj, cfg, c->dt_s);
   fw_obs_init(&c->obs, cfg, c->dt_s);
   fw_protect_config(&c->prot, cfg, c->dt_s);
-  c->e_start_max_V = fw_units_mps_to_radps_e(cfg, cfg->start_speed_max_mps) * cfg->psi_f_Wb;
+  c->e_start_max_V = fw_units_bemf_V(cfg, cfg->start_speed_max_mps);
   fw_mon_init(&c->mon, cfg, c->dt_s);
   fw_bemf_init(&c->bemf, cfg, c->dt_s);
   /* references set under the old limits must obey the new ones */
@@ -780,6 +780,9 @@ void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
 
 float fw_units_mps_to_radps_e(const fw_config_t *cfg, float v) {
   return FW_PI_F32 * v / cfg->pole_pitch_m;
+}
+float fw_units_bemf_V(const fw_config_t *cfg, float v) {
+  return fw_units_mps_to_radps_e(cfg, v) * cfg->psi_f_Wb;
 }
 float fw_units_radps_e_to_mps(const fw_config_t *cfg, float w) {
   return w * cfg->pole_pitch_m / FW_PI_F32;

@@ -8,7 +8,8 @@
  *     e_q = u_q - R i_q - L_q di_q/dt - w^ L_d i_d =  E cos dtheta,   E = w psi_f,
  * so dtheta = atan2(-e_d, e_q) (plus pi for w < 0) is an angle error the PLL
  * can track instead of the HF error. The handover has hysteresis on |w^| psi_f
- * (bemf_e_on_V up, bemf_e_off_V down): going up, the PLL switches to the
+ * (bemf_e_on_V up, bemf_e_off_V down: the back-EMF of the configured speeds
+ * bemf_v_on_mps, bemf_v_off_mps, fw_config_derive): going up, the PLL switches to the
  * back-EMF error once the estimate has been above the band for 5 ms, then the
  * injection ramps down to bemf_inj_share of u_inj_V (the HF witness of the
  * integrity monitor keeps working on the reduced injection); going down, the
