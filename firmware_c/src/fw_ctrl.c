@@ -484,6 +484,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
   hf->i_f_ab_A = p->i_ab;
   hf->e_raw_dq_A.x = hf->e_raw_dq_A.y = 0.0f; /* raw HF difference, for the monitor */
   hf->E_d_A = 0.0f;
+  const float w_frame = c->obs.pll.w_hat_radps; /* theta_hat turned at this from k-1 to k */
   if (!p->pulses) {
     const fw_extractor_t ex = (fw_extractor_t)cfg->extractor;
     fw_inj_update(&c->inj, ex, p->i_ab, p->sc, c->obs.pll.theta_rad, c->obs.pll.w_i_radps,
@@ -510,7 +511,8 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
   p->i_dq = fw_foc_measure(hf->i_f_ab_A, p->sc);
   if (c->phase == FW_START_RUN && !p->pulses) {
     const float i_dq_arr[2] = {p->i_dq.x, p->i_dq.y};
-    fw_bemf_update(&c->bemf, fw_foc_u_applied(&c->foc), i_dq_arr, c->obs.pll.w_i_radps);
+    fw_bemf_update(&c->bemf, fw_foc_u_applied(&c->foc), i_dq_arr, c->obs.pll.w_i_radps,
+                   w_frame);
     fw_bemf_schedule(&c->bemf, c->obs.pll.w_i_radps, (uint8_t)fw_inj_settled(&c->inj));
   }
 }
