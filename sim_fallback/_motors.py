@@ -197,7 +197,8 @@ class Motor:
     radius_m : float
         Equivalent radius r = p tau / pi (m per mechanical rad).
     controller : dict
-        ``[controller]`` section values (with defaults).
+        ``[controller]`` section values (with defaults; the back-EMF handover and witness
+        speeds only when the file gives them).
     """
 
     name: str
