@@ -52,6 +52,7 @@ MOTOR_FIELDS = frozenset({
     "cur_kp_V_per_A", "cur_ki_V_per_As", "spd_kp_A_per_radps", "spd_ki_A_per_rad",
     "u_inj_V", "f_inj_Hz", "extractor", "pll_accel_per_A",
     "adc_A_per_count", "adc_offset_counts", "adc_V_per_count", "adc_max_count",
+    "bemf_v_on_mps", "bemf_v_off_mps", "mon_bemf_min_mps",
 })
 
 

@@ -207,11 +207,11 @@ CASES: list[FaultCase] = [
               "(reversal through a static-friction stop)", motor="iron_core_linear",
               v0_mps=-0.94, speed=0.1, expect="either"),
     FaultCase("enable_moving_0.12mps", "enable at 0.12 m/s: too fast for an injection start, "
-              "too slow for the back-EMF (4.8 V < bemf_e_off_V)", motor="iron_core_linear",
-              v0_mps=0.12, speed=0.1, expect="fault", fault=0xFF08),
+              "too slow for the back-EMF (below bemf_v_off_mps = 0.175 m/s)",
+              motor="iron_core_linear", v0_mps=0.12, speed=0.1, expect="fault", fault=0xFF08),
     FaultCase("enable_moving_0.94mps_no_bemf", "enable at 0.94 m/s with the back-EMF "
-              "handover off (bemf_e_on_V = 0)", motor="iron_core_linear", v0_mps=0.94,
-              speed=0.1, fw={"bemf_e_on_V": 0.0}, expect="fault", fault=0xFF08),
+              "handover off (bemf_v_on_mps = 0)", motor="iron_core_linear", v0_mps=0.94,
+              speed=0.1, fw={"bemf_v_on_mps": 0.0}, expect="fault", fault=0xFF08),
     FaultCase("enable_moving_paper_0.5mps", "paper_salient enabled while coasting at 0.5 m/s",
               v0_mps=0.5, speed=0.3, expect="track"),
     FaultCase("enable_creeping_0.01mps", "enable while the mover creeps at 0.01 m/s "

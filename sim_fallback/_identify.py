@@ -39,15 +39,16 @@ IDENT_FW = {"mon_sal_tol": 10.0, "saliency_min": 0.05,
             # d a fast observer's angle jitter makes thrust that moves the mover
             "gains_auto": 0, "pll_kp": 86.6, "pll_ki": 5000.0, "pll_kd": 1.0e5,
             # the back-EMF witness's voltage residual uses R and L, which steps 1-3
-            # measure: off (threshold out of reach) until the drive is reconfigured with
-            # them; the motion runs have it back (:data:`IDENT_RESTORED`), its angle check
-            # does not depend on psi_f, still unknown then. With R 27 % off it faulted
-            # (EST_BEMF_MISMATCH) on the DC steps of the R measurement.
-            "mon_bemf_min_V": 1000.0}
+            # measure: off (threshold out of reach: the back-EMF of 1000 m/s) until the
+            # drive is reconfigured with them; the motion runs have it back
+            # (:data:`IDENT_RESTORED`), its angle check does not depend on psi_f, still
+            # unknown then. With R 27 % off it faulted (EST_BEMF_MISMATCH) on the DC steps
+            # of the R measurement.
+            "mon_bemf_min_mps": 1000.0}
 
 #: Settings of :data:`IDENT_FW` the drive gets back (the user's values) once R, L_d and
 #: L_q are measured, before the motion runs.
-IDENT_RESTORED = ("mon_bemf_min_V",)
+IDENT_RESTORED = ("mon_bemf_min_mps",)
 
 #: Speed-loop bandwidth (rad/s) while identifying: the motor file's may be tuned for a
 #: known motor (iron_core_linear: 80 rad/s); on an unknown one a slow loop is safer.

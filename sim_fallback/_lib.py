@@ -41,11 +41,12 @@ FW_CONFIG_FIELDS: list[tuple[str, type]] = [
     ("follow_err_mps", _f), ("follow_err_time_s", _f), ("i_rated_A", _f), ("i2t_time_s", _f),
     ("quick_stop_option", _u32), ("fault_reaction_option", _u32), ("fault_brake_time_s", _f),
     ("mon_angle_max_rad", _f), ("mon_detect_time_s", _f), ("mon_sal_tol", _f),
-    ("mon_bemf_max_rad", _f), ("mon_bemf_min_V", _f), ("i_sum_max_A", _f),
+    ("mon_bemf_max_rad", _f), ("mon_bemf_min_mps", _f), ("i_sum_max_A", _f),
     ("i_offset_max_A", _f), ("start_speed_max_mps", _f),
-    ("bemf_e_on_V", _f), ("bemf_e_off_V", _f), ("bemf_inj_share", _f),
+    ("bemf_v_on_mps", _f), ("bemf_v_off_mps", _f), ("bemf_inj_share", _f),
     ("mass_kg", _f), ("visc_Ns_per_m", _f), ("coulomb_N", _f), ("cur_bw_radps", _f),
     ("spd_bw_radps", _f), ("gains_auto", _u32),
+    ("bemf_e_on_V", _f), ("bemf_e_off_V", _f), ("mon_bemf_min_V", _f),
 ]
 
 

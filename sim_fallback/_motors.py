@@ -54,7 +54,8 @@ class MotorFileError(ValueError):
 
 
 _FW_NAMES = {"R_ohm", "L_d_H", "L_q_H", "psi_f_Wb", "pole_pitch_m", "pole_pairs", "f_pwm_Hz",
-             "i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz"}
+             "i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz", "bemf_v_on_mps",
+             "bemf_v_off_mps", "mon_bemf_min_mps"}
 
 
 def firmware_field_ranges() -> dict[str, tuple[float, float, str]]:
@@ -173,7 +174,13 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float, float, str, Any]] = {
     ("controller", "i_trip_A"): (False, 0.1, 500.0, "A", 24.0),
     ("controller", "u_inj_V"): (False, 0.0, 400.0, "V", 50.0),
     ("controller", "f_inj_Hz"): (False, 100.0, 20000.0, "Hz", 3000.0),
+    # back-EMF handover and witness speeds (docs/bemf.md); not given: the firmware default
+    ("controller", "bemf_v_on_mps"): (False, 0.0, 100.0, "m/s", None),
+    ("controller", "bemf_v_off_mps"): (False, 0.0, 100.0, "m/s", None),
+    ("controller", "mon_bemf_min_mps"): (False, 0.001, 1000.0, "m/s", None),
 }
+#: ``[controller]`` keys that are fw_config_t fields of the same name, set as given.
+_CTRL_FW_FIELDS = ("bemf_v_on_mps", "bemf_v_off_mps", "mon_bemf_min_mps")
 _TEXT_FIELDS = {("motor", "name"), ("motor", "description"), ("motor", "parameterization")}
 
 
@@ -190,7 +197,8 @@ class Motor:
     radius_m : float
         Equivalent radius r = p tau / pi (m per mechanical rad).
     controller : dict
-        ``[controller]`` section values (with defaults).
+        ``[controller]`` section values (with defaults; the back-EMF handover and witness
+        speeds only when the file gives them).
     """
 
     name: str
@@ -439,7 +447,7 @@ def _build(path: Path, doc: dict[str, Any]) -> Motor:
         udc_fullscale_V=float(g["udc_fullscale_V"]), udc_noise_V=float(g["udc_noise_V"]),
         seed=0,
     )
-    ctrl = {k: float(g[k]) for (s, k) in _SCHEMA if s == "controller"}
+    ctrl = {k: float(g[k]) for (s, k) in _SCHEMA if s == "controller" and g[k] is not None}
     return Motor(name=str(m.get("name", path.stem)), path=path,
                  description=str(m.get("description", "")), parameterization=param,
                  plant=plant, pole_pairs=p, radius_m=r, controller=ctrl, raw=doc)
@@ -478,7 +486,10 @@ def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
     ki = kp w_bw / 6, converted with v = w_e tau / pi. PLL 86.6 / 5000. ADC
     scaling matches the plant's ADC (the drive knows its nominal scaling, not
     the offset or gain errors): the motor file's, or ``sensing``
-    (:data:`SENSING_SCALE_KEYS`) when the simulated board differs from it.
+    (:data:`SENSING_SCALE_KEYS`) when the simulated board differs from it. The back-EMF
+    handover and witness speeds (``bemf_v_on_mps``, ``bemf_v_off_mps``,
+    ``mon_bemf_min_mps``) from ``[controller]`` when given, else the firmware's defaults;
+    the drive derives their back-EMF levels.
     """
     L = _lib.lib()
     cfg = _lib.FwConfig()
@@ -505,6 +516,9 @@ def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
     cfg.i_trip_A = c["i_trip_A"]
     cfg.u_inj_V = c["u_inj_V"]
     cfg.f_inj_Hz = c["f_inj_Hz"]
+    for k in _CTRL_FW_FIELDS:
+        if k in c:
+            setattr(cfg, k, c[k])
     if motor.parameterization == "rotary":
         # the paper's speed PI, 0.1 A/(r/min) and 0.6 A/(r/min s), and its PLL, kept
         L.fw_config_derive(cfg)
@@ -530,6 +544,9 @@ def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
         if not hasattr(cfg, k):
             raise KeyError(f"unknown fw_config_t field '{k}'")
         setattr(cfg, k, v)
+    # derived again over the overrides, as fw_init will (the back-EMF levels of the
+    # handover speeds; the gains when still automatic): the configuration the drive runs
+    L.fw_config_derive(cfg)
     return cfg
 
 

@@ -3,13 +3,16 @@
  * @brief Back-EMF observer and the injection / back-EMF handover (fw_bemf.h).
  */
 #include <math.h>
+#include <stdbool.h>
 #include <string.h>
 
 #include "pmlsm/fw_ctrl.h"
 
 #define BEMF_TAU_S 0.001f      /* back-EMF low-pass (a DC signal in the estimated frame) */
 #define BEMF_HOLD_S 0.005f     /* the switching condition must hold this long */
-#define BEMF_RAMP_S 0.010f     /* injection ramp time, full <-> share */
+#define BEMF_RAMP_S 0.010f     /* injection ramp down once on the back-EMF, full -> share */
+#define BEMF_RAMP_BACK_S 0.002f /* injection back, share -> full: a load step brakes a light
+                                 * mover through the band in ~10 ms (docs/bemf.md) */
 #define BEMF_HF_SETTLE_S 0.002f /* HF path settling after the injection is back */
 
 void fw_bemf_init(fw_bemf_t *b, const fw_config_t *cfg, float dt_s) {
@@ -23,7 +26,12 @@ void fw_bemf_init(fw_bemf_t *b, const fw_config_t *cfg, float dt_s) {
   b->inv_dt = 1.0f / dt_s;
   b->w_on = cfg->bemf_e_on_V / cfg->psi_f_Wb;
   b->w_off = cfg->bemf_e_off_V / cfg->psi_f_Wb;
+  b->e_on2 = cfg->bemf_e_on_V * cfg->bemf_e_on_V;
+  b->e_off2 = cfg->bemf_e_off_V * cfg->bemf_e_off_V;
+  b->e_min2 = 0.25f * b->e_off2; /* (half the switch-off level)^2 */
   b->inj_share = cfg->bemf_inj_share;
+  b->step_down = dt_s / BEMF_RAMP_S * (1.0f - b->inj_share);
+  b->step_back = dt_s / BEMF_RAMP_BACK_S * (1.0f - b->inj_share);
   fw_bemf_reset(b);
 }
 
@@ -50,18 +58,20 @@ void fw_bemf_catch(fw_bemf_t *b, float w0, const float i_dq_A[2]) {
   b->i_prev_A[1] = i_dq_A[1];
 }
 
+/** |filtered back-EMF|^2 (V^2). */
+static float mag2(const fw_bemf_t *b) { return b->e_d_f * b->e_d_f + b->e_q_f * b->e_q_f; }
+
 /** Angle error of the filtered back-EMF (0 below half the switch-off level). */
 static float angle(const fw_bemf_t *b) {
-  const float e2 = b->e_d_f * b->e_d_f + b->e_q_f * b->e_q_f;
-  const float e_min = 0.5f * b->w_off * b->psi_f_Wb;
-  if (e2 < e_min * e_min) {
+  if (mag2(b) < b->e_min2) {
     return 0.0f;
   }
   const float ang = atan2f(-b->e_d_f, b->e_q_f);
   return b->w_neg ? fw_wrap_pi_f32(ang + FW_PI_F32) : ang;
 }
 
-void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat) {
+void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat,
+                    float w_frame) {
   if (!b->active && fabsf(w_hat) < 0.5f * b->w_off) {
     b->e_d_f = b->e_q_f = 0.0f; /* far below the handover: nothing to observe */
     b->err_rad = 0.0f;
@@ -71,7 +81,7 @@ void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], 
     return;
   }
   float e[2];
-  fw_bemf_residual(u_dq_V, i_dq_A, b->i_prev_A, b->inv_dt, w_hat, b->R_ohm, b->L_d_H,
+  fw_bemf_residual(u_dq_V, i_dq_A, b->i_prev_A, b->inv_dt, w_frame, b->R_ohm, b->L_d_H,
                    b->L_q_H, e);
   b->e_d_f += b->a_f * (e[0] - b->e_d_f);
   b->e_q_f += b->a_f * (e[1] - b->e_q_f);
@@ -91,6 +101,7 @@ void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled) {
   if (b->w_on <= 0.0f) {
     return; /* handover off: injection only */
   }
+  bool lost = false; /* the back-EMF is too small to give an angle */
   if (!b->active) {
     if (!(w > b->w_on)) {
       b->t_cond_s = 0.0f;
@@ -104,19 +115,30 @@ void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled) {
       b->going_up = 1u;
       b->t_cond_s = 0.0f;
     }
-  } else if (w < b->w_off) {
-    b->going_up = 0u; /* injection back first, PLL follows when the HF path has settled */
-  } else if (!b->going_up && w > b->w_on) {
-    b->going_up = 1u; /* changed its mind on the way down */
+  } else {
+    /* Going down, the measured back-EMF |e| = |w| psi_f below the band counts as much as
+     * the speed estimate: a load step can brake the mover faster than the observer
+     * follows, and then the back-EMF falls first. Going up from injection the estimate
+     * decides (there |e| carries the HF ripple's L di/dt, +-0.5 V: it would hold the
+     * handover back). */
+    const float e2 = mag2(b);
+    lost = e2 < b->e_min2;
+    if (w < b->w_off || e2 < b->e_off2) {
+      b->going_up = 0u; /* injection back first, PLL follows when the HF path has settled */
+    } else if (!b->going_up && w > b->w_on && e2 > b->e_on2) {
+      b->going_up = 1u; /* changed its mind on the way down */
+    }
   }
-  const float step = b->dt_s / BEMF_RAMP_S * (1.0f - b->inj_share);
   if (b->active && b->going_up) {
-    b->inj_scale = fmaxf(b->inj_share, b->inj_scale - step);
+    b->inj_scale = fmaxf(b->inj_share, b->inj_scale - b->step_down);
     b->t_full_s = 0.0f;
   } else {
-    b->inj_scale = fminf(1.0f, b->inj_scale + step);
+    b->inj_scale = fminf(1.0f, b->inj_scale + b->step_back);
     b->t_full_s = b->inj_scale >= 1.0f ? b->t_full_s + b->dt_s : 0.0f;
-    if (b->active && b->t_full_s >= BEMF_HF_SETTLE_S && hf_settled) {
+    /* the PLL returns to the HF error once the extraction has settled at full injection,
+     * or at once, at whatever injection, when the back-EMF is too small to give an angle
+     * (it would coast on a zero error; E_q / E_d does not depend on the amplitude) */
+    if (b->active && hf_settled && (b->t_full_s >= BEMF_HF_SETTLE_S || lost)) {
       b->active = 0u;
     }
   }

@@ -93,12 +93,13 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->mon_detect_time_s = 0.01f;
   cfg->mon_sal_tol = 1.0f; /* measured saliency within a factor 2 of the configured */
   cfg->mon_bemf_max_rad = 0.6f;
-  cfg->mon_bemf_min_V = 5.0f;
+  cfg->mon_bemf_min_mps = 0.21f; /* paper motor: 5.0 V */
   cfg->i_sum_max_A = 0.2f; /* plus 3 % of |i_a| + |i_b| + |i_c| (fw_mon.c) */
   cfg->i_offset_max_A = 1.0f;
   cfg->start_speed_max_mps = 0.05f;
-  cfg->bemf_e_on_V = 10.0f; /* paper motor: 55 rad/s el. = 131 r/min, above the paper's speeds */
-  cfg->bemf_e_off_V = 7.0f;
+  /* paper motor: 55 rad/s el. = 131 r/min (10.0 V), above the paper's speeds; down at 6.9 V */
+  cfg->bemf_v_on_mps = 0.42f;
+  cfg->bemf_v_off_mps = 0.29f;
   cfg->bemf_inj_share = 0.25f;
   /* paper Table 1 as a linear machine: J = 0.03 kg m^2 over r = p tau / pi */
   cfg->mass_kg = 32.13f;
@@ -107,12 +108,21 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->cur_bw_radps = 1100.0f;
   cfg->spd_bw_radps = 35.0f;  /* the paper's speed PI on this mass */
   cfg->gains_auto = 0u;       /* defaults keep the paper's explicit gains */
+  fw_config_derive(cfg);      /* the back-EMF levels of the speeds above */
 }
 
 void fw_config_derive(fw_config_t *cfg) {
-  if (cfg == NULL || cfg->gains_auto == 0u || !(cfg->pole_pitch_m > 0.0f) ||
-      !(cfg->mass_kg > 0.0f)) {
-    return; /* the range check reports bad fields */
+  if (cfg == NULL) {
+    return;
+  }
+  /* Back-EMF levels of the handover and witness speeds: where the handover sits in
+   * speed does not depend on psi_f (docs/bemf.md). A bad pole pitch or psi_f makes
+   * them non-finite; the range check reports the bad field first. */
+  cfg->bemf_e_on_V = fw_units_bemf_V(cfg, cfg->bemf_v_on_mps);
+  cfg->bemf_e_off_V = fw_units_bemf_V(cfg, cfg->bemf_v_off_mps);
+  cfg->mon_bemf_min_V = fw_units_bemf_V(cfg, cfg->mon_bemf_min_mps);
+  if (cfg->gains_auto == 0u || !(cfg->pole_pitch_m > 0.0f) || !(cfg->mass_kg > 0.0f)) {
+    return; /* explicit gains; the range check reports bad fields */
   }
   const float k_e = FW_PI_F32 / cfg->pole_pitch_m; /* el. rad per m */
   const float K_F = fw_units_force_per_A(cfg);     /* N per A of i_q */
@@ -209,9 +219,9 @@ fw_status_t fw_config_check(const fw_config_t *cfg, fw_config_issue_t *issue) {
     return report(issue, FW_ERR_INCONSISTENT, "sogi_k_adapt_min", cfg->sogi_k_adapt_min,
                   FW_SOGI_K_MIN, cfg->sogi_k_adapt_max);
   }
-  if (cfg->bemf_e_on_V > 0.0f && cfg->bemf_e_off_V >= cfg->bemf_e_on_V) {
-    return report(issue, FW_ERR_INCONSISTENT, "bemf_e_off_V", cfg->bemf_e_off_V, 0.0f,
-                  cfg->bemf_e_on_V);
+  if (cfg->bemf_v_on_mps > 0.0f && cfg->bemf_v_off_mps >= cfg->bemf_v_on_mps) {
+    return report(issue, FW_ERR_INCONSISTENT, "bemf_v_off_mps", cfg->bemf_v_off_mps, 0.0f,
+                  cfg->bemf_v_on_mps);
   }
   if (cfg->pll_kd > 0.0f && cfg->pll_kd >= cfg->pll_kp * cfg->pll_ki) {
     return report(issue, FW_ERR_INCONSISTENT, "pll_kd", cfg->pll_kd, 0.0f,

@@ -102,7 +102,7 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   fw_inj_init(&c->inj, cfg, c->dt_s);
   fw_obs_init(&c->obs, cfg, c->dt_s);
   fw_protect_config(&c->prot, cfg, c->dt_s);
-  c->e_start_max_V = fw_units_mps_to_radps_e(cfg, cfg->start_speed_max_mps) * cfg->psi_f_Wb;
+  c->e_start_max_V = fw_units_bemf_V(cfg, cfg->start_speed_max_mps);
   fw_mon_init(&c->mon, cfg, c->dt_s);
   fw_bemf_init(&c->bemf, cfg, c->dt_s);
   /* references set under the old limits must obey the new ones */
@@ -484,6 +484,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
   hf->i_f_ab_A = p->i_ab;
   hf->e_raw_dq_A.x = hf->e_raw_dq_A.y = 0.0f; /* raw HF difference, for the monitor */
   hf->E_d_A = 0.0f;
+  const float w_frame = c->obs.pll.w_hat_radps; /* theta_hat turned at this from k-1 to k */
   if (!p->pulses) {
     const fw_extractor_t ex = (fw_extractor_t)cfg->extractor;
     fw_inj_update(&c->inj, ex, p->i_ab, p->sc, c->obs.pll.theta_rad, c->obs.pll.w_i_radps,
@@ -510,7 +511,8 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
   p->i_dq = fw_foc_measure(hf->i_f_ab_A, p->sc);
   if (c->phase == FW_START_RUN && !p->pulses) {
     const float i_dq_arr[2] = {p->i_dq.x, p->i_dq.y};
-    fw_bemf_update(&c->bemf, fw_foc_u_applied(&c->foc), i_dq_arr, c->obs.pll.w_i_radps);
+    fw_bemf_update(&c->bemf, fw_foc_u_applied(&c->foc), i_dq_arr, c->obs.pll.w_i_radps,
+                   w_frame);
     fw_bemf_schedule(&c->bemf, c->obs.pll.w_i_radps, (uint8_t)fw_inj_settled(&c->inj));
   }
 }
@@ -780,6 +782,9 @@ void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
 
 float fw_units_mps_to_radps_e(const fw_config_t *cfg, float v) {
   return FW_PI_F32 * v / cfg->pole_pitch_m;
+}
+float fw_units_bemf_V(const fw_config_t *cfg, float v) {
+  return fw_units_mps_to_radps_e(cfg, v) * cfg->psi_f_Wb;
 }
 float fw_units_radps_e_to_mps(const fw_config_t *cfg, float w) {
   return w * cfg->pole_pitch_m / FW_PI_F32;

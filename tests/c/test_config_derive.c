@@ -1,9 +1,10 @@
 /**
  * @file test_config_derive.c
- * @brief Gains derived in the drive from the physical description
- *        (fw_config_derive) against the formulas computed here in double.
+ * @brief Gains and back-EMF levels derived in the drive from the physical
+ *        description (fw_config_derive) against the formulas computed here in double.
  */
 #include <math.h>
+#include <string.h>
 
 #include "pmlsm/fw_ctrl.h"
 #include "tinytest.h"
@@ -81,8 +82,62 @@ static void test_explicit_gains_kept(void) {
   TT_CHECK(fw_config_check(&c, &issue) == FW_ERR_RANGE);
 }
 
+/* The handover and witness levels are the back-EMF psi_f (pi / tau) v at their speeds,
+ * derived whatever gains_auto; the handover speed does not move with psi_f. */
+static void check_levels(const fw_config_t *c) {
+  const double k = (double)c->psi_f_Wb * M_PI / (double)c->pole_pitch_m; /* V per m/s */
+  TT_CHECK_NEAR(c->bemf_e_on_V, k * (double)c->bemf_v_on_mps, 1e-6 * k);
+  TT_CHECK_NEAR(c->bemf_e_off_V, k * (double)c->bemf_v_off_mps, 1e-6 * k);
+  TT_CHECK_NEAR(c->mon_bemf_min_V, k * (double)c->mon_bemf_min_mps, 1e-6 * k);
+}
+
+static void test_bemf_levels_from_speeds(void) {
+  fw_config_t c;
+  fw_config_default(&c); /* the paper motor: derived already */
+  TT_CHECK(c.gains_auto == 0u);
+  check_levels(&c);
+  TT_CHECK_NEAR(c.bemf_e_on_V, 10.04, 0.01); /* 0.42 m/s x 23.9 V/(m/s) */
+  /* iron_core_linear's file: 0.25 / 0.175 / 0.125 m/s, 40 V per m/s */
+  c.psi_f_Wb = 0.20372f;
+  c.pole_pitch_m = 0.016f;
+  c.bemf_v_on_mps = 0.25f;
+  c.bemf_v_off_mps = 0.175f;
+  c.mon_bemf_min_mps = 0.125f;
+  fw_config_derive(&c);
+  check_levels(&c);
+  TT_CHECK_NEAR(c.bemf_e_on_V, 10.0, 1e-3);
+  TT_CHECK_NEAR(c.bemf_e_off_V, 7.0, 1e-3);
+  TT_CHECK_NEAR(c.mon_bemf_min_V, 5.0, 1e-3);
+  /* a stronger magnet (an identified psi_f): the levels follow, the speeds stay */
+  c.psi_f_Wb = 0.26f;
+  c.gains_auto = 1u;
+  fw_config_derive(&c);
+  check_levels(&c);
+  TT_CHECK(c.bemf_v_on_mps == 0.25f);
+  /* fw_init and fw_set_config store the derived levels, whatever the caller left in them */
+  c.bemf_e_on_V = c.bemf_e_off_V = c.mon_bemf_min_V = 0.0f;
+  fw_ctrl_t ctrl;
+  TT_CHECK(fw_init(&ctrl, &c) == FW_OK);
+  check_levels(fw_get_config(&ctrl));
+  c.psi_f_Wb = 0.16f;
+  fw_config_issue_t issue;
+  TT_CHECK(fw_set_config(&ctrl, &c, &issue) == FW_OK);
+  check_levels(fw_get_config(&ctrl));
+  TT_CHECK_NEAR(fw_get_config(&ctrl)->bemf_e_on_V, 0.25 * M_PI / 0.016 * 0.16, 1e-4);
+  /* 0 switches the handover off (level 0); down must stay below up */
+  c.bemf_v_on_mps = 0.0f;
+  fw_config_derive(&c);
+  TT_CHECK(c.bemf_e_on_V == 0.0f);
+  TT_CHECK(fw_config_check(&c, &issue) == FW_OK);
+  c.bemf_v_on_mps = 0.2f;
+  c.bemf_v_off_mps = 0.2f;
+  TT_CHECK(fw_config_check(&c, &issue) == FW_ERR_INCONSISTENT);
+  TT_CHECK(issue.field != NULL && strcmp(issue.field, "bemf_v_off_mps") == 0);
+}
+
 int main(void) {
   TT_RUN(test_derive_matches_formulas);
   TT_RUN(test_explicit_gains_kept);
+  TT_RUN(test_bemf_levels_from_speeds);
   return TT_SUMMARY();
 }

@@ -5,6 +5,7 @@ plant (protocols.sim_bridge.DriveBridge, paced to real time)."""
 
 from __future__ import annotations
 
+import math
 import subprocess
 import time
 import uuid
@@ -65,6 +66,37 @@ def test_eds_objects_readable(rig):
     assert node.sdo["HF extractor"].raw == 2
     node.sdo[0x2042].raw = "bench axis 1"  # segmented download
     assert node.sdo[0x2042].raw == "bench axis 1"
+
+
+def test_handover_levels_derived_over_canopen(rig):
+    """A drive configured over CANopen gets the back-EMF levels of the Python
+    configuration path (one derivation, in the core): psi_f and the handover and witness
+    speeds written by SDO, the derived levels read back from their read-only objects."""
+    net, node, bridge, seen = rig
+    if bridge.sim is None:
+        pytest.skip("no simulated plant: the Python configuration path is not there")
+    from sim_fallback._motors import fw_config
+
+    # written in this order, given back in the reverse one: down stays below up
+    speeds = {(0x2053, 2): ("bemf_v_off_mps", 0.175), (0x2053, 1): ("bemf_v_on_mps", 0.25),
+              (0x2052, 5): ("mon_bemf_min_mps", 0.125), (0x2050, 5): ("psi_f_Wb", 0.26)}
+    keep = {a: node.sdo[a[0]][a[1]].raw for a in speeds}
+    try:
+        for (i, s), (_, v) in speeds.items():
+            node.sdo[i][s].raw = v
+        ref = fw_config(bridge.sim.motor, **dict(speeds.values()))
+        k = 0.26 * math.pi / ref.pole_pitch_m  # V per m/s
+        for (i, s), name, v in (((0x2053, 4), "bemf_e_on_V", 0.25),
+                                ((0x2053, 5), "bemf_e_off_V", 0.175),
+                                ((0x2052, 9), "mon_bemf_min_V", 0.125)):
+            got = node.sdo[i][s].raw
+            assert got == pytest.approx(getattr(ref, name), rel=1e-6), name
+            assert got == pytest.approx(k * v, rel=1e-6), name
+        with pytest.raises(SdoAbortedError):
+            node.sdo[0x2053][4].raw = 1.0  # derived: read-only
+    finally:
+        for (i, s), v in reversed(keep.items()):
+            node.sdo[i][s].raw = v
 
 
 def test_out_of_range_write_aborts_and_changes_nothing(rig):

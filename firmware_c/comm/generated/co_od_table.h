@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 265u
-#define CO_OD_RAM_SIZE 872u
+#define CO_OD_COUNT 268u
+#define CO_OD_RAM_SIZE 884u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -210,75 +210,78 @@
 #define CO_OD_2052_02 197u /* Integrity monitor: Detection time */
 #define CO_OD_2052_03 198u /* Integrity monitor: Saliency tolerance */
 #define CO_OD_2052_04 199u /* Integrity monitor: Back-EMF angle limit */
-#define CO_OD_2052_05 200u /* Integrity monitor: Back-EMF minimum */
+#define CO_OD_2052_05 200u /* Integrity monitor: Back-EMF minimum speed */
 #define CO_OD_2052_06 201u /* Integrity monitor: Current sum limit */
 #define CO_OD_2052_07 202u /* Integrity monitor: Current offset limit */
 #define CO_OD_2052_08 203u /* Integrity monitor: Start speed limit */
-#define CO_OD_2053_00 204u /* Back-EMF observer: Highest sub-index supported */
-#define CO_OD_2053_01 205u /* Back-EMF observer: Handover up */
-#define CO_OD_2053_02 206u /* Back-EMF observer: Handover down */
-#define CO_OD_2053_03 207u /* Back-EMF observer: Injection share */
-#define CO_OD_2054_00 208u /* Machine and loop bandwidths: Highest sub-index supported */
-#define CO_OD_2054_01 209u /* Machine and loop bandwidths: Mover mass */
-#define CO_OD_2054_02 210u /* Machine and loop bandwidths: Viscous friction */
-#define CO_OD_2054_03 211u /* Machine and loop bandwidths: Coulomb friction */
-#define CO_OD_2054_04 212u /* Machine and loop bandwidths: Current loop bandwidth */
-#define CO_OD_2054_05 213u /* Machine and loop bandwidths: Speed loop bandwidth */
-#define CO_OD_2054_06 214u /* Machine and loop bandwidths: Gains automatic */
-#define CO_OD_2060_00 215u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 216u /* Telemetry: Decimation */
-#define CO_OD_2060_02 217u /* Telemetry: Signal count */
-#define CO_OD_2060_03 218u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 219u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 220u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 221u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 222u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 223u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 224u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 225u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 226u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 227u /* Trace: Command */
-#define CO_OD_2070_02 228u /* Trace: State */
-#define CO_OD_2070_03 229u /* Trace: Trigger signal */
-#define CO_OD_2070_04 230u /* Trace: Trigger level */
-#define CO_OD_2070_05 231u /* Trace: Trigger edge */
-#define CO_OD_2070_06 232u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 233u /* Trace: Signal count */
-#define CO_OD_2070_08 234u /* Trace: Signal 1 */
-#define CO_OD_2070_09 235u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 236u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 237u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 238u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 239u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 240u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 241u /* Trace: Signal 8 */
-#define CO_OD_2080_00 242u /* Identification: Highest sub-index supported */
-#define CO_OD_2080_01 243u /* Identification: d-axis current reference */
-#define CO_OD_2080_02 244u /* Identification: Measured smaller inductance */
-#define CO_OD_2080_03 245u /* Identification: Measured larger inductance */
-#define CO_OD_603F_00 246u /* Error code: Error code */
-#define CO_OD_6040_00 247u /* Controlword: Controlword */
-#define CO_OD_6041_00 248u /* Statusword: Statusword */
-#define CO_OD_605A_00 249u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 250u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 251u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 252u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 253u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 254u /* Following error window: Following error window */
-#define CO_OD_6066_00 255u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 256u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 257u /* Target torque: Target torque */
-#define CO_OD_6077_00 258u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 259u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 260u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 261u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 262u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 263u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 264u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2052_09 204u /* Integrity monitor: Back-EMF minimum */
+#define CO_OD_2053_00 205u /* Back-EMF observer: Highest sub-index supported */
+#define CO_OD_2053_01 206u /* Back-EMF observer: Handover up speed */
+#define CO_OD_2053_02 207u /* Back-EMF observer: Handover down speed */
+#define CO_OD_2053_03 208u /* Back-EMF observer: Injection share */
+#define CO_OD_2053_04 209u /* Back-EMF observer: Handover up */
+#define CO_OD_2053_05 210u /* Back-EMF observer: Handover down */
+#define CO_OD_2054_00 211u /* Machine and loop bandwidths: Highest sub-index supported */
+#define CO_OD_2054_01 212u /* Machine and loop bandwidths: Mover mass */
+#define CO_OD_2054_02 213u /* Machine and loop bandwidths: Viscous friction */
+#define CO_OD_2054_03 214u /* Machine and loop bandwidths: Coulomb friction */
+#define CO_OD_2054_04 215u /* Machine and loop bandwidths: Current loop bandwidth */
+#define CO_OD_2054_05 216u /* Machine and loop bandwidths: Speed loop bandwidth */
+#define CO_OD_2054_06 217u /* Machine and loop bandwidths: Gains automatic */
+#define CO_OD_2060_00 218u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 219u /* Telemetry: Decimation */
+#define CO_OD_2060_02 220u /* Telemetry: Signal count */
+#define CO_OD_2060_03 221u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 222u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 223u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 224u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 225u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 226u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 227u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 228u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 229u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 230u /* Trace: Command */
+#define CO_OD_2070_02 231u /* Trace: State */
+#define CO_OD_2070_03 232u /* Trace: Trigger signal */
+#define CO_OD_2070_04 233u /* Trace: Trigger level */
+#define CO_OD_2070_05 234u /* Trace: Trigger edge */
+#define CO_OD_2070_06 235u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 236u /* Trace: Signal count */
+#define CO_OD_2070_08 237u /* Trace: Signal 1 */
+#define CO_OD_2070_09 238u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 239u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 240u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 241u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 242u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 243u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 244u /* Trace: Signal 8 */
+#define CO_OD_2080_00 245u /* Identification: Highest sub-index supported */
+#define CO_OD_2080_01 246u /* Identification: d-axis current reference */
+#define CO_OD_2080_02 247u /* Identification: Measured smaller inductance */
+#define CO_OD_2080_03 248u /* Identification: Measured larger inductance */
+#define CO_OD_603F_00 249u /* Error code: Error code */
+#define CO_OD_6040_00 250u /* Controlword: Controlword */
+#define CO_OD_6041_00 251u /* Statusword: Statusword */
+#define CO_OD_605A_00 252u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 253u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 254u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 255u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 256u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 257u /* Following error window: Following error window */
+#define CO_OD_6066_00 258u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 259u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 260u /* Target torque: Target torque */
+#define CO_OD_6077_00 261u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 262u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 263u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 264u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 265u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 266u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 267u /* Supported drive modes: Supported drive modes */
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 64u
+#define CO_OD_CFG_COUNT 67u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 

@@ -6,15 +6,16 @@
  * frame the voltage equation leaves
  *     e_d = u_d - R i_d - L_d di_d/dt + w^ L_q i_q = -E sin dtheta,
  *     e_q = u_q - R i_q - L_q di_q/dt - w^ L_d i_d =  E cos dtheta,   E = w psi_f,
- * so dtheta = atan2(-e_d, e_q) (plus pi for w < 0) is an angle error the PLL
+ * (w^ the speed the estimated frame turns at, w the mover's) so dtheta = atan2(-e_d, e_q) (plus pi for w < 0) is an angle error the PLL
  * can track instead of the HF error. The handover has hysteresis on |w^| psi_f
- * (bemf_e_on_V up, bemf_e_off_V down): going up, the PLL switches to the
- * back-EMF error once the estimate has been above the band for 5 ms, then the
- * injection ramps down to bemf_inj_share of u_inj_V (the HF witness of the
- * integrity monitor keeps working on the reduced injection); going down, the
- * injection ramps back up first and the PLL returns to the HF error once the
- * extraction has settled. The PLL state is continuous through both, so the
- * estimate does not jump.
+ * and on the measured |e| (bemf_e_on_V up, bemf_e_off_V down: the back-EMF of the
+ * configured speeds bemf_v_on_mps, bemf_v_off_mps, fw_config_derive): going up, the
+ * PLL switches to the back-EMF error once the estimate has been above the band for 5 ms, then
+ * the injection ramps down to bemf_inj_share of u_inj_V over 10 ms (the HF witness of
+ * the integrity monitor keeps working on the reduced injection); going down, as soon as
+ * either is below the band, the injection ramps back up first (2 ms) and the PLL returns
+ * to the HF error once the extraction has settled (2 ms). The PLL state is continuous
+ * through both, so the estimate does not jump.
  *
  * Included by fw_ctrl.h (needs fw_config_t).
  */
@@ -35,7 +36,10 @@ extern "C" {
 typedef struct {
   float R_ohm, L_d_H, L_q_H, psi_f_Wb, dt_s, a_f;
   float w_on, w_off;    /**< handover band, el. rad/s (w_on = 0: handover off) */
+  float e_on2, e_off2;  /**< the same band in back-EMF, squared (V^2) */
+  float e_min2;         /**< (half the switch-off back-EMF)^2: below it, no angle */
   float inj_share;      /**< injection scale while on back-EMF */
+  float step_down, step_back; /**< injection scale change per period, down / back up */
   float i_prev_A[2];
   float e_d_f, e_q_f;   /**< filtered back-EMF in the estimated frame, V */
   float err_rad;        /**< angle error from the last update, when err_fresh */
@@ -71,8 +75,15 @@ static inline void fw_bemf_residual(const float u_dq_V[2], const float i_dq_A[2]
 void fw_bemf_init(fw_bemf_t *b, const fw_config_t *cfg, float dt_s);
 /** Closed loop (re)starts: injection full, PLL on the HF error. */
 void fw_bemf_reset(fw_bemf_t *b);
-/** Filter the back-EMF from the applied voltage and the fundamental current. */
-void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat);
+/** Filter the back-EMF from the applied voltage and the fundamental current. w_hat: the
+ *  speed estimate (el. rad/s); w_frame: the speed the estimated frame turned at from the
+ *  last sample to this one (the PLL's w_hat of the last period), for the cross-coupling
+ *  terms: with the speed estimate there instead, an error e in the PLL's output moves the
+ *  residual by kp e L_q i_q, which at low back-EMF and high thrust (kp L_q i_q > |w| psi_f)
+ *  closes a positive feedback on the angle error (a 0.48 rad oscillation at 0.3 m/s on a
+ *  loaded randomized motor, docs/identify.md). */
+void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat,
+                    float w_frame);
 /** Angle error dtheta seen by the back-EMF at the last update (rad, [-pi, pi)); 0 when
  *  |E| is too small or the speed far below the handover (not observed there).
  *  Computed in the update only while the PLL tracks it (active); otherwise here,
@@ -82,7 +93,11 @@ float fw_bemf_error(const fw_bemf_t *b);
  *  the observer starts locked at |E| = |w0| psi_f, injection ramps down. */
 void fw_bemf_catch(fw_bemf_t *b, float w0, const float i_dq_A[2]);
 /** Handover logic for this period; hf_settled: the HF path has a full period
- *  of data at full injection. Updates active and inj_scale. */
+ *  of data at full injection. Up when the speed estimate has been above the band for
+ *  5 ms; down as soon as the estimate or the measured back-EMF is below it (injection
+ *  back over 2 ms, the PLL on the HF error 2 ms later, or at once when the back-EMF is
+ *  too small to give an angle); back up on the way down only when both are above it.
+ *  Updates active and inj_scale. */
 void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled);
 
 #ifdef __cplusplus

@@ -70,21 +70,24 @@
   F32(mon_detect_time_s, "s", 0.001f, 0.1f, 0.01f) \
   F32(mon_sal_tol, "", 0.05f, 10.0f, 1.0f) \
   F32(mon_bemf_max_rad, "rad", 0.05f, 3.2f, 0.6f) \
-  F32(mon_bemf_min_V, "V", 0.1f, 1000.0f, 5.0f) \
+  F32(mon_bemf_min_mps, "m/s", 0.001f, 1000.0f, 0.21f) \
   F32(i_sum_max_A, "A", 0.001f, 500.0f, 0.2f) \
   F32(i_offset_max_A, "A", 0.001f, 500.0f, 1.0f) \
   F32(start_speed_max_mps, "m/s", 0.001f, 100.0f, 0.05f) \
-  F32(bemf_e_on_V, "V", 0.0f, 1000.0f, 10.0f) \
-  F32(bemf_e_off_V, "V", 0.0f, 1000.0f, 7.0f) \
+  F32(bemf_v_on_mps, "m/s", 0.0f, 100.0f, 0.42f) \
+  F32(bemf_v_off_mps, "m/s", 0.0f, 100.0f, 0.29f) \
   F32(bemf_inj_share, "", 0.05f, 1.0f, 0.25f) \
   F32(mass_kg, "kg", 0.001f, 100000.0f, 32.13f) \
   F32(visc_Ns_per_m, "N s/m", 0.0f, 1000000.0f, 8.57f) \
   F32(coulomb_N, "N", 0.0f, 1000000.0f, 49.1f) \
   F32(cur_bw_radps, "rad/s", 1.0f, 100000.0f, 1100.0f) \
   F32(spd_bw_radps, "rad/s", 0.1f, 10000.0f, 35.0f) \
-  U32(gains_auto, "", 0.0f, 1.0f, 0u)
+  U32(gains_auto, "", 0.0f, 1.0f, 0u) \
+  F32(bemf_e_on_V, "V", 0.0f, 1000000000.0f, 10.044456f) \
+  F32(bemf_e_off_V, "V", 0.0f, 1000000000.0f, 6.935458f) \
+  F32(mon_bemf_min_V, "V", 0.0f, 1000000000.0f, 5.022228f)
 /* clang-format on */
 
-#define FW_CONFIG_FIELD_COUNT 70u
+#define FW_CONFIG_FIELD_COUNT 73u
 
 #endif /* PMLSM_FW_CONFIG_FIELDS_H */

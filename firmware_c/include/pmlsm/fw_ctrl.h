@@ -175,13 +175,13 @@ typedef struct {
   float mon_detect_time_s;  /**< a witness must exceed its limit this long to fault */
   float mon_sal_tol;        /**< measured saliency within a factor (1 + tol) of the configured */
   float mon_bemf_max_rad;   /**< back-EMF residual angle limit */
-  float mon_bemf_min_V;     /**< back-EMF witness active above this |e| */
+  float mon_bemf_min_mps;   /**< back-EMF witness active above the back-EMF of this speed */
   float i_sum_max_A;        /**< limit on the filtered |i_a + i_b + i_c| */
   float i_offset_max_A;     /**< limit on each standstill offset */
   float start_speed_max_mps;/**< refuse to enable above this mover speed */
   /* back-EMF observer and handover (fw_bemf.h) */
-  float bemf_e_on_V;        /**< hand over to the back-EMF above |w^| psi_f = this (0: off) */
-  float bemf_e_off_V;       /**< back to injection below this (< bemf_e_on_V) */
+  float bemf_v_on_mps;      /**< hand over to the back-EMF above this speed (0: off) */
+  float bemf_v_off_mps;     /**< back to injection below this speed (< bemf_v_on_mps) */
   float bemf_inj_share;     /**< injection kept on back-EMF, share of u_inj_V */
   /* physical description and bandwidths: gains derived in the drive (fw_config_derive) */
   float mass_kg;            /**< mover plus load mass */
@@ -191,6 +191,11 @@ typedef struct {
   float spd_bw_radps;       /**< speed-loop bandwidth */
   uint32_t gains_auto;      /**< 1: current/speed PI and pll_accel_per_A derived from the above;
                                  0: the explicit gain fields are used as given */
+  /* derived by fw_config_derive from the speeds above, psi_f and pole_pitch_m (the
+   * back-EMF w psi_f at those speeds; read-only in the object dictionary) */
+  float bemf_e_on_V;        /**< back-EMF at bemf_v_on_mps */
+  float bemf_e_off_V;       /**< back-EMF at bemf_v_off_mps */
+  float mon_bemf_min_V;     /**< back-EMF at mon_bemf_min_mps */
 } fw_config_t;
 
 #include "fw_mon.h"
@@ -363,7 +368,10 @@ typedef struct {
 void fw_config_default(fw_config_t *cfg);
 
 /**
- * Derive the gains from the physical description when gains_auto is set:
+ * Derive the back-EMF levels of the configured speeds (always):
+ *   bemf_e_on_V = psi_f (pi/tau) bemf_v_on_mps, bemf_e_off_V likewise from bemf_v_off_mps,
+ *   mon_bemf_min_V from mon_bemf_min_mps (the back-EMF w psi_f at that speed),
+ * and the gains from the physical description when gains_auto is set:
  *   K_F = 1.5 (pi/tau) psi_f (N/A),
  *   cur_kp = L_d w_c, cur_ki = R w_c (w_c = cur_bw_radps),
  *   spd_kp = m w_s / K_F * tau / pi (A per el. rad/s), spd_ki = spd_kp w_s / 6,
@@ -372,7 +380,8 @@ void fw_config_default(fw_config_t *cfg);
  *   w = sqrt(a_d / (3 * 0.05 rad)), a_d = (pi/tau) 0.2 K_F i_max / m (a load step of
  *   20 % of the peak thrust leaves about 0.05 rad), w within [30, 2 pi f_inj / 40].
  * fw_init and fw_set_config apply it, so the stored configuration (and the
- * object dictionary) shows the gains in use. No-op when gains_auto is 0.
+ * object dictionary) shows the levels and gains in use; fw_config_default applies it
+ * too. The gains are left as they are when gains_auto is 0.
  */
 void fw_config_derive(fw_config_t *cfg);
 
@@ -462,6 +471,9 @@ size_t fw_ctrl_sizeof(void);
 /** Linear speed (m/s) -> electrical rad/s: w_e = pi v / tau. */
 float fw_units_mps_to_radps_e(const fw_config_t *cfg, float v_mps);
 float fw_units_radps_e_to_mps(const fw_config_t *cfg, float w_radps_e);
+/** Back-EMF magnitude w psi_f (V) of a mover at v_mps (the one conversion used by
+ *  fw_config_derive for the handover and witness levels, and the start check). */
+float fw_units_bemf_V(const fw_config_t *cfg, float v_mps);
 /** Rotary-equivalent r/min -> electrical rad/s: w_e = p 2 pi n / 60. */
 float fw_units_rpm_to_radps_e(const fw_config_t *cfg, float n_rpm);
 float fw_units_radps_e_to_rpm(const fw_config_t *cfg, float w_radps_e);
