@@ -88,20 +88,22 @@ def _fw_overrides(case: FaultCase) -> dict[str, float]:
     return out
 
 
-def run_case(case: FaultCase, seed: int = 0) -> dict[str, Any]:
-    """Run one case; return what happened, judged from the simulator's truth."""
+def record_case(case: FaultCase, seed: int = 0, channels: list[str] | None = None,
+                ) -> tuple[dict[str, np.ndarray], float, float]:
+    """Simulate one case: the record (``channels``, None: every channel), the time of
+    the enable (s) and the drive's fault brake time (s)."""
     mot = load_motor(case.motor)
-    ch = ["theta_e_rad", "theta_hat_rad", "fault_code", "duty_abc", "start_phase", "t_s"]
     plant = dict(case.plant)
     for k, f in case.plant_scale.items():
         plant[k] = float(mot.plant[k]) * f
+    kw = {} if channels is None else {"channels": channels}
     with Sim(mot, seed=seed, plant=plant, fw=_fw_overrides(case)) as sim:
         sim.set_schedule(SIM_REF_SPEED, case.speed, mot.mps_to_radps_e(1.0))
         if case.load_N:
             sim.set_schedule(SIM_REF_LOAD, case.load_N)
         parts = []
         if case.idle_s > 0.0:
-            parts.append(sim.advance(int(round(case.idle_s / sim.dt_s)), channels=ch))
+            parts.append(sim.advance(int(round(case.idle_s / sim.dt_s)), **kw))
         if case.v0_mps:
             st = sim.state()
             sim.set_state(x0_m=st["x_m"], v0_mps=case.v0_mps)
@@ -114,10 +116,16 @@ def run_case(case: FaultCase, seed: int = 0) -> dict[str, Any]:
             while events and events[0][0] <= sim.t_s - t_enable + 1e-12:
                 sim.set_plant(**events.pop(0)[1])
             n = min(CHUNK, n_total - done)
-            parts.append(sim.advance(n, channels=ch))
+            parts.append(sim.advance(n, **kw))
             done += n
         brake_s = float(sim.cfg.fault_brake_time_s)
-    d = {k: np.concatenate([p[k] for p in parts]) for k in ch}
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, t_enable, brake_s
+
+
+def run_case(case: FaultCase, seed: int = 0) -> dict[str, Any]:
+    """Run one case; return what happened, judged from the simulator's truth."""
+    ch = ["theta_e_rad", "theta_hat_rad", "fault_code", "duty_abc", "start_phase", "t_s"]
+    d, t_enable, brake_s = record_case(case, seed, ch)
     t = d["t_s"] - t_enable
     on = ~np.isnan(d["duty_abc"][:, 0])
     fc = d["fault_code"].astype(int)

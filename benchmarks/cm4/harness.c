@@ -204,7 +204,8 @@ int main(int argc, char **argv) {
     printf("CM4: warm ok phase=RUN sizeof(fw_ctrl_t)=%u inputs=%d\n", (unsigned)sizeof g_base, n);
     return 0;
   }
-  if (argc >= 5 && strcmp(argv[1], "count") == 0) {
+  int isr = argc >= 5 && strcmp(argv[1], "count_isr") == 0;
+  if (isr || (argc >= 5 && strcmp(argv[1], "count") == 0)) {
     int batch = atoi(argv[3]), nb = atoi(argv[4]);
     if (batch < 1 || nb < 1 || batch * nb > N_MAX) {
       printf("CM4: bad batch sizes\n");
@@ -225,62 +226,36 @@ int main(int argc, char **argv) {
     /* Batches restart from the saved state: they must span whole injection
      * periods, or the replayed HF response is out of phase and the core
      * (rightly) trips FW_FAULT_EST_HF_LOW. */
-    int period = (int)(g_base.cfg.f_pwm_Hz / g_base.cfg.f_inj_Hz + 0.5f);
-    if (period < 1 || batch % period != 0) {
-      printf("CM4: batch %d is not a multiple of the injection period %d\n", batch, period);
-      return 1;
-    }
-    int all_run = 1;
-    for (int b = 0; b < nb; b++) {
-      memcpy(&g_c, &g_base, sizeof g_c);
-      replay_batch(&g_c, &g_rec[b * batch], batch);
-      if (!in_run(&g_c)) all_run = 0;
-    }
-    printf("CM4: count done batches=%d batch=%d closed_loop=%s phase=%d fault=0x%04x\n", nb,
-           batch, all_run ? "yes" : "NO", (int)g_c.phase, (unsigned)fw_fault_code(&g_c));
-    return all_run ? 0 : 1;
-  }
-  if (argc >= 5 && strcmp(argv[1], "count_isr") == 0) {
-    int batch = atoi(argv[3]), nb = atoi(argv[4]);
-    if (batch < 1 || nb < 1 || batch * nb > N_MAX) {
-      printf("CM4: bad batch sizes\n");
-      return 1;
-    }
-    FILE *f = fopen(argv[2], "rb");
-    if (f == NULL) {
-      printf("CM4: cannot open %s\n", argv[2]);
-      return 1;
-    }
-    size_t ok = fread(&g_base, sizeof g_base, 1, f);
-    ok += fread(g_rec, sizeof g_rec[0], (size_t)(batch * nb), f);
-    fclose(f);
-    if (ok != 1u + (size_t)(batch * nb)) {
-      printf("CM4: short read\n");
-      return 1;
-    }
     const fw_config_t *cfg = &g_base.cfg;
-    for (int k = 0; k < batch * nb; k++) {
-      for (int j = 0; j < 3; j++) {
-        g_adc[k].i_abc_counts[j] = to_counts(g_rec[k].i_abc_A[j], cfg->adc_A_per_count,
-                                             cfg->adc_offset_counts, cfg->adc_max_count);
-      }
-      g_adc[k].u_dc_counts = to_counts(g_rec[k].u_dc_V, cfg->adc_V_per_count, 0.0f,
-                                       cfg->adc_max_count);
-    }
-    if (fw_app_init(&g_app, cfg, 1u) != FW_OK) {
-      printf("CM4: fw_app_init refused the configuration\n");
-      return 1;
-    }
     int period = (int)(cfg->f_pwm_Hz / cfg->f_inj_Hz + 0.5f);
     if (period < 1 || batch % period != 0) {
       printf("CM4: batch %d is not a multiple of the injection period %d\n", batch, period);
       return 1;
     }
+    fw_ctrl_t *c = &g_c;
+    if (isr) { /* the inputs as the ADC delivered them; the core inside the application */
+      for (int k = 0; k < batch * nb; k++) {
+        for (int j = 0; j < 3; j++) {
+          g_adc[k].i_abc_counts[j] = to_counts(g_rec[k].i_abc_A[j], cfg->adc_A_per_count,
+                                               cfg->adc_offset_counts, cfg->adc_max_count);
+        }
+        g_adc[k].u_dc_counts = to_counts(g_rec[k].u_dc_V, cfg->adc_V_per_count, 0.0f,
+                                         cfg->adc_max_count);
+      }
+      if (fw_app_init(&g_app, cfg, 1u) != FW_OK) {
+        printf("CM4: fw_app_init refused the configuration\n");
+        return 1;
+      }
+      c = fw_app_ctrl(&g_app);
+    }
     int all_run = 1;
-    fw_ctrl_t *c = fw_app_ctrl(&g_app);
     for (int b = 0; b < nb; b++) {
       memcpy(c, &g_base, sizeof *c);
-      replay_isr_batch(&g_app, &g_adc[b * batch], batch);
+      if (isr) {
+        replay_isr_batch(&g_app, &g_adc[b * batch], batch);
+      } else {
+        replay_batch(c, &g_rec[b * batch], batch);
+      }
       if (!in_run(c)) all_run = 0;
     }
     printf("CM4: count done batches=%d batch=%d closed_loop=%s phase=%d fault=0x%04x\n", nb,

@@ -237,6 +237,17 @@ static inline void basis_ensure(sim_t *s, double x_m, double i_d_A) {
 }
 
 /** Exact (libm) psi_d(i_d) and 1 / L_dd(i_d). */
+/* cos/sin of a stage's angle offset d from the expansion point: the checked
+ * polynomial (flagging a far stage) when far != NULL, else the short series */
+static inline void stage_cs(double d, int *far, double *cd, double *sd) {
+  if (far) {
+    *far |= fabs(d) > SIM_BASIS_FAR_DTH;
+    sim_cs_poly(d, cd, sd);
+  } else {
+    sim_cs_small(d, cd, sd);
+  }
+}
+
 static void d_axis_flux_exact(const sim_plant_params_t *p, double i_d, double *psi_d,
                               double *inv_L_dd) {
   if (p->dL_sat_H == 0.0) {
@@ -344,13 +355,7 @@ SIM_INLINE double deriv_t(const sim_t *s, const double y[4], const substep_in_t 
     /* rotor-frame voltage: the basis-frame voltage rotated back by the
      * stage's angle offset d (cos/sin(-d) = cos d, -sin d) */
     double cd, sd;
-    const double d = s->k_theta * dx;
-    if (far) {
-      *far |= fabs(d) > SIM_BASIS_FAR_DTH;
-      sim_cs_poly(d, &cd, &sd);
-    } else {
-      sim_cs_small(d, &cd, &sd);
-    }
+    stage_cs(s->k_theta * dx, far, &cd, &sd);
     const double u_d = cd * in->u_dq0_V[0] + sd * in->u_dq0_V[1];
     const double u_q = cd * in->u_dq0_V[1] - sd * in->u_dq0_V[0];
     const double w = s->k_theta * y[3];
@@ -364,13 +369,7 @@ SIM_INLINE double deriv_t(const sim_t *s, const double y[4], const substep_in_t 
   double F_cog = 0.0;
   if (cog) {
     double cd, sd;
-    const double d = s->k_cog * dx;
-    if (far) {
-      *far |= fabs(d) > SIM_BASIS_FAR_DTH;
-      sim_cs_poly(d, &cd, &sd);
-    } else {
-      sim_cs_small(d, &cd, &sd);
-    }
+    stage_cs(s->k_cog * dx, far, &cd, &sd);
     /* sin of the cogging angle, as sim_rot */
     F_cog = p->cog_amp_N * (s->b_cs0 * cd + s->b_cc0 * sd);
   }

@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from sim_fallback import MOTOR_DIR, SIM_REF_LOAD, SIM_REF_SPEED, Sim, load_motor  # noqa: E402
-from sim_fallback._faults import CASES, CHUNK, _fw_overrides  # noqa: E402
+from sim_fallback._faults import CASES, record_case  # noqa: E402
 
 T_END = 0.4
 
@@ -48,33 +48,8 @@ def _closed_loop(motor: str, extractor: str, plant: dict[str, Any], seed: int,
 
 
 def _fault_case(case: Any, seed: int) -> dict[str, np.ndarray]:
-    """The matrix's run (sim_fallback._faults.run_case) recording every channel."""
-    mot = load_motor(case.motor)
-    plant = dict(case.plant)
-    for k, f in case.plant_scale.items():
-        plant[k] = float(mot.plant[k]) * f
-    parts = []
-    with Sim(mot, seed=seed, plant=plant, fw=_fw_overrides(case)) as sim:
-        sim.set_schedule(SIM_REF_SPEED, case.speed, mot.mps_to_radps_e(1.0))
-        if case.load_N:
-            sim.set_schedule(SIM_REF_LOAD, case.load_N)
-        if case.idle_s > 0.0:
-            parts.append(sim.advance(int(round(case.idle_s / sim.dt_s))))
-        if case.v0_mps:
-            st = sim.state()
-            sim.set_state(x0_m=st["x_m"], v0_mps=case.v0_mps)
-        t_enable = sim.t_s
-        sim.enable("speed")
-        events = sorted(case.events, key=lambda e: e[0])
-        n_total = int(round(case.t_end / sim.dt_s))
-        done = 0
-        while done < n_total:
-            while events and events[0][0] <= sim.t_s - t_enable + 1e-12:
-                sim.set_plant(**events.pop(0)[1])
-            n = min(CHUNK * 10, n_total - done)
-            parts.append(sim.advance(n))
-            done += n
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    """The matrix's run (sim_fallback._faults.record_case) recording every channel."""
+    return record_case(case, seed)[0]
 
 
 def _plant_only() -> dict[str, np.ndarray]:
