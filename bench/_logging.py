@@ -563,11 +563,13 @@ def _write_mf4(path: Path, rows: Iterable[tuple[str, str, np.ndarray, np.ndarray
         mdf.header.comment = _mf4_header_xml(header)
     for sigs in groups.values():
         mdf.append(sigs, comment="pmlsm bench")
-    tmp = path.with_suffix(".tmp")
-    mdf.save(tmp, overwrite=True, compression=compression)
+    # written beside it, then renamed: a reader never sees a half-written file. The name
+    # keeps the .mf4 suffix: asammdf puts its own suffix on another (a ".tmp" became
+    # the final name itself, written in place while readers could open it)
+    tmp = path.with_name(f".{path.stem}.writing.mf4")
+    saved = mdf.save(tmp, overwrite=True, compression=compression)
     mdf.close()
-    written = tmp if tmp.exists() else tmp.with_suffix(".mf4")
-    os.replace(written, path)
+    os.replace(saved if saved and Path(saved).exists() else tmp, path)
 
 
 def read_signals(run_dir: str | Path) -> dict[str, tuple[np.ndarray, np.ndarray, str]]:
