@@ -251,6 +251,10 @@ def bench(*args: str, cwd: Path, timeout: float = 120.0) -> subprocess.Completed
     return r
 
 
+#: judged until this long before the statusword leaves OPERATION ENABLED (see the test)
+DISABLE_MARGIN_S = 0.2
+
+
 def _enabled(got: dict[str, tuple[np.ndarray, np.ndarray]]) -> tuple[float, float]:
     """Drive times between which the statusword (0x6041, from the TPDO) says operation
     enabled (the end: the disable on exit)."""
@@ -287,8 +291,12 @@ def test_bench_live_sim_records_wire_estimates_and_truth_that_agree(tmp_path: Pa
     tt, pt = got["truth/position"]
     _, st = got["truth/speed"]
     _, perr_fw = got["truth/position_error"]
-    # after the start-up (alignment, polarity test, settling), before the disable
-    sel = (te > t_on + 0.3) & (te < t_off - 0.02)
+    # after the start-up (alignment, polarity test, settling), before the disable. The
+    # bench's disable zeroes the references by SDO before it walks the state machine, so
+    # the mover slows down while the statusword still says OPERATION ENABLED: by one SDO
+    # round trip or two, which take tens of ms on a loaded machine (60 ms seen)
+    t_off -= DISABLE_MARGIN_S
+    sel = (te > t_on + 0.3) & (te < t_off)
     assert sel.sum() >= 40, (t_on, te[-1])
     te, pe = te[sel], pe[sel]
     j = _nearest(tt, te)
@@ -302,10 +310,10 @@ def test_bench_live_sim_records_wire_estimates_and_truth_that_agree(tmp_path: Pa
 
     ts_e, se = got["speed/estimate"]
     ts_p, sp = got["speed/pdo"]
-    k = (ts_e > t_on + 0.5) & (ts_e < t_off - 0.02)
+    k = (ts_e > t_on + 0.5) & (ts_e < t_off)
     assert np.abs(st[_nearest(tt, ts_e[k])] - 100.0).max() < 5.0
     assert np.abs(se[k] - st[_nearest(tt, ts_e[k])]).max() < 5.0
-    kp = (ts_p > t_on + 0.5) & (ts_p < t_off - 0.02)
+    kp = (ts_p > t_on + 0.5) & (ts_p < t_off)
     assert np.abs(sp[kp] - se[_nearest(ts_e, ts_p[kp])]).max() < 5.0  # PDO vs serial
 
 
