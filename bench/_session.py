@@ -359,9 +359,18 @@ class PdoRecorder:
             self._rated = float(conn.drive.force_rated_N)
         except Exception:  # noqa: BLE001 - unknown rating: log per mille
             self._rated = float("nan")
-        for tpdo in conn.drive.node.tpdo.values():
-            if tpdo.enabled:
-                tpdo.add_callback(self._on_pdo)
+        self._maps = [tpdo for tpdo in conn.drive.node.tpdo.values() if tpdo.enabled]
+        for tpdo in self._maps:
+            tpdo.add_callback(self._on_pdo)
+
+    def detach(self) -> None:
+        """Stop decoding: the callbacks leave the TPDO maps (a shell opens and closes
+        live telemetry many times on one connection)."""
+        self.live = None
+        for tpdo in self._maps:
+            if self._on_pdo in tpdo.callbacks:
+                tpdo.callbacks.remove(self._on_pdo)
+        self._maps = []
 
     def _layout(self, pdo_map: Any) -> list[tuple[str, Any, int, float | None, Any]]:
         """How to decode one mapped PDO: (signal, struct, byte offset, scale, variable)
@@ -527,6 +536,40 @@ def open_live(spec: Any, conn: Connection, run_dir: Any, name: str, lazy: bool =
                          radius_m=conn.units.radius_m, say=_say, lazy=lazy)
 
 
+class LiveTap:
+    """What feeds live telemetry from a connection, the one wiring of ``bench live`` and
+    the shell's ``drive.live()``: the TPDOs (:class:`PdoRecorder`), the serial telemetry
+    when the connection has a serial link (:class:`TelemetryReader`), and, on the
+    simulated drive, its truth beside them (never instead). :meth:`close` undoes all of it
+    and stops the reader."""
+
+    def __init__(self, conn: Connection, feed: Any, truth_decimation: int = 0) -> None:
+        self.conn = conn
+        self.sim = conn.sim
+        if self.sim is not None:
+            if truth_decimation:
+                self.sim.record_decimation = max(self.sim.record_decimation,
+                                                 truth_decimation)
+            self.sim.sink = feed.put_truth
+        self.pdo = PdoRecorder(conn, None, live=feed)
+        self.tel: TelemetryReader | None = None
+        if conn.serial is not None:
+            f_pwm = (float(self.sim.sim.cfg.f_pwm_Hz) if self.sim is not None
+                     else conn.control_rate_Hz() or 24000.0)
+            self.tel = TelemetryReader(conn.serial, None, f_pwm, live=feed)
+            self.tel.start()
+
+    def close(self) -> None:
+        if self.sim is not None:
+            self.sim.sink = None
+        self.pdo.detach()
+        if self.tel is not None:
+            self.tel.live = None
+            self.tel.stop()
+            self.tel.join(timeout=1.0)
+            self.tel = None
+
+
 def close_live(live: Any, drive_time_s: float | None = None) -> dict[str, Any]:
     """Flush and close live telemetry; print its one-line summary; its statistics."""
     from bench._live import summary_line
@@ -575,18 +618,9 @@ def run_live(conn: Connection, spec: Any, speed_mps: float, duration_s: float = 
         if run_dir is not None and Path(run_dir).is_dir() and not any(Path(run_dir).iterdir()):
             Path(run_dir).rmdir()
         raise
-    feed = live.feed
+    tap = LiveTap(conn, live.feed, truth_decimation=12)  # truth at 2 kHz
     if conn.sim is not None:
-        conn.sim.record_decimation = max(conn.sim.record_decimation, 12)  # truth at 2 kHz
-        conn.sim.sink = feed.put_truth
         conn.sim.set_realtime(True)
-    pdo = PdoRecorder(conn, None, live=feed)
-    tel = None
-    if conn.serial is not None:
-        f_pwm = (float(conn.sim.sim.cfg.f_pwm_Hz) if conn.sim is not None
-                 else conn.control_rate_Hz() or 24000.0)
-        tel = TelemetryReader(conn.serial, None, f_pwm, live=feed)
-        tel.start()
     d = conn.drive
     interrupted = False
     fault = None
@@ -615,12 +649,7 @@ def run_live(conn: Connection, spec: Any, speed_mps: float, duration_s: float = 
             _say("bench: drive disabled")
         except Exception as e:  # noqa: BLE001
             _say(f"bench: SAFE STATE FAILED: {e}")
-        if conn.sim is not None:
-            conn.sim.sink = None
-        pdo.live = None
-        if tel is not None:
-            tel.live = None
-            tel.stop()
+        tap.close()
         drive_time = max(0.0, t_end - t0)
         stats = close_live(live, drive_time_s=drive_time)
     out_dir = Path(run_dir) if run_dir is not None else Path(spec.path).parent

@@ -119,7 +119,7 @@ class Shell:
         self.runs_root = runs_root
         self.last_result: Any = None
         self._live: Any = None
-        self._pdo: Any = None
+        self._tap: Any = None
 
     # ---- state and set-points ----------------------------------------------------------
     @property
@@ -190,7 +190,7 @@ class Shell:
         session goes on; arguments as ``--rerun`` (default ``spawn``)."""
         from bench._live import parse_rerun_spec
         from bench._logging import run_dir_for
-        from bench._session import PdoRecorder, open_live
+        from bench._session import LiveTap, open_live
 
         if self._live is not None:
             return "live telemetry already running (drive.live_stop() ends it)"
@@ -199,10 +199,7 @@ class Shell:
             raise ValueError(f"drive.live{tuple(rerun)}: unexpected {rest[0]!r}")
         run_dir = run_dir_for("shell", self.runs_root) if spec.path is None else None
         self._live = open_live(spec, self.conn, run_dir, "shell")
-        feed = self._live.feed
-        if self.conn.sim is not None:
-            self.conn.sim.sink = feed.put_truth
-        self._pdo = PdoRecorder(self.conn, None, live=feed)
+        self._tap = LiveTap(self.conn, self._live.feed)
         return f"live telemetry -> {self._live.sink.path}"
 
     def live_stop(self) -> dict[str, Any] | None:
@@ -211,10 +208,9 @@ class Shell:
 
         if self._live is None:
             return None
-        if self.conn.sim is not None:
-            self.conn.sim.sink = None
-        if self._pdo is not None:
-            self._pdo.live = None
+        if self._tap is not None:
+            self._tap.close()
+            self._tap = None
         live, self._live = self._live, None
         return close_live(live)
 

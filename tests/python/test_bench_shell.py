@@ -101,3 +101,33 @@ def test_bench_shell_with_piped_input(tmp_path):
     assert "U= 50.0" in p.stdout and "U2= 25.0" in p.stdout
     assert "STATE= OPERATION ENABLED" in p.stdout
     assert "Traceback" not in p.stdout + p.stderr
+
+
+def test_live_in_the_shell_streams_pdo_serial_and_truth_and_detaches(ns, tmp_path):
+    """drive.live() is wired like `bench live` (one LiveTap): TPDOs, the serial telemetry
+    and the simulated drive's truth reach the recording; live_stop() leaves no decoder on
+    the TPDOs, so a second live() does not decode every frame twice."""
+    from bench._live import read_rrd
+
+    drive = ns["drive"]
+    conn = drive.conn
+    maps = [m for m in conn.drive.node.tpdo.values() if m.enabled]
+    before = [len(m.callbacks) for m in maps]
+    for k in range(2):
+        rrd = tmp_path / f"shell{k}.rrd"
+        assert str(rrd) in drive.live("save", str(rrd))
+        assert [len(m.callbacks) for m in maps] == [n + 1 for n in before]
+        drive.enable()
+        drive.speed(0.05)
+        conn.drive.clock.sleep_until(conn.drive.clock.now() + 0.3)
+        drive.disable()
+        stats = drive.live_stop()
+        assert stats is not None
+        assert [len(m.callbacks) for m in maps] == before
+        got = read_rrd(rrd)
+        # serial telemetry (position/estimate), TPDOs (speed/pdo) and the truth, each
+        # over the 0.3 s of drive time at the live view's 50 Hz (15 samples)
+        for name in ("position/estimate", "speed/pdo", "truth/position"):
+            assert name in got, (name, sorted(got))
+            t, _ = got[name]
+            assert t.size >= 12 and t[-1] - t[0] > 0.25, (name, t.size)
