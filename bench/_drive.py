@@ -23,9 +23,15 @@ from typing import Any, Protocol
 import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
+from protocols.generated import od_names as od
 from protocols.generated.od_names import FAULTS as _OD_FAULTS
 
 log = logging.getLogger("bench.drive")
+
+#: CiA 301 areas of the object dictionary (index ranges, not objects): the
+#: communication area, and within it the PDO communication and mapping parameters
+COMMUNICATION_AREA = range(0x1000, 0x2000)
+PDO_PARAMETER_AREA = range(0x1400, 0x1C00)
 
 ROOT = Path(__file__).resolve().parent.parent
 #: EDS generated from protocols/od.yaml.
@@ -245,30 +251,34 @@ class Drive:
     # ---- identity ---------------------------------------------------------------------
     def identity(self) -> dict[str, Any]:
         """Identity (0x1018), names, firmware version (0x2040) and build id (0x2041)."""
-        sdo = self.node.sdo
-        fw = int(sdo[0x2040].raw)
+        v = self.var
+        fw = int(v(od.FIRMWARE_VERSION).raw)
         out: dict[str, Any] = {
             "node_id": self.node_id,
-            "device_name": str(sdo[0x1008].raw),
-            "software_version": str(sdo[0x100A].raw),
-            "vendor_id": int(sdo[0x1018][1].raw),
-            "product_code": int(sdo[0x1018][2].raw),
-            "revision": int(sdo[0x1018][3].raw),
-            "serial": int(sdo[0x1018][4].raw),
+            "device_name": str(v(od.MANUFACTURER_DEVICE_NAME).raw),
+            "software_version": str(v(od.MANUFACTURER_SOFTWARE_VERSION).raw),
+            "vendor_id": int(v(od.IDENTITY_OBJECT__VENDOR_ID).raw),
+            "product_code": int(v(od.IDENTITY_OBJECT__PRODUCT_CODE).raw),
+            "revision": int(v(od.IDENTITY_OBJECT__REVISION_NUMBER).raw),
+            "serial": int(v(od.IDENTITY_OBJECT__SERIAL_NUMBER).raw),
             "firmware_version": f"{(fw >> 16) & 0xFF}.{(fw >> 8) & 0xFF}.{fw & 0xFF}",
             "firmware_version_u32": fw,
-            "build_id": str(sdo[0x2041].raw),
+            "build_id": str(v(od.BUILD_ID).raw),
         }
         return out
 
     def check_firmware(self, ident: dict[str, Any] | None = None) -> list[str]:
         """Compare the drive's identity with the EDS; return the mismatches (empty: ok)."""
         ident = ident or self.identity()
-        od = self.node.object_dictionary
+        eds = self.node.object_dictionary
+
+        def default(e: od.Entry) -> int:
+            return int((eds[e.index] if e.var else eds[e.index][e.sub]).default)
+
         problems = []
-        exp_prod = int(od[0x1018][2].default)
-        exp_rev = int(od[0x1018][3].default)
-        exp_fw = int(od[0x2040].default)
+        exp_prod = default(od.IDENTITY_OBJECT__PRODUCT_CODE)
+        exp_rev = default(od.IDENTITY_OBJECT__REVISION_NUMBER)
+        exp_fw = default(od.FIRMWARE_VERSION)
         if ident["product_code"] != exp_prod:
             problems.append(f"product code 0x{ident['product_code']:08X} != EDS 0x{exp_prod:08X}")
         if ident["revision"] != exp_rev:
@@ -303,7 +313,7 @@ class Drive:
     @property
     def statusword(self) -> int:
         """Statusword (0x6041) read by SDO."""
-        return int(self.node.sdo[0x6041].raw)
+        return int(self.var(od.STATUSWORD).raw)
 
     @property
     def state(self) -> str:
@@ -339,8 +349,8 @@ class Drive:
             cw = State402.TRANSITIONTABLE.get((state, nxt))
             if cw is None:
                 raise DriveError(f"no CiA 402 transition from {state} towards {target}")
-            self._sync_rpdo_cache(0x6040, cw)
-            self.write_raw(0x6040, 0, cw)
+            self._sync_rpdo_cache(od.CONTROLWORD, cw)
+            self.write(od.CONTROLWORD, cw)
             while (state := self.state) != nxt:
                 if state == "FAULT" or time.monotonic() > deadline:
                     break
@@ -357,9 +367,9 @@ class Drive:
         """Select ``speed`` (CSV, 9) or ``force`` (CST, 10) and check 0x6061."""
         if mode not in MODES:
             raise ValueError(f"mode {mode!r}; allowed: {sorted(MODES)}")
-        self.write_raw(0x6060, 0, MODES[mode])
+        self.write(od.MODES_OF_OPERATION, MODES[mode])
         deadline = time.monotonic() + 1.0
-        while int(self.node.sdo[0x6061].raw) != MODES[mode]:
+        while int(self.var(od.MODES_OF_OPERATION_DISPLAY).raw) != MODES[mode]:
             if time.monotonic() > deadline:
                 raise DriveError(f"drive did not confirm mode {mode} (0x6061)")
             time.sleep(0.001)
@@ -371,8 +381,8 @@ class Drive:
             raise DriveError(f"drive in FAULT ({fault_text(self.fault_code())}); "
                              "run `bench faults --reset` first")
         self.set_speed_mps(0.0)
-        self.write_raw(0x6071, 0, 0)
-        self._sync_rpdo_cache(0x6071, 0)
+        self.write(od.TARGET_TORQUE, 0)
+        self._sync_rpdo_cache(od.TARGET_TORQUE, 0)
         self.set_mode(mode)
         self._goto("OPERATION ENABLED", timeout_s)
         self.enabled = True
@@ -384,12 +394,12 @@ class Drive:
         fails, and raises :class:`DriveError` only when the drive still reports
         OPERATION ENABLED afterwards.
         """
-        for idx in (0x60FF, 0x6071):
+        for ref in (od.TARGET_VELOCITY, od.TARGET_TORQUE):
             try:
-                self._sync_rpdo_cache(idx, 0)
-                self.node.sdo[idx].raw = 0
+                self._sync_rpdo_cache(ref, 0)
+                self.var(ref).raw = 0
             except Exception as e:  # keep going: disabling matters more
-                log.warning("zeroing 0x%04X failed: %s", idx, e)
+                log.warning("zeroing 0x%04X failed: %s", ref.index, e)
         try:
             if self.state == "FAULT":  # power stage already off; a reset is the user's call
                 self.enabled = False
@@ -400,30 +410,29 @@ class Drive:
             self._goto("SWITCH ON DISABLED", timeout_s)
         except Exception as e:
             log.warning("state walk to SWITCH ON DISABLED failed (%s); writing controlword", e)
-            self.node.sdo[0x6040].raw = 0x0000  # DISABLE VOLTAGE
+            self.var(od.CONTROLWORD).raw = 0x0000  # DISABLE VOLTAGE
             if self.state in ("OPERATION ENABLED", "QUICK STOP ACTIVE"):
                 raise DriveError("drive still enabled after DISABLE VOLTAGE") from e
         self.enabled = False
 
     def quick_stop(self) -> None:
         """Controlword QUICK STOP (0x0002): decelerate, then PWM off."""
-        self.node.sdo[0x6040].raw = 0x0002
+        self.var(od.CONTROLWORD).raw = 0x0002
 
     # ---- references -------------------------------------------------------------------
     def set_speed_mps(self, v_mps: float) -> None:
         """Target velocity (0x60FF, um/s) from m/s."""
         raw = int(round(v_mps * 1e6))
-        self.write_raw(0x60FF, 0, raw)
-        self._sync_rpdo_cache(0x60FF, raw)
+        self.write(od.TARGET_VELOCITY, raw)
+        self._sync_rpdo_cache(od.TARGET_VELOCITY, raw)
 
     @property
     def force_rated_N(self) -> float:
         """Force (N) meant by 1000 per mille of 0x6071/0x6077: K_f i_max_A."""
         if self._force_rated_N is None:
-            sdo = self.node.sdo
-            i_max = float(sdo[0x2050][10].raw)
-            psi = float(sdo[0x2050][5].raw)
-            tau = float(sdo[0x2050][6].raw)
+            i_max = float(self.var(od.DRIVE_CONFIGURATION__I_MAX_A).raw)
+            psi = float(self.var(od.DRIVE_CONFIGURATION__PSI_F_WB).raw)
+            tau = float(self.var(od.DRIVE_CONFIGURATION__POLE_PITCH_M).raw)
             self._force_rated_N = 1.5 * math.pi / tau * psi * i_max
         return self._force_rated_N
 
@@ -433,24 +442,24 @@ class Drive:
         if not -1000 <= pm <= 1000:
             raise DriveError(f"force {force_N:.3g} N is {pm} per mille of the rated "
                              f"{self.force_rated_N:.3g} N; allowed [-1000, 1000]")
-        self.write_raw(0x6071, 0, pm)
-        self._sync_rpdo_cache(0x6071, pm)
+        self.write(od.TARGET_TORQUE, pm)
+        self._sync_rpdo_cache(od.TARGET_TORQUE, pm)
 
-    def _sync_rpdo_cache(self, index: int, raw: int) -> None:
+    def _sync_rpdo_cache(self, e: od.Entry, raw: int) -> None:
         """Keep canopen's RPDO image equal to what was written by SDO.
 
         BaseNode402 sends the controlword in RPDO1, which also carries the
         target velocity: a stale image would overwrite the reference.
         """
-        ptr = self.node.rpdo_pointers.get(index)
+        ptr = self.node.rpdo_pointers.get(e.index)
         if ptr is not None:
             ptr.raw = raw
     def actual(self) -> dict[str, float]:
         """Estimated position (m), speed (m/s) and force (N) read by SDO."""
-        sdo = self.node.sdo
-        return {"pos_hat_m": int(sdo[0x6064].raw) * 1e-6,
-                "speed_hat_mps": int(sdo[0x606C].raw) * 1e-6,
-                "force_hat_N": int(sdo[0x6077].raw) * 1e-3 * self.force_rated_N}
+        v = self.var
+        return {"pos_hat_m": int(v(od.POSITION_ACTUAL_VALUE).raw) * 1e-6,
+                "speed_hat_mps": int(v(od.VELOCITY_ACTUAL_VALUE).raw) * 1e-6,
+                "force_hat_N": int(v(od.TORQUE_ACTUAL_VALUE).raw) * 1e-3 * self.force_rated_N}
 
     # ---- parameters -------------------------------------------------------------------
     @property
@@ -482,6 +491,19 @@ class Drive:
             raise ParamError(explain_abort(e, p, value)) from e
         except SdoCommunicationError as e:
             raise ParamError(f"0x{index:04X}:{sub}: no answer from the drive ({e})") from e
+
+    def var(self, e: od.Entry) -> Any:
+        """The canopen SDO variable of an OD entry named in :mod:`protocols.generated.od_names`
+        (``drive.var(od.STATUSWORD).raw``)."""
+        return self.node.sdo[e.index] if e.var else self.node.sdo[e.index][e.sub]
+
+    def write(self, e: od.Entry, value: Any) -> None:
+        """:meth:`write_raw` of an OD entry by name (``drive.write(od.CONTROLWORD, 0)``)."""
+        self.write_raw(e.index, e.sub, value)
+
+    def read(self, e: od.Entry) -> Any:
+        """:meth:`read_raw` of an OD entry by name."""
+        return self.read_raw(e.index, e.sub)
 
     def read_raw(self, index: int, sub: int = 0) -> Any:
         """SDO upload with aborts turned into :class:`ParamError`."""
@@ -529,7 +551,7 @@ class Drive:
         out: dict[str, Any] = {}
         seen = set()
         for p in self.params.values():
-            if p.access != "rw" or (p.index, p.sub) in seen or 0x1400 <= p.index < 0x1C00:
+            if p.access != "rw" or (p.index, p.sub) in seen or p.index in PDO_PARAMETER_AREA:
                 continue
             if p.command:  # od.yaml `command`: an action or set-point, not configuration
                 continue
@@ -615,12 +637,13 @@ class Drive:
     SAVE_SIGNATURE = 0x65766173  #: 'save' in ASCII, written to 0x1010:1
     LOAD_SIGNATURE = 0x64616F6C  #: 'load' in ASCII, written to 0x1011:1
 
-    def _nvm_command(self, index: int, signature: int, what: str) -> None:
-        if not int(self.read_raw(index, 1)) & 1:
+    def _nvm_command(self, e: od.Entry, signature: int, what: str) -> None:
+        index = e.index
+        if not int(self.read(e)) & 1:
             raise ParamError(f"the drive has no non-volatile memory (0x{index:04X}:1 reads 0): "
                              f"nothing {what}")
         try:
-            self.write_raw(index, 1, signature)
+            self.write(e, signature)
         except ParamError as e:
             cause = e.__cause__
             code = int(cause.code) if isinstance(cause, SdoAbortedError) else None
@@ -638,12 +661,13 @@ class Drive:
         """Store the running configuration in the drive's non-volatile memory (CiA 301
         0x1010:1 'save'); it is loaded at power-up and NMT reset node. Raises
         :class:`ParamError` (the drive has none, the power stage is on, the medium failed)."""
-        self._nvm_command(0x1010, self.SAVE_SIGNATURE, "saved")
+        self._nvm_command(od.STORE_PARAMETERS__SAVE_ALL_PARAMETERS, self.SAVE_SIGNATURE, "saved")
 
     def erase_saved_config(self) -> None:
         """Erase the stored configuration (CiA 301 0x1011:1 'load'): the defaults apply from
         the next NMT reset node or power-up; the running values stay until then."""
-        self._nvm_command(0x1011, self.LOAD_SIGNATURE, "erased")
+        self._nvm_command(od.RESTORE_DEFAULT_PARAMETERS__RESTORE_ALL_DEFAULT_PARAMETERS,
+                          self.LOAD_SIGNATURE, "erased")
 
     # ---- trace buffer (scope) ---------------------------------------------------------
     def trace_capture(self, signals: list[str], pre_s: float, f_pwm_Hz: float) -> dict[str, Any]:
@@ -662,22 +686,22 @@ class Drive:
         ids = [names.index(sig) for sig in signals]
         per_sig = serial_link.TRACE_FLOATS // max(1, len(ids))
         pre = min(int(round(pre_s * f_pwm_Hz)), per_sig // 2)
-        self.write_raw(0x2070, 1, 0)  # stop
-        self.write_raw(0x2070, 7, len(ids))
+        self.write(od.TRACE__COMMAND, 0)  # stop
+        self.write(od.TRACE__SIGNAL_COUNT, len(ids))
         for k, i in enumerate(ids):
-            self.write_raw(0x2070, 8 + k, i)
-        self.write_raw(0x2070, 6, pre)
-        self.write_raw(0x2070, 1, 1)  # arm
-        self.write_raw(0x2070, 1, 2)  # force trigger
+            self.write_raw(od.INDEX_TRACE, od.TRACE__SIGNAL_1.sub + k, i)
+        self.write(od.TRACE__PRE_TRIGGER_SAMPLES, pre)
+        self.write(od.TRACE__COMMAND, 1)  # arm
+        self.write(od.TRACE__COMMAND, 2)  # force trigger
         t_trigger = self.clock.now()
-        state = int(self.read_raw(0x2070, 2))
+        state = int(self.read(od.TRACE__STATE))
         if state not in (2, 3):
             raise DriveError(f"trace did not trigger (0x2070:2 state {state})")
         return {"ids": ids, "pre_samples": pre, "samples": per_sig, "t_trigger_clock": t_trigger}
 
     def trace_upload(self) -> None:
         """Ask the drive to send the last capture over the serial link (0x2070:1 = 3)."""
-        self.write_raw(0x2070, 1, 3)
+        self.write(od.TRACE__COMMAND, 3)
 
     # ---- faults -----------------------------------------------------------------------
     def active_fault(self) -> int:
@@ -689,29 +713,29 @@ class Drive:
 
     def fault_code(self) -> int:
         """Latched fault (0x603F), 0 if none."""
-        return int(self.node.sdo[0x603F].raw)
+        return int(self.var(od.ERROR_CODE).raw)
 
     def faults(self) -> dict[str, Any]:
         """Current fault, error register and fault history (newest first)."""
         hist = []
-        for sub in range(1, 9):
-            c = int(self.node.sdo[0x2030][sub].raw)
+        for sub in range(od.FAULT_HISTORY__FAULT_1.sub, od.FAULT_HISTORY__FAULT_8.sub + 1):
+            c = int(self.read_raw(od.INDEX_FAULT_HISTORY, sub))
             if c:
                 hist.append(c)
         return {"state": self.state, "error_code": self.fault_code(),
-                "error_register": int(self.node.sdo[0x1001].raw), "history": hist,
+                "error_register": int(self.var(od.ERROR_REGISTER).raw), "history": hist,
                 "emcy": [(int(e.code), e.register) for e in self.node.emcy.log]}
 
     def reset_faults(self, timeout_s: float = 1.0) -> str:
         """Fault reset (controlword bit 7 rising edge); returns the new state."""
-        self.node.sdo[0x6040].raw = 0x0000
-        self.node.sdo[0x6040].raw = 0x0080
+        self.var(od.CONTROLWORD).raw = 0x0000
+        self.var(od.CONTROLWORD).raw = 0x0080
         deadline = time.monotonic() + timeout_s
         while self.state == "FAULT":
             if time.monotonic() > deadline:
                 raise DriveError(f"fault reset refused; fault {fault_text(self.fault_code())}")
             time.sleep(0.01)
-        self.node.sdo[0x6040].raw = 0x0000
+        self.var(od.CONTROLWORD).raw = 0x0000
         return self.state
 
 

@@ -17,6 +17,9 @@ import can
 import canopen
 
 from bench._drive import DEFAULT_EDS
+from protocols.generated import od_names as od
+
+_OD = od
 
 # statusword values per state (CiA 402, bits 0-3, 5, 6; bit 9 remote)
 _SW = {
@@ -55,19 +58,17 @@ class FakeDrive402:
         self.writes: list[tuple[int, int, Any]] = []
         self.fail_disable = False
         self.node.add_write_callback(self._on_write)
-        self._set(0x6041, 0, _SW[self.state])
+        self._set(od.STATUSWORD, _SW[self.state])
         self.network.subscribe(0x200 + node_id, self._on_rpdo1)
 
     def close(self) -> None:
         self.network.disconnect()
 
     # ---- helpers ----------------------------------------------------------------------
-    def _set(self, index: int, sub: int, value: Any) -> None:
-        self.node.set_data(index, sub, self.node.object_dictionary[index].encode_raw(value)
-                           if sub == 0 and not hasattr(self.node.object_dictionary[index],
-                                                       "subindices")
-                           else self.node.object_dictionary[index][sub].encode_raw(value),
-                           check_writable=False)
+    def _set(self, e: od.Entry, value: Any) -> None:
+        eds = self.node.object_dictionary
+        var = eds[e.index] if e.var else eds[e.index][e.sub]
+        self.node.set_data(e.index, e.sub, var.encode_raw(value), check_writable=False)
 
     def _tpdo1(self) -> None:
         self.network.send_message(0x180 + self.node_id,
@@ -76,14 +77,14 @@ class FakeDrive402:
     def _enter(self, state: str) -> None:
         self.state = state
         self.history.append(state)
-        self._set(0x6041, 0, _SW[state])
+        self._set(od.STATUSWORD, _SW[state])
         self._tpdo1()
 
-    def raise_fault(self, code: int = 0xFF02) -> None:
+    def raise_fault(self, code: int = od.FAULT_CODES["EST_PLL_ERROR"]) -> None:
         """Latch a fault (0x603F) and enter FAULT."""
         with self.lock:
-            self._set(0x603F, 0, code)
-            self._set(0x2030, 1, code)
+            self._set(od.ERROR_CODE, code)
+            self._set(od.FAULT_HISTORY__FAULT_1, code)
             self._enter("FAULT")
         self.network.send_message(0x80 + self.node_id, struct.pack("<HB5x", code, 0x80))
 
@@ -93,7 +94,7 @@ class FakeDrive402:
             s = self.state
             if s == "FAULT":
                 if cw & 0x80:
-                    self._set(0x603F, 0, 0)
+                    self._set(od.ERROR_CODE, 0)
                     self._enter("SWITCH ON DISABLED")
                 return
             if cw & 0x02 == 0:  # disable voltage
@@ -111,16 +112,17 @@ class FakeDrive402:
                 self._enter("OPERATION ENABLED")
 
     def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        # (canopen passes the variable as the keyword `od`: the module is _OD here)
         value = od.decode_raw(data)
         self.writes.append((index, subindex, value))
-        if index == 0x6040:
+        if index == _OD.CONTROLWORD.index:
             threading.Thread(target=self._controlword, args=(int(value),), daemon=True).start()
-        elif index == 0x6060:
+        elif index == _OD.MODES_OF_OPERATION.index:
             self.mode = int(value)
-            self._set(0x6061, 0, self.mode)
+            self._set(_OD.MODES_OF_OPERATION_DISPLAY, self.mode)
 
     def _on_rpdo1(self, can_id: int, data: bytearray, timestamp: float) -> None:
         cw, vel = struct.unpack_from("<Hi", bytes(data).ljust(6, b"\0"))
-        self.writes.append((0x6040, 0, cw))
-        self.writes.append((0x60FF, 0, vel))
+        self.writes.append((*od.CONTROLWORD[:2], cw))
+        self.writes.append((*od.TARGET_VELOCITY[:2], vel))
         self._controlword(cw)

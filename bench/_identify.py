@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from protocols.generated import od_names as od
 from sim_fallback._identify import (
     IDENT_RESTORED,
     PROBE_SIGNALS,
@@ -120,8 +121,8 @@ class WireProbe(Probe):
 
     def standstill_start(self, k: int) -> tuple[float, float]:
         self._enable_force()
-        small = float(self.drive.read_raw(0x2080, 2))
-        large = float(self.drive.read_raw(0x2080, 3))
+        small = float(self.drive.read(od.IDENTIFICATION__MEASURED_SMALLER_INDUCTANCE))
+        large = float(self.drive.read(od.IDENTIFICATION__MEASURED_LARGER_INDUCTANCE))
         self.drive.disable()
         self.run(0.02)
         return small, large
@@ -130,7 +131,7 @@ class WireProbe(Probe):
         self._enable_force()
 
     def set_id(self, amps: float) -> None:
-        self.drive.write_raw(0x2080, 1, float(amps))
+        self.drive.write(od.IDENTIFICATION__D_AXIS_CURRENT_REFERENCE, float(amps))
 
     def reconfigure(self, fields: dict[str, float]) -> None:
         self.drive.disable()
@@ -213,11 +214,11 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
     try:
         names = signal_names()
         ids = [names.index(s) for s in TEL_SIGNALS]
-        drive.write_raw(0x2060, 1, 0)  # telemetry off while it is reconfigured
-        drive.write_raw(0x2060, 2, len(ids))
+        drive.write(od.TELEMETRY__DECIMATION, 0)  # telemetry off while it is reconfigured
+        drive.write(od.TELEMETRY__SIGNAL_COUNT, len(ids))
         for k, i in enumerate(ids):
-            drive.write_raw(0x2060, 3 + k, i)
-        drive.write_raw(0x2060, 1, max(1, int(round(cfg0.f_pwm_Hz / 1000.0))))
+            drive.write_raw(od.INDEX_TELEMETRY, od.TELEMETRY__SIGNAL_1.sub + k, i)
+        drive.write(od.TELEMETRY__DECIMATION, max(1, int(round(cfg0.f_pwm_Hz / 1000.0))))
         # the bias sweep reads the raw HF response (E_d = T_s u_inj / L_dd): the
         # pseudo-filter extraction, whatever the drive normally uses
         drive.set("extractor", float(extractor_id("pseudo")))

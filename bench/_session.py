@@ -38,26 +38,32 @@ from bench._report import make_plots, write_html, write_junit, write_summary_jso
 from bench._runner import InterruptGuard, Runner, RunResult
 from bench._sequence import Sequence
 from bench._units import MotorUnits, motor_units
+from protocols.generated import od_names as od
 
 log = logging.getLogger("bench.session")
 
+#: the drive's consumer heartbeat entry that watches the bench
+HB_WATCH = od.CONSUMER_HEARTBEAT_TIME__CONSUMER_HEARTBEAT_TIME_1
+
 # TPDO-mapped objects -> (signal name, unit, scale to SI or None for "per mille force")
 _PDO_SIGNALS: dict[tuple[int, int], tuple[str, str, float | None]] = {
-    (0x6041, 0): ("statusword", "", 1.0),
-    (0x6061, 0): ("mode_display", "", 1.0),
-    (0x6064, 0): ("pos_hat_m", "m", 1e-6),
-    (0x606C, 0): ("speed_hat_mps", "m/s", 1e-6),
-    (0x6077, 0): ("force_hat_N", "N", None),
-    (0x603F, 0): ("error_code", "", 1.0),
-    (0x1001, 0): ("error_register", "", 1.0),
-    (0x2020, 1): ("theta_hat_rad", "rad", 1.0),
-    (0x2020, 2): ("omega_hat_radps", "rad/s", 1.0),
-    (0x2020, 3): ("speed_hat_mps_pll", "m/s", 1.0),
-    (0x2020, 4): ("pll_err_rad", "rad", 1.0),
-    (0x2020, 5): ("hf_amp_A", "A", 1.0),
-    (0x2020, 6): ("pll_err_f_rad", "rad", 1.0),
-    (0x2020, 7): ("sogi_k_eff", "", 1.0),
-    (0x2020, 8): ("start_phase", "", 1.0),
+    (e.index, e.sub): v for e, v in (
+        (od.STATUSWORD, ("statusword", "", 1.0)),
+        (od.MODES_OF_OPERATION_DISPLAY, ("mode_display", "", 1.0)),
+        (od.POSITION_ACTUAL_VALUE, ("pos_hat_m", "m", 1e-6)),
+        (od.VELOCITY_ACTUAL_VALUE, ("speed_hat_mps", "m/s", 1e-6)),
+        (od.TORQUE_ACTUAL_VALUE, ("force_hat_N", "N", None)),
+        (od.ERROR_CODE, ("error_code", "", 1.0)),
+        (od.ERROR_REGISTER, ("error_register", "", 1.0)),
+        (od.ESTIMATOR__ESTIMATED_ANGLE, ("theta_hat_rad", "rad", 1.0)),
+        (od.ESTIMATOR__ESTIMATED_SPEED, ("omega_hat_radps", "rad/s", 1.0)),
+        (od.ESTIMATOR__ESTIMATED_LINEAR_SPEED, ("speed_hat_mps_pll", "m/s", 1.0)),
+        (od.ESTIMATOR__PLL_ERROR, ("pll_err_rad", "rad", 1.0)),
+        (od.ESTIMATOR__HF_AMPLITUDE, ("hf_amp_A", "A", 1.0)),
+        (od.ESTIMATOR__FILTERED_PLL_ERROR, ("pll_err_f_rad", "rad", 1.0)),
+        (od.ESTIMATOR__SOGI_K_IN_USE, ("sogi_k_eff", "", 1.0)),
+        (od.ESTIMATOR__START_UP_PHASE, ("start_phase", "", 1.0)),
+    )
 }
 
 
@@ -133,7 +139,7 @@ class Connection:
         self._hb_task = self.network.send_periodic(0x700 + 0x7F, bytes([0x05]),
                                                    period_ms / 1000.0)
         for d in self._watchers():  # the load machine too: a dead bench must stop it as well
-            d.node.sdo[0x1016][1].raw = (0x7F << 16) | (5 * period_ms)
+            d.var(HB_WATCH).raw = (0x7F << 16) | (5 * period_ms)
         # The bench is also the SYNC producer: the drive's TPDOs (position,
         # velocity, torque) are SYNC-triggered and would never flow without one.
         if self.sync_period_ms > 0:
@@ -149,7 +155,7 @@ class Connection:
         if self._hb_task is not None:
             for d in self._watchers():
                 try:
-                    d.node.sdo[0x1016][1].raw = 0  # stop watching, then stop beating
+                    d.var(HB_WATCH).raw = 0  # stop watching, then stop beating
                 except Exception as e:  # noqa: BLE001
                     log.warning("could not switch node %d's heartbeat watch off: %s",
                                 d.node_id, e)
@@ -245,7 +251,7 @@ def open_hardware(interface: str | None, channel: str | None, bitrate: int | Non
     try:
         drive = Drive(net, node_id, sdo_timeout_s=probe_timeout_s)
         try:
-            _ = drive.node.sdo[0x1000].raw  # probe: does the drive answer?
+            _ = drive.var(od.DEVICE_TYPE).raw  # probe: does the drive answer?
         except Exception as e:
             raise NoHardware(f"no answer from drive node {node_id} on {kw}: {e}") from e
         drive.node.sdo.RESPONSE_TIMEOUT = 0.5
@@ -254,7 +260,7 @@ def open_hardware(interface: str | None, channel: str | None, bitrate: int | Non
         if load_node:
             ld = Drive(net, load_node, sdo_timeout_s=probe_timeout_s)
             try:
-                _ = ld.node.sdo[0x1000].raw  # probe: does the load machine answer?
+                _ = ld.var(od.DEVICE_TYPE).raw  # probe: does the load machine answer?
             except Exception as e:
                 # the drive is there, so no fallback to the simulator: a clear error
                 raise ConnectionError(f"load machine node {load_node} on {kw} does not "

@@ -686,7 +686,7 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_param(args: argparse.Namespace) -> int:
-    from bench._drive import ParamError, ParamInputError, param_table
+    from bench._drive import COMMUNICATION_AREA, ParamError, ParamInputError, param_table
 
     if args.action not in ("get", "set", "list"):
         raise UserError("param: choose get, set or list (see bench param --help)")
@@ -695,7 +695,7 @@ def cmd_param(args: argparse.Namespace) -> int:
         try:
             seen = set()
             for p in param_table().values():
-                if p.address in seen or (not args.all and 0x1000 <= p.index < 0x2000):
+                if p.address in seen or (not args.all and p.index in COMMUNICATION_AREA):
                     continue
                 seen.add(p.address)
                 rng = f"[{p.min}, {p.max}]" if p.min is not None or p.max is not None else ""

@@ -348,11 +348,14 @@ def gen_py_names(od: ObjectDictionary) -> str:
         "",
         "FAULTS: fault code -> (name, text); FAULT_REACTIONS: code -> reaction;",
         "FAULT_CODES: name -> code; INDEX_<OBJECT NAME>: object index;",
-        "ENTRIES: (index, sub) -> name (the EDS ParameterName).",
+        "ENTRIES: (index, sub) -> name (the EDS ParameterName); every entry as an",
+        "``Entry(index, sub, var)`` constant by name (CONTROLWORD, TELEMETRY__DECIMATION).",
         q,
         "",
         "# ruff: noqa: E501",
         "from __future__ import annotations",
+        "",
+        "from typing import NamedTuple",
         "",
         "FAULTS: dict[int, tuple[str, str]] = {",
     ]
@@ -381,7 +384,32 @@ def gen_py_names(od: ObjectDictionary) -> str:
     lines += ["", "ENTRIES: dict[tuple[int, int], str] = {"]
     for e in od.entries:
         lines.append(f"    (0x{e.index:04X}, {e.sub}): {e.name!r},")
-    lines += ["}", ""]
+    lines += ["}", "", "",
+              "class Entry(NamedTuple):",
+              f"    {q}One OD entry: ``sdo[index]`` when ``var`` (a single-entry object),",
+              f"    else ``sdo[index][sub]``.{q}",
+              "",
+              "    index: int",
+              "    sub: int",
+              "    var: bool = False",
+              "",
+              "",
+              "# every entry by name: <OBJECT> for a single-entry object, <OBJECT>__<ENTRY> for",
+              "# the entries of a record or array (the entry's fw_config field where it mirrors",
+              "# one, else its EDS name)"]
+    seen = {}
+    for e in od.entries:
+        if e.kind == "var":
+            ident = _py_ident(e.object_name)
+            lines.append(f"{ident} = Entry(0x{e.index:04X}, 0, var=True)")
+        elif e.sub == 0:
+            continue
+        else:
+            ident = _py_ident(e.object_name) + "__" + _py_ident(e.fw_config or e.name)
+            lines.append(f"{ident} = Entry(0x{e.index:04X}, {e.sub})")
+        if seen.setdefault(ident, (e.index, e.sub)) != (e.index, e.sub):
+            raise ValueError(f"two OD entries are named {ident}")
+    lines.append("")
     return "\n".join(lines)
 
 

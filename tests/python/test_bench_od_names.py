@@ -1,0 +1,65 @@
+"""The bench addresses the drive's object dictionary by name (issue 13 item 3): the
+entries generated from protocols/od.yaml (`protocols.generated.od_names`), never a bare
+index in the code. A literal equal to an object index in the bench's code (comments and
+docstrings aside) fails this test, naming the file and line."""
+
+from __future__ import annotations
+
+import io
+import re
+import tokenize
+from pathlib import Path
+
+import yaml
+
+from protocols.generated import od_names as od
+
+REPO = Path(__file__).resolve().parents[2]
+
+#: where a CiA 301 area bound is defined by name (index ranges, not objects)
+AREA_DEFINITIONS = re.compile(r"^[A-Z_]+_AREA = range\(")
+
+
+def _od_indices() -> set[int]:
+    """The objects od.yaml lists, and the PDO parameter objects generated from it."""
+    data = yaml.safe_load((REPO / "protocols" / "od.yaml").read_text())
+    return ({int(o["index"]) for o in data["objects"]}
+            | {v for k, v in vars(od).items() if k.startswith("INDEX_")})
+
+
+def test_bench_code_names_od_entries_instead_of_indices():
+    indices = _od_indices()
+    assert 0x6040 in indices and 0x2060 in indices  # the reference itself is sound
+    bare = []
+    for path in sorted((REPO / "bench").glob("*.py")):
+        src = path.read_text()
+        for tok in tokenize.generate_tokens(io.StringIO(src).readline):
+            if tok.type != tokenize.NUMBER or not tok.string.lower().startswith("0x"):
+                continue
+            if int(tok.string, 16) in indices and not AREA_DEFINITIONS.match(tok.line.strip()):
+                bare.append(f"{path.relative_to(REPO)}:{tok.start[0]}: {tok.line.strip()}")
+    assert not bare, "bare OD indices (use protocols.generated.od_names):\n" + "\n".join(bare)
+
+
+def test_generated_entries_match_od_yaml():
+    """Every named entry is the (index, sub) od.yaml gives it, and var objects are sub 0."""
+    data = yaml.safe_load((REPO / "protocols" / "od.yaml").read_text())
+    by_index = {int(o["index"]): o for o in data["objects"]}
+    n = 0
+    for name, e in vars(od).items():
+        if not isinstance(e, od.Entry):
+            continue
+        n += 1
+        if e.index not in by_index:  # PDO parameters, generated from od.yaml's pdos
+            assert 0x1400 <= e.index < 0x1C00, name
+            continue
+        obj = by_index[e.index]
+        if e.var:
+            assert obj.get("kind", "var") == "var" and e.sub == 0, name
+        else:
+            subs = {int(s["sub"]) for s in obj["subs"]}
+            assert e.sub in subs, name
+        assert od.ENTRIES[(e.index, e.sub)]
+    assert n > 150
+    assert od.CONTROLWORD == (0x6040, 0, True)
+    assert od.TELEMETRY__DECIMATION[:2] == (0x2060, 1)
