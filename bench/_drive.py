@@ -23,6 +23,7 @@ from typing import Any, Protocol
 import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
+from bench._units import si_to_wire, wire_to_si
 from protocols.generated import od_names as od
 from protocols.generated.od_names import FAULTS as _OD_FAULTS
 
@@ -422,7 +423,7 @@ class Drive:
     # ---- references -------------------------------------------------------------------
     def set_speed_mps(self, v_mps: float) -> None:
         """Target velocity (0x60FF, um/s) from m/s."""
-        raw = int(round(v_mps * 1e6))
+        raw = si_to_wire(od.TARGET_VELOCITY, v_mps)
         self.write(od.TARGET_VELOCITY, raw)
         self._sync_rpdo_cache(od.TARGET_VELOCITY, raw)
 
@@ -438,7 +439,7 @@ class Drive:
 
     def set_force_N(self, force_N: float) -> None:
         """Target torque (0x6071, per mille of :attr:`force_rated_N`) from N."""
-        pm = int(round(1000.0 * force_N / self.force_rated_N))
+        pm = si_to_wire(od.TARGET_TORQUE, force_N / self.force_rated_N)
         if not -1000 <= pm <= 1000:
             raise DriveError(f"force {force_N:.3g} N is {pm} per mille of the rated "
                              f"{self.force_rated_N:.3g} N; allowed [-1000, 1000]")
@@ -456,10 +457,12 @@ class Drive:
             ptr.raw = raw
     def actual(self) -> dict[str, float]:
         """Estimated position (m), speed (m/s) and force (N) read by SDO."""
-        v = self.var
-        return {"pos_hat_m": int(v(od.POSITION_ACTUAL_VALUE).raw) * 1e-6,
-                "speed_hat_mps": int(v(od.VELOCITY_ACTUAL_VALUE).raw) * 1e-6,
-                "force_hat_N": int(v(od.TORQUE_ACTUAL_VALUE).raw) * 1e-3 * self.force_rated_N}
+        def si(e: od.Entry) -> float:
+            return wire_to_si(e, int(self.var(e).raw))
+
+        return {"pos_hat_m": si(od.POSITION_ACTUAL_VALUE),
+                "speed_hat_mps": si(od.VELOCITY_ACTUAL_VALUE),
+                "force_hat_N": si(od.TORQUE_ACTUAL_VALUE) * self.force_rated_N}
 
     # ---- parameters -------------------------------------------------------------------
     @property

@@ -37,7 +37,7 @@ from bench._logging import RunLogger, run_dir_for
 from bench._report import make_plots, write_html, write_junit, write_summary_json
 from bench._runner import InterruptGuard, Runner, RunResult
 from bench._sequence import Sequence
-from bench._units import MotorUnits, motor_units
+from bench._units import WIRE_UNITS, MotorUnits, motor_units, wire_unit
 from protocols.generated import od_names as od
 
 log = logging.getLogger("bench.session")
@@ -45,24 +45,27 @@ log = logging.getLogger("bench.session")
 #: the drive's consumer heartbeat entry that watches the bench
 HB_WATCH = od.CONSUMER_HEARTBEAT_TIME__CONSUMER_HEARTBEAT_TIME_1
 
-# TPDO-mapped objects -> (signal name, unit, scale to SI or None for "per mille force")
+# TPDO-mapped objects -> (signal name, SI unit, wire-to-SI factor; None for "per mille of
+# the rated force"), the units from od.yaml (bench._units.wire_unit)
+_PER_MILLE = WIRE_UNITS["per mille"][1]
 _PDO_SIGNALS: dict[tuple[int, int], tuple[str, str, float | None]] = {
-    (e.index, e.sub): v for e, v in (
-        (od.STATUSWORD, ("statusword", "", 1.0)),
-        (od.MODES_OF_OPERATION_DISPLAY, ("mode_display", "", 1.0)),
-        (od.POSITION_ACTUAL_VALUE, ("pos_hat_m", "m", 1e-6)),
-        (od.VELOCITY_ACTUAL_VALUE, ("speed_hat_mps", "m/s", 1e-6)),
-        (od.TORQUE_ACTUAL_VALUE, ("force_hat_N", "N", None)),
-        (od.ERROR_CODE, ("error_code", "", 1.0)),
-        (od.ERROR_REGISTER, ("error_register", "", 1.0)),
-        (od.ESTIMATOR__ESTIMATED_ANGLE, ("theta_hat_rad", "rad", 1.0)),
-        (od.ESTIMATOR__ESTIMATED_SPEED, ("omega_hat_radps", "rad/s", 1.0)),
-        (od.ESTIMATOR__ESTIMATED_LINEAR_SPEED, ("speed_hat_mps_pll", "m/s", 1.0)),
-        (od.ESTIMATOR__PLL_ERROR, ("pll_err_rad", "rad", 1.0)),
-        (od.ESTIMATOR__HF_AMPLITUDE, ("hf_amp_A", "A", 1.0)),
-        (od.ESTIMATOR__FILTERED_PLL_ERROR, ("pll_err_f_rad", "rad", 1.0)),
-        (od.ESTIMATOR__SOGI_K_IN_USE, ("sogi_k_eff", "", 1.0)),
-        (od.ESTIMATOR__START_UP_PHASE, ("start_phase", "", 1.0)),
+    (e.index, e.sub): (name, *(("N", None) if e.unit == "per mille" else wire_unit(e)))
+    for e, name in (
+        (od.STATUSWORD, "statusword"),
+        (od.MODES_OF_OPERATION_DISPLAY, "mode_display"),
+        (od.POSITION_ACTUAL_VALUE, "pos_hat_m"),
+        (od.VELOCITY_ACTUAL_VALUE, "speed_hat_mps"),
+        (od.TORQUE_ACTUAL_VALUE, "force_hat_N"),
+        (od.ERROR_CODE, "error_code"),
+        (od.ERROR_REGISTER, "error_register"),
+        (od.ESTIMATOR__ESTIMATED_ANGLE, "theta_hat_rad"),
+        (od.ESTIMATOR__ESTIMATED_SPEED, "omega_hat_radps"),
+        (od.ESTIMATOR__ESTIMATED_LINEAR_SPEED, "speed_hat_mps_pll"),
+        (od.ESTIMATOR__PLL_ERROR, "pll_err_rad"),
+        (od.ESTIMATOR__HF_AMPLITUDE, "hf_amp_A"),
+        (od.ESTIMATOR__FILTERED_PLL_ERROR, "pll_err_f_rad"),
+        (od.ESTIMATOR__SOGI_K_IN_USE, "sogi_k_eff"),
+        (od.ESTIMATOR__START_UP_PHASE, "start_phase"),
     )
 }
 
@@ -410,7 +413,7 @@ class PdoRecorder:
             # largest cost of a received TPDO (4 per SYNC at 1 kHz)
             raw = st.unpack_from(data, off)[0] if st is not None else var.raw
             if scale is None:  # per mille of the rated force -> N
-                vals[name] = float(raw) * 1e-3 * self._rated
+                vals[name] = float(raw) * _PER_MILLE * self._rated
             else:
                 vals[name] = float(raw) * scale
         if self.logger is not None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 #: Speed units accepted in sequence files.
 SPEED_UNITS: tuple[str, ...] = ("r/min", "rpm", "m/s", "mm/s")
@@ -72,6 +73,32 @@ class MotorUnits:
     def rad_e_to_mm(self, angle_rad: float) -> float:
         """Electrical angle (rad) to mover displacement (mm)."""
         return angle_rad * self.pole_pitch_m / math.pi * 1e3
+
+
+#: Units the drive's CiA 402 objects use on the wire (od.yaml's ``unit:``) -> (SI unit, factor
+#: from wire to SI). "per mille" is of the drive's rated force (:attr:`Drive.force_rated_N`).
+#: Entries whose wire unit is not listed are SI already.
+WIRE_UNITS: dict[str, tuple[str, float]] = {
+    "um": ("m", 1e-6),
+    "um/s": ("m/s", 1e-6),
+    "ms": ("s", 1e-3),
+    "per mille": ("", 1e-3),
+}
+
+
+def wire_unit(e: Any) -> tuple[str, float]:
+    """(SI unit, wire-to-SI factor) of an OD entry (``protocols.generated.od_names.Entry``)."""
+    return WIRE_UNITS.get(e.unit, (e.unit, 1.0))
+
+
+def wire_to_si(e: Any, raw: float) -> float:
+    """An OD entry's wire value in SI (per mille: the fraction of the rated value)."""
+    return float(raw) * wire_unit(e)[1]
+
+
+def si_to_wire(e: Any, value: float) -> int:
+    """An SI value in an integer OD entry's wire unit, rounded to the nearest count."""
+    return int(round(value / wire_unit(e)[1]))
 
 
 #: The paper's Table 1 geometry (p = 4) with the sim's pole pitch (24 mm).

@@ -349,7 +349,7 @@ def gen_py_names(od: ObjectDictionary) -> str:
         "FAULTS: fault code -> (name, text); FAULT_REACTIONS: code -> reaction;",
         "FAULT_CODES: name -> code; INDEX_<OBJECT NAME>: object index;",
         "ENTRIES: (index, sub) -> name (the EDS ParameterName); every entry as an",
-        "``Entry(index, sub, var)`` constant by name (CONTROLWORD, TELEMETRY__DECIMATION).",
+        "``Entry(index, sub, var, unit)`` constant by name (CONTROLWORD, TELEMETRY__DECIMATION).",
         q,
         "",
         "# ruff: noqa: E501",
@@ -392,6 +392,7 @@ def gen_py_names(od: ObjectDictionary) -> str:
               "    index: int",
               "    sub: int",
               "    var: bool = False",
+              "    unit: str = \"\"  # on the wire (od.yaml); bench._units.wire_to_si converts",
               "",
               "",
               "# every entry by name: <OBJECT> for a single-entry object, <OBJECT>__<ENTRY> for",
@@ -401,12 +402,14 @@ def gen_py_names(od: ObjectDictionary) -> str:
     for e in od.entries:
         if e.kind == "var":
             ident = _py_ident(e.object_name)
-            lines.append(f"{ident} = Entry(0x{e.index:04X}, 0, var=True)")
+            unit = f", unit={e.unit!r}" if e.unit else ""
+            lines.append(f"{ident} = Entry(0x{e.index:04X}, 0, var=True{unit})")
         elif e.sub == 0:
             continue
         else:
             ident = _py_ident(e.object_name) + "__" + _py_ident(e.fw_config or e.name)
-            lines.append(f"{ident} = Entry(0x{e.index:04X}, {e.sub})")
+            unit = f", unit={e.unit!r}" if e.unit else ""
+            lines.append(f"{ident} = Entry(0x{e.index:04X}, {e.sub}{unit})")
         if seen.setdefault(ident, (e.index, e.sub)) != (e.index, e.sub):
             raise ValueError(f"two OD entries are named {ident}")
     lines.append("")

@@ -61,5 +61,29 @@ def test_generated_entries_match_od_yaml():
             assert e.sub in subs, name
         assert od.ENTRIES[(e.index, e.sub)]
     assert n > 150
-    assert od.CONTROLWORD == (0x6040, 0, True)
+    assert od.CONTROLWORD[:3] == (0x6040, 0, True)
     assert od.TELEMETRY__DECIMATION[:2] == (0x2060, 1)
+
+
+def test_wire_units_agree_with_od_yaml_scales():
+    """The bench's wire-unit factors (bench._units.WIRE_UNITS) and od.yaml's own scales of
+    the entries that mirror a configuration field (``scale``: SI -> wire) are the same
+    numbers, so that the two ways across the wire cannot drift apart; and every wire unit
+    the CiA 402 process data use is known."""
+    from bench._units import WIRE_UNITS, si_to_wire, wire_to_si
+    from protocols import _od
+
+    model = _od.load()
+    checked = 0
+    for e in model.entries:
+        if e.fw_config and e.scale != 1.0:
+            assert e.unit in WIRE_UNITS, (e.index, e.sub, e.unit)
+            assert WIRE_UNITS[e.unit][1] * e.scale == 1.0, (e.index, e.sub, e.unit)
+            checked += 1
+    assert checked >= 3
+    for e in (od.POSITION_ACTUAL_VALUE, od.VELOCITY_ACTUAL_VALUE, od.TARGET_VELOCITY,
+              od.TORQUE_ACTUAL_VALUE, od.TARGET_TORQUE):
+        assert e.unit in WIRE_UNITS, e
+    assert si_to_wire(od.TARGET_VELOCITY, 0.25) == 250_000      # m/s -> um/s
+    assert wire_to_si(od.POSITION_ACTUAL_VALUE, -1_500) == -1.5e-3  # um -> m
+    assert si_to_wire(od.TARGET_TORQUE, 0.2) == 200              # fraction -> per mille
