@@ -132,10 +132,14 @@ typedef struct {
   void (*exit)(fw_port_t *port, uint32_t key);
 } fw_app_lock_t;
 
-/** One control period as the background sees it. */
+/** One control period as the background sees it: the interrupt captures the
+ *  snapshot's raw half (fw_snapshot_capture), the background completes it
+ *  (fw_snapshot_complete) before it uses it. */
 typedef struct {
   fw_snapshot_t snap;
+  fw_snapshot_raw_t raw;
   uint32_t step; /**< the application's period index */
+  uint8_t done;  /**< snap completed (background) */
 } fw_app_period_t;
 
 /** Application counters (diagnostics, tests). */
@@ -160,12 +164,13 @@ typedef struct {
   uint32_t uart_head, uart_tail;
   uint32_t step;       /**< control periods since init (written by the interrupt) */
   uint32_t f_pwm_Hz;   /**< integer PWM rate for the time base */
-  uint32_t now_us;     /**< time base: floor(steps * 1e6 / f_pwm_Hz), modulo 2^32 */
+  uint32_t now_us;     /**< time base: floor(steps * 1e6 / f_pwm_Hz), modulo 2^32, at time_step */
   uint32_t us_rem;     /**< remainder of that division (< f_pwm_Hz) */
+  uint32_t time_step;  /**< the period count now_us was converted at (background) */
   fw_app_period_t ring[FW_APP_SNAP_RING]; /**< interrupt -> background */
   _Atomic uint32_t ring_head; /**< written by the interrupt only */
   _Atomic uint32_t ring_tail; /**< written by the background only */
-  _Atomic uint32_t isr_now_us; /**< now_us as published by the interrupt */
+  _Atomic uint32_t isr_step;  /**< step as published by the interrupt (the time base) */
   fw_app_lock_t lock;
   int32_t mode_applied; /**< fw_mode_t last accepted by fw_set_mode, -1 none */
   uint8_t cw_pending;
