@@ -746,13 +746,18 @@ void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
 }
 
 bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_inputs_t *in) {
-  bool ok = adc->u_dc_counts <= cfg->adc_max_count;
-  for (int i = 0; i < 3; i++) {
-    ok = ok && adc->i_abc_counts[i] <= cfg->adc_max_count;
-    in->i_abc_A[i] = ((float)adc->i_abc_counts[i] - cfg->adc_offset_counts) * cfg->adc_A_per_count;
-  }
-  in->u_dc_V = (float)adc->u_dc_counts * cfg->adc_V_per_count;
-  return ok;
+  const uint32_t a = adc->i_abc_counts[0], b = adc->i_abc_counts[1], c = adc->i_abc_counts[2];
+  const uint32_t u = adc->u_dc_counts;
+  const float off = cfg->adc_offset_counts, k = cfg->adc_A_per_count;
+  in->i_abc_A[0] = ((float)a - off) * k;
+  in->i_abc_A[1] = ((float)b - off) * k;
+  in->i_abc_A[2] = ((float)c - off) * k;
+  in->u_dc_V = (float)u * cfg->adc_V_per_count;
+  /* one range test: the largest of the four counts (no branch per count) */
+  uint32_t m = a > b ? a : b;
+  m = m > c ? m : c;
+  m = m > u ? m : u;
+  return m <= cfg->adc_max_count;
 }
 
 void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {

@@ -933,7 +933,10 @@ static void fw_app_publish(fw_app_t *app) {
   uint32_t tail = atomic_load_explicit(&app->ring_tail, memory_order_acquire);
   const uint32_t step = app->step;
   if (head - tail < FW_APP_SNAP_RING) {
-    fw_app_period_t *p = &app->ring[head % FW_APP_SNAP_RING];
+    /* through a volatile: the compiler keeps the slot's address in one
+       register instead of rebuilding it for every field (-Os, GCC 12) */
+    fw_app_period_t *volatile slot = &app->ring[head % FW_APP_SNAP_RING];
+    fw_app_period_t *p = slot;
     fw_snapshot_capture(&app->ctrl, &p->snap, &p->raw);
     p->step = step;
     p->done = 0u;

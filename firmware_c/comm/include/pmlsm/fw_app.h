@@ -155,6 +155,13 @@ typedef struct {
 /** The drive application. Treat the members as private. */
 typedef struct {
   fw_ctrl_t ctrl;
+  /* the control interrupt's data next to the core's: the slots' fields are
+     within the immediate offsets of one base register */
+  uint32_t step;       /**< control periods since init (written by the interrupt) */
+  _Atomic uint32_t ring_head; /**< written by the interrupt only */
+  _Atomic uint32_t ring_tail; /**< written by the background only */
+  _Atomic uint32_t isr_step;  /**< step as published by the interrupt (the time base) */
+  fw_app_period_t ring[FW_APP_SNAP_RING]; /**< interrupt -> background */
   fw_config_t boot_cfg; /**< configuration of fw_app_init, restored by NMT reset node */
   co_node_t node;
   fw_serial_link_t link;
@@ -162,15 +169,10 @@ typedef struct {
   float trace_buf[FW_APP_TRACE_FLOATS];
   uint8_t uart[FW_APP_UART_LEN];
   uint32_t uart_head, uart_tail;
-  uint32_t step;       /**< control periods since init (written by the interrupt) */
   uint32_t f_pwm_Hz;   /**< integer PWM rate for the time base */
   uint32_t now_us;     /**< time base: floor(steps * 1e6 / f_pwm_Hz), modulo 2^32, at time_step */
   uint32_t us_rem;     /**< remainder of that division (< f_pwm_Hz) */
   uint32_t time_step;  /**< the period count now_us was converted at (background) */
-  fw_app_period_t ring[FW_APP_SNAP_RING]; /**< interrupt -> background */
-  _Atomic uint32_t ring_head; /**< written by the interrupt only */
-  _Atomic uint32_t ring_tail; /**< written by the background only */
-  _Atomic uint32_t isr_step;  /**< step as published by the interrupt (the time base) */
   fw_app_lock_t lock;
   int32_t mode_applied; /**< fw_mode_t last accepted by fw_set_mode, -1 none */
   uint8_t cw_pending;
