@@ -18,10 +18,13 @@
  *
  * Interrupt and background. fw_app_isr is what the control interrupt does,
  * and nothing else: the core's one ADC conversion and range check
- * (fw_step_adc), the control step, and a copy of the core's snapshot into a
- * lock-free single-producer ring (FW_APP_SNAP_RING entries); its cost does
- * not depend on bus traffic. fw_app_background, called by the background
- * loop at its own rate, does the rest: it processes the queued CAN frames
+ * (fw_step_adc), the control step, and the raw half of the core's snapshot
+ * (fw_snapshot_capture) into a lock-free single-producer ring
+ * (FW_APP_SNAP_RING entries) and the period count; its cost does not
+ * depend on bus traffic. fw_app_background, called by the background loop
+ * at its own rate, does the rest: it completes the published snapshots
+ * (fw_snapshot_complete, with the configuration their period ran with),
+ * converts the period count to the time base, processes the queued CAN frames
  * (NMT, SDO, SYNC, RPDO, heartbeats) and applies what they command, then
  * drains the ring in order - an EMCY per fault change, a telemetry frame
  * every 0x2060:1 periods and a trace sample per period, all from the
