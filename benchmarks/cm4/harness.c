@@ -20,8 +20,10 @@
  *   harness count_isr STATE B NB  as count, but through the whole control
  *                           interrupt of the drive application: fw_app_isr
  *                           (ADC counts -> the core's conversion -> fw_step
- *                           -> the period's snapshot into the background's
- *                           ring -> time base) on the recorded inputs turned
+ *                           -> the period's raw snapshot into the
+ *                           background's ring -> period count; the
+ *                           background's completion is not counted) on
+ *                           the recorded inputs turned
  *                           back into ADC counts with the configured scaling;
  *                           the script counts from fw_app_isr's entry to its
  *                           return to replay_isr_batch(). The ring is emptied

@@ -59,9 +59,11 @@ static void latch_fault(fw_ctrl_t *c, fw_fault_t code) {
 }
 
 /** Unwrapped estimated position, m. */
-static float pos_hat_m(const fw_ctrl_t *c) {
-  return fw_obs_pos_e(&c->obs) * c->cfg.pole_pitch_m / FW_PI_F32;
+static float pos_m_of(const fw_config_t *cfg, float pos_e) {
+  return pos_e * cfg->pole_pitch_m / FW_PI_F32;
 }
+
+static float pos_hat_m(const fw_ctrl_t *c) { return pos_m_of(&c->cfg, fw_obs_pos_e(&c->obs)); }
 
 static void foc_param(const fw_config_t *cfg, float dt_s, fw_foc_param_t *p) {
   p->dt_s = dt_s;
@@ -164,19 +166,28 @@ const fw_config_t *fw_get_config(const fw_ctrl_t *ctrl) { return ctrl ? &ctrl->c
 
 fw_cia402_state_t fw_state(const fw_ctrl_t *ctrl) { return ctrl->sm.state; }
 
-uint16_t fw_statusword(const fw_ctrl_t *ctrl) {
-  bool warning = ctrl->u_dc_V < ctrl->cfg.u_dc_min_V;
+/** The statusword from the signals it depends on (fw_statusword, fw_snapshot_complete). */
+static uint16_t statusword_of(const fw_config_t *cfg, fw_cia402_state_t state, float u_dc_V,
+                              fw_start_phase_t phase, fw_mode_t mode, float speed_ref,
+                              float omega_f) {
+  bool warning = u_dc_V < cfg->u_dc_min_V;
   bool reached = false;
-  if (ctrl->sm.state == FW_CIA402_OPERATION_ENABLED && ctrl->phase == FW_START_RUN) {
-    if (ctrl->mode == FW_MODE_SPEED) {
-      float e = ctrl->speed_ref_radps_e - ctrl->obs.omega_f;
-      float tol = 0.02f * fabsf(ctrl->speed_ref_radps_e) + 1.0f;
+  if (state == FW_CIA402_OPERATION_ENABLED && phase == FW_START_RUN) {
+    if (mode == FW_MODE_SPEED) {
+      float e = speed_ref - omega_f;
+      float tol = 0.02f * fabsf(speed_ref) + 1.0f;
       reached = fabsf(e) < tol;
     } else {
       reached = true;
     }
   }
-  return fw_cia402_statusword(&ctrl->sm, warning, true, reached);
+  const fw_cia402_t sm = {.state = state};
+  return fw_cia402_statusword(&sm, warning, true, reached);
+}
+
+uint16_t fw_statusword(const fw_ctrl_t *ctrl) {
+  return statusword_of(&ctrl->cfg, ctrl->sm.state, ctrl->u_dc_V, ctrl->phase, ctrl->mode,
+                       ctrl->speed_ref_radps_e, ctrl->obs.omega_f);
 }
 
 uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
@@ -735,21 +746,51 @@ void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
 }
 
 bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_inputs_t *in) {
-  bool ok = adc->u_dc_counts <= cfg->adc_max_count;
-  for (int i = 0; i < 3; i++) {
-    ok = ok && adc->i_abc_counts[i] <= cfg->adc_max_count;
-    in->i_abc_A[i] = ((float)adc->i_abc_counts[i] - cfg->adc_offset_counts) * cfg->adc_A_per_count;
-  }
-  in->u_dc_V = (float)adc->u_dc_counts * cfg->adc_V_per_count;
-  return ok;
+  const uint32_t a = adc->i_abc_counts[0], b = adc->i_abc_counts[1], c = adc->i_abc_counts[2];
+  const uint32_t u = adc->u_dc_counts;
+  const float off = cfg->adc_offset_counts, k = cfg->adc_A_per_count;
+  in->i_abc_A[0] = ((float)a - off) * k;
+  in->i_abc_A[1] = ((float)b - off) * k;
+  in->i_abc_A[2] = ((float)c - off) * k;
+  in->u_dc_V = (float)u * cfg->adc_V_per_count;
+  /* one range test: the largest of the four counts (no branch per count) */
+  uint32_t m = a > b ? a : b;
+  m = m > c ? m : c;
+  m = m > u ? m : u;
+  return m <= cfg->adc_max_count;
 }
 
-void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
-  if (ctrl == NULL || snap == NULL) {
-    return;
-  }
-  const fw_config_t *cfg = &ctrl->cfg;
-  *snap = ctrl->snap;
+void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
+  const fw_snapshot_t *s = &ctrl->snap;
+  /* what fw_step wrote (every field of ctrl->snap that it writes) */
+  snap->step_count = s->step_count;
+  snap->cia402_state = s->cia402_state;
+  snap->start_phase = s->start_phase;
+  snap->fault_code = s->fault_code;
+  snap->pll_err_rad = s->pll_err_rad;
+  snap->hf_amp_A = s->hf_amp_A;
+  snap->hf_q_A = s->hf_q_A;
+  snap->pol_dI_pos_A = s->pol_dI_pos_A;
+  snap->pol_dI_neg_A = s->pol_dI_neg_A;
+  snap->i_dq_A[0] = s->i_dq_A[0];
+  snap->i_dq_A[1] = s->i_dq_A[1];
+  snap->i_dq_ref_A[0] = s->i_dq_ref_A[0];
+  snap->i_dq_ref_A[1] = s->i_dq_ref_A[1];
+  snap->u_dq_V[0] = s->u_dq_V[0];
+  snap->u_dq_V[1] = s->u_dq_V[1];
+  snap->u_inj_V = s->u_inj_V;
+  snap->i_ab_A[0] = s->i_ab_A[0];
+  snap->i_ab_A[1] = s->i_ab_A[1];
+  snap->i_h_ab_A[0] = s->i_h_ab_A[0];
+  snap->i_h_ab_A[1] = s->i_h_ab_A[1];
+  snap->u_dc_V = s->u_dc_V;
+  snap->duty_abc[0] = s->duty_abc[0];
+  snap->duty_abc[1] = s->duty_abc[1];
+  snap->duty_abc[2] = s->duty_abc[2];
+  snap->sal_meas = s->sal_meas;
+  snap->L_small_meas_H = s->L_small_meas_H;
+  snap->L_large_meas_H = s->L_large_meas_H;
+  /* the blocks' present states */
   snap->theta_hat_rad = ctrl->theta_k;
   snap->omega_hat_radps = ctrl->obs.pll.w_i_radps;
   snap->omega_f_radps = ctrl->obs.omega_f;
@@ -762,20 +803,51 @@ void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
   snap->inj_scale = ctrl->bemf.inj_scale;
   snap->bemf_active = ctrl->bemf.active;
   snap->flying_start = ctrl->start.flying;
-  snap->extractor = (uint8_t)cfg->extractor;
+  snap->extractor = (uint8_t)ctrl->cfg.extractor;
   snap->mode = (uint8_t)ctrl->mode;
   snap->polarity_flipped = ctrl->polarity_flipped;
-  const float pos_e = fw_obs_pos_e(&ctrl->obs);
-  snap->pos_hat_m = pos_hat_m(ctrl);
-  snap->speed_hat_mps = fw_units_radps_e_to_mps(cfg, ctrl->obs.pll.w_i_radps);
-  snap->pos_hat_mech_rad = pos_e / cfg->pole_pairs;
-  snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, ctrl->obs.pll.w_i_radps);
   snap->sogi_k_eff = fw_inj_k(&ctrl->inj);
-  snap->bemf_err_rad = fw_bemf_error(&ctrl->bemf); /* an atan2f: on demand */
   snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
+  raw->pos_e_rad = fw_obs_pos_e(&ctrl->obs);
+  raw->bemf_e_dq_V[0] = ctrl->bemf.e_d_f;
+  raw->bemf_e_dq_V[1] = ctrl->bemf.e_q_f;
+  raw->bemf_err_rad = ctrl->bemf.err_rad;
+  raw->bemf_fresh = ctrl->bemf.err_fresh;
+  raw->bemf_w_neg = ctrl->bemf.w_neg;
+}
+
+void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
+                          const fw_snapshot_raw_t *raw) {
+  const fw_config_t *cfg = &ctrl->cfg;
+  const float w = snap->omega_hat_radps;
+  snap->pos_hat_m = pos_m_of(cfg, raw->pos_e_rad);
+  snap->speed_hat_mps = fw_units_radps_e_to_mps(cfg, w);
+  snap->pos_hat_mech_rad = raw->pos_e_rad / cfg->pole_pairs;
+  snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, w);
   snap->force_hat_N = fw_units_force_per_A(cfg) * snap->i_dq_A[1];
   snap->torque_hat_Nm = 1.5f * cfg->pole_pairs * cfg->psi_f_Wb * snap->i_dq_A[1];
-  snap->statusword = fw_statusword(ctrl);
+  fw_bemf_t b = ctrl->bemf; /* the observer as it was at the capture (its filters) */
+  b.e_d_f = raw->bemf_e_dq_V[0];
+  b.e_q_f = raw->bemf_e_dq_V[1];
+  b.err_rad = raw->bemf_err_rad;
+  b.err_fresh = raw->bemf_fresh;
+  b.w_neg = raw->bemf_w_neg;
+  snap->bemf_err_rad = fw_bemf_error(&b); /* an atan2f: on demand */
+  snap->statusword =
+      statusword_of(cfg, (fw_cia402_state_t)snap->cia402_state, snap->u_dc_V,
+                    (fw_start_phase_t)snap->start_phase, (fw_mode_t)snap->mode,
+                    snap->speed_ref_radps_e, snap->omega_f_radps);
+}
+
+void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
+  if (ctrl == NULL || snap == NULL) {
+    return;
+  }
+  fw_snapshot_raw_t raw;
+  *snap = ctrl->snap; /* padding as before */
+  fw_snapshot_capture(ctrl, snap, &raw);
+  fw_snapshot_complete(ctrl, snap, &raw);
+  snap->statusword = fw_statusword(ctrl); /* the present state (a command may follow the step) */
 }
 
 /* ---- units ---------------------------------------------------------------- */

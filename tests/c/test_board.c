@@ -243,11 +243,92 @@ static void test_interrupt_inside_background_keeps_order(void) {
   TT_CHECK(g_pa.isr_in_lock == 0u);
 }
 
+/* The time base is converted in the background from the period count the
+ * interrupt publishes: after every background pass now_us is floor(n * 1e6 /
+ * f_pwm) modulo 2^32 of the periods n so far (reference in 64-bit integers),
+ * for backgrounds at irregular intervals and across the wrap of the uint32
+ * period counter. */
+static void test_time_base_counts_periods_exactly(void) {
+  boot();
+  const uint64_t f = g_a.f_pwm_Hz;
+  TT_CHECK(f == 24000u);
+  uint64_t n = 0u;
+  int good = 1;
+  for (int k = 0; k < 300; k++) {
+    for (int j = 0; j < 1 + (k * 7) % 8; j++) { /* 1..8 periods: never more than the ring */
+      fw_board_control_isr(&g_ba);
+      n++;
+    }
+    fw_board_background(&g_ba);
+    good = good && g_a.now_us == (uint32_t)(n * 1000000u / f);
+  }
+  TT_CHECK(good);
+  /* 50 periods before the period counter wraps (2^32 periods: 49.7 h) */
+  n = 0x100000000ull - 50u;
+  const uint32_t n32 = (uint32_t)n;
+  g_a.step = n32;
+  atomic_store(&g_a.isr_step, n32);
+  g_a.time_step = n32;
+  g_a.now_us = (uint32_t)(n * 1000000u / f);
+  g_a.us_rem = (uint32_t)(n * 1000000u % f);
+  good = 1;
+  for (int k = 0; k < 40; k++) {
+    for (int j = 0; j < 1 + k % 5; j++) {
+      fw_board_control_isr(&g_ba);
+      n++;
+    }
+    fw_board_background(&g_ba);
+    good = good && g_a.now_us == (uint32_t)(n * 1000000u / f);
+  }
+  TT_CHECK(good);
+  TT_CHECK(n > 0x100000000ull + 50u && g_a.step == (uint32_t)n); /* it did wrap */
+}
+
+/* The interrupt publishes the snapshot's raw half; the background completes
+ * it later. Periods published before a configuration change are completed
+ * with the configuration they were stepped with: the statusword's warning bit
+ * (u_dc below u_dc_min_V) of periods stepped before the trip level was raised
+ * above the DC link does not show in the OD, the next period's does. */
+static void test_pending_periods_keep_their_configuration(void) {
+  boot();
+  fw_board_control_isr(&g_ba);
+  fw_board_background(&g_ba);
+  co_node_t *node = fw_app_node(&g_a);
+  TT_CHECK((co_node_get_u32(node, CO_OD_6041_00) & 0x80u) == 0u); /* ~300 V > 150 V */
+  for (int k = 0; k < 5; k++) fw_board_control_isr(&g_ba); /* pending */
+  float trip = 400.0f;
+  uint32_t bits;
+  memcpy(&bits, &trip, sizeof bits);
+  uint8_t req[8] = {0x23, 0x50, 0x20, 0x07, (uint8_t)bits, (uint8_t)(bits >> 8),
+                    (uint8_t)(bits >> 16), (uint8_t)(bits >> 24)}; /* 0x2050:7 u_dc_min_V */
+  fw_can_frame_t f;
+  memset(&f, 0, sizeof f);
+  f.id = 0x600u + NID;
+  f.dlc = 8u;
+  memcpy(f.data, req, 8u);
+  TT_CHECK(fw_board_can_rx_isr(&g_ba, &f));
+  g_pa.can_room = CAN_BOX;
+  fw_board_background(&g_ba); /* the write, then the five periods */
+  TT_CHECK(fw_get_config(fw_app_ctrl(&g_a))->u_dc_min_V == 400.0f);
+  int answered = 0;
+  for (uint32_t i = 0; i < g_pa.can_n; i++) {
+    answered += g_pa.can[i].id == 0x580u + NID && g_pa.can[i].data[0] == 0x60u; /* accepted */
+  }
+  TT_CHECK(answered == 1);
+  TT_CHECK((co_node_get_u32(node, CO_OD_6041_00) & 0x80u) == 0u);
+  fw_board_control_isr(&g_ba);
+  fw_board_background(&g_ba);
+  TT_CHECK((co_node_get_u32(node, CO_OD_6041_00) & 0x80u) == 0x80u);
+  TT_CHECK((fw_statusword(fw_app_ctrl(&g_a)) & 0x80u) == 0x80u);
+}
+
 int main(void) {
   TT_RUN(test_isr_reads_adc_latches_duties_no_lock);
   TT_RUN(test_refused_frames_and_bytes_arrive_later_in_order);
   TT_RUN(test_background_changes_core_in_balanced_lock);
   TT_RUN(test_lagging_background_loses_oldest_counted);
   TT_RUN(test_interrupt_inside_background_keeps_order);
+  TT_RUN(test_time_base_counts_periods_exactly);
+  TT_RUN(test_pending_periods_keep_their_configuration);
   return TT_SUMMARY();
 }

@@ -58,13 +58,38 @@ uint8_t fw_app_error_register(uint16_t code) {
   return reg;
 }
 
-/* Time base: floor(steps * 1e6 / f_pwm) us modulo 2^32, accumulated so that
- * it stays continuous when the uint32 step counter wraps (49.7 h at 24 kHz). */
-static void fw_app_advance_time(fw_app_t *app) {
+/* Time base: floor(steps * 1e6 / f_pwm) us modulo 2^32, converted in the
+ * background from the period count the interrupt publishes (the interrupt
+ * only counts): the periods since the last conversion at once, exactly what
+ * adding 1e6 / f_pwm per period with the remainder carried gives; continuous
+ * when the uint32 period counter wraps (49.7 h at 24 kHz). A change of
+ * f_pwm (fw_app_start_core) converts up to the present period first. */
+static uint32_t fw_app_time(fw_app_t *app, uint32_t step) {
   uint32_t f = app->f_pwm_Hz > 0u ? app->f_pwm_Hz : 1u;
-  app->us_rem += 1000000u;
-  app->now_us += app->us_rem / f;
-  app->us_rem %= f;
+  uint64_t acc = (uint64_t)app->us_rem + (uint64_t)(step - app->time_step) * 1000000u;
+  app->now_us += (uint32_t)(acc / f); /* modulo 2^32 */
+  app->us_rem = (uint32_t)(acc % f);
+  app->time_step = step;
+  return app->now_us;
+}
+
+/* Complete the snapshot of a published period (once). */
+static void fw_app_complete(fw_app_t *app, fw_app_period_t *p) {
+  if (!p->done) {
+    fw_snapshot_complete(&app->ctrl, &p->snap, &p->raw);
+    p->done = 1u;
+  }
+}
+
+/* Complete every published period not processed yet: before the core's
+ * configuration changes, so that they are completed with the configuration
+ * they were stepped with. */
+static void fw_app_complete_pending(fw_app_t *app) {
+  uint32_t tail = atomic_load_explicit(&app->ring_tail, memory_order_relaxed);
+  uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_acquire);
+  for (; tail != head; tail++) {
+    fw_app_complete(app, &app->ring[tail % FW_APP_SNAP_RING]);
+  }
 }
 
 /* The background's changes of the core happen inside this lock (fw_app.h). */
@@ -403,6 +428,8 @@ static void fw_app_nvm_apply_records(fw_app_t *app, size_t len, size_t n, bool c
 }
 
 static fw_status_t fw_app_start_core(fw_app_t *app, const fw_config_t *cfg) {
+  fw_app_complete_pending(app);
+  (void)fw_app_time(app, app->step); /* the periods so far at the old rate */
   fw_status_t st = fw_init(&app->ctrl, cfg);
   const fw_config_t *used = fw_get_config(&app->ctrl);
   float f = used != NULL ? used->f_pwm_Hz : 0.0f;
@@ -590,6 +617,7 @@ static co_abort_t fw_app_write_locked(fw_app_t *app, uint16_t index, uint8_t sub
       }
     }
     fw_config_issue_t issue;
+    fw_app_complete_pending(app);
     fw_status_t st = fw_set_config(&app->ctrl, &cfg, &issue);
     if (st == FW_OK || st == FW_ERR_SALIENCY) {
       /* FW_ERR_SALIENCY: the core stored the configuration (enabling will
@@ -897,21 +925,29 @@ static void fw_app_serial(fw_app_t *app, const fw_snapshot_t *s, uint32_t step) 
 
 /* ---- the control interrupt ----------------------------------------------------- */
 
-/* After the step: publish the period to the background, advance the time base. */
+/* After the step: publish the period to the background (the snapshot's raw
+ * half; the background completes it), count the period. One release fence
+ * for the slot and both counters. */
 static void fw_app_publish(fw_app_t *app) {
   uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
   uint32_t tail = atomic_load_explicit(&app->ring_tail, memory_order_acquire);
+  const uint32_t step = app->step;
   if (head - tail < FW_APP_SNAP_RING) {
-    fw_app_period_t *p = &app->ring[head % FW_APP_SNAP_RING];
-    fw_get_snapshot(&app->ctrl, &p->snap);
-    p->step = app->step;
-    atomic_store_explicit(&app->ring_head, head + 1u, memory_order_release);
+    /* through a volatile: the compiler keeps the slot's address in one
+       register instead of rebuilding it for every field (-Os, GCC 12) */
+    fw_app_period_t *volatile slot = &app->ring[head % FW_APP_SNAP_RING];
+    fw_app_period_t *p = slot;
+    fw_snapshot_capture(&app->ctrl, &p->snap, &p->raw);
+    p->step = step;
+    p->done = 0u;
+    head++;
   } else {
     app->count.snap_overruns++; /* the background is behind: it never sees this period */
   }
-  app->step++;
-  fw_app_advance_time(app);
-  atomic_store_explicit(&app->isr_now_us, app->now_us, memory_order_release);
+  app->step = step + 1u;
+  atomic_thread_fence(memory_order_release);
+  atomic_store_explicit(&app->ring_head, head, memory_order_relaxed);
+  atomic_store_explicit(&app->isr_step, step + 1u, memory_order_relaxed);
 }
 
 void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *out) {
@@ -940,7 +976,8 @@ static void fw_app_bg_output(fw_app_t *app, uint32_t now) {
   uint32_t tail = atomic_load_explicit(&app->ring_tail, memory_order_relaxed);
   uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_acquire);
   while (tail != head) {
-    const fw_app_period_t *p = &app->ring[tail % FW_APP_SNAP_RING];
+    fw_app_period_t *p = &app->ring[tail % FW_APP_SNAP_RING];
+    fw_app_complete(app, p);
     fw_app_faults(app, &p->snap);
     fw_app_serial(app, &p->snap, p->step);
     if (tail + 1u == head) {
@@ -957,7 +994,7 @@ void fw_app_background(void *ctx) {
   if (app == NULL) {
     return;
   }
-  uint32_t now = atomic_load_explicit(&app->isr_now_us, memory_order_acquire);
+  uint32_t now = fw_app_time(app, atomic_load_explicit(&app->isr_step, memory_order_acquire));
   fw_app_bg_input(app, now);
   fw_app_bg_output(app, now);
 }
@@ -970,7 +1007,7 @@ void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
     }
     return;
   }
-  uint32_t now = app->now_us;
+  uint32_t now = fw_app_time(app, app->step);
   fw_app_bg_input(app, now);
   fw_step(&app->ctrl, in, out);
   fw_app_publish(app);

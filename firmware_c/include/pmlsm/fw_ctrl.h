@@ -460,8 +460,32 @@ void fw_step_adc(fw_ctrl_t *ctrl, const fw_adc_inputs_t *in, fw_outputs_t *out);
  *  above adc_max_count (the caller raises FW_FAULT_ADC_RANGE; fw_step_adc does). */
 bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_inputs_t *in);
 
-/** Copy of the internal signals after the last step. */
+/** Copy of the internal signals after the last step (fw_snapshot_capture +
+ *  fw_snapshot_complete, with the statusword of the core's present state). */
 void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap);
+
+/** What fw_snapshot_complete needs besides the captured snapshot fields. */
+typedef struct {
+  float pos_e_rad;     /**< unwrapped electrical position estimate */
+  float bemf_e_dq_V[2]; /**< the back-EMF observer's filtered back-EMF */
+  float bemf_err_rad;  /**< its angle error, when bemf_fresh */
+  uint8_t bemf_fresh;  /**< bemf_err_rad is computed (fw_bemf_t.err_fresh) */
+  uint8_t bemf_w_neg;  /**< fw_bemf_t.w_neg */
+} fw_snapshot_raw_t;
+
+/**
+ * The snapshot in two halves, for a control interrupt that hands its periods
+ * to a background loop (fw_app): fw_snapshot_capture copies this period's
+ * signals and the blocks' present states (loads and stores only: no unit
+ * conversion, no division, no statusword, no atan2f) into snap and raw;
+ * fw_snapshot_complete computes the rest of snap from them (positions and
+ * speeds in units, thrust, torque, the back-EMF angle error, the statusword)
+ * with ctrl's configuration, later and elsewhere. Right after fw_step (with
+ * inputs), capture + complete give exactly fw_get_snapshot.
+ */
+void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw);
+void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
+                          const fw_snapshot_raw_t *raw);
 
 /** sizeof(fw_ctrl_t), for bindings that allocate it. */
 size_t fw_ctrl_sizeof(void);

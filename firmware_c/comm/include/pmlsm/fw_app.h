@@ -18,10 +18,13 @@
  *
  * Interrupt and background. fw_app_isr is what the control interrupt does,
  * and nothing else: the core's one ADC conversion and range check
- * (fw_step_adc), the control step, and a copy of the core's snapshot into a
- * lock-free single-producer ring (FW_APP_SNAP_RING entries); its cost does
- * not depend on bus traffic. fw_app_background, called by the background
- * loop at its own rate, does the rest: it processes the queued CAN frames
+ * (fw_step_adc), the control step, and the raw half of the core's snapshot
+ * (fw_snapshot_capture) into a lock-free single-producer ring
+ * (FW_APP_SNAP_RING entries) and the period count; its cost does not
+ * depend on bus traffic. fw_app_background, called by the background loop
+ * at its own rate, does the rest: it completes the published snapshots
+ * (fw_snapshot_complete, with the configuration their period ran with),
+ * converts the period count to the time base, processes the queued CAN frames
  * (NMT, SDO, SYNC, RPDO, heartbeats) and applies what they command, then
  * drains the ring in order - an EMCY per fault change, a telemetry frame
  * every 0x2060:1 periods and a trace sample per period, all from the
@@ -132,10 +135,14 @@ typedef struct {
   void (*exit)(fw_port_t *port, uint32_t key);
 } fw_app_lock_t;
 
-/** One control period as the background sees it. */
+/** One control period as the background sees it: the interrupt captures the
+ *  snapshot's raw half (fw_snapshot_capture), the background completes it
+ *  (fw_snapshot_complete) before it uses it. */
 typedef struct {
   fw_snapshot_t snap;
+  fw_snapshot_raw_t raw;
   uint32_t step; /**< the application's period index */
+  uint8_t done;  /**< snap completed (background) */
 } fw_app_period_t;
 
 /** Application counters (diagnostics, tests). */
@@ -151,6 +158,13 @@ typedef struct {
 /** The drive application. Treat the members as private. */
 typedef struct {
   fw_ctrl_t ctrl;
+  /* the control interrupt's data next to the core's: the slots' fields are
+     within the immediate offsets of one base register */
+  uint32_t step;       /**< control periods since init (written by the interrupt) */
+  _Atomic uint32_t ring_head; /**< written by the interrupt only */
+  _Atomic uint32_t ring_tail; /**< written by the background only */
+  _Atomic uint32_t isr_step;  /**< step as published by the interrupt (the time base) */
+  fw_app_period_t ring[FW_APP_SNAP_RING]; /**< interrupt -> background */
   fw_config_t boot_cfg; /**< configuration of fw_app_init, restored by NMT reset node */
   co_node_t node;
   fw_serial_link_t link;
@@ -158,14 +172,10 @@ typedef struct {
   float trace_buf[FW_APP_TRACE_FLOATS];
   uint8_t uart[FW_APP_UART_LEN];
   uint32_t uart_head, uart_tail;
-  uint32_t step;       /**< control periods since init (written by the interrupt) */
   uint32_t f_pwm_Hz;   /**< integer PWM rate for the time base */
-  uint32_t now_us;     /**< time base: floor(steps * 1e6 / f_pwm_Hz), modulo 2^32 */
+  uint32_t now_us;     /**< time base: floor(steps * 1e6 / f_pwm_Hz), modulo 2^32, at time_step */
   uint32_t us_rem;     /**< remainder of that division (< f_pwm_Hz) */
-  fw_app_period_t ring[FW_APP_SNAP_RING]; /**< interrupt -> background */
-  _Atomic uint32_t ring_head; /**< written by the interrupt only */
-  _Atomic uint32_t ring_tail; /**< written by the background only */
-  _Atomic uint32_t isr_now_us; /**< now_us as published by the interrupt */
+  uint32_t time_step;  /**< the period count now_us was converted at (background) */
   fw_app_lock_t lock;
   int32_t mode_applied; /**< fw_mode_t last accepted by fw_set_mode, -1 none */
   uint8_t cw_pending;
