@@ -9,7 +9,12 @@ statistic over the check window as a share of the threshold (above 1: refused), 
 verdict, and from the simulator's truth (verdict only) the largest true speed during the
 alignment: a mover at rest must not be refused, one moving faster than the limit must.
 
-    python tools/start_motion_check.py [--positions 16] [--seeds 1-8] [--moving 0.075,0.12]
+    python tools/start_motion_check.py [--positions 16] [--seeds 1-8] [--motors 0-7]
+                                       [--moving 0.1,0.12] [--steady 0.06,0.075]
+
+``--moving``: true speeds at enable with the motor's friction (the mover slows through the
+check); ``--steady``: without friction and cogging (it keeps its speed but for what the
+start's own current does to it). Measured numbers: docs/integrity.md, start-up.
 """
 
 from __future__ import annotations
@@ -83,7 +88,7 @@ def main() -> int:
         print(f"{label:34s} {a.min():6.3f} {np.median(a):6.3f} {np.quantile(a, 0.99):6.3f} "
               f"{a.max():6.3f}  {refused:3d}/{a.size}  {vmax * 1e3:7.2f}")
     print("\nmoving at enable (iron_core_linear; must be refused, or caught on the back-EMF "
-          "above bemf_v_off_mps): smallest statistic / threshold")
+          "above bemf_v_off_mps): statistic / threshold, smallest and largest")
     print(f"{'v0 (m/s)':>9s} {'friction':>8s} {'min':>6s} {'max':>6s}  refused  caught  "
           "true |v| at 15 ms (m/s)  over the limit there: refused  statistic / true "
           "back-EMF at 15 ms")
