@@ -79,7 +79,7 @@ def test_psi_f_mass_and_coulomb_friction():
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "issue target not met yet: viscous friction within 10 % (measured +7 ... +69 %: the "
+    "issue target not met yet: viscous friction within 10 % (measured +8 ... +91 %: the "
     "speed profile spans 0.08-0.3 m/s within the 0.3 m travel, where b v is a few newtons "
     "beside 15 N of Coulomb friction and 8 N of cogging); see docs/identify.md"))
 def test_viscous_friction_target():
