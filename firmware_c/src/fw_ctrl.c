@@ -713,7 +713,14 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     p.u_dq.x = p.u_d_pulse;
     p.u_dq.y = 0.0f;
   } else {
-    p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, c->obs.omega_f, safe.u_dc_V);
+    /* The decoupling feed-forward (w psi_f on q^, w L i) only in closed loop. In
+     * start-up the PLL's speed is its convergence from an unknown angle (up to
+     * 200 rad/s el. on a mover at rest), not a motion: fed forward as w psi_f it
+     * is a phantom back-EMF of tens of volts that the current loop turns into
+     * real thrust, and the motion check then refuses the mover it pushed. A
+     * moving mover's back-EMF is held by the PI's integrator instead. */
+    const float w_ff = c->phase == FW_START_RUN ? c->obs.omega_f : 0.0f;
+    p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, safe.u_dc_V);
   }
   if (!stage_monitor(c, &hf, &mi, &p)) { /* hard fault: switch off now */
     fill_snapshot_common(c, &safe, p.i_ab, out);

@@ -223,6 +223,8 @@ FW_NOINLINE void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float acce
   }
   sums_clear_run(m);
   if (!running) {
+    /* start-up: the residual's magnitude is the motion check's statistic */
+    m->e_bemf_V = sqrtf(m->r_d_f * m->r_d_f + m->r_q_f * m->r_q_f);
     return;
   }
   /* HF angle */

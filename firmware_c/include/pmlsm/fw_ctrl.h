@@ -284,7 +284,8 @@ typedef struct {
   /* integrity monitor (fw_mon.h) */
   float mon_angle_hf_rad;   /**< |angle error| solved from the raw HF response */
   float mon_angle_bemf_rad; /**< angle of the voltage residual against the estimate */
-  float mon_e_bemf_V;       /**< |voltage residual| (back-EMF magnitude) */
+  float mon_e_bemf_V;       /**< |voltage residual| (back-EMF magnitude); in start-up the
+                             *   motion check's statistic (MOVING_AT_ENABLE) */
   float mon_i_sum_A;        /**< low-passed |i_a + i_b + i_c| */
   float sal_meas;           /**< saliency measured at start-up (L_large / L_small - 1) */
   float L_small_meas_H;     /**< smaller inductance measured at start-up */

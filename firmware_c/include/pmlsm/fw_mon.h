@@ -131,8 +131,10 @@ void fw_mon_compensate(const fw_mon_t *m, float i_abc_A[3]);
 fw_fault_t fw_mon_saliency(fw_mon_t *m, const fw_config_t *cfg, float y_dd, float y_qd,
                            float y_dq, float y_qq, float Ts_u_Vs);
 
-/** Motion check at the end of alignment: |u_dq| (low-passed) against the
- *  back-EMF at start_speed_max_mps. Returns FW_FAULT_MOVING_AT_ENABLE or NONE. */
+/** Motion check during the alignment: |u - R i - L di/dt| (low-passed; the
+ *  zero-current loop's voltage, whose back-EMF feed-forward is off until closed
+ *  loop) against the back-EMF at start_speed_max_mps. Returns
+ *  FW_FAULT_MOVING_AT_ENABLE or NONE. */
 fw_fault_t fw_mon_motion(const fw_mon_t *m, float e_start_max_V);
 
 /** Closed loop starts: forget the filtered signals of the start-up pulses. */
