@@ -41,6 +41,8 @@ struct sim_s {
   double dt_s;          /**< PWM period */
   double k_theta;       /**< pi / tau (rad per m) */
   double adc_last_cnt[3];  /**< last current ADC counts (stuck-converter fault) */
+  double adc_base[3];   /**< adc_mid + adc_offset_counts[j] */
+  double adc_gain1[3];  /**< 1 + adc_gain_err[j] */
   double k_force;       /**< 1.5 pi / tau */
   double adc_lsb_A;     /**< current per count */
   double adc_mid;       /**< zero-current count */
@@ -61,6 +63,7 @@ struct sim_s {
   int use_adc;
   uint32_t bg_in; /**< control periods until the controller's next background pass */
   sim_sched_store_t sched[SIM_REF_COUNT];
+  double sched_next_t; /**< sim_run re-applies the schedules from this time on */
   /* Expansion points for cheap stage evaluations (see sim_plant.c): exact
    * sin/cos of theta_e and of the cogging angle at x0 (refreshed when x
    * drifts too far); Taylor coefficients of psi_d and 1 / L_dd around the
@@ -132,15 +135,6 @@ static inline void sim_plant_sincos(const sim_t *s, double x_m, double *c, doubl
     *c = cos(s->k_theta * x_m);
     *sn = sin(s->k_theta * x_m);
   }
-}
-
-/** nearbyint(x) (current rounding mode) without a libm call: x86-64 before
- * SSE4.1 has no rounding instruction. Same value for every x (the sign of a
- * zero result may differ, which the ADC clamp removes). */
-static inline double sim_nearbyint(double x) {
-  if (!(fabs(x) < 0x1p52)) return x; /* already integral, inf or NaN */
-  const double m = copysign(0x1p52, x);
-  return (x + m) - m;
 }
 
 /* xoshiro256** */

@@ -105,6 +105,10 @@ void sim_plant_derive(sim_t *s) {
   s->udc_lsb_V = p->udc_fullscale_V / full;
   s->inv_adc_lsb_A = 1.0 / s->adc_lsb_A;
   s->inv_udc_lsb_V = 1.0 / s->udc_lsb_V;
+  for (int j = 0; j < 3; ++j) {
+    s->adc_base[j] = s->adc_mid + p->adc_offset_counts[j];
+    s->adc_gain1[j] = 1.0 + p->adc_gain_err[j];
+  }
   s->u_dt_V = p->u_dc_V * p->dead_time_s * p->f_pwm_Hz;
   s->inv_L_q = 1.0 / p->L_q_H;
   s->inv_mass = 1.0 / p->mass_kg;
