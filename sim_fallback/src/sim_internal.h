@@ -139,29 +139,44 @@ static inline void sim_plant_sincos(const sim_t *s, double x_m, double *c, doubl
 
 /* xoshiro256** */
 static inline uint64_t sim_rotl64(uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
-static inline uint64_t sim_xoshiro_next(uint64_t r[4]) {
-  const uint64_t result = sim_rotl64(r[1] * 5u, 7) * 9u;
-  const uint64_t t = r[1] << 17;
-  r[2] ^= r[0];
-  r[3] ^= r[1];
-  r[1] ^= r[2];
-  r[0] ^= r[3];
-  r[2] ^= t;
-  r[3] = sim_rotl64(r[3], 45);
+/** One step on a state held in four variables (locals of a caller stay in registers). */
+SIM_INLINE uint64_t sim_xoshiro_next4(uint64_t *a, uint64_t *b, uint64_t *c, uint64_t *d) {
+  const uint64_t result = sim_rotl64(*b * 5u, 7) * 9u;
+  const uint64_t t = *b << 17;
+  *c ^= *a;
+  *d ^= *b;
+  *b ^= *c;
+  *a ^= *d;
+  *c ^= t;
+  *d = sim_rotl64(*d, 45);
   return result;
+}
+static inline uint64_t sim_xoshiro_next(uint64_t r[4]) {
+  return sim_xoshiro_next4(&r[0], &r[1], &r[2], &r[3]);
 }
 
 /* sim_plant.c */
-/** Ziggurat draw that missed the fast path with raw draw r (same sequence as sim_rng_gauss). */
+/** Ziggurat draw that missed the fast path with raw draw r (continues on s->rng). */
 double sim_rng_gauss_slow(sim_t *s, uint64_t r);
 
-/** Standard normal deviate: the ziggurat fast path inline (~99 % of draws). */
-static inline double sim_rng_gauss_inline(sim_t *s) {
-  const uint64_t r = sim_xoshiro_next(s->rng);
+/** Standard normal deviate with the generator state in a..d (the caller copies it
+ * from s->rng and back, so that over several draws it stays in registers): the
+ * ziggurat's fast path inline (~99 % of draws), a miss through s->rng. */
+SIM_INLINE double sim_rng_gauss4(sim_t *s, uint64_t *a, uint64_t *b, uint64_t *c, uint64_t *d) {
+  const uint64_t r = sim_xoshiro_next4(a, b, c, d);
   const unsigned i = (unsigned)(r & 0x7Fu);
   const double u = (double)(r >> 11) * 0x1.0p-52 - 1.0;
   if (fabs(u) < s->zig_r[i]) return u * s->zig_x[i];
-  return sim_rng_gauss_slow(s, r);
+  s->rng[0] = *a;
+  s->rng[1] = *b;
+  s->rng[2] = *c;
+  s->rng[3] = *d;
+  const double g = sim_rng_gauss_slow(s, r);
+  *a = s->rng[0];
+  *b = s->rng[1];
+  *c = s->rng[2];
+  *d = s->rng[3];
+  return g;
 }
 
 void sim_plant_derive(sim_t *s);

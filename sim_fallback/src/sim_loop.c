@@ -227,39 +227,6 @@ static inline double adc_quantise(double x, double max) {
   return (c + 0x1p52) - 0x1p52;
 }
 
-/** One xoshiro256** step on a generator state held in locals. */
-SIM_INLINE uint64_t rng_next4(uint64_t *a, uint64_t *b, uint64_t *c, uint64_t *d) {
-  const uint64_t result = sim_rotl64(*b * 5u, 7) * 9u;
-  const uint64_t t = *b << 17;
-  *c ^= *a;
-  *d ^= *b;
-  *b ^= *c;
-  *a ^= *d;
-  *c ^= t;
-  *d = sim_rotl64(*d, 45);
-  return result;
-}
-
-/** sim_rng_gauss_inline with the generator state in locals (the same draws, in the
- * same order): the state stays in registers across the period's four draws instead
- * of being loaded and stored around each; the rare slow path goes through s->rng. */
-SIM_INLINE double gauss4(sim_t *s, uint64_t *a, uint64_t *b, uint64_t *c, uint64_t *d) {
-  const uint64_t r = rng_next4(a, b, c, d);
-  const unsigned i = (unsigned)(r & 0x7Fu);
-  const double u = (double)(r >> 11) * 0x1.0p-52 - 1.0;
-  if (fabs(u) < s->zig_r[i]) return u * s->zig_x[i];
-  s->rng[0] = *a;
-  s->rng[1] = *b;
-  s->rng[2] = *c;
-  s->rng[3] = *d;
-  const double g = sim_rng_gauss_slow(s, r);
-  *a = s->rng[0];
-  *b = s->rng[1];
-  *c = s->rng[2];
-  *d = s->rng[3];
-  return g;
-}
-
 /** The ADC model: current counts cnt[0..2] and the DC-link count cnt[3] at the
  * present state (noise drawn in the order phase a, b, c, DC link). Per-phase
  * constants from sim_plant_derive: adc_base = adc_mid + offset, adc_gain1 =
@@ -280,8 +247,8 @@ SIM_INLINE void sample_counts(sim_t *s, double cnt[4]) {
   if (sig_i > 0.0 || sig_u > 0.0) {
     uint64_t ra = s->rng[0], rb = s->rng[1], rc = s->rng[2], rd = s->rng[3];
     if (sig_i > 0.0)
-      for (int j = 0; j < 3; ++j) cnt[j] += sig_i * gauss4(s, &ra, &rb, &rc, &rd);
-    if (sig_u > 0.0) u += sig_u * gauss4(s, &ra, &rb, &rc, &rd);
+      for (int j = 0; j < 3; ++j) cnt[j] += sig_i * sim_rng_gauss4(s, &ra, &rb, &rc, &rd);
+    if (sig_u > 0.0) u += sig_u * sim_rng_gauss4(s, &ra, &rb, &rc, &rd);
     s->rng[0] = ra;
     s->rng[1] = rb;
     s->rng[2] = rc;

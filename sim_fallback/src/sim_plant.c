@@ -66,7 +66,15 @@ double sim_rng_gauss_slow(sim_t *s, uint64_t r) {
 }
 
 /** Standard normal deviate (ziggurat; ~99 % of draws take the fast path). */
-double sim_rng_gauss(sim_t *s) { return sim_rng_gauss_inline(s); }
+double sim_rng_gauss(sim_t *s) {
+  uint64_t a = s->rng[0], b = s->rng[1], c = s->rng[2], d = s->rng[3];
+  const double g = sim_rng_gauss4(s, &a, &b, &c, &d);
+  s->rng[0] = a;
+  s->rng[1] = b;
+  s->rng[2] = c;
+  s->rng[3] = d;
+  return g;
+}
 
 /* ---- plant ------------------------------------------------------------- */
 
