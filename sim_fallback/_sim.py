@@ -28,8 +28,10 @@ CHANNELS = [name for name, *_ in _lib.RECORD_CHANNELS]
 ScheduleLike = float | Sequence[tuple[float, float]] | dict[str, Any] | None
 
 
-def _schedule(spec: ScheduleLike, scale: float) -> tuple[np.ndarray, np.ndarray, int] | None:
-    """Normalise a schedule: constant, [(t_s, value), ...] or {"t_s", "value", "ramp"}."""
+def _schedule(spec: ScheduleLike, scale: float) -> tuple[list[float], list[float], int] | None:
+    """Normalise a schedule: constant, [(t_s, value), ...] or {"t_s", "value", "ramp"}.
+    Breakpoint times and scaled values as floats (a few of them: plain Python, which
+    costs a run ~2 us where numpy arrays cost ~12 us)."""
     if spec is None:
         return None
     ramp = 0
@@ -38,13 +40,13 @@ def _schedule(spec: ScheduleLike, scale: float) -> tuple[np.ndarray, np.ndarray,
     elif isinstance(spec, dict):
         t, v, ramp = list(spec["t_s"]), list(spec["value"]), int(bool(spec.get("ramp", False)))
     else:
-        t = [float(a) for a, _ in spec]
-        v = [float(b) for _, b in spec]
-    ta = np.ascontiguousarray(t, dtype=np.float64)
-    va = np.ascontiguousarray(v, dtype=np.float64) * scale
-    if ta.size == 0 or ta.shape != va.shape or np.any(np.diff(ta) < 0):
+        t = [a for a, _ in spec]
+        v = [b for _, b in spec]
+    t = [float(a) for a in t]
+    v = [float(b) * scale for b in v]
+    if not t or len(t) != len(v) or any(b < a for a, b in zip(t, t[1:], strict=False)):
         raise ValueError(f"bad schedule {spec!r}: need ascending t_s and matching values")
-    return ta, va, ramp
+    return t, v, ramp
 
 
 class _SimRecordRaw(C.Structure):
@@ -71,10 +73,6 @@ def _record_layout(want: tuple[str, ...], n_rec: int
             out.append((name, dt, cols, nbytes, off))
             off += -(-nbytes // 64) * 64
     return out, off
-
-
-def _dptr(a: np.ndarray) -> Any:
-    return a.ctypes.data_as(C.POINTER(C.c_double))
 
 
 class Sim:
@@ -189,7 +187,8 @@ class Sim:
             rc = self._L.sim_set_schedule(self._h, kind, None, None, 0, 0)
         else:
             t, v, ramp = s
-            rc = self._L.sim_set_schedule(self._h, kind, _dptr(t), _dptr(v), t.size, ramp)
+            arr = C.c_double * len(t)
+            rc = self._L.sim_set_schedule(self._h, kind, arr(*t), arr(*v), len(t), ramp)
         if rc != 0:
             raise ValueError(f"sim_set_schedule rejected {spec!r}")
 

@@ -41,6 +41,8 @@ struct sim_s {
   double dt_s;          /**< PWM period */
   double k_theta;       /**< pi / tau (rad per m) */
   double adc_last_cnt[3];  /**< last current ADC counts (stuck-converter fault) */
+  double adc_base[3];   /**< adc_mid + adc_offset_counts[j] */
+  double adc_gain1[3];  /**< 1 + adc_gain_err[j] */
   double k_force;       /**< 1.5 pi / tau */
   double adc_lsb_A;     /**< current per count */
   double adc_mid;       /**< zero-current count */
@@ -61,6 +63,7 @@ struct sim_s {
   int use_adc;
   uint32_t bg_in; /**< control periods until the controller's next background pass */
   sim_sched_store_t sched[SIM_REF_COUNT];
+  double sched_next_t; /**< sim_run re-applies the schedules from this time on */
   /* Expansion points for cheap stage evaluations (see sim_plant.c): exact
    * sin/cos of theta_e and of the cogging angle at x0 (refreshed when x
    * drifts too far); Taylor coefficients of psi_d and 1 / L_dd around the
@@ -134,40 +137,46 @@ static inline void sim_plant_sincos(const sim_t *s, double x_m, double *c, doubl
   }
 }
 
-/** nearbyint(x) (current rounding mode) without a libm call: x86-64 before
- * SSE4.1 has no rounding instruction. Same value for every x (the sign of a
- * zero result may differ, which the ADC clamp removes). */
-static inline double sim_nearbyint(double x) {
-  if (!(fabs(x) < 0x1p52)) return x; /* already integral, inf or NaN */
-  const double m = copysign(0x1p52, x);
-  return (x + m) - m;
-}
-
 /* xoshiro256** */
 static inline uint64_t sim_rotl64(uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
-static inline uint64_t sim_xoshiro_next(uint64_t r[4]) {
-  const uint64_t result = sim_rotl64(r[1] * 5u, 7) * 9u;
-  const uint64_t t = r[1] << 17;
-  r[2] ^= r[0];
-  r[3] ^= r[1];
-  r[1] ^= r[2];
-  r[0] ^= r[3];
-  r[2] ^= t;
-  r[3] = sim_rotl64(r[3], 45);
+/** One step on a state held in four variables (locals of a caller stay in registers). */
+SIM_INLINE uint64_t sim_xoshiro_next4(uint64_t *a, uint64_t *b, uint64_t *c, uint64_t *d) {
+  const uint64_t result = sim_rotl64(*b * 5u, 7) * 9u;
+  const uint64_t t = *b << 17;
+  *c ^= *a;
+  *d ^= *b;
+  *b ^= *c;
+  *a ^= *d;
+  *c ^= t;
+  *d = sim_rotl64(*d, 45);
   return result;
+}
+static inline uint64_t sim_xoshiro_next(uint64_t r[4]) {
+  return sim_xoshiro_next4(&r[0], &r[1], &r[2], &r[3]);
 }
 
 /* sim_plant.c */
-/** Ziggurat draw that missed the fast path with raw draw r (same sequence as sim_rng_gauss). */
+/** Ziggurat draw that missed the fast path with raw draw r (continues on s->rng). */
 double sim_rng_gauss_slow(sim_t *s, uint64_t r);
 
-/** Standard normal deviate: the ziggurat fast path inline (~99 % of draws). */
-static inline double sim_rng_gauss_inline(sim_t *s) {
-  const uint64_t r = sim_xoshiro_next(s->rng);
+/** Standard normal deviate with the generator state in a..d (the caller copies it
+ * from s->rng and back, so that over several draws it stays in registers): the
+ * ziggurat's fast path inline (~99 % of draws), a miss through s->rng. */
+SIM_INLINE double sim_rng_gauss4(sim_t *s, uint64_t *a, uint64_t *b, uint64_t *c, uint64_t *d) {
+  const uint64_t r = sim_xoshiro_next4(a, b, c, d);
   const unsigned i = (unsigned)(r & 0x7Fu);
   const double u = (double)(r >> 11) * 0x1.0p-52 - 1.0;
   if (fabs(u) < s->zig_r[i]) return u * s->zig_x[i];
-  return sim_rng_gauss_slow(s, r);
+  s->rng[0] = *a;
+  s->rng[1] = *b;
+  s->rng[2] = *c;
+  s->rng[3] = *d;
+  const double g = sim_rng_gauss_slow(s, r);
+  *a = s->rng[0];
+  *b = s->rng[1];
+  *c = s->rng[2];
+  *d = s->rng[3];
+  return g;
 }
 
 void sim_plant_derive(sim_t *s);

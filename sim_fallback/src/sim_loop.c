@@ -1,8 +1,12 @@
 /*
- * Batch closed loop: ADC sampling -> controller step (function pointer)
- * -> plant integration over one PWM period with the duties latched one
- * period earlier. Schedules and recording are handled here so a whole
- * scenario runs in one C call.
+ * Batch closed loop: ADC sampling -> plant integration over one PWM period
+ * with the duties latched one period earlier -> controller step (function
+ * pointer) on the samples. The plant's period does not depend on this
+ * period's controller step, so it is issued before it: the processor then
+ * overlaps the sampling's dependency chain with the plant's, and the start of
+ * the controller step with the plant's end (~2 % per period, same values).
+ * Schedules and recording are handled here so a whole scenario runs in one C
+ * call.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -73,6 +77,7 @@ sim_t *sim_new(const sim_plant_params_t *p) {
   sim_rng_seed(s, p->seed);
   s->duty[0] = s->duty[1] = s->duty[2] = 0.5;
   for (int k = 0; k < SIM_REF_COUNT; ++k) s->sched[k].last_sent = (double)NAN;
+  s->sched_next_t = -(double)INFINITY;
   return s;
 }
 
@@ -98,6 +103,7 @@ void sim_set_controller(sim_t *s, const sim_controller_t *c) {
   if (s && c) {
     s->ctrl = *c;
     s->bg_in = 0u;
+    s->sched_next_t = -(double)INFINITY; /* references go to the new controller */
   }
 }
 
@@ -114,6 +120,7 @@ int sim_set_schedule(sim_t *s, sim_ref_kind_t kind, const double *t_s,
     if (i > 0u && t_s[i] < t_s[i - 1u]) return -1;
   }
   sim_sched_store_t *sc = &s->sched[kind];
+  s->sched_next_t = -(double)INFINITY;
   free(sc->t_s);
   free(sc->value);
   sc->t_s = sc->value = NULL;
@@ -161,6 +168,42 @@ static double sched_eval(sim_sched_store_t *sc, double t) {
   return sc->value[i] + a * (sc->value[i + 1u] - sc->value[i]);
 }
 
+/** Earliest time after t at which sched_eval(sc, .) may differ from its value at t
+ * (sched_eval just called at t): the next breakpoint of a step schedule, +inf after
+ * the last one, -inf inside a ramp (changes every period). */
+static double sched_valid_until(const sim_sched_store_t *sc, double t) {
+  if (t < sc->t_s[0]) return sc->t_s[0];
+  if (sc->cursor + 1u >= sc->n) return (double)INFINITY;
+  return sc->ramp ? -(double)INFINITY : sc->t_s[sc->cursor + 1u];
+}
+
+/** The references of the period at t: each schedule's value to the controller
+ * (set_ref, when it changed) or the plant (load force). Returns the time until
+ * which none of them changes: the batch loop calls this again only from then on
+ * (before, every schedule would give the value last handed on, and nothing would
+ * be called or changed). */
+static double sched_apply(sim_t *s, double t) {
+  double until = (double)INFINITY;
+  for (int kd = 0; kd < SIM_REF_COUNT; ++kd) {
+    sim_sched_store_t *sc = &s->sched[kd];
+    if (sc->n == 0u) continue;
+    const double v = sched_eval(sc, t);
+    if (kd == SIM_REF_LOAD) {
+      s->F_load_N = v;
+    } else if (v != sc->last_sent) {
+      if (!s->ctrl.set_ref) {
+        until = -(double)INFINITY; /* not handed on: again next period */
+        continue;
+      }
+      s->ctrl.set_ref(s->ctrl.ctx, (sim_ref_kind_t)kd, v);
+      sc->last_sent = v;
+    }
+    const double u = sched_valid_until(sc, t);
+    if (u < until) until = u;
+  }
+  return until;
+}
+
 double sim_sched_value(const sim_t *s, sim_ref_kind_t kind) {
   if (!s || (unsigned)kind >= (unsigned)SIM_REF_COUNT) return (double)NAN;
   sim_sched_store_t tmp = s->sched[kind];
@@ -174,7 +217,22 @@ static inline double clampd(double x, double lo, double hi) {
   return x < lo ? lo : (x > hi ? hi : x);
 }
 
-void sim_sample(sim_t *s, fw_inputs_t *in, fw_adc_inputs_t *adc) {
+/** ADC count: x clamped to [0, max] (max an integer below 2^52), then rounded to
+ * the nearest integer in the current rounding mode without a libm call (x86-64
+ * before SSE4.1 has no rounding instruction): (c + 2^52) - 2^52 for 0 <= c < 2^52.
+ * Clamping first gives the same count as rounding first for every x (NaN
+ * included), and needs neither a range test nor the sign for the 2^52 trick. */
+static inline double adc_quantise(double x, double max) {
+  const double c = clampd(x, 0.0, max);
+  return (c + 0x1p52) - 0x1p52;
+}
+
+/** The ADC model: current counts cnt[0..2] and the DC-link count cnt[3] at the
+ * present state (noise drawn in the order phase a, b, c, DC link). Per-phase
+ * constants from sim_plant_derive: adc_base = adc_mid + offset, adc_gain1 =
+ * 1 + gain error, so cnt = adc_base + i (1 + gain err) / lsb is evaluated as the
+ * model writes it, operation for operation. */
+SIM_INLINE void sample_counts(sim_t *s, double cnt[4]) {
   const sim_plant_params_t *p = &s->p;
   double c, sn;
   sim_plant_sincos(s, s->st.x_m, &c, &sn);
@@ -182,22 +240,52 @@ void sim_sample(sim_t *s, fw_inputs_t *in, fw_adc_inputs_t *adc) {
   const double i_be = sn * s->st.i_d_A + c * s->st.i_q_A;
   const double i_abc[3] = {i_al, -0.5 * i_al + 0.5 * SIM_SQRT3 * i_be,
                            -0.5 * i_al - 0.5 * SIM_SQRT3 * i_be};
-  for (int j = 0; j < 3; ++j) {
-    double cnt = s->adc_mid + p->adc_offset_counts[j] +
-                 i_abc[j] * (1.0 + p->adc_gain_err[j]) * s->inv_adc_lsb_A;
-    if (p->adc_noise_counts > 0.0) cnt += p->adc_noise_counts * sim_rng_gauss_inline(s);
-    cnt = clampd(sim_nearbyint(cnt), 0.0, s->adc_max);
-    if (p->adc_stuck_mask & (1u << j)) cnt = s->adc_last_cnt[j]; /* frozen converter */
-    s->adc_last_cnt[j] = cnt;
-    if (adc) adc->i_abc_counts[j] = (uint16_t)cnt;
-    /* what the drive computes with its nominal scaling */
-    if (in) in->i_abc_A[j] = (float)((cnt - s->adc_mid) * s->adc_lsb_A);
-  }
+  for (int j = 0; j < 3; ++j)
+    cnt[j] = s->adc_base[j] + i_abc[j] * s->adc_gain1[j] * s->inv_adc_lsb_A;
   double u = p->u_dc_V;
-  if (p->udc_noise_V > 0.0) u += p->udc_noise_V * sim_rng_gauss_inline(s);
-  const double ucnt = clampd(sim_nearbyint(u * s->inv_udc_lsb_V), 0.0, s->adc_max);
-  if (adc) adc->u_dc_counts = (uint16_t)ucnt;
-  if (in) in->u_dc_V = (float)(ucnt * s->udc_lsb_V);
+  const double sig_i = p->adc_noise_counts, sig_u = p->udc_noise_V;
+  if (sig_i > 0.0 || sig_u > 0.0) {
+    uint64_t ra = s->rng[0], rb = s->rng[1], rc = s->rng[2], rd = s->rng[3];
+    if (sig_i > 0.0)
+      for (int j = 0; j < 3; ++j) cnt[j] += sig_i * sim_rng_gauss4(s, &ra, &rb, &rc, &rd);
+    if (sig_u > 0.0) u += sig_u * sim_rng_gauss4(s, &ra, &rb, &rc, &rd);
+    s->rng[0] = ra;
+    s->rng[1] = rb;
+    s->rng[2] = rc;
+    s->rng[3] = rd;
+  }
+  const double top = s->adc_max;
+  for (int j = 0; j < 3; ++j) cnt[j] = adc_quantise(cnt[j], top);
+  cnt[3] = adc_quantise(u * s->inv_udc_lsb_V, top);
+  const uint32_t stuck = p->adc_stuck_mask;
+  if (stuck)
+    for (int j = 0; j < 3; ++j)
+      if (stuck & (1u << j)) cnt[j] = s->adc_last_cnt[j]; /* frozen converter */
+  for (int j = 0; j < 3; ++j) s->adc_last_cnt[j] = cnt[j];
+}
+
+void sim_sample(sim_t *s, fw_inputs_t *in, fw_adc_inputs_t *adc) {
+  double cnt[4];
+  sample_counts(s, cnt);
+  for (int j = 0; j < 3; ++j) {
+    if (adc) adc->i_abc_counts[j] = (uint16_t)cnt[j];
+    /* what the drive computes with its nominal scaling */
+    if (in) in->i_abc_A[j] = (float)((cnt[j] - s->adc_mid) * s->adc_lsb_A);
+  }
+  if (adc) adc->u_dc_counts = (uint16_t)cnt[3];
+  if (in) in->u_dc_V = (float)(cnt[3] * s->udc_lsb_V);
+}
+
+/** sim_sample for a controller that takes counts (the firmware's control interrupt):
+ * the batch loop's common case, without the physical conversion. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static void sample_adc(sim_t *s, fw_adc_inputs_t *adc) {
+  double cnt[4];
+  sample_counts(s, cnt);
+  for (int j = 0; j < 3; ++j) adc->i_abc_counts[j] = (uint16_t)cnt[j];
+  adc->u_dc_counts = (uint16_t)cnt[3];
 }
 
 double sim_force_N(const sim_t *s) { return s ? sim_plant_force(s, &s->st) : (double)NAN; }
@@ -211,10 +299,13 @@ void sim_plant_advance(sim_t *s, const double duty_abc[3], int pwm_enable, doubl
 
 /* ---- batch loop -------------------------------------------------------- */
 
+/** A duty the plant applies: NaN or infinite -> 0.5, others clamped to [0, 1]
+ * (the common in-range duty with two comparisons). */
 static inline double sanitize_duty(float d) {
   const double x = (double)d;
+  if (x >= 0.0 && x <= 1.0) return x;
   if (!isfinite(x)) return 0.5;
-  return clampd(x, 0.0, 1.0);
+  return x < 0.0 ? 0.0 : 1.0;
 }
 
 int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *rec) {
@@ -237,18 +328,8 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
   const uint32_t bg_every = s->ctrl.background_every > 0u ? s->ctrl.background_every : 1u;
 
   for (uint64_t n = 0; n < n_steps; ++n) {
-    /* 1. references for this period */
-    for (int kd = 0; kd < SIM_REF_COUNT; ++kd) {
-      sim_sched_store_t *sc = &s->sched[kd];
-      if (sc->n == 0u) continue;
-      const double v = sched_eval(sc, s->t_s);
-      if (kd == SIM_REF_LOAD) {
-        s->F_load_N = v;
-      } else if (v != sc->last_sent && s->ctrl.set_ref) {
-        s->ctrl.set_ref(s->ctrl.ctx, (sim_ref_kind_t)kd, v);
-        sc->last_sent = v;
-      }
-    }
+    /* 1. references for this period (only when a schedule may have moved) */
+    if (s->t_s >= s->sched_next_t) s->sched_next_t = sched_apply(s, s->t_s);
     /* 2. the drive's background loop, at its own rate between control
      * interrupts: in the slot before this period's interrupt, so a command
      * that arrived before the period takes effect in it */
@@ -260,20 +341,17 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
         s->bg_in--;
       }
     }
-    /* 3. sample, 4. controller (the control interrupt) */
-    sim_sample(s, adc_mode ? NULL : &in, &adc); /* the drive converts counts itself */
-    memset(&out, 0, sizeof out);
+    /* 3. sample: the ADC at t_k */
     if (adc_mode)
-      s->ctrl.step_adc(s->ctrl.ctx, &adc, &out);
+      sample_adc(s, &adc); /* the drive converts counts itself */
     else
-      s->ctrl.step(s->ctrl.ctx, &in, &out);
+      sim_sample(s, &in, &adc);
 
-    /* 5. record (truth at t_k, controller view at t_k) */
-    const int rec_now = (rec_in == 0u);
-    rec_in = rec_now ? decimation - 1u : rec_in - 1u;
-    if (rec_now && n_rec < cap) {
-      const uint32_t r = n_rec++;
-      if (want_snap && s->ctrl.snapshot) s->ctrl.snapshot(s->ctrl.ctx, &snap);
+    /* 4. record the truth at t_k and the samples */
+    const int rec_now = (rec_in == 0u) && n_rec < cap;
+    rec_in = (rec_in == 0u) ? decimation - 1u : rec_in - 1u;
+    const uint32_t r = n_rec;
+    if (rec_now) {
       const double th = s->k_theta * s->st.x_m;
       if (rec->t_s) rec->t_s[r] = s->t_s;
       if (rec->theta_e_rad) rec->theta_e_rad[r] = th;
@@ -291,6 +369,21 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
                        : (double)in.i_abc_A[j];
       if (rec->u_dc_meas_V)
         rec->u_dc_meas_V[r] = adc_mode ? (double)adc.u_dc_counts * s->udc_lsb_V : (double)in.u_dc_V;
+    }
+
+    /* 5. plant over [t_k, t_k+1) with the duties from step k-1 (independent of
+     * step k below, which sees only the samples taken above) */
+    sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
+
+    /* 6. controller (the control interrupt) on the samples of t_k */
+    memset(&out, 0, sizeof out);
+    if (adc_mode)
+      s->ctrl.step_adc(s->ctrl.ctx, &adc, &out);
+    else
+      s->ctrl.step(s->ctrl.ctx, &in, &out);
+    if (rec_now) {
+      n_rec++;
+      if (want_snap && s->ctrl.snapshot) s->ctrl.snapshot(s->ctrl.ctx, &snap);
       if (rec->theta_hat_rad) rec->theta_hat_rad[r] = (double)snap.theta_hat_rad;
       if (rec->omega_hat_radps) rec->omega_hat_radps[r] = (double)snap.omega_hat_radps;
       if (rec->omega_f_radps) rec->omega_f_radps[r] = (double)snap.omega_f_radps;
@@ -309,9 +402,6 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
       if (rec->start_phase) rec->start_phase[r] = snap.start_phase;
       if (rec->fault_code) rec->fault_code[r] = snap.fault_code;
     }
-
-    /* 6. plant over [t_k, t_k+1) with the duties from step k-1 */
-    sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
     /* 7. latch the new duties for the next period */
     s->pwm_on = out.pwm_enable ? 1 : 0;
     for (int j = 0; j < 3; ++j) s->duty[j] = sanitize_duty(out.duty_abc[j]);

@@ -66,7 +66,15 @@ double sim_rng_gauss_slow(sim_t *s, uint64_t r) {
 }
 
 /** Standard normal deviate (ziggurat; ~99 % of draws take the fast path). */
-double sim_rng_gauss(sim_t *s) { return sim_rng_gauss_inline(s); }
+double sim_rng_gauss(sim_t *s) {
+  uint64_t a = s->rng[0], b = s->rng[1], c = s->rng[2], d = s->rng[3];
+  const double g = sim_rng_gauss4(s, &a, &b, &c, &d);
+  s->rng[0] = a;
+  s->rng[1] = b;
+  s->rng[2] = c;
+  s->rng[3] = d;
+  return g;
+}
 
 /* ---- plant ------------------------------------------------------------- */
 
@@ -105,6 +113,10 @@ void sim_plant_derive(sim_t *s) {
   s->udc_lsb_V = p->udc_fullscale_V / full;
   s->inv_adc_lsb_A = 1.0 / s->adc_lsb_A;
   s->inv_udc_lsb_V = 1.0 / s->udc_lsb_V;
+  for (int j = 0; j < 3; ++j) {
+    s->adc_base[j] = s->adc_mid + p->adc_offset_counts[j];
+    s->adc_gain1[j] = 1.0 + p->adc_gain_err[j];
+  }
   s->u_dt_V = p->u_dc_V * p->dead_time_s * p->f_pwm_Hz;
   s->inv_L_q = 1.0 / p->L_q_H;
   s->inv_mass = 1.0 / p->mass_kg;

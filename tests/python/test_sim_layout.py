@@ -48,3 +48,40 @@ def test_config_roundtrip_through_c():
     L.fw_get_config.argtypes = [C.c_void_p]
     stored = L.fw_get_config(fw.handle).contents
     assert stored.as_dict() == cfg.as_dict()
+
+
+def test_snapshot_as_dict_reads_every_field_as_getattr():
+    """FwSnapshot.as_dict reads the structure in one struct.unpack_from (offsets and
+    padding from the mirror): every field, in order, with the value and type that
+    getattr gives, arrays as lists, on a snapshot of a running drive and on one with a
+    distinct byte pattern in every position."""
+    import math
+
+    from sim_fallback import Sim
+
+    def by_getattr(snap):
+        out = {}
+        for name, _ in snap._fields_:
+            v = getattr(snap, name)
+            out[name] = list(v) if isinstance(v, C.Array) else v
+        return out
+
+    with Sim("paper_salient", seed=3) as s:
+        s.enable("speed")
+        s.advance(6000)
+        s.firmware.snapshot()  # fills the firmware object's FwSnapshot
+        running = s.firmware._snap
+    patterned = _lib.FwSnapshot()
+    C.memmove(C.addressof(patterned), bytes((7 * i + 1) % 251 for i in range(C.sizeof(patterned))),
+              C.sizeof(patterned))
+    for snap in (running, patterned):
+        got, want = snap.as_dict(), by_getattr(snap)
+        assert list(got) == list(want)
+        for k, w in want.items():
+            g = got[k]
+            assert type(g) is type(w), k
+            same = [a == b or (math.isnan(a) and math.isnan(b)) for a, b in
+                    zip(g if isinstance(g, list) else [g], w if isinstance(w, list) else [w],
+                        strict=True)]
+            assert all(same), (k, g, w)
+    assert running.as_dict()["step_count"] > 0

@@ -110,6 +110,40 @@ def test_free_acceleration_constant_force():
     assert np.all(rec["i_d_A"] == 0) and np.all(rec["i_q_A"] == 0)
 
 
+def _sched_value(t_s, value, ramp, t):
+    """sched_eval of sim_loop.c, operation for operation (Python floats are IEEE doubles)."""
+    if t < t_s[0]:
+        return value[0]
+    i = max(j for j in range(len(t_s)) if t_s[j] <= t)
+    if not ramp or i + 1 >= len(t_s):
+        return value[i]
+    a = (t - t_s[i]) / (t_s[i + 1] - t_s[i])
+    return value[i] + a * (value[i + 1] - value[i])
+
+
+@pytest.mark.parametrize("ramp", [False, True])
+def test_schedules_applied_every_period(ramp):
+    """sim_run re-evaluates the schedules only when one may have moved (the next
+    breakpoint, every period inside a ramp): the load it applies is the schedule's value
+    at every period all the same, bit for bit, across chunks, a schedule replaced in the
+    middle of a run and breakpoints between periods or before the first one; and with a
+    controller that takes no references (the fixed-duty one) a speed schedule next to it
+    does not hold the load back."""
+    s = make()
+    s.use_fixed_duties([0.5, 0.5, 0.5], False)
+    s.set_schedule(0, 100.0)  # speed: nothing takes it
+    t1, v1 = [0.002, 0.0041, 0.0041, 0.01], [3.0, -2.0, 7.5, 1.0]
+    s.set_schedule(SIM_REF_LOAD, {"t_s": t1, "value": v1, "ramp": ramp})
+    got = [s.advance(150), s.advance(200)]
+    t2, v2 = [0.0151, 0.02], [-4.0, 6.0]
+    s.set_schedule(SIM_REF_LOAD, {"t_s": t2, "value": v2, "ramp": ramp})
+    got.append(s.advance(300))
+    for rec, (ts, vs) in zip(got, [(t1, v1), (t1, v1), (t2, v2)], strict=True):
+        want = [_sched_value(ts, vs, ramp, t) for t in rec["t_s"]]
+        assert rec["load_N"].tolist() == want
+    assert got[2]["t_s"][0] < t2[0] < got[2]["t_s"][-1]
+
+
 def test_static_friction_holds_without_creep_then_breaks_away():
     s = make(F_static_N=50.0, F_coulomb_N=40.0)
     m = s.params.mass_kg
