@@ -7,21 +7,15 @@
 #include <string.h>
 
 #include "pmlsm/fw_ctrl.h"
+#include "test_motors.h"
 #include "tinytest.h"
 
 static void test_derive_matches_formulas(void) {
   fw_config_t c;
   fw_config_default(&c);
-  /* iron_core_linear */
-  c.R_ohm = 2.4f;
-  c.L_d_H = 0.008f;
-  c.L_q_H = 0.011f;
-  c.psi_f_Wb = 0.20372f;
-  c.pole_pitch_m = 0.016f;
-  c.mass_kg = 6.0f;
+  test_motor_iron_core_linear(&c);
   c.cur_bw_radps = 1100.0f;
   c.spd_bw_radps = 20.0f;
-  c.gains_auto = 1u;
   fw_config_derive(&c);
   const double ke = M_PI / 0.016, KF = 1.5 * ke * 0.20372; /* 60.0 N/A */
   TT_CHECK_NEAR(KF, 60.0, 0.01);

@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "pmlsm/fw_ctrl.h"
+#include "test_motors.h"
 #include "tinytest.h"
 
 typedef struct {
@@ -204,13 +205,7 @@ static void test_alignment_holds_zero_current_at_rest(void) {
      * (its observer converges through 200 rad/s el. from near the saddle) */
     fw_config_t cfg;
     fw_config_default(&cfg);
-    cfg.R_ohm = 2.4f;
-    cfg.L_d_H = 0.008f;
-    cfg.L_q_H = 0.011f;
-    cfg.psi_f_Wb = 0.20372f;
-    cfg.pole_pitch_m = 0.016f;
-    cfg.mass_kg = 6.0f;
-    cfg.gains_auto = 1u;
+    test_motor_iron_core_linear(&cfg);
     fw_ctrl_t c;
     fw_init(&c, &cfg);
     fw_set_mode(&c, FW_MODE_FORCE);
