@@ -61,13 +61,17 @@ void fw_bemf_catch(fw_bemf_t *b, float w0, const float i_dq_A[2]) {
 /** |filtered back-EMF|^2 (V^2). */
 static float mag2(const fw_bemf_t *b) { return b->e_d_f * b->e_d_f + b->e_q_f * b->e_q_f; }
 
-/** Angle error of the filtered back-EMF (0 below half the switch-off level). */
-static float angle(const fw_bemf_t *b) {
-  if (mag2(b) < b->e_min2) {
+float fw_bemf_angle_of(const fw_bemf_t *b, float e_d, float e_q, uint8_t w_neg) {
+  if (e_d * e_d + e_q * e_q < b->e_min2) {
     return 0.0f;
   }
-  const float ang = atan2f(-b->e_d_f, b->e_q_f);
-  return b->w_neg ? fw_wrap_pi_f32(ang + FW_PI_F32) : ang;
+  const float ang = atan2f(-e_d, e_q);
+  return w_neg ? fw_wrap_pi_f32(ang + FW_PI_F32) : ang;
+}
+
+/** Angle error of the filtered back-EMF (0 below half the switch-off level). */
+static float angle(const fw_bemf_t *b) {
+  return fw_bemf_angle_of(b, b->e_d_f, b->e_q_f, b->w_neg);
 }
 
 void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat,

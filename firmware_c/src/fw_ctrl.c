@@ -833,13 +833,10 @@ void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
   snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, w);
   snap->force_hat_N = fw_units_force_per_A(cfg) * snap->i_dq_A[1];
   snap->torque_hat_Nm = 1.5f * cfg->pole_pairs * cfg->psi_f_Wb * snap->i_dq_A[1];
-  fw_bemf_t b = ctrl->bemf; /* the observer as it was at the capture (its filters) */
-  b.e_d_f = raw->bemf_e_dq_V[0];
-  b.e_q_f = raw->bemf_e_dq_V[1];
-  b.err_rad = raw->bemf_err_rad;
-  b.err_fresh = raw->bemf_fresh;
-  b.w_neg = raw->bemf_w_neg;
-  snap->bemf_err_rad = fw_bemf_error(&b); /* an atan2f: on demand */
+  /* the observer's angle error as at the capture (an atan2f on demand, as fw_bemf_error) */
+  snap->bemf_err_rad = raw->bemf_fresh ? raw->bemf_err_rad
+                                       : fw_bemf_angle_of(&ctrl->bemf, raw->bemf_e_dq_V[0],
+                                                          raw->bemf_e_dq_V[1], raw->bemf_w_neg);
   snap->statusword =
       statusword_of(cfg, (fw_cia402_state_t)snap->cia402_state, snap->u_dc_V,
                     (fw_start_phase_t)snap->start_phase, (fw_mode_t)snap->mode,

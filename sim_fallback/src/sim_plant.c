@@ -493,6 +493,27 @@ static inline double sgn_band(double i, double band) {
   return r > 1.0 ? 1.0 : (r < -1.0 ? -1.0 : r);
 }
 
+/** A sub-step's inputs but the voltage: the load (see load_add), the phases conducting. */
+static inline void substep_in_begin(const sim_t *s, substep_in_t *in) {
+  in->F_load_N = s->F_load_N;
+  in->load_add = (s->F_load_N == 0.0) ? 0.0 : -s->F_load_N;
+  in->elec_open = 0;
+}
+
+/** The stator voltage u_ab turned into the rotor frame at the basis angle. */
+static inline void substep_in_voltage(const sim_t *s, const double u_ab[2], substep_in_t *in) {
+  in->u_dq0_V[0] = s->b_c0 * u_ab[0] + s->b_s0 * u_ab[1];
+  in->u_dq0_V[1] = -s->b_s0 * u_ab[0] + s->b_c0 * u_ab[1];
+}
+
+/** The sub-step's end state y = {i_d, i_q, x, v} becomes the plant's. */
+static inline void state_store(sim_plant_state_t *st, const double y[4]) {
+  st->i_d_A = y[0];
+  st->i_q_A = y[1];
+  st->x_m = y[2];
+  st->v_mps = y[3];
+}
+
 /** One RK4 sub-step of length h. */
 static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
                     const double *u_ab_fixed) {
@@ -500,9 +521,7 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
   sim_plant_state_t *st = &s->st;
   basis_ensure(s, st->x_m, st->i_d_A);
   substep_in_t in;
-  in.F_load_N = s->F_load_N;
-  in.load_add = (s->F_load_N == 0.0) ? 0.0 : -s->F_load_N;
-  in.elec_open = 0;
+  substep_in_begin(s, &in);
   double u_ab[2];
   double i_al = 0.0, i_be = 0.0;
   if (u_ab_fixed) {
@@ -532,8 +551,7 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
     u_ab[1] = (u_pole[1] - u_pole[2]) * (1.0 / SIM_SQRT3);
   }
 
-  in.u_dq0_V[0] = s->b_c0 * u_ab[0] + s->b_s0 * u_ab[1];
-  in.u_dq0_V[1] = -s->b_s0 * u_ab[0] + s->b_c0 * u_ab[1];
+  substep_in_voltage(s, u_ab, &in);
 
   /* mechanics: stuck, or sliding in a fixed direction for this sub-step */
   double y0[4] = {st->i_d_A, st->i_q_A, st->x_m, st->v_mps};
@@ -681,10 +699,7 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
     y1[0] = c1 * a1 + s1 * b1;
     y1[1] = -s1 * a1 + c1 * b1;
   }
-  st->i_d_A = y1[0];
-  st->i_q_A = y1[1];
-  st->x_m = y1[2];
-  st->v_mps = y1[3];
+  state_store(st, y1);
 }
 
 /**
@@ -701,11 +716,8 @@ static int substep_fast(sim_t *s, double h, const double u_ab[2]) {
   sim_plant_state_t *st = &s->st;
   basis_ensure(s, st->x_m, st->i_d_A);
   substep_in_t in;
-  in.F_load_N = s->F_load_N;
-  in.load_add = (s->F_load_N == 0.0) ? 0.0 : -s->F_load_N;
-  in.elec_open = 0;
-  in.u_dq0_V[0] = s->b_c0 * u_ab[0] + s->b_s0 * u_ab[1];
-  in.u_dq0_V[1] = -s->b_s0 * u_ab[0] + s->b_c0 * u_ab[1];
+  substep_in_begin(s, &in);
+  substep_in_voltage(s, u_ab, &in);
   double y0[4] = {st->i_d_A, st->i_q_A, st->x_m, st->v_mps};
   double y1[4];
   if (st->stuck || st->v_mps == 0.0) {
@@ -715,10 +727,7 @@ static int substep_fast(sim_t *s, double h, const double u_ab[2]) {
     rk4_stuck(s, &in, y0, h, y1);
     if (fabs(drive_force(s, y1, &in)) > p->F_static_N) return 0; /* breaks away inside */
     st->stuck = 1;
-    st->i_d_A = y1[0];
-    st->i_q_A = y1[1];
-    st->x_m = y1[2];
-    st->v_mps = y1[3];
+    state_store(st, y1);
     return 1;
   }
   in.mech_dir = st->v_mps > 0.0 ? 1 : -1;
@@ -726,10 +735,7 @@ static int substep_fast(sim_t *s, double h, const double u_ab[2]) {
   /* substep()'s end-of-sliding tests: velocity reversal or stick band */
   const int crossed = (in.mech_dir > 0) ? (y1[3] <= 0.0) : (y1[3] >= 0.0);
   if (crossed || fabs(y1[3]) < p->v_stick_mps) return 0;
-  st->i_d_A = y1[0];
-  st->i_q_A = y1[1];
-  st->x_m = y1[2];
-  st->v_mps = y1[3];
+  state_store(st, y1);
   return 1;
 }
 

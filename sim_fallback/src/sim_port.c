@@ -59,7 +59,6 @@ struct sim_app {
   fw_app_t app;
   fw_board_t board;
   struct fw_port port;
-  uint32_t background_every;
 };
 
 /* ---- fw_port.h ------------------------------------------------------------- */
@@ -195,7 +194,6 @@ sim_app_t *sim_app_new(const fw_config_t *cfg, uint8_t node_id, const char *nvm_
     memcpy(d->port.tmp, nvm_path, n);
     memcpy(&d->port.tmp[n], ".tmp", 5u);
   }
-  d->background_every = 1u;
   (void)fw_board_init(&d->board, &d->app, &d->port); /* boots from the file */
   return d;
 }
@@ -204,12 +202,11 @@ void sim_app_free(sim_app_t *d) { free(d); }
 
 void sim_app_controller(sim_app_t *d, uint32_t background_every, sim_controller_t *c) {
   memset(c, 0, sizeof *c);
-  d->background_every = background_every > 0u ? background_every : 1u;
   c->ctx = d;
   c->step_adc = sim_app_step_adc;
   c->snapshot = sim_app_snapshot;
   c->background = sim_app_background;
-  c->background_every = d->background_every;
+  c->background_every = background_every > 0u ? background_every : 1u;
 }
 
 bool sim_app_can_rx(sim_app_t *d, const fw_can_frame_t *frame) {

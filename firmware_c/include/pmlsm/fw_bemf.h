@@ -89,6 +89,10 @@ void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], 
  *  Computed in the update only while the PLL tracks it (active); otherwise here,
  *  on demand (an atan2f the control step does not need). */
 float fw_bemf_error(const fw_bemf_t *b);
+/** The angle error of a filtered back-EMF (e_d, e_q) in the estimated frame, with the
+ *  speed's sign (w_neg) and b's threshold: what fw_bemf_error computes from b's own
+ *  filters, for values captured earlier (fw_snapshot_complete). */
+float fw_bemf_angle_of(const fw_bemf_t *b, float e_d, float e_q, uint8_t w_neg);
 /** Flying start: the PLL is set on a moving mover at speed w0 (el. rad/s):
  *  the observer starts locked at |E| = |w0| psi_f, injection ramps down. */
 void fw_bemf_catch(fw_bemf_t *b, float w0, const float i_dq_A[2]);
