@@ -274,7 +274,7 @@ class Drive:
         eds = self.node.object_dictionary
 
         def default(e: od.Entry) -> int:
-            return int((eds[e.index] if e.var else eds[e.index][e.sub]).default)
+            return int(e.of(eds).default)
 
         problems = []
         exp_prod = default(od.IDENTITY_OBJECT__PRODUCT_CODE)
@@ -498,7 +498,7 @@ class Drive:
     def var(self, e: od.Entry) -> Any:
         """The canopen SDO variable of an OD entry named in :mod:`protocols.generated.od_names`
         (``drive.var(od.STATUSWORD).raw``)."""
-        return self.node.sdo[e.index] if e.var else self.node.sdo[e.index][e.sub]
+        return e.of(self.node.sdo)
 
     def write(self, e: od.Entry, value: Any) -> None:
         """:meth:`write_raw` of an OD entry by name (``drive.write(od.CONTROLWORD, 0)``)."""

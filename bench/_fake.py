@@ -66,8 +66,7 @@ class FakeDrive402:
 
     # ---- helpers ----------------------------------------------------------------------
     def _set(self, e: od.Entry, value: Any) -> None:
-        eds = self.node.object_dictionary
-        var = eds[e.index] if e.var else eds[e.index][e.sub]
+        var = e.of(self.node.object_dictionary)
         self.node.set_data(e.index, e.sub, var.encode_raw(value), check_writable=False)
 
     def _tpdo1(self) -> None:

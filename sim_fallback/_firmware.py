@@ -172,6 +172,11 @@ class Firmware:
         r = self.cfg.pole_pairs * self.cfg.pole_pitch_m / math.pi
         return self.set_force_ref_N(torque_Nm / r)
 
+    def bemf_V(self, v_mps: float) -> float:
+        """Back-EMF magnitude w psi_f (V) of a mover at v_mps with this configuration: the
+        firmware's ``fw_units_bemf_V`` (its handover, witness and motion-check levels)."""
+        return float(self._L.fw_units_bemf_V(C.byref(self.cfg), v_mps))
+
     @property
     def force_per_A(self) -> float:
         """K_F in N/A (the firmware's nominal thrust constant)."""

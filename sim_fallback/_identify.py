@@ -23,6 +23,7 @@ simulator's truth is used by the tests only, to judge the result.
 
 from __future__ import annotations
 
+import argparse
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -495,6 +496,17 @@ def _fit_motion(runs: list[dict[str, np.ndarray]], dt: float, R: float, L_q: flo
         log=[f"psi_f {psi:.5f} Wb from {len(Yp)} samples (u_q offset {c0:+.3f} V); "
              f"mass/friction fit over {len(y)} samples, K_F = {K_F:.3f} N/A; Gaussian "
              f"filter sigma {sigma_s * 1e3:.0f} ms on both sides"])
+
+
+def seed_range(text: str) -> range:
+    """Seeds from a command line: ``"a-b"`` (both included) or ``"a"``; an argparse
+    ``type`` (a malformed value is its one-line error)."""
+    a, _, b = text.partition("-")
+    try:
+        return range(int(a), int(b or a) + 1)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected seeds 'a-b' or 'a', "
+                                         "non-negative integers") from None
 
 
 def randomized_plant(seed: int, base: str = "iron_core_linear") -> dict[str, float]:

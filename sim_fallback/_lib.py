@@ -307,6 +307,7 @@ def _declare(lib: C.CDLL) -> None:
         "fw_units_radps_e_to_mps": (_f, [P(FwConfig), _f]),
         "fw_units_rpm_to_radps_e": (_f, [P(FwConfig), _f]),
         "fw_units_force_per_A": (_f, [P(FwConfig)]),
+        "fw_units_bemf_V": (_f, [P(FwConfig), _f]),
         "fw_set_extractor": (C.c_int, [V, C.c_int]),
         "fw_fault_code": (C.c_int, [V]),
         "fw_raise_fault": (None, [V, C.c_int]),

@@ -179,8 +179,10 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float, float, str, Any]] = {
     ("controller", "bemf_v_off_mps"): (False, 0.0, 100.0, "m/s", None),
     ("controller", "mon_bemf_min_mps"): (False, 0.001, 1000.0, "m/s", None),
 }
-#: ``[controller]`` keys that are fw_config_t fields of the same name, set as given.
-_CTRL_FW_FIELDS = ("bemf_v_on_mps", "bemf_v_off_mps", "mon_bemf_min_mps")
+#: ``[controller]`` keys that are fw_config_t fields of the same name, set as given (the
+#: back-EMF speeds only when the file gives them: else the firmware's defaults).
+_CTRL_FW_FIELDS = ("i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz",
+                   "bemf_v_on_mps", "bemf_v_off_mps", "mon_bemf_min_mps")
 _TEXT_FIELDS = {("motor", "name"), ("motor", "description"), ("motor", "parameterization")}
 
 
@@ -511,11 +513,6 @@ def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
     cfg.cur_bw_radps = 1100.0  # the paper's current-loop rule: k_P = L_d 1100, k_I = R 1100
     cfg.gains_auto = 1
     c = motor.controller
-    cfg.i_max_A = c["i_max_A"]
-    cfg.i_rated_A = c["i_rated_A"]
-    cfg.i_trip_A = c["i_trip_A"]
-    cfg.u_inj_V = c["u_inj_V"]
-    cfg.f_inj_Hz = c["f_inj_Hz"]
     for k in _CTRL_FW_FIELDS:
         if k in c:
             setattr(cfg, k, c[k])

@@ -9,11 +9,13 @@ from typing import Any
 
 import numpy as np
 
+from protocols.generated.od_names import FAULT_CODES
+
 from ._sim import SIM_REF_SPEED, Sim
 
 ALIGN = 1          #: fw_start_phase_t FW_START_ALIGN
 CHECK_FROM_S = 0.015  #: FW_MOTION_CHECK_S
-MOVING_AT_ENABLE = 0xFF08
+MOVING_AT_ENABLE = FAULT_CODES["MOVING_AT_ENABLE"]
 #: plant overrides: no friction or cogging (a mover that keeps its speed)
 FRICTIONLESS = {"F_coulomb_N": 0.0, "F_static_N": 0.0, "b_visc_Ns_per_m": 0.0,
                 "cog_amp_N": 0.0}
@@ -31,7 +33,7 @@ def motion_check(motor: str, seed: int, x0_m: float, v0_mps: float = 0.0,
             sim.set_state(x0_m=x0_m, v0_mps=v0_mps)
         sim.set_schedule(SIM_REF_SPEED, 0.0)
         cfg = sim.cfg
-        thr = cfg.psi_f_Wb * math.pi / cfg.pole_pitch_m * cfg.start_speed_max_mps
+        thr = sim.firmware.bemf_V(cfg.start_speed_max_mps)  # the drive's own threshold
         sim.enable("speed")
         stat, v_max, v_check, stat_check = 0.0, 0.0, float("nan"), float("nan")
         while sim.t_s < 0.3:
@@ -48,7 +50,7 @@ def motion_check(motor: str, seed: int, x0_m: float, v0_mps: float = 0.0,
             if d["fault_code"][-1]:
                 break
         # the statistic at the first check against the true back-EMF there
-        e_true = cfg.psi_f_Wb * math.pi / cfg.pole_pitch_m * v_check
+        e_true = sim.firmware.bemf_V(v_check)
         return {"ratio": stat / thr, "fault": int(sim.firmware.fault_code()),
                 "v_max": v_max, "v_check": v_check, "v_limit": cfg.start_speed_max_mps,
                 "accuracy": stat_check / e_true if e_true > 0.0 else float("nan"),

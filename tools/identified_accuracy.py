@@ -24,24 +24,19 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from sim_fallback import run_scenario  # noqa: E402
 from sim_fallback._faults import FAULT_NAMES  # noqa: E402
-from sim_fallback._identify import identify, randomized_plant  # noqa: E402
+from sim_fallback._identify import identify, randomized_plant, seed_range  # noqa: E402
 from sim_fallback._motors import fw_config, load_motor  # noqa: E402
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="0-7", help="motor seeds, 'a-b' (default 0-7)")
+    ap.add_argument("--seeds", default="0-7", type=seed_range,
+                    help="motor seeds, 'a-b' (default 0-7)")
     ap.add_argument("--speeds", default="0.1,0.3,1.0", help="speeds in m/s")
-    ap.add_argument("--sim-seeds", default="1",
+    ap.add_argument("--sim-seeds", default="1", type=seed_range,
                     help="simulator seeds (noise, start position), 'a-b' (default 1)")
     args = ap.parse_args()
-
-    def rng(s: str) -> range:
-        a, _, b = s.partition("-")
-        return range(int(a), int(b or a) + 1)
-
-    seeds = rng(args.seeds)
-    sim_seeds = rng(args.sim_seeds)
+    seeds, sim_seeds = args.seeds, args.sim_seeds
     speeds = [float(x) for x in args.speeds.split(",")]
     tally: list[Counter[str]] = [Counter() for _ in speeds]
     stopped = 0

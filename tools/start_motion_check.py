@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sim_fallback._identify import randomized_plant  # noqa: E402
+from sim_fallback._identify import randomized_plant, seed_range  # noqa: E402
 from sim_fallback._motors import load_motor  # noqa: E402
 from sim_fallback._start_check import FRICTIONLESS, MOVING_AT_ENABLE, motion_check  # noqa: E402
 
@@ -54,27 +54,24 @@ def cases(motor_seeds: range) -> list[tuple[str, str, dict[str, Any] | None,
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--positions", type=int, default=16, help="start positions per period")
-    ap.add_argument("--seeds", default="1-8", help="simulator noise seeds, 'a-b'")
-    ap.add_argument("--motors", default="0-7", help="randomized motor seeds, 'a-b'")
+    ap.add_argument("--seeds", default="1-8", type=seed_range,
+                    help="simulator noise seeds, 'a-b'")
+    ap.add_argument("--motors", default="0-7", type=seed_range,
+                    help="randomized motor seeds, 'a-b'")
     ap.add_argument("--moving", default="0.1,0.12",
                     help="true speeds at enable (m/s), friction on (the mover slows)")
     ap.add_argument("--steady", default="0.06,0.075",
                     help="true speeds at enable (m/s), friction and cogging off (a mover "
                     "coasting at that speed through the check)")
     args = ap.parse_args()
-
-    def rng(s: str) -> range:
-        a, _, b = s.partition("-")
-        return range(int(a), int(b or a) + 1)
-
-    seeds = rng(args.seeds)
+    seeds = args.seeds
     moving = [(float(v), None) for v in args.moving.split(",") if v]
     moving += [(float(v), FRICTIONLESS) for v in args.steady.split(",") if v]
     print("standstill: largest statistic / threshold over the check window "
           f"({args.positions} positions x {len(seeds)} seeds)")
     print(f"{'case':34s} {'min':>6s} {'median':>6s} {'p99':>6s} {'max':>6s}  refused  "
           "true |v| max (mm/s)")
-    for label, motor, plant, fw in cases(rng(args.motors)):
+    for label, motor, plant, fw in cases(args.motors):
         tau = load_motor(motor).tau_m
         rs, refused, vmax = [], 0, 0.0
         for seed in seeds:

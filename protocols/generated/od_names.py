@@ -11,7 +11,7 @@ ENTRIES: (index, sub) -> name (the EDS ParameterName); every entry as an
 # ruff: noqa: E501
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 FAULTS: dict[int, tuple[str, str]] = {
     0x2310: ('OVERCURRENT', '|phase current| above i_trip_A'),
@@ -421,6 +421,11 @@ class Entry(NamedTuple):
     sub: int
     var: bool = False
     unit: str = ""  # on the wire (od.yaml); bench._units.wire_to_si converts
+
+    def of(self, objects: Any) -> Any:
+        """This entry in a container indexed like the object dictionary:
+        canopen's ``node.sdo`` or ``ObjectDictionary``."""
+        return objects[self.index] if self.var else objects[self.index][self.sub]
 
 
 # every entry by name: <OBJECT> for a single-entry object, <OBJECT>__<ENTRY> for
