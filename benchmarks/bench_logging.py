@@ -38,6 +38,7 @@ import can  # noqa: E402
 import canopen  # noqa: E402
 
 from bench._logging import RunLogger  # noqa: E402
+from protocols.generated import od_names as od  # noqa: E402
 
 
 def _cpu() -> float:
@@ -55,8 +56,8 @@ def run_sim(duration_s: float, out: Path) -> dict[str, float]:
         node.nmt.state = "PRE-OPERATIONAL"
         tp = node.tpdo[4]
         tp.clear()
-        tp.add_variable(0x2020, 1)  # estimated angle, REAL32
-        tp.add_variable(0x2020, 4)  # PLL error, REAL32
+        tp.add_variable(od.ESTIMATOR__ESTIMATED_ANGLE.index, od.ESTIMATOR__ESTIMATED_ANGLE.sub)
+        tp.add_variable(od.ESTIMATOR__PLL_ERROR.index, od.ESTIMATOR__PLL_ERROR.sub)
         tp.trans_type = 1
         tp.enabled = True
         tp.save()

@@ -1,7 +1,8 @@
 """The bench addresses the drive's object dictionary by name (issue 13 item 3): the
 entries generated from protocols/od.yaml (`protocols.generated.od_names`), never a bare
-index in the code. A literal equal to an object index in the bench's code (comments and
-docstrings aside) fails this test, naming the file and line."""
+index in the code. A literal equal to an object index in the bench's code, its tools,
+examples and benchmarks (comments and docstrings aside) fails this test, naming the file
+and line."""
 
 from __future__ import annotations
 
@@ -31,7 +32,10 @@ def test_bench_code_names_od_entries_instead_of_indices():
     indices = _od_indices()
     assert 0x6040 in indices and 0x2060 in indices  # the reference itself is sound
     bare = []
-    for path in sorted((REPO / "bench").glob("*.py")):
+    paths = [p for d in ("bench", "tools", "examples", "benchmarks")
+             for p in sorted((REPO / d).glob("*.py"))]
+    assert len(paths) > 20, paths
+    for path in paths:
         src = path.read_text()
         for tok in tokenize.generate_tokens(io.StringIO(src).readline):
             if tok.type != tokenize.NUMBER or not tok.string.lower().startswith("0x"):
