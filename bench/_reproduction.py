@@ -20,9 +20,10 @@ from typing import Any
 import numpy as np
 
 from bench._scenario_metrics import EST_BAND_RPM, POS_BAND_RAD, SPEED_BAND_RPM
+from bench._sequence import EXTRACTORS
 
 SCENARIOS = ("load_step", "speed_reversal", "startup")
-EXTRACTORS = ("pseudo", "sogi", "sogi_adaptive")
+#: the extractors (od.yaml enums:), in value order
 EX_LABEL = {"pseudo": "pseudo-filter", "sogi": "SOGI k = 0.5", "sogi_adaptive": "adaptive SOGI"}
 SC_LABEL = {"load_step": "load step", "speed_reversal": "speed reversal", "startup": "start-up"}
 #: The sweeps (campaign reproduction_sweep_<key>), in the report's order.

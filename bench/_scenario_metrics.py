@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from protocols.generated.od_names import StartPhase
 from sim_fallback.metrics import compute_metrics, window_mask
 
 #: Statistics over a window: position error (el. rad) RMS / max |.| / mean, speed
@@ -155,7 +156,7 @@ def startup_metrics(res: Any) -> dict[str, float]:
     """Closed-loop start (first RUN sample, s) and max |error| from the settling time on."""
     d = res.data
     t = d["t_s"]
-    run = np.nonzero(d["start_phase"] == 3)[0]
+    run = np.nonzero(d["start_phase"] == StartPhase.RUN)[0]
     ts = res.metrics["settling_time_s"]
     e = np.abs(res.position_error_rad)
     return {"t_run_s": float(t[run[0]]) if run.size else float("nan"),
@@ -168,9 +169,9 @@ def run_metrics(res: Any) -> dict[str, float]:
     d = res.data
     t = d["t_s"]
     nz = np.nonzero(d["fault_code"])[0]
-    run = d["start_phase"] == 3
+    run = d["start_phase"] == StartPhase.RUN
     return {"valid": float(res.valid), "reached_run": float(np.any(run)),
-            "pwm_on": float(np.any(d["start_phase"] != 0)),
+            "pwm_on": float(np.any(d["start_phase"] != StartPhase.IDLE)),
             "init_status": float(res.info.get("fw_init_status", -1)),
             "t_fault_s": float(t[nz[0]]) if nz.size else float("nan"),
             "run_err_max_rad": (float(np.max(np.abs(res.position_error_rad[run])))
@@ -207,7 +208,7 @@ def analyse(res: Any, metrics: Iterable[str], windows: Mapping[str, list[float]]
         w, _, name = m.partition(".")
         t0, t1 = windows[w]
         if name == "run_err_rms":
-            k = window_mask(res.data["t_s"], t0, t1) & (res.data["start_phase"] == 3)
+            k = window_mask(res.data["t_s"], t0, t1) & (res.data["start_phase"] == StartPhase.RUN)
             out[m] = (float(np.sqrt(np.mean(res.position_error_rad[k] ** 2))) if np.any(k)
                       else float("nan"))
         elif not res.valid:

@@ -33,9 +33,10 @@ import jsonschema
 import yaml
 
 from bench._units import FORCE_UNITS, SPEED_UNITS
+from protocols.generated.od_names import Extractor
 from sim_fallback.metrics import METRIC_NAMES
 
-EXTRACTORS: tuple[str, ...] = ("pseudo", "sogi", "sogi_adaptive")
+EXTRACTORS: tuple[str, ...] = tuple(e.key for e in Extractor)  # od.yaml enums:
 OPS: tuple[str, ...] = ("<", "<=", ">", ">=")
 STEP_KINDS: tuple[str, ...] = (
     "enable", "disable", "set_mode", "set_speed", "set_force", "ramp", "load_step",

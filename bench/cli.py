@@ -27,6 +27,10 @@ from pathlib import Path
 from typing import Any
 
 from bench import __version__
+from protocols.generated.od_names import Extractor
+
+#: --extractor choices (protocols/od.yaml enums:)
+EXTRACTOR_KEYS = tuple(e.key for e in Extractor)
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_DRIVE, EXIT_INTERNAL, EXIT_INTERRUPT = 0, 1, 2, 3, 4, 130
 EXIT_CODES_TEXT = ("Exit codes: 0 ok, 1 expectation failed, 2 invalid input (sequence, motor "
@@ -70,7 +74,7 @@ def _conn_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--motor", default=None,
                    help="motor file (sim, and unit conversion on hardware); default: the "
                         "sequence's, else paper_salient")
-    g.add_argument("--extractor", choices=("pseudo", "sogi", "sogi_adaptive"),
+    g.add_argument("--extractor", choices=EXTRACTOR_KEYS,
                    help="simulated drive: HF extractor (default: the sequence's)")
     g.add_argument("--seed", type=int, help="simulated drive: noise seed (default: the "
                                             "sequence's)")
@@ -243,7 +247,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "listens.")
     st.add_argument("--motor", default="paper_salient", help="motor file (default "
                                                              "paper_salient)")
-    st.add_argument("--extractor", choices=("pseudo", "sogi", "sogi_adaptive"),
+    st.add_argument("--extractor", choices=EXTRACTOR_KEYS,
                     default="sogi_adaptive", help="HF extractor (default sogi_adaptive)")
     st.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     st.add_argument("--node-id", type=int, default=1, help="drive node id (default 1)")

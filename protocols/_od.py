@@ -131,6 +131,28 @@ class Fault:
     reaction: str
 
 
+@dataclass(frozen=True)
+class EnumValue:
+    """One value of an enumeration (``enums:`` section)."""
+
+    name: str   # C enumerator suffix and Python member name (SOGI_ADAPTIVE)
+    value: int
+    key: str    # the lower-case name the bench and motor files use (sogi_adaptive)
+    text: str
+
+
+@dataclass(frozen=True)
+class Enum:
+    """An enumeration whose values cross the wire (``enums:`` section): a C enum of
+    fw_enums.h and an IntEnum of od_names.py."""
+
+    name: str    # extractor
+    ctype: str   # fw_extractor_t
+    prefix: str  # FW_EXTRACTOR_
+    doc: str
+    values: tuple[EnumValue, ...]
+
+
 @dataclass
 class ObjectDictionary:
     """The expanded dictionary: device info, entries sorted by (index, sub), signals,
@@ -141,6 +163,7 @@ class ObjectDictionary:
     signals: list[dict[str, str]]
     fw_config: dict[str, dict[str, float]] = field(default_factory=dict)
     faults: list[Fault] = field(default_factory=list)
+    enums: list[Enum] = field(default_factory=list)
 
     def objects(self) -> dict[int, list[OdEntry]]:
         """Entries grouped by index, in order."""
@@ -408,4 +431,39 @@ def _load(path: Path) -> ObjectDictionary:
             raise OdError(f"{where}: code or name {flt.name} defined twice")
         faults.append(flt)
     return ObjectDictionary(device=dict(data["device"]), entries=entries, signals=signals,
-                            fw_config=fw_limits, faults=faults)
+                            fw_config=fw_limits, faults=faults,
+                            enums=_enums(data.get("enums", []) or []))
+
+
+def _enums(raw: list[dict[str, Any]]) -> list[Enum]:
+    """The ``enums:`` section, checked: C/Python identifiers, unique names, keys and
+    values within each enumeration."""
+    out: list[Enum] = []
+    for k, e in enumerate(raw):
+        where = f"od.yaml enums[{k}]"
+        try:
+            vals = []
+            for j, v in enumerate(e["values"]):
+                w = f"{where}.values[{j}]"
+                ev = EnumValue(str(v["name"]), int(v["value"]), str(v["key"]), str(v["text"]))
+                if not re.fullmatch(r"[A-Z][A-Z0-9_]*", ev.name) or not 0 <= ev.value <= 255:
+                    raise OdError(f"{w}: name {ev.name!r} (A-Z0-9_) / value {ev.value} (0..255)")
+                if ev.key != ev.name.lower():
+                    raise OdError(f"{w}: key {ev.key!r} must be {ev.name.lower()!r}")
+                if any(u.name == ev.name or u.value == ev.value for u in vals):
+                    raise OdError(f"{w}: name {ev.name} or value {ev.value} defined twice")
+                vals.append(ev)
+            en = Enum(str(e["name"]), str(e["ctype"]), str(e["prefix"]), str(e["doc"]),
+                      tuple(vals))
+        except KeyError as err:
+            raise OdError(f"{where}: missing {err}") from None
+        if not re.fullmatch(r"[a-z][a-z0-9_]*", en.name) or not en.values:
+            raise OdError(f"{where}: name {en.name!r} (a-z0-9_) and at least one value")
+        if not re.fullmatch(r"fw_[a-z0-9_]+_t", en.ctype) or not re.fullmatch(
+                r"FW_[A-Z0-9_]*_", en.prefix):
+            raise OdError(f"{where}: ctype {en.ctype!r} (fw_..._t) / prefix {en.prefix!r} "
+                          "(FW_..._)")
+        if any(g.name == en.name or g.ctype == en.ctype for g in out):
+            raise OdError(f"{where}: enumeration {en.name} defined twice")
+        out.append(en)
+    return out

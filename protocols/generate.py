@@ -10,9 +10,10 @@ Outputs (checked in; tests/python/test_protocol_od.py fails on drift):
 - firmware_c/comm/generated/co_od_table.h / .c   (C table, see co_od.h)
 - firmware_c/comm/generated/fw_serial_signals.h / .c (signal table, see fw_serial.h)
 - firmware_c/include/pmlsm/fw_faults.h            (fw_fault_t: codes and names of the core)
+- firmware_c/include/pmlsm/fw_enums.h             (enums whose values cross the wire)
 - firmware_c/include/pmlsm/fw_config_fields.h     (fw_config_t field table: types, units, ranges)
 - protocols/generated/pmlsm_drive.eds           (CiA 306 EDS for canopen.import_od)
-- protocols/generated/od_names.py               (fault codes and names, object indices)
+- protocols/generated/od_names.py               (fault codes and names, enums, object indices)
 - docs/od_table.md                               (documentation)
 """
 
@@ -347,7 +348,8 @@ def gen_py_names(od: ObjectDictionary) -> str:
         f"{HEADER}.",
         "",
         "FAULTS: fault code -> (name, text); FAULT_REACTIONS: code -> reaction;",
-        "FAULT_CODES: name -> code; INDEX_<OBJECT NAME>: object index;",
+        "FAULT_CODES: name -> code; Extractor, Mode, StartPhase, Reaction: the enums;",
+        "INDEX_<OBJECT NAME>: object index;",
         "ENTRIES: (index, sub) -> name (the EDS ParameterName); every entry as an",
         "``Entry(index, sub, var, unit)`` constant by name (CONTROLWORD, TELEMETRY__DECIMATION).",
         q,
@@ -355,6 +357,7 @@ def gen_py_names(od: ObjectDictionary) -> str:
         "# ruff: noqa: E501",
         "from __future__ import annotations",
         "",
+        "from enum import IntEnum",
         "from typing import Any, NamedTuple",
         "",
         "FAULTS: dict[int, tuple[str, str]] = {",
@@ -373,8 +376,8 @@ def gen_py_names(od: ObjectDictionary) -> str:
         '        return "NONE"',
         '    return FAULTS[code][0] if code in FAULTS else f"0x{code:04X}"',
         "",
-        "",
     ]
+    lines += _py_enums(od) + [""]
     seen: dict[str, int] = {}
     for index, entries in od.objects().items():
         ident = "INDEX_" + _py_ident(entries[0].object_name)
@@ -419,6 +422,47 @@ def gen_py_names(od: ObjectDictionary) -> str:
             raise ValueError(f"two OD entries are named {ident}")
     lines.append("")
     return "\n".join(lines)
+
+
+def _camel(name: str) -> str:
+    return "".join(w.capitalize() for w in name.split("_"))
+
+
+def gen_enums_header(od: ObjectDictionary) -> str:
+    """The enumerations whose values cross the wire (firmware_c/include/pmlsm/fw_enums.h),
+    from od.yaml's ``enums:`` list, the one source for the core and the bench."""
+    lines = [f"/* {HEADER} */",
+             "/**",
+             " * @file fw_enums.h",
+             " * @brief Enumerations whose values cross the wire (OD entries, telemetry",
+             " *        signals): protocols/od.yaml, enums:; the bench's IntEnum classes",
+             " *        (protocols/generated/od_names.py) come from the same list.",
+             " */",
+             "#ifndef PMLSM_FW_ENUMS_H",
+             "#define PMLSM_FW_ENUMS_H"]
+    for en in od.enums:
+        lines += ["", f"/** {en.doc.replace('*/', '* /')} */", "typedef enum {"]
+        for k, v in enumerate(en.values):
+            sep = "," if k + 1 < len(en.values) else ""
+            text = v.text.replace("*/", "* /")
+            lines.append(f"  {en.prefix}{v.name} = {v.value}{sep} /**< {text} */")
+        lines.append(f"}} {en.ctype};")
+    lines += ["", "#endif /* PMLSM_FW_ENUMS_H */", ""]
+    return "\n".join(lines)
+
+
+def _py_enums(od: ObjectDictionary) -> list[str]:
+    """IntEnum classes of od_names.py, one per ``enums:`` entry."""
+    q = '"' * 3
+    lines: list[str] = []
+    for en in od.enums:
+        lines += ["", f"class {_camel(en.name)}(IntEnum):",
+                  f"    {q}{en.doc} ({en.ctype}); ``.key`` is the bench's lower-case name.{q}",
+                  ""]
+        lines += [f"    {v.name} = {v.value}  # {v.text}" for v in en.values]
+        lines += ["", "    @property", "    def key(self) -> str:",
+                  "        return self.name.lower()", ""]
+    return lines
 
 
 def gen_fault_header(od: ObjectDictionary) -> str:
@@ -496,6 +540,7 @@ def outputs(od: ObjectDictionary | None = None) -> dict[Path, str]:
         gen / "fw_serial_signals.h": gen_signals_header(od),
         gen / "fw_serial_signals.c": gen_signals_source(od),
         ROOT / "firmware_c" / "include" / "pmlsm" / "fw_faults.h": gen_fault_header(od),
+        ROOT / "firmware_c" / "include" / "pmlsm" / "fw_enums.h": gen_enums_header(od),
         ROOT / "firmware_c" / "include" / "pmlsm" / "fw_config_fields.h":
             gen_config_fields_header(od),
         ROOT / "protocols" / "generated" / "pmlsm_drive.eds": gen_eds(od),

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from protocols.generated.od_names import FAULT_REACTIONS, FAULTS
+from protocols.generated.od_names import FAULT_REACTIONS, FAULTS, StartPhase
 
 from ._motors import fw_config, load_motor
 from ._sim import SIM_REF_LOAD, SIM_REF_SPEED, Sim, wrap_pi
@@ -129,7 +129,7 @@ def run_case(case: FaultCase, seed: int = 0) -> dict[str, Any]:
     t = d["t_s"] - t_enable
     on = ~np.isnan(d["duty_abc"][:, 0])
     fc = d["fault_code"].astype(int)
-    run = (d["start_phase"] == 3) & on & (fc == 0) & (t >= 0)
+    run = (d["start_phase"] == StartPhase.RUN) & on & (fc == 0) & (t >= 0)
     err = np.abs(wrap_pi(d["theta_e_rad"] - d["theta_hat_rad"]))
     blind = run & (err > BLIND_ERR_RAD)
     # longest stretch of blind driving

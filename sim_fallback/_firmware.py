@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from protocols.generated.od_names import Mode
+
 from . import _lib
 
 
@@ -54,7 +56,8 @@ def config_error(cfg: _lib.FwConfig) -> ConfigError | None:
 
 CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION, CW_DISABLE_VOLTAGE = 0x06, 0x07, 0x0F, 0x00
 CW_FAULT_RESET = 0x80
-MODES = {"speed": 0, "force": 1}
+#: mode name -> fw_mode_t value (protocols/od.yaml enums:)
+MODES = {m.key: int(m) for m in Mode}
 
 
 class Firmware:

@@ -25,6 +25,8 @@ try:
 except ImportError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
+from protocols.generated.od_names import Extractor
+
 from . import _lib
 
 MOTOR_DIR = Path(__file__).resolve().parent / "motors"
@@ -547,7 +549,8 @@ def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
     return cfg
 
 
-EXTRACTORS = {"pseudo": 0, "sogi": 1, "sogi_adaptive": 2}
+#: extractor name -> fw_extractor_t value (protocols/od.yaml enums:)
+EXTRACTORS = {e.key: int(e) for e in Extractor}
 
 
 def extractor_id(ex: int | str) -> int:

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from protocols.generated.od_names import StartPhase
+
 from . import _lib
 from ._firmware import Firmware, config_error
 from ._motors import SENSING_SCALE_KEYS, Motor, extractor_id, fw_config, load_motor, plant_params
@@ -396,7 +398,7 @@ def run_scenario(motor: str | Path | Motor = "paper_salient",
             reason = f"configuration refused: {refused}"
         elif fault or (fc.size and np.any(fc != 0)):
             reason = f"fault 0x{(fault or int(fc[fc != 0][0])):04X}"
-        elif "start_phase" in data and not np.any(data["start_phase"] == 3):
+        elif "start_phase" in data and not np.any(data["start_phase"] == StartPhase.RUN):
             reason = "never reached closed loop (start_phase RUN)"
         # the project's metric definitions (sim_fallback.metrics), default windows
         vals, windows = run_metrics(data, mot.tau_m, float(mot.pole_pairs), settle_s,

@@ -9,11 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from protocols.generated.od_names import FAULT_CODES
+from protocols.generated.od_names import FAULT_CODES, StartPhase
 
 from ._sim import SIM_REF_SPEED, Sim
 
-ALIGN = 1          #: fw_start_phase_t FW_START_ALIGN
 CHECK_FROM_S = 0.015  #: FW_MOTION_CHECK_S
 MOVING_AT_ENABLE = FAULT_CODES["MOVING_AT_ENABLE"]
 #: plant overrides: no friction or cogging (a mover that keeps its speed)
@@ -38,7 +37,7 @@ def motion_check(motor: str, seed: int, x0_m: float, v0_mps: float = 0.0,
         stat, v_max, v_check, stat_check = 0.0, 0.0, float("nan"), float("nan")
         while sim.t_s < 0.3:
             d = sim.advance(8, channels=["t_s", "v_mps", "start_phase", "fault_code"])
-            aligning = d["start_phase"] == ALIGN
+            aligning = d["start_phase"] == StartPhase.ALIGN
             if not aligning.any():
                 break
             v_max = max(v_max, float(np.max(np.abs(d["v_mps"][aligning]))))

@@ -244,3 +244,45 @@ def test_bad_yaml_is_reported_with_the_field(tmp_path):
                              "    doc: CiA 402 controlword", 1))
     with pytest.raises(OdError, match="0x6040.*unknown type"):
         load(p)
+
+
+def test_enums_are_one_list_for_c_and_python(od):
+    """od.yaml's enums: generate the C enums of fw_enums.h and the IntEnums of od_names;
+    the C header is parsed here independently of the generator, and the values the
+    simulated drive and the bench rely on are checked literally."""
+    from protocols.generated import od_names
+
+    h = Path(generate.ROOT, "firmware_c", "include", "pmlsm", "fw_enums.h").read_text()
+    c = {m.group(1): int(m.group(2)) for m in re.finditer(r"\b(FW_[A-Z0-9_]+) = (\d+)", h)}
+    seen = 0
+    for en in od.enums:
+        cls = getattr(od_names, "".join(w.capitalize() for w in en.name.split("_")))
+        assert f"}} {en.ctype};" in h
+        for v in en.values:
+            assert c[en.prefix + v.name] == v.value == int(cls[v.name]), (en.name, v.name)
+            assert cls[v.name].key == v.key
+            seen += 1
+    assert seen == len(c) >= 13
+    assert od_names.StartPhase.RUN == 3 and od_names.StartPhase.ALIGN == 1
+    assert [e.key for e in od_names.Extractor] == ["pseudo", "sogi", "sogi_adaptive"]
+    assert od_names.Mode.FORCE == 1 and od_names.Reaction.QUICK_RAMP == 2
+    # the header is the one definition: fw_ctrl.h includes it and defines none of them
+    ctrl = Path(generate.ROOT, "firmware_c", "include", "pmlsm", "fw_ctrl.h").read_text()
+    assert '#include "fw_enums.h"' in ctrl
+    assert not any(f"}} {en.ctype};" in ctrl for en in od.enums)
+
+
+@pytest.mark.parametrize("old, new, match", [
+    ("{name: RUN, value: 3, key: run,", "{name: RUN, value: 2, key: run,",
+     r"enums\[2\]\.values\[3\]: name RUN or value 2 defined twice"),
+    ("{name: RUN, value: 3, key: run,", "{name: RUN, value: 3, key: closed,",
+     r"enums\[2\]\.values\[3\]: key 'closed' must be 'run'"),
+    ("    ctype: fw_mode_t\n", "", r"enums\[1\]: missing 'ctype'"),
+])
+def test_bad_enum_is_reported_with_its_place(tmp_path, old, new, match):
+    src = Path(generate.ROOT, "protocols", "od.yaml").read_text()
+    assert old in src
+    p = tmp_path / "od.yaml"
+    p.write_text(src.replace(old, new, 1))
+    with pytest.raises(OdError, match=match):
+        load(p)

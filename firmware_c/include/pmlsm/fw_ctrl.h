@@ -48,27 +48,9 @@ extern "C" {
 /** Depth of the fault history. */
 #define FW_FAULT_HISTORY_LEN 8u
 
-/** HF current extractor (switchable at run time). */
-typedef enum {
-  FW_EXTRACTOR_PSEUDO = 0,       /**< paper eq. 11 baseline: raw sample difference */
-  FW_EXTRACTOR_SOGI = 1,         /**< eq. 12, fixed k */
-  FW_EXTRACTOR_SOGI_ADAPTIVE = 2 /**< eq. 13 with an observable adaptation signal */
-} fw_extractor_t;
-
-/** Control mode (maps to CiA 402 CSV / CST). */
-typedef enum {
-  FW_MODE_SPEED = 0, /**< speed loop -> i_q reference */
-  FW_MODE_FORCE = 1  /**< i_q reference set directly (thrust / torque) */
-} fw_mode_t;
-
-/** Sensorless start-up phase inside OPERATION ENABLED. */
-typedef enum {
-  FW_START_IDLE = 0,     /**< power stage off */
-  FW_START_ALIGN = 1,    /**< injection + PLL, zero current: angle mod pi */
-  FW_START_POLARITY = 2, /**< +/- d-axis pulses: north/south decision */
-  FW_START_RUN = 3,      /**< closed loop */
-  FW_START_SALIENCY = 4  /**< after ALIGN: square wave on d^, then on q^: measured saliency */
-} fw_start_phase_t;
+/* Extractor, control mode, start-up phase and reaction option codes: generated
+ * from protocols/od.yaml (enums:), the one list for the core and the bench. */
+#include "fw_enums.h"
 
 /** Injection periods per axis in the standstill saliency check (the first is
  *  not averaged: the axis change settles). */
@@ -78,13 +60,6 @@ typedef enum {
  * list of codes, names and texts for the core, the CANopen slave, the bench and the
  * docs. */
 #include "fw_faults.h"
-
-/** Reaction option codes (CiA 402 0x605A quick stop, 0x605E fault reaction). */
-typedef enum {
-  FW_REACT_SWITCH_OFF = 0, /**< PWM off at once (disable drive function) */
-  FW_REACT_RAMP = 1,       /**< brake under control, then PWM off (time-bounded) */
-  FW_REACT_QUICK_RAMP = 2  /**< same as RAMP with the quick-stop time bound */
-} fw_reaction_t;
 
 /** Result of configuration checks and setters. */
 typedef enum {
