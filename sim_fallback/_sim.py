@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from protocols.generated.od_names import StartPhase
+from protocols.generated.od_names import Extractor, StartPhase
 
 from . import _lib
 from ._firmware import Firmware, config_error
@@ -356,8 +356,7 @@ def run_scenario(motor: str | Path | Motor = "paper_salient",
         x0 = float(np.random.default_rng([int(seed), 0x5EED]).uniform(0.0, 2.0 * mot.tau_m))
     else:
         x0 = float(x0_m)
-    ex_name = {v: k for k, v in {"pseudo": 0, "sogi": 1, "sogi_adaptive": 2}.items()}[
-        extractor_id(extractor)]
+    ex_name = Extractor(extractor_id(extractor)).key
     # strict=False: a refused configuration is a result (the drive boots in
     # FAULT), reported in info["invalid_reason"] with the field and its range.
     sim = Sim(mot, extractor=extractor, seed=seed, noise=noise, x0_m=x0, plant=plant, fw=fw,
