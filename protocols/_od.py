@@ -375,10 +375,53 @@ def load(path: Path | str = OD_YAML) -> ObjectDictionary:
     return _LOADED[key]
 
 
+VERSION_RE = re.compile(r"(\d{1,3})\.(\d{1,3})\.(\d{1,3})")
+
+
+def _device(raw: dict[str, Any]) -> dict[str, Any]:
+    """The ``device:`` section with what is derived from ``firmware_version`` (MAJOR.MINOR.PATCH):
+    ``revision_number`` (0x00MMmmpp, FW_VERSION_U32), never written by hand."""
+    dev = dict(raw)
+    v = str(dev.get("firmware_version", ""))
+    m = VERSION_RE.fullmatch(v)
+    if not m or any(int(x) > 255 for x in m.groups()):
+        raise OdError(f"od.yaml device.firmware_version: {v!r}, expected MAJOR.MINOR.PATCH "
+                      "with each part 0..255")
+    if "revision_number" in dev:
+        raise OdError("od.yaml device.revision_number: derived from device.firmware_version; "
+                      "remove it")
+    major, minor, patch = (int(x) for x in m.groups())
+    dev["firmware_version"] = v
+    dev["revision_number"] = (major << 16) | (minor << 8) | patch
+    return dev
+
+
+def _with_device_refs(obj: dict[str, Any], dev: dict[str, Any]) -> dict[str, Any]:
+    """``default: device.<key>`` replaced by the device section's value (a copy: the
+    parsed document is shared)."""
+    def sub(d: dict[str, Any], where: str) -> dict[str, Any]:
+        v = d.get("default")
+        if isinstance(v, str) and v.startswith("device."):
+            key = v[len("device."):]
+            if key not in dev:
+                raise OdError(f"{where}: default {v!r}, the device section has no {key!r} "
+                              f"(it has {', '.join(sorted(dev))})")
+            return {**d, "default": dev[key]}
+        return d
+
+    where = f"od.yaml 0x{int(obj['index']):04X}"
+    out = sub(obj, where)
+    if "subs" in obj:
+        out = {**out, "subs": [sub(s, f"{where}:{s.get('sub')}") for s in obj["subs"]]}
+    return out
+
+
 def _load(path: Path) -> ObjectDictionary:
     data = _parse(path)
+    dev = _device(data["device"])
     fw_limits = data.get("fw_config", {}) or {}
-    objs = list(data["objects"]) + _pdo_objects(data.get("pdos", {}) or {})
+    objs = ([_with_device_refs(o, dev) for o in data["objects"]]
+            + _pdo_objects(data.get("pdos", {}) or {}))
     max_string = int(data["device"].get("max_string", 24))
     entries: list[OdEntry] = []
     seen: set[tuple[int, int]] = set()
@@ -430,7 +473,7 @@ def _load(path: Path) -> ObjectDictionary:
         if any(g.code == flt.code or g.name == flt.name for g in faults):
             raise OdError(f"{where}: code or name {flt.name} defined twice")
         faults.append(flt)
-    return ObjectDictionary(device=dict(data["device"]), entries=entries, signals=signals,
+    return ObjectDictionary(device=dev, entries=entries, signals=signals,
                             fw_config=fw_limits, faults=faults,
                             enums=_enums(data.get("enums", []) or []))
 

@@ -11,6 +11,7 @@ Outputs (checked in; tests/python/test_protocol_od.py fails on drift):
 - firmware_c/comm/generated/fw_serial_signals.h / .c (signal table, see fw_serial.h)
 - firmware_c/include/pmlsm/fw_faults.h            (fw_fault_t: codes and names of the core)
 - firmware_c/include/pmlsm/fw_enums.h             (enums whose values cross the wire)
+- firmware_c/include/pmlsm/fw_version.h           (FW_VERSION_*: device.firmware_version)
 - firmware_c/include/pmlsm/fw_config_fields.h     (fw_config_t field table: types, units, ranges)
 - protocols/generated/pmlsm_drive.eds           (CiA 306 EDS for canopen.import_od)
 - protocols/generated/od_names.py               (fault codes and names, enums, object indices)
@@ -360,6 +361,9 @@ def gen_py_names(od: ObjectDictionary) -> str:
         "from enum import IntEnum",
         "from typing import Any, NamedTuple",
         "",
+        "#: the firmware's version (device.firmware_version; 0x100A, 0x2040 packed)",
+        f"FW_VERSION_STRING = {str(od.device['firmware_version'])!r}",
+        "",
         "FAULTS: dict[int, tuple[str, str]] = {",
     ]
     for f in od.faults:
@@ -465,6 +469,34 @@ def _py_enums(od: ObjectDictionary) -> list[str]:
     return lines
 
 
+def gen_version_header(od: ObjectDictionary) -> str:
+    """FW_VERSION_* (firmware_c/include/pmlsm/fw_version.h) from od.yaml's
+    ``device.firmware_version``, the one place the version is written."""
+    major, minor, patch = (int(x) for x in str(od.device["firmware_version"]).split("."))
+    return "\n".join([
+        f"/* {HEADER} */",
+        "/**",
+        " * @file fw_version.h",
+        " * @brief The firmware's version (protocols/od.yaml, device.firmware_version): 0x100A",
+        " *        as text, 0x2040 and the identity's revision number (0x1018:3) packed.",
+        " */",
+        "#ifndef PMLSM_FW_VERSION_H",
+        "#define PMLSM_FW_VERSION_H",
+        "",
+        "#include <stdint.h>",
+        "",
+        f"#define FW_VERSION_MAJOR {major}",
+        f"#define FW_VERSION_MINOR {minor}",
+        f"#define FW_VERSION_PATCH {patch}",
+        "/** Firmware version packed as 0x00MMmmpp. */",
+        "#define FW_VERSION_U32 \\",
+        "  ((uint32_t)((FW_VERSION_MAJOR << 16) | (FW_VERSION_MINOR << 8) | FW_VERSION_PATCH))",
+        f'#define FW_VERSION_STRING "{od.device["firmware_version"]}"',
+        "",
+        "#endif /* PMLSM_FW_VERSION_H */",
+        ""])
+
+
 def gen_fault_header(od: ObjectDictionary) -> str:
     """fw_fault_t for the core (firmware_c/include/pmlsm/fw_faults.h): the codes,
     names and texts of od.yaml's ``faults:`` list, the one source."""
@@ -541,6 +573,7 @@ def outputs(od: ObjectDictionary | None = None) -> dict[Path, str]:
         gen / "fw_serial_signals.c": gen_signals_source(od),
         ROOT / "firmware_c" / "include" / "pmlsm" / "fw_faults.h": gen_fault_header(od),
         ROOT / "firmware_c" / "include" / "pmlsm" / "fw_enums.h": gen_enums_header(od),
+        ROOT / "firmware_c" / "include" / "pmlsm" / "fw_version.h": gen_version_header(od),
         ROOT / "firmware_c" / "include" / "pmlsm" / "fw_config_fields.h":
             gen_config_fields_header(od),
         ROOT / "protocols" / "generated" / "pmlsm_drive.eds": gen_eds(od),

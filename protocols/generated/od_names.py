@@ -15,6 +15,9 @@ from __future__ import annotations
 from enum import IntEnum
 from typing import Any, NamedTuple
 
+#: the firmware's version (device.firmware_version; 0x100A, 0x2040 packed)
+FW_VERSION_STRING = '0.2.0'
+
 FAULTS: dict[int, tuple[str, str]] = {
     0x2310: ('OVERCURRENT', '|phase current| above i_trip_A'),
     0x2350: ('I2T', 'current-time integral above the i2t limit (i_rated_A, i2t_time_s)'),

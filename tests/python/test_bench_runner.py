@@ -15,6 +15,7 @@ import pytest
 
 from bench import Drive, MotorUnits, Runner, validate_sequence
 from bench._fake import FakeDrive402
+from protocols.generated import od_names
 
 UNITS = MotorUnits(pole_pitch_m=0.024, pole_pairs=4)
 HEAD = "name: t\nmotor: paper_salient\nextractor: sogi_adaptive\nseed: 0\nsteps:\n"
@@ -180,7 +181,7 @@ def test_hardware_path_with_a_stand_in_drive(tmp_path) -> None:
         assert (0x60FF, 0, 10000) in fake.writes
         meta = json.loads((out.run_dir / "meta.json").read_text())
         assert meta["connection_info"]["kind"] == "hardware"
-        assert meta["drive"]["firmware_version"] == "0.1.0"
+        assert meta["drive"]["firmware_version"] == od_names.FW_VERSION_STRING == "0.2.0"
         assert any("connected to HARDWARE" in s for s in said)
     finally:
         fake.close()

@@ -286,3 +286,37 @@ def test_bad_enum_is_reported_with_its_place(tmp_path, old, new, match):
     p.write_text(src.replace(old, new, 1))
     with pytest.raises(OdError, match=match):
         load(p)
+
+
+def test_firmware_version_is_written_once(od):
+    """device.firmware_version is the one place: 0x100A (text), 0x2040 and 0x1018:3
+    (packed 0x00MMmmpp), the EDS and the C header all come from it."""
+    v = od.device["firmware_version"]
+    major, minor, patch = (int(x) for x in v.split("."))
+    packed = (major << 16) | (minor << 8) | patch
+    assert od.find(0x100A).default == v
+    assert od.find(0x2040).default == packed == od.find(0x1018, 3).default
+    assert od.find(0x1018, 2).default == od.device["product_number"]
+    h = Path(generate.ROOT, "firmware_c", "include", "pmlsm", "fw_version.h").read_text()
+    got = {k: int(n) for k, n in re.findall(r"#define FW_VERSION_(MAJOR|MINOR|PATCH) (\d+)", h)}
+    assert got == {"MAJOR": major, "MINOR": minor, "PATCH": patch}
+    eds = configparser.ConfigParser()
+    eds.read(Path(generate.ROOT, "protocols", "generated", "pmlsm_drive.eds"))
+    assert int(eds["DeviceInfo"]["RevisionNumber"], 0) == packed
+
+
+@pytest.mark.parametrize("old, new, match", [
+    ("  firmware_version: 0.2.0\n", "  firmware_version: 0.2\n",
+     r"device.firmware_version: '0.2', expected MAJOR.MINOR.PATCH"),
+    ("  firmware_version: 0.2.0\n", "  firmware_version: 0.2.0\n  revision_number: 0x200\n",
+     r"device.revision_number: derived from device.firmware_version"),
+    ("    default: device.firmware_version\n", "    default: device.firmware\n",
+     r"0x100A: default 'device.firmware', the device section has no 'firmware'"),
+])
+def test_bad_device_section_is_a_one_line_error(tmp_path, old, new, match):
+    src = Path(generate.ROOT, "protocols", "od.yaml").read_text()
+    assert old in src
+    p = tmp_path / "od.yaml"
+    p.write_text(src.replace(old, new, 1))
+    with pytest.raises(OdError, match=match):
+        load(p)

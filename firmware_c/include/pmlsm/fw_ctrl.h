@@ -35,13 +35,9 @@
 extern "C" {
 #endif
 
-#define FW_VERSION_MAJOR 0
-#define FW_VERSION_MINOR 1
-#define FW_VERSION_PATCH 0
-/** Firmware version packed as 0x00MMmmpp. */
-#define FW_VERSION_U32                                                         \
-  ((uint32_t)((FW_VERSION_MAJOR << 16) | (FW_VERSION_MINOR << 8) |            \
-              FW_VERSION_PATCH))
+/* FW_VERSION_MAJOR/MINOR/PATCH, FW_VERSION_U32: generated from protocols/od.yaml
+ * (device.firmware_version). */
+#include "fw_version.h"
 
 /** Largest supported number of PWM periods per injection period. */
 #define FW_INJ_MAX_SAMPLES 64u
