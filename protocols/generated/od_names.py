@@ -174,6 +174,8 @@ INDEX_PROTECTIONS = 0x2051
 INDEX_INTEGRITY_MONITOR = 0x2052
 INDEX_BACK_EMF_OBSERVER = 0x2053
 INDEX_MACHINE_AND_LOOP_BANDWIDTHS = 0x2054
+INDEX_START_UP_AND_ESTIMATE_SUPERVISION = 0x2055
+INDEX_BOARD_SENSING = 0x2056
 INDEX_TELEMETRY = 0x2060
 INDEX_TRACE = 0x2070
 INDEX_IDENTIFICATION = 0x2080
@@ -380,6 +382,7 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2050, 16): 'Speed filter',
     (0x2050, 17): 'Saliency minimum',
     (0x2050, 18): 'Quick stop time',
+    (0x2050, 19): 'Pole pairs',
     (0x2051, 0): 'Highest sub-index supported',
     (0x2051, 1): 'Max speed',
     (0x2051, 2): 'Position limit min',
@@ -414,6 +417,20 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2054, 4): 'Current loop bandwidth',
     (0x2054, 5): 'Speed loop bandwidth',
     (0x2054, 6): 'Gains automatic',
+    (0x2055, 0): 'Highest sub-index supported',
+    (0x2055, 1): 'Alignment time',
+    (0x2055, 2): 'Polarity pulse voltage',
+    (0x2055, 3): 'Polarity pulse samples',
+    (0x2055, 4): 'Polarity pulse pairs',
+    (0x2055, 5): 'Polarity margin',
+    (0x2055, 6): 'HF amplitude minimum ratio',
+    (0x2055, 7): 'PLL error limit',
+    (0x2055, 8): 'PLL error time',
+    (0x2056, 0): 'Highest sub-index supported',
+    (0x2056, 1): 'Current per count',
+    (0x2056, 2): 'Current zero',
+    (0x2056, 3): 'DC link volts per count',
+    (0x2056, 4): 'Full-scale count',
     (0x2060, 0): 'Highest sub-index supported',
     (0x2060, 1): 'Decimation',
     (0x2060, 2): 'Signal count',
@@ -643,6 +660,7 @@ DRIVE_CONFIGURATION__SPD_KI_A_PER_RAD = Entry(0x2050, 15, unit='A/rad')
 DRIVE_CONFIGURATION__SPD_FILTER_HZ = Entry(0x2050, 16, unit='Hz')
 DRIVE_CONFIGURATION__SALIENCY_MIN = Entry(0x2050, 17)
 DRIVE_CONFIGURATION__QUICK_STOP_TIME_S = Entry(0x2050, 18, unit='s')
+DRIVE_CONFIGURATION__POLE_PAIRS = Entry(0x2050, 19)
 PROTECTIONS__V_MAX_MPS = Entry(0x2051, 1, unit='m/s')
 PROTECTIONS__POS_LIMIT_MIN_M = Entry(0x2051, 2, unit='m')
 PROTECTIONS__POS_LIMIT_MAX_M = Entry(0x2051, 3, unit='m')
@@ -673,6 +691,18 @@ MACHINE_AND_LOOP_BANDWIDTHS__COULOMB_N = Entry(0x2054, 3, unit='N')
 MACHINE_AND_LOOP_BANDWIDTHS__CUR_BW_RADPS = Entry(0x2054, 4, unit='rad/s')
 MACHINE_AND_LOOP_BANDWIDTHS__SPD_BW_RADPS = Entry(0x2054, 5, unit='rad/s')
 MACHINE_AND_LOOP_BANDWIDTHS__GAINS_AUTO = Entry(0x2054, 6)
+START_UP_AND_ESTIMATE_SUPERVISION__ALIGN_TIME_S = Entry(0x2055, 1, unit='s')
+START_UP_AND_ESTIMATE_SUPERVISION__POL_PULSE_V = Entry(0x2055, 2, unit='V')
+START_UP_AND_ESTIMATE_SUPERVISION__POL_PULSE_SAMPLES = Entry(0x2055, 3)
+START_UP_AND_ESTIMATE_SUPERVISION__POL_PULSE_PAIRS = Entry(0x2055, 4)
+START_UP_AND_ESTIMATE_SUPERVISION__POL_MARGIN = Entry(0x2055, 5)
+START_UP_AND_ESTIMATE_SUPERVISION__HF_MIN_RATIO = Entry(0x2055, 6)
+START_UP_AND_ESTIMATE_SUPERVISION__PLL_ERR_MAX_RAD = Entry(0x2055, 7, unit='rad')
+START_UP_AND_ESTIMATE_SUPERVISION__PLL_ERR_TIME_S = Entry(0x2055, 8, unit='s')
+BOARD_SENSING__ADC_A_PER_COUNT = Entry(0x2056, 1, unit='A')
+BOARD_SENSING__ADC_OFFSET_COUNTS = Entry(0x2056, 2)
+BOARD_SENSING__ADC_V_PER_COUNT = Entry(0x2056, 3, unit='V')
+BOARD_SENSING__ADC_MAX_COUNT = Entry(0x2056, 4)
 TELEMETRY__DECIMATION = Entry(0x2060, 1)
 TELEMETRY__SIGNAL_COUNT = Entry(0x2060, 2)
 TELEMETRY__SIGNAL_1 = Entry(0x2060, 3)

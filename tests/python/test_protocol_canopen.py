@@ -127,6 +127,39 @@ def test_out_of_range_write_aborts_and_changes_nothing(rig):
     assert node.sdo[0x6071].raw == 0
 
 
+def test_start_up_supervision_and_board_sensing_over_canopen(rig):
+    """Every configuration field is on the bus: the start-up and estimate-loss tuning
+    (0x2055) and the rotary-equivalent pole pairs (0x2050:19) are written and read back
+    by SDO, an out-of-range value aborts and changes nothing; the board's ADC scaling
+    (0x2056) reads what the simulated board uses and refuses writes."""
+    net, node, bridge, _ = rig
+    new = {(0x2055, 1): 0.12, (0x2055, 2): 48.0, (0x2055, 3): 10, (0x2055, 4): 3,
+           (0x2055, 5): 0.05, (0x2055, 6): 0.25, (0x2055, 7): 0.4, (0x2055, 8): 0.04,
+           (0x2050, 19): 5.0}
+    keep = {a: node.sdo[a[0]][a[1]].raw for a in new}
+    assert keep[(0x2055, 7)] == pytest.approx(0.5) and keep[(0x2055, 3)] == 12  # defaults
+    try:
+        for (i, s), v in new.items():
+            node.sdo[i][s].raw = v
+        for (i, s), v in new.items():
+            assert node.sdo[i][s].raw == pytest.approx(v, rel=1e-6), (hex(i), s)
+        with pytest.raises(SdoAbortedError) as ei:
+            node.sdo[0x2055][7].raw = 2.0  # pll_err_max_rad: 0.01 .. 1.6
+        assert ei.value.code == 0x06090031
+        assert node.sdo[0x2055][7].raw == pytest.approx(0.4)
+    finally:
+        for (i, s), v in keep.items():
+            node.sdo[i][s].raw = v
+    if bridge.sim is not None:
+        cfg = bridge.sim.cfg
+        for s, name in ((1, "adc_A_per_count"), (2, "adc_offset_counts"),
+                        (3, "adc_V_per_count"), (4, "adc_max_count")):
+            assert node.sdo[0x2056][s].raw == pytest.approx(getattr(cfg, name), rel=1e-6)
+    with pytest.raises(SdoAbortedError) as ei:
+        node.sdo[0x2056][1].raw = 1.0
+    assert ei.value.code == 0x06010002
+
+
 def test_walk_to_operation_enabled_and_follow_target_velocity(rig):
     net, node, bridge, _ = rig
     node.nmt.state = "PRE-OPERATIONAL"
@@ -259,3 +292,4 @@ def test_serial_telemetry_and_trace_of_a_speed_step(rig):
     # telemetry at 1 kHz, consecutive steps 24 apart
     steps = [t.step for t in telem]
     assert len(steps) > 10 and all(b - a == 24 for a, b in zip(steps, steps[1:], strict=False))
+

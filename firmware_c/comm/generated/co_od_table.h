@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 268u
-#define CO_OD_RAM_SIZE 884u
+#define CO_OD_COUNT 283u
+#define CO_OD_RAM_SIZE 938u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -194,94 +194,109 @@
 #define CO_OD_2050_10 181u /* Drive configuration: Speed filter */
 #define CO_OD_2050_11 182u /* Drive configuration: Saliency minimum */
 #define CO_OD_2050_12 183u /* Drive configuration: Quick stop time */
-#define CO_OD_2051_00 184u /* Protections: Highest sub-index supported */
-#define CO_OD_2051_01 185u /* Protections: Max speed */
-#define CO_OD_2051_02 186u /* Protections: Position limit min */
-#define CO_OD_2051_03 187u /* Protections: Position limit max */
-#define CO_OD_2051_04 188u /* Protections: Following error window */
-#define CO_OD_2051_05 189u /* Protections: Following error time */
-#define CO_OD_2051_06 190u /* Protections: Rated current */
-#define CO_OD_2051_07 191u /* Protections: i2t time */
-#define CO_OD_2051_08 192u /* Protections: Quick stop option */
-#define CO_OD_2051_09 193u /* Protections: Fault reaction option */
-#define CO_OD_2051_0A 194u /* Protections: Fault braking time */
-#define CO_OD_2052_00 195u /* Integrity monitor: Highest sub-index supported */
-#define CO_OD_2052_01 196u /* Integrity monitor: HF angle limit */
-#define CO_OD_2052_02 197u /* Integrity monitor: Detection time */
-#define CO_OD_2052_03 198u /* Integrity monitor: Saliency tolerance */
-#define CO_OD_2052_04 199u /* Integrity monitor: Back-EMF angle limit */
-#define CO_OD_2052_05 200u /* Integrity monitor: Back-EMF minimum speed */
-#define CO_OD_2052_06 201u /* Integrity monitor: Current sum limit */
-#define CO_OD_2052_07 202u /* Integrity monitor: Current offset limit */
-#define CO_OD_2052_08 203u /* Integrity monitor: Start speed limit */
-#define CO_OD_2052_09 204u /* Integrity monitor: Back-EMF minimum */
-#define CO_OD_2053_00 205u /* Back-EMF observer: Highest sub-index supported */
-#define CO_OD_2053_01 206u /* Back-EMF observer: Handover up speed */
-#define CO_OD_2053_02 207u /* Back-EMF observer: Handover down speed */
-#define CO_OD_2053_03 208u /* Back-EMF observer: Injection share */
-#define CO_OD_2053_04 209u /* Back-EMF observer: Handover up */
-#define CO_OD_2053_05 210u /* Back-EMF observer: Handover down */
-#define CO_OD_2054_00 211u /* Machine and loop bandwidths: Highest sub-index supported */
-#define CO_OD_2054_01 212u /* Machine and loop bandwidths: Mover mass */
-#define CO_OD_2054_02 213u /* Machine and loop bandwidths: Viscous friction */
-#define CO_OD_2054_03 214u /* Machine and loop bandwidths: Coulomb friction */
-#define CO_OD_2054_04 215u /* Machine and loop bandwidths: Current loop bandwidth */
-#define CO_OD_2054_05 216u /* Machine and loop bandwidths: Speed loop bandwidth */
-#define CO_OD_2054_06 217u /* Machine and loop bandwidths: Gains automatic */
-#define CO_OD_2060_00 218u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 219u /* Telemetry: Decimation */
-#define CO_OD_2060_02 220u /* Telemetry: Signal count */
-#define CO_OD_2060_03 221u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 222u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 223u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 224u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 225u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 226u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 227u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 228u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 229u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 230u /* Trace: Command */
-#define CO_OD_2070_02 231u /* Trace: State */
-#define CO_OD_2070_03 232u /* Trace: Trigger signal */
-#define CO_OD_2070_04 233u /* Trace: Trigger level */
-#define CO_OD_2070_05 234u /* Trace: Trigger edge */
-#define CO_OD_2070_06 235u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 236u /* Trace: Signal count */
-#define CO_OD_2070_08 237u /* Trace: Signal 1 */
-#define CO_OD_2070_09 238u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 239u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 240u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 241u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 242u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 243u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 244u /* Trace: Signal 8 */
-#define CO_OD_2080_00 245u /* Identification: Highest sub-index supported */
-#define CO_OD_2080_01 246u /* Identification: d-axis current reference */
-#define CO_OD_2080_02 247u /* Identification: Measured smaller inductance */
-#define CO_OD_2080_03 248u /* Identification: Measured larger inductance */
-#define CO_OD_603F_00 249u /* Error code: Error code */
-#define CO_OD_6040_00 250u /* Controlword: Controlword */
-#define CO_OD_6041_00 251u /* Statusword: Statusword */
-#define CO_OD_605A_00 252u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 253u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 254u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 255u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 256u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 257u /* Following error window: Following error window */
-#define CO_OD_6066_00 258u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 259u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 260u /* Target torque: Target torque */
-#define CO_OD_6077_00 261u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 262u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 263u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 264u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 265u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 266u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 267u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2050_13 184u /* Drive configuration: Pole pairs */
+#define CO_OD_2051_00 185u /* Protections: Highest sub-index supported */
+#define CO_OD_2051_01 186u /* Protections: Max speed */
+#define CO_OD_2051_02 187u /* Protections: Position limit min */
+#define CO_OD_2051_03 188u /* Protections: Position limit max */
+#define CO_OD_2051_04 189u /* Protections: Following error window */
+#define CO_OD_2051_05 190u /* Protections: Following error time */
+#define CO_OD_2051_06 191u /* Protections: Rated current */
+#define CO_OD_2051_07 192u /* Protections: i2t time */
+#define CO_OD_2051_08 193u /* Protections: Quick stop option */
+#define CO_OD_2051_09 194u /* Protections: Fault reaction option */
+#define CO_OD_2051_0A 195u /* Protections: Fault braking time */
+#define CO_OD_2052_00 196u /* Integrity monitor: Highest sub-index supported */
+#define CO_OD_2052_01 197u /* Integrity monitor: HF angle limit */
+#define CO_OD_2052_02 198u /* Integrity monitor: Detection time */
+#define CO_OD_2052_03 199u /* Integrity monitor: Saliency tolerance */
+#define CO_OD_2052_04 200u /* Integrity monitor: Back-EMF angle limit */
+#define CO_OD_2052_05 201u /* Integrity monitor: Back-EMF minimum speed */
+#define CO_OD_2052_06 202u /* Integrity monitor: Current sum limit */
+#define CO_OD_2052_07 203u /* Integrity monitor: Current offset limit */
+#define CO_OD_2052_08 204u /* Integrity monitor: Start speed limit */
+#define CO_OD_2052_09 205u /* Integrity monitor: Back-EMF minimum */
+#define CO_OD_2053_00 206u /* Back-EMF observer: Highest sub-index supported */
+#define CO_OD_2053_01 207u /* Back-EMF observer: Handover up speed */
+#define CO_OD_2053_02 208u /* Back-EMF observer: Handover down speed */
+#define CO_OD_2053_03 209u /* Back-EMF observer: Injection share */
+#define CO_OD_2053_04 210u /* Back-EMF observer: Handover up */
+#define CO_OD_2053_05 211u /* Back-EMF observer: Handover down */
+#define CO_OD_2054_00 212u /* Machine and loop bandwidths: Highest sub-index supported */
+#define CO_OD_2054_01 213u /* Machine and loop bandwidths: Mover mass */
+#define CO_OD_2054_02 214u /* Machine and loop bandwidths: Viscous friction */
+#define CO_OD_2054_03 215u /* Machine and loop bandwidths: Coulomb friction */
+#define CO_OD_2054_04 216u /* Machine and loop bandwidths: Current loop bandwidth */
+#define CO_OD_2054_05 217u /* Machine and loop bandwidths: Speed loop bandwidth */
+#define CO_OD_2054_06 218u /* Machine and loop bandwidths: Gains automatic */
+#define CO_OD_2055_00 219u /* Start-up and estimate supervision: Highest sub-index supported */
+#define CO_OD_2055_01 220u /* Start-up and estimate supervision: Alignment time */
+#define CO_OD_2055_02 221u /* Start-up and estimate supervision: Polarity pulse voltage */
+#define CO_OD_2055_03 222u /* Start-up and estimate supervision: Polarity pulse samples */
+#define CO_OD_2055_04 223u /* Start-up and estimate supervision: Polarity pulse pairs */
+#define CO_OD_2055_05 224u /* Start-up and estimate supervision: Polarity margin */
+#define CO_OD_2055_06 225u /* Start-up and estimate supervision: HF amplitude minimum ratio */
+#define CO_OD_2055_07 226u /* Start-up and estimate supervision: PLL error limit */
+#define CO_OD_2055_08 227u /* Start-up and estimate supervision: PLL error time */
+#define CO_OD_2056_00 228u /* Board sensing: Highest sub-index supported */
+#define CO_OD_2056_01 229u /* Board sensing: Current per count */
+#define CO_OD_2056_02 230u /* Board sensing: Current zero */
+#define CO_OD_2056_03 231u /* Board sensing: DC link volts per count */
+#define CO_OD_2056_04 232u /* Board sensing: Full-scale count */
+#define CO_OD_2060_00 233u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 234u /* Telemetry: Decimation */
+#define CO_OD_2060_02 235u /* Telemetry: Signal count */
+#define CO_OD_2060_03 236u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 237u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 238u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 239u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 240u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 241u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 242u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 243u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 244u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 245u /* Trace: Command */
+#define CO_OD_2070_02 246u /* Trace: State */
+#define CO_OD_2070_03 247u /* Trace: Trigger signal */
+#define CO_OD_2070_04 248u /* Trace: Trigger level */
+#define CO_OD_2070_05 249u /* Trace: Trigger edge */
+#define CO_OD_2070_06 250u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 251u /* Trace: Signal count */
+#define CO_OD_2070_08 252u /* Trace: Signal 1 */
+#define CO_OD_2070_09 253u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 254u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 255u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 256u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 257u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 258u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 259u /* Trace: Signal 8 */
+#define CO_OD_2080_00 260u /* Identification: Highest sub-index supported */
+#define CO_OD_2080_01 261u /* Identification: d-axis current reference */
+#define CO_OD_2080_02 262u /* Identification: Measured smaller inductance */
+#define CO_OD_2080_03 263u /* Identification: Measured larger inductance */
+#define CO_OD_603F_00 264u /* Error code: Error code */
+#define CO_OD_6040_00 265u /* Controlword: Controlword */
+#define CO_OD_6041_00 266u /* Statusword: Statusword */
+#define CO_OD_605A_00 267u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 268u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 269u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 270u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 271u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 272u /* Following error window: Following error window */
+#define CO_OD_6066_00 273u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 274u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 275u /* Target torque: Target torque */
+#define CO_OD_6077_00 276u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 277u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 278u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 279u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 280u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 281u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 282u /* Supported drive modes: Supported drive modes */
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 67u
+#define CO_OD_CFG_COUNT 80u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 
