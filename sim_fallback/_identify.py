@@ -19,6 +19,9 @@ simulator's truth is used by the tests only, to judge the result.
 5. Mass and friction from the same runs: K_F i_q = m a + b v + F_c sgn(v).
    Both fits use the position estimate's derivatives (zero phase) and the same
    Gaussian low-pass on both sides of each equation (see _fit_motion).
+6. Viscous and Coulomb friction: trapezoidal speed passes at two speeds in each
+   direction within the travel; F = F_c sgn(v) + b v by weighted least squares over
+   constant-speed windows of whole electrical periods (see _fit_friction).
 """
 
 from __future__ import annotations
@@ -55,6 +58,20 @@ IDENT_RESTORED = ("mon_bemf_min_mps",)
 #: Speed-loop bandwidth (rad/s) while identifying: the motor file's may be tuned for a
 #: known motor (iron_core_linear: 80 rad/s); on an unknown one a slow loop is safer.
 IDENT_SPEED_BW = 20.0
+
+#: Constant-speed passes for the friction line (step 6): ramp acceleration (m/s^2),
+#: speed-loop bandwidth (rad/s, derived from the measured mass and psi_f), the time
+#: the speed loop settles after a ramp (s), the shortest averaging window (s), the
+#: half-width of the speed fits at its ends (s), the rest after each pass (s), the
+#: fastest pass (m/s) and the share of the travel kept free at each end.
+PASS_ACCEL = 5.0
+PASS_SPEED_BW = 60.0
+PASS_SETTLE_S = 0.08
+PASS_MIN_WINDOW_S = 0.12
+PASS_V_FIT_S = 0.04
+PASS_REST_S = 0.25
+PASS_V_MAX = 1.5
+PASS_MARGIN = 0.1
 
 #: Speed profile of the motion runs: relative amplitude and frequency (Hz) of the
 #: sinusoid around the mean speed.
@@ -384,13 +401,166 @@ def run_identification(probe: Probe, cfg0: Any, tau_m: float, travel_m: float = 
         runs.append({"x": r["pos_hat_m"], "i_q": r["i_q_A"], "i_d": r["i_d_A"],
                      "u_q": r["u_q_V"]})
         probe.ramp_speed(float(prof[-1]), 0.0, 0.2)
-        probe.run(0.45)  # back to rest under control
+        x_end = float(probe.run(0.45)["pos_hat_m"][-1])  # back to rest under control
     fit = _fit_motion(runs, dt=0.001, R=float(R), L_q=float(L_q_ss), L_d=float(L_d0),
                       tau=tau_m)
     res.values.update(fit.values)
     res.sigma.update(fit.sigma)
     res.log += fit.log
+
+    # 6. the friction line from constant-speed passes at two speeds in each direction
+    # (the profile runs above cannot separate b v from F_c: see _fit_friction)
+    # where the mover is, from where the profile runs started (the position estimate is
+    # continuous while the drive runs)
+    x_rel = x_end - float(runs[0]["x"][0])
+    try:
+        line = _friction_passes(probe, cfg0, tau_m, travel_m, x_rel, res.values, res.sigma)
+    except RuntimeError as e:
+        # a drive fault in this last step keeps what was measured before it
+        res.log.append(f"constant-speed passes stopped ({e}): viscous and Coulomb "
+                       "friction from the profile runs")
+        return res
+    if line is None:
+        res.log.append(f"travel {travel_m:g} m too short for the constant-speed passes: "
+                       "viscous and Coulomb friction from the profile runs")
+    else:
+        res.values.update(line.values)
+        res.sigma.update(line.sigma)
+        res.log += line.log
     return res
+
+
+def _friction_passes(probe: Probe, cfg0: Any, tau: float, travel_m: float, x_rel: float,
+                     values: dict[str, float], sigma: dict[str, float]) -> _Fit | None:
+    """Step 6: trapezoidal speed passes, two speeds in each direction, within the travel;
+    the friction line from their constant-speed parts (:func:`_fit_friction`). ``x_rel``:
+    where the mover is (m) from where the motion runs started, by the position estimate.
+    None when the travel is too short for a plateau of whole electrical periods.
+
+    The drive is reconfigured first with the measured psi_f and mass (the back-EMF
+    witness checks the voltage with psi_f: a randomized motor's 25 % off faulted at
+    1 m/s) and a speed loop of :data:`PASS_SPEED_BW` derived from them, so the speed
+    settles within :data:`PASS_SETTLE_S` after each ramp (at 20 rad/s it does not
+    within the travel)."""
+    psi, m = float(values["psi_f_Wb"]), float(values["mass_kg"])
+    if not (psi > 0.0 and m > 0.0):
+        return None
+    k_e = math.pi / tau
+    K_F = 1.5 * k_e * psi
+    a = PASS_ACCEL
+    lo, hi = PASS_MARGIN * travel_m, (1.0 - PASS_MARGIN) * travel_m
+    v_cap = PASS_V_MAX
+    v_max_cfg = float(getattr(cfg0, "v_max_mps", 0.0) or 0.0)
+    if v_max_cfg > 0.0:
+        v_cap = min(v_cap, 0.5 * v_max_cfg)
+
+    def length(v: float) -> float:
+        """Travel of a pass at v: the ramps at a, the settling, an averaging window of
+        at least PASS_MIN_WINDOW_S and one electrical period (2 tau), the end fit."""
+        window = max(v * PASS_MIN_WINDOW_S, 2.0 * tau)
+        return v * v / a + v * (PASS_SETTLE_S + PASS_V_FIT_S) + window
+
+    def top_speed(dist: float) -> float:
+        """The fastest pass (up to v_cap) that fits in ``dist``; 0 if none does."""
+        if length(v_cap) <= dist:
+            return v_cap
+        v0, v1 = 0.0, v_cap
+        for _ in range(40):
+            v0, v1 = ((v0 + v1) / 2, v1) if length((v0 + v1) / 2) <= dist else \
+                (v0, (v0 + v1) / 2)
+        return v0 if length(v0) <= dist else 0.0
+
+    v_hi = top_speed(hi - lo)
+    if v_hi <= 0.0:
+        return None
+    kp = m * PASS_SPEED_BW / (K_F * k_e)
+    probe.reconfigure({"psi_f_Wb": psi, "mass_kg": m, "spd_kp_A_per_radps": kp,
+                       "spd_ki_A_per_rad": kp * PASS_SPEED_BW / 6.0})
+    passes = []
+    for level in (1.0, 0.5):
+        for sgn in (1.0, -1.0):
+            dist = (hi - x_rel) if sgn > 0 else (x_rel - lo)
+            v = min(level * v_hi, top_speed(dist))
+            if v < 0.25 * v_hi:
+                continue
+            ta = v / a
+            tp = max(dist / v - ta, 0.0)
+            t_end = 2.0 * ta + tp + PASS_REST_S
+            t_pts = np.arange(0.0, t_end + 1e-9, 0.01)
+            prof = sgn * np.interp(t_pts, [0.0, ta, ta + tp, 2.0 * ta + tp, t_end],
+                                   [0.0, v, v, 0.0, 0.0])
+            r = probe.follow_speed(t_pts, prof)
+            x = r["pos_hat_m"]
+            x_rel += float(x[-1] - x[0])
+            passes.append({"x": x, "i_q": r["i_q_A"], "t0": ta + PASS_SETTLE_S,
+                           "t1": ta + tp - PASS_V_FIT_S})
+    return _fit_friction(passes, dt=0.001, K_F=K_F, mass=m, tau=tau,
+                         rel_psi=float(sigma.get("psi_f_Wb", 0.0)) / psi)
+
+
+def _fit_friction(passes: list[dict[str, Any]], dt: float, K_F: float, mass: float,
+                  tau: float, rel_psi: float = 0.0) -> _Fit | None:
+    """Viscous and Coulomb friction from constant-speed windows (drive signals only).
+
+    Each window spans a whole number of electrical periods (2 tau) of the position
+    estimate, so a force periodic in the position (cogging) averages out. Over a window
+    of length T the mean thrust is K_F mean(i_q) = m dv/T + F_c sgn(v) + b mean(v):
+    mean(v) = dx/T exactly from the position estimate, dv (what the speed loop has not
+    settled yet) from straight-line fits of the position at both ends (+- PASS_V_FIT_S),
+    times the mass from the profile runs. F(v) = F_c sgn(v) + b v by weighted least
+    squares over the windows of both directions and two speeds: b is the slope, which
+    needs the wide speed range (the profile runs alone span 0.08-0.3 m/s, where b v
+    was a few newtons beside the Coulomb and cogging forces)."""
+    period = 2.0 * tau
+    h = int(round(PASS_V_FIT_S / dt))
+    tt = np.arange(-h, h + 1) * dt
+
+    def speed_at(x: np.ndarray, i: int) -> tuple[float, float]:
+        c = np.polyfit(tt, x[i - h:i + h + 1], 1)
+        r = x[i - h:i + h + 1] - np.polyval(c, tt)
+        return float(c[0]), float(np.std(r) / math.sqrt(float(np.sum(tt * tt))))
+
+    rows = []
+    for p in passes:
+        x, iq = p["x"], p["i_q"]
+        n0, n1 = int(round(p["t0"] / dt)), int(round(p["t1"] / dt))
+        if n0 - h < 0 or n1 + h >= len(x) or n1 <= n0:
+            continue
+        d = np.abs(x[n0:n1 + 1] - x[n0])
+        k = int(float(d.max()) // period)
+        if k < 1:
+            continue
+        # the window's end where the mover has gone k electrical periods, and the
+        # boundaries of each period inside it (for the scatter)
+        cuts = [n0 + int(np.searchsorted(np.maximum.accumulate(d), j * period))
+                for j in range(k + 1)]
+        nb = cuts[-1]
+        T = (nb - n0) * dt
+        v_mean = float(x[nb] - x[n0]) / T
+        (v0, s0), (v1, s1) = speed_at(x, n0), speed_at(x, nb)
+        F = K_F * float(np.mean(iq[n0:nb])) - mass * (v1 - v0) / T
+        per = [K_F * float(np.mean(iq[cuts[j]:cuts[j + 1]])) for j in range(k)]
+        s_F = math.hypot(float(np.std(per)) / math.sqrt(k) if k > 1 else 0.0,
+                         mass * math.hypot(s0, s1) / T)
+        rows.append((math.copysign(1.0, v_mean), v_mean, F, max(s_F, 1e-3 * abs(F) + 1e-6), k))
+    speeds = {round(abs(r[1]), 2) for r in rows}
+    if len(rows) < 3 or len(speeds) < 2:
+        return None
+    X = np.array([[r[0], r[1]] for r in rows])
+    y = np.array([r[2] for r in rows])
+    w = 1.0 / np.array([r[3] for r in rows])
+    coef, *_ = np.linalg.lstsq(X * w[:, None], y * w, rcond=None)
+    chi2 = float(np.sum(((y - X @ coef) * w) ** 2))
+    dof = max(len(rows) - 2, 1)
+    cov = np.linalg.inv((X * w[:, None]).T @ (X * w[:, None])) * max(1.0, chi2 / dof)
+    F_c, b = float(coef[0]), float(coef[1])
+    return _Fit(
+        values={"b_visc_Ns_per_m": b, "F_coulomb_N": F_c},
+        sigma={"b_visc_Ns_per_m": math.hypot(math.sqrt(cov[1, 1]), rel_psi * b),
+               "F_coulomb_N": math.hypot(math.sqrt(cov[0, 0]), rel_psi * F_c)},
+        log=["friction from constant-speed windows (whole electrical periods): "
+             + ", ".join(f"{r[1]:+.3f} m/s {r[2]:+.2f} N" for r in rows)
+             + f"; F = {F_c:.3f} N sgn(v) + {b:.3f} N s/m v"])
 
 
 def _ramp_id(probe: Probe, target_A: float, seconds: float = 0.03) -> None:

@@ -1,6 +1,8 @@
 """Motor identification by the drive (sim_fallback/_identify.py) against the simulated
 plant's truth, with 12-bit ADC noise: shipped motors and a randomized one."""
 
+import functools
+
 import pytest
 
 from sim_fallback._identify import identify, randomized_plant, truth_of
@@ -54,17 +56,28 @@ def _mechanical_cases():
     return cases + [(mot, _random_plant(seed)) for seed in range(8)]
 
 
+@functools.cache
+def _mechanical(k: int):
+    """Case k of :func:`_mechanical_cases` identified once for the tests below: the
+    result, or the drive fault's message."""
+    mot, plant = _mechanical_cases()[k]
+    try:
+        return identify(mot, plant=plant)
+    except RuntimeError as e:
+        assert plant is not None and "drive fault 0xFF" in str(e), e
+        return str(e)
+
+
 def test_psi_f_mass_and_coulomb_friction():
     """psi_f within 3 %, mass and Coulomb friction within 10 % on the shipped motors and
     on every randomized motor the drive completes (the others stop on a named fault, see
-    above). Measured: psi_f within 0.7 %, mass +0.9 ... -7.4 %, Coulomb -1.0 ... -7.8 %;
+    above). Measured: psi_f within 0.7 %, mass +0.9 ... -7.4 %, Coulomb -0.3 ... +2.6 %
+    (from the constant-speed passes; from the profile runs it was -1.0 ... -7.8 %);
     before the matched filtering and the cogging terms: psi_f to -21 %, mass to -40 %."""
     done = 0
-    for mot, plant in _mechanical_cases():
-        try:
-            r = identify(mot, plant=plant)
-        except RuntimeError as e:
-            assert plant is not None and "drive fault 0xFF" in str(e), e
+    for k, (mot, plant) in enumerate(_mechanical_cases()):
+        r = _mechanical(k)
+        if isinstance(r, str):
             continue
         done += 1
         err = r.rel_error(truth_of(mot, plant))
@@ -72,20 +85,31 @@ def test_psi_f_mass_and_coulomb_friction():
         assert abs(err["mass_kg"]) <= 0.10, (mot.name, plant, err["mass_kg"])
         assert abs(err["F_coulomb_N"]) <= 0.10, (mot.name, plant, err["F_coulomb_N"])
         # the stated one-sigma uncertainty must cover the error within 4 sigma
-        for k in ("psi_f_Wb", "mass_kg"):
-            truth = truth_of(mot, plant)[k]
-            assert abs(r.values[k] - truth) <= 4.0 * r.sigma[k] + 0.01 * truth, (k, r.sigma[k])
+        for k2 in ("psi_f_Wb", "mass_kg", "F_coulomb_N"):
+            truth = truth_of(mot, plant)[k2]
+            assert abs(r.values[k2] - truth) <= 4.0 * r.sigma[k2] + 0.01 * truth, \
+                (k2, r.sigma[k2])
     assert done >= 7, done
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue target not met yet: viscous friction within 10 % (measured +8 ... +91 %: the "
-    "speed profile spans 0.08-0.3 m/s within the 0.3 m travel, where b v is a few newtons "
-    "beside 15 N of Coulomb friction and 8 N of cogging); see docs/identify.md"))
 def test_viscous_friction_target():
-    for mot, plant in _mechanical_cases()[:2]:
-        err = identify(mot, plant=plant).rel_error(truth_of(mot, plant))
-        assert abs(err["b_visc_Ns_per_m"]) <= 0.10
+    """Viscous friction within 10 % (the issue's target) on the same motors, from the
+    constant-speed passes at two speeds in each direction (docs/identify.md, step 6).
+    Measured: paper_salient -8.0 %, iron_core_linear -2.7 %, the randomized motors
+    -1.2 ... -6.5 %; from the profile runs alone (0.08-0.3 m/s) it was +8 ... +91 %.
+    The stated one-sigma covers the error within 4 sigma."""
+    done = 0
+    for k, (mot, plant) in enumerate(_mechanical_cases()):
+        r = _mechanical(k)
+        if isinstance(r, str):
+            continue
+        done += 1
+        truth = truth_of(mot, plant)["b_visc_Ns_per_m"]
+        err = r.rel_error(truth_of(mot, plant))["b_visc_Ns_per_m"]
+        assert abs(err) <= 0.10, (mot.name, plant, err)
+        assert abs(r.values["b_visc_Ns_per_m"] - truth) <= 4.0 * r.sigma["b_visc_Ns_per_m"], \
+            (mot.name, plant, err, r.sigma["b_visc_Ns_per_m"] / truth)
+    assert done >= 7, done
 
 
 def test_motor_file_round_trip(tmp_path):
