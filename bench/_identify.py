@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from protocols.generated import od_names as od
+from protocols.generated.od_names import StartPhase
 from sim_fallback._identify import (
     IDENT_RESTORED,
     PROBE_SIGNALS,
@@ -36,6 +37,8 @@ from sim_fallback._identify import (
 
 #: Telemetry signals the probe asks for (one frame per millisecond).
 TEL_SIGNALS = (*PROBE_SIGNALS, "fault_code", "start_phase")
+#: 0.15 s windows of drive time the start-up may take before identification gives up
+START_WINDOWS = 4
 
 #: Units and descriptions of the identified values (report and motor file).
 QUANTITIES: dict[str, tuple[str, str]] = {
@@ -115,9 +118,16 @@ class WireProbe(Probe):
         d.enable("force")
         d.set_force_N(0.0)
         self.id_ref_A = 0.0
-        r = self.run(0.15)
-        if not r["start_phase"].size or int(r["start_phase"][-1]) != 3:
-            raise IdentifyError("start-up did not reach closed loop in 0.15 s")
+        # The start-up (alignment, polarity, saliency check) takes about 0.1 s of drive
+        # time. A window begins at the last telemetry sample the bench has, which lags
+        # the drive when the host is busy: wait for RUN over up to START_WINDOWS windows
+        # of drive time instead of judging the first one alone.
+        for _ in range(START_WINDOWS):
+            r = self.run(0.15)
+            if r["start_phase"].size and int(r["start_phase"][-1]) == StartPhase.RUN:
+                return
+        raise IdentifyError(f"start-up did not reach closed loop in {0.15 * START_WINDOWS:.2f} s"
+                            " of drive time")
 
     def standstill_start(self, k: int) -> tuple[float, float]:
         self._enable_force()

@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from protocols.generated.od_names import StartPhase
+
 from ._motors import Motor, fw_config
 from ._sim import SIM_REF_FORCE, SIM_REF_SPEED, Sim
 
@@ -216,7 +218,7 @@ class SimProbe(Probe):
         sim.enable("force")
         self._snaps(0.15)
         s = sim.snapshot()
-        if s["start_phase"] != 3:
+        if s["start_phase"] != StartPhase.RUN:
             raise RuntimeError("start-up did not reach closed loop")
         return s
 
