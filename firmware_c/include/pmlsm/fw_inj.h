@@ -69,7 +69,7 @@ typedef struct {
 
 /** Constants from the configuration (n_inj, SOGI group delay); then fw_inj_reset. */
 void fw_inj_init(fw_inj_t *j, const fw_config_t *cfg, float dt_s);
-/** Clear every history; SOGIs restart with k for cfg->extractor. */
+/** Clear every history; SOGIs restart with k for cfg->estimator.extractor. */
 void fw_inj_reset(fw_inj_t *j, const fw_config_t *cfg);
 /** Same k on both SOGIs (coefficients computed once). */
 void fw_inj_set_k(fw_inj_t *j, float k);
@@ -89,7 +89,7 @@ void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab_A, fw_sinc
 static inline void fw_inj_adapt(fw_inj_t *j, const fw_config_t *cfg, float r) {
   /* Observable adaptation (replaces eq. 13's theta - theta_hat): a wide band
    * while the PLL error is large, a narrow one when locked. */
-  const float k = cfg->sogi_k_adapt_min + (cfg->sogi_k_adapt_max - cfg->sogi_k_adapt_min) * r;
+  const float k = cfg->estimator.sogi_k_adapt_min + (cfg->estimator.sogi_k_adapt_max - cfg->estimator.sogi_k_adapt_min) * r;
   const float dk = k - j->sogi_a.k;
   if (dk > FW_INJ_SOGI_K_STEP || dk < -FW_INJ_SOGI_K_STEP) {
     fw_inj_set_k(j, k);
