@@ -238,8 +238,9 @@ int main(int argc, char **argv) {
     if (isr) { /* the inputs as the ADC delivered them; the core inside the application */
       for (int k = 0; k < batch * nb; k++) {
         for (int j = 0; j < 3; j++) {
-          g_adc[k].i_abc_counts[j] = to_counts(g_rec[k].i_abc_A[j], cfg->sensing.adc_A_per_count,
-                                               cfg->sensing.adc_offset_counts, cfg->sensing.adc_max_count);
+          g_adc[k].i_abc_counts[j] =
+              to_counts(g_rec[k].i_abc_A[j], cfg->sensing.adc_A_per_count,
+                        cfg->sensing.adc_offset_counts, cfg->sensing.adc_max_count);
         }
         g_adc[k].u_dc_counts = to_counts(g_rec[k].u_dc_V, cfg->sensing.adc_V_per_count, 0.0f,
                                          cfg->sensing.adc_max_count);

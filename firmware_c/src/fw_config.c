@@ -60,11 +60,13 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->estimator.sogi_k = 0.5f;
   cfg->estimator.sogi_k_adapt_max = 0.8f;
   cfg->estimator.sogi_k_adapt_min = 0.5f; /* = the fixed-k value: adapt only widens in transients */
-  cfg->estimator.sogi_adapt_err_rad = 0.02f; /* |filtered error| for full SOGI k and observer bandwidth */
+  /* |filtered error| for full SOGI k and observer bandwidth */
+  cfg->estimator.sogi_adapt_err_rad = 0.02f;
   cfg->estimator.pll_kp = 86.6f;
   cfg->estimator.pll_ki = 5000.0f;
   /* p K_t / J = p * 1.5 p psi_f / J (electrical rad/s^2 per A) */
-  cfg->estimator.pll_accel_per_A = cfg->machine.pole_pairs * 1.5f * cfg->machine.pole_pairs * cfg->machine.psi_f_Wb / 0.03f;
+  cfg->estimator.pll_accel_per_A =
+      cfg->machine.pole_pairs * 1.5f * cfg->machine.pole_pairs * cfg->machine.psi_f_Wb / 0.03f;
   cfg->estimator.pll_bw_min = 0.5f; /* halve the observer poles when locked: noise */
   cfg->estimator.pll_kd = 1.0e5f; /* poles -28 +/- 50j, -30 rad/s with the paper's kp, ki */
   cfg->estimator.align_time_s = 0.08f;
@@ -90,7 +92,8 @@ void fw_config_default(fw_config_t *cfg) {
   cfg->protection.i2t_time_s = 2.0f;
   cfg->protection.quick_stop_option = (uint32_t)FW_REACT_QUICK_RAMP;
   cfg->protection.fault_reaction_option = (uint32_t)FW_REACT_QUICK_RAMP;
-  cfg->protection.fault_brake_time_s = 0.08f; /* heartbeat loss: PWM off within consumer time + 80 ms */
+  /* heartbeat loss: PWM off within consumer time + 80 ms */
+  cfg->protection.fault_brake_time_s = 0.08f;
   cfg->protection.mon_angle_max_rad = 0.5f;
   cfg->protection.mon_detect_time_s = 0.01f;
   cfg->protection.mon_sal_tol = 1.0f; /* measured saliency within a factor 2 of the configured */
@@ -123,7 +126,8 @@ void fw_config_derive(fw_config_t *cfg) {
   cfg->estimator.bemf_e_on_V = fw_units_bemf_V(cfg, cfg->estimator.bemf_v_on_mps);
   cfg->estimator.bemf_e_off_V = fw_units_bemf_V(cfg, cfg->estimator.bemf_v_off_mps);
   cfg->protection.mon_bemf_min_V = fw_units_bemf_V(cfg, cfg->protection.mon_bemf_min_mps);
-  if (cfg->loops.gains_auto == 0u || !(cfg->machine.pole_pitch_m > 0.0f) || !(cfg->machine.mass_kg > 0.0f)) {
+  if (cfg->loops.gains_auto == 0u || !(cfg->machine.pole_pitch_m > 0.0f) ||
+      !(cfg->machine.mass_kg > 0.0f)) {
     return; /* explicit gains; the range check reports bad fields */
   }
   const float k_e = FW_PI_F32 / cfg->machine.pole_pitch_m; /* el. rad per m */
@@ -215,17 +219,20 @@ fw_status_t fw_config_check(const fw_config_t *cfg, fw_config_issue_t *issue) {
                   cfg->protection.u_dc_max_V);
   }
   if (cfg->loops.i_max_A >= cfg->protection.i_trip_A) {
-    return report(issue, FW_ERR_INCONSISTENT, "i_max_A", cfg->loops.i_max_A, 0.05f, cfg->protection.i_trip_A);
+    return report(issue, FW_ERR_INCONSISTENT, "i_max_A", cfg->loops.i_max_A, 0.05f,
+                  cfg->protection.i_trip_A);
   }
   if (cfg->estimator.sogi_k_adapt_min > cfg->estimator.sogi_k_adapt_max) {
     return report(issue, FW_ERR_INCONSISTENT, "sogi_k_adapt_min", cfg->estimator.sogi_k_adapt_min,
                   FW_SOGI_K_MIN, cfg->estimator.sogi_k_adapt_max);
   }
-  if (cfg->estimator.bemf_v_on_mps > 0.0f && cfg->estimator.bemf_v_off_mps >= cfg->estimator.bemf_v_on_mps) {
+  if (cfg->estimator.bemf_v_on_mps > 0.0f &&
+      cfg->estimator.bemf_v_off_mps >= cfg->estimator.bemf_v_on_mps) {
     return report(issue, FW_ERR_INCONSISTENT, "bemf_v_off_mps", cfg->estimator.bemf_v_off_mps, 0.0f,
                   cfg->estimator.bemf_v_on_mps);
   }
-  if (cfg->estimator.pll_kd > 0.0f && cfg->estimator.pll_kd >= cfg->estimator.pll_kp * cfg->estimator.pll_ki) {
+  if (cfg->estimator.pll_kd > 0.0f &&
+      cfg->estimator.pll_kd >= cfg->estimator.pll_kp * cfg->estimator.pll_ki) {
     return report(issue, FW_ERR_INCONSISTENT, "pll_kd", cfg->estimator.pll_kd, 0.0f,
                   cfg->estimator.pll_kp * cfg->estimator.pll_ki);
   }
@@ -238,7 +245,8 @@ fw_status_t fw_config_check(const fw_config_t *cfg, fw_config_issue_t *issue) {
   /* sal = 0 is refused even with saliency_min = 0: L_q / (L_q - L_d) is inf */
   if (sal < cfg->protection.saliency_min - 1e-6f || !(sal > 0.0f)) {
     return report(issue, FW_ERR_SALIENCY, "L_q_H", cfg->machine.L_q_H,
-                  cfg->machine.L_d_H * (1.0f + cfg->protection.saliency_min), cfg->machine.L_d_H * 10.0f);
+                  cfg->machine.L_d_H * (1.0f + cfg->protection.saliency_min),
+                  cfg->machine.L_d_H * 10.0f);
   }
   return report(issue, FW_OK, NULL, 0.0f, 0.0f, 0.0f);
 }

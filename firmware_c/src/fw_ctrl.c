@@ -85,7 +85,7 @@ static void reset_dynamics(fw_ctrl_t *c) {
   fw_foc_param_t fp;
   foc_param(cfg, c->dt_s, &fp);
   fw_foc_reset(&c->foc, &fp);
-  fw_inj_reset(&c->inj, cfg);
+  fw_inj_reset(&c->inj, &cfg->estimator);
   fw_obs_reset(&c->obs, cfg);
   c->phase = FW_START_IDLE;
   c->phase_time_s = 0.0f;
@@ -278,7 +278,7 @@ fw_status_t fw_set_extractor(fw_ctrl_t *ctrl, fw_extractor_t ex) {
   /* demodulated history belongs to the old path: restart the averages, and
    * hold the PLL and the adaptation until the new path has settled (a change
    * of k moves the SOGI output for a while) */
-  fw_inj_set_extractor(&ctrl->inj, &ctrl->cfg, ex);
+  fw_inj_set_extractor(&ctrl->inj, &ctrl->cfg.estimator, ex);
   fw_obs_hold(&ctrl->obs, FW_EST_SETTLE_S);
   return FW_OK;
 }
@@ -306,7 +306,7 @@ size_t fw_ctrl_sizeof(void) { return sizeof(fw_ctrl_t); }
  */
 static float polarity_step(fw_ctrl_t *c, float i_d) {
   fw_pol_result_t res;
-  const float v = fw_start_polarity_step(&c->start, &c->cfg, i_d, &res);
+  const float v = fw_start_polarity_step(&c->start, &c->cfg.estimator, i_d, &res);
   c->snap.pol_dI_pos_A = c->start.pol_sum_pos;
   c->snap.pol_dI_neg_A = c->start.pol_sum_neg;
   if (res == FW_POL_BUSY) {
@@ -434,7 +434,7 @@ typedef struct {
 static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
                          fw_mon_in_t *mi, fw_period_t *p) {
   const fw_fault_t f =
-      fw_fault_check_inputs(&c->cfg, in, fw_cia402_power_enabled(c->sm.state));
+      fw_fault_check_inputs(&c->cfg.protection, in, fw_cia402_power_enabled(c->sm.state));
   *safe = *in;
   if (f != FW_FAULT_NONE) {
     latch_fault(c, f);
@@ -511,7 +511,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
     float adapt_r;
     const float eps = fw_obs_update(&c->obs, &oi, &adapt_r);
     if (ex == FW_EXTRACTOR_SOGI_ADAPTIVE) {
-      fw_inj_adapt(&c->inj, cfg, adapt_r);
+      fw_inj_adapt(&c->inj, &cfg->estimator, adapt_r);
     }
     snap->pll_err_rad = eps;
     snap->hf_amp_A = hf->E_d_A;
@@ -551,14 +551,14 @@ static void stage_startup(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p)
    * needs is the back-EMF of a moving mover (judged once the loop and the
    * monitor's filter have settled, and again at the end). */
   if (c->phase == FW_START_ALIGN) {
-    fw_start_fly_observe(&c->start, cfg, c->dt_s, hf->i_f_ab_A, c->phase_time_s);
+    fw_start_fly_observe(&c->start, &cfg->machine, c->dt_s, hf->i_f_ab_A, c->phase_time_s);
   }
   if (c->phase == FW_START_ALIGN && c->phase_time_s >= FW_MOTION_CHECK_S &&
       fw_mon_motion(&c->mon, c->e_start_max_V) != FW_FAULT_NONE) {
     latch_fault(c, fly_catch(c)); /* moving: catch it on the back-EMF, or refuse */
   }
   if (c->phase == FW_START_ALIGN &&
-      fw_start_align_done(cfg, c->phase_time_s, c->inj.inj_idx, n_inj) &&
+      fw_start_align_done(&cfg->estimator, c->phase_time_s, c->inj.inj_idx, n_inj) &&
       c->fault.code == FW_FAULT_NONE) {
     c->phase = FW_START_SALIENCY; /* whole injection periods: ends on the same phase */
     c->phase_time_s = 0.0f;

@@ -17,7 +17,7 @@ void fw_inj_init(fw_inj_t *j, const fw_config_t *cfg, float dt_s) {
   const float h = 0.5f * w0 * dt_s;
   const float t = tanf(h);
   j->sogi_gd_s_k = (2.0f / w0) * h * (1.0f + t * t) / t;
-  fw_inj_reset(j, cfg);
+  fw_inj_reset(j, &cfg->estimator);
 }
 
 static void restart_averages(fw_inj_t *j) {
@@ -26,11 +26,11 @@ static void restart_averages(fw_inj_t *j) {
   j->sum_ed = j->sum_eq = j->sum_ia = j->sum_ib = 0.0f;
 }
 
-void fw_inj_reset(fw_inj_t *j, const fw_config_t *cfg) {
-  float k = cfg->estimator.extractor == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE ? cfg->estimator.sogi_k_adapt_max
-                                                                     : cfg->estimator.sogi_k;
-  (void)fw_sogi_init_f32(&j->sogi_a, cfg->estimator.f_inj_Hz, k, j->dt_s);
-  (void)fw_sogi_init_f32(&j->sogi_b, cfg->estimator.f_inj_Hz, k, j->dt_s);
+void fw_inj_reset(fw_inj_t *j, const fw_cfg_estimator_t *est) {
+  float k = est->extractor == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE ? est->sogi_k_adapt_max
+                                                                   : est->sogi_k;
+  (void)fw_sogi_init_f32(&j->sogi_a, est->f_inj_Hz, k, j->dt_s);
+  (void)fw_sogi_init_f32(&j->sogi_b, est->f_inj_Hz, k, j->dt_s);
   j->sogi_gd_s = j->sogi_gd_s_k / j->sogi_a.k;
   memset(j->h_prev_raw, 0, sizeof(j->h_prev_raw));
   memset(j->h_prev_sogi, 0, sizeof(j->h_prev_sogi));
@@ -46,8 +46,8 @@ void fw_inj_set_k(fw_inj_t *j, float k) {
   j->sogi_gd_s = j->sogi_gd_s_k / j->sogi_a.k; /* k is clamped > 0 by set_k */
 }
 
-void fw_inj_set_extractor(fw_inj_t *j, const fw_config_t *cfg, fw_extractor_t ex) {
-  fw_inj_set_k(j, ex == FW_EXTRACTOR_SOGI_ADAPTIVE ? cfg->estimator.sogi_k_adapt_max : cfg->estimator.sogi_k);
+void fw_inj_set_extractor(fw_inj_t *j, const fw_cfg_estimator_t *est, fw_extractor_t ex) {
+  fw_inj_set_k(j, ex == FW_EXTRACTOR_SOGI_ADAPTIVE ? est->sogi_k_adapt_max : est->sogi_k);
   restart_averages(j); /* the demodulated history belongs to the old path */
 }
 

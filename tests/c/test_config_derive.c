@@ -52,7 +52,8 @@ static void test_derive_matches_formulas(void) {
   fw_ctrl_t ctrl;
   TT_CHECK(fw_init(&ctrl, &c2) == FW_OK);
   TT_CHECK_NEAR(fw_get_config(&ctrl)->loops.cur_kp_V_per_A, 8.8, 1e-4);
-  TT_CHECK_NEAR(fw_get_config(&ctrl)->estimator.pll_accel_per_A, ke * KF / 6.0, 1e-5 * ke * KF / 6.0);
+  TT_CHECK_NEAR(fw_get_config(&ctrl)->estimator.pll_accel_per_A, ke * KF / 6.0,
+                1e-5 * ke * KF / 6.0);
 }
 
 static void test_explicit_gains_kept(void) {
@@ -79,7 +80,8 @@ static void test_explicit_gains_kept(void) {
 /* The handover and witness levels are the back-EMF psi_f (pi / tau) v at their speeds,
  * derived whatever gains_auto; the handover speed does not move with psi_f. */
 static void check_levels(const fw_config_t *c) {
-  const double k = (double)c->machine.psi_f_Wb * M_PI / (double)c->machine.pole_pitch_m; /* V per m/s */
+  /* V per m/s */
+  const double k = (double)c->machine.psi_f_Wb * M_PI / (double)c->machine.pole_pitch_m;
   TT_CHECK_NEAR(c->estimator.bemf_e_on_V, k * (double)c->estimator.bemf_v_on_mps, 1e-6 * k);
   TT_CHECK_NEAR(c->estimator.bemf_e_off_V, k * (double)c->estimator.bemf_v_off_mps, 1e-6 * k);
   TT_CHECK_NEAR(c->protection.mon_bemf_min_V, k * (double)c->protection.mon_bemf_min_mps, 1e-6 * k);

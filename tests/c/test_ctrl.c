@@ -299,7 +299,8 @@ static void test_config_checks(void) {
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_INCONSISTENT);
 
   bad = cfg;
-  bad.estimator.pll_kd = 2.0f * bad.estimator.pll_kp * bad.estimator.pll_ki; /* observer unstable: refused */
+  /* observer unstable: refused */
+  bad.estimator.pll_kd = 2.0f * bad.estimator.pll_kp * bad.estimator.pll_ki;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_INCONSISTENT);
   TT_CHECK(strcmp(iss.field, "pll_kd") == 0);
 
@@ -317,7 +318,8 @@ static void test_config_checks(void) {
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_SALIENCY);
   bad.machine.L_q_H = 1.05f * bad.machine.L_d_H;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_SALIENCY);
-  bad.machine.L_q_H = 1.1f * bad.machine.L_d_H; /* exactly the threshold, despite float32 rounding */
+  /* exactly the threshold, despite float32 rounding */
+  bad.machine.L_q_H = 1.1f * bad.machine.L_d_H;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_OK);
   bad.machine.L_q_H = 1.0999f * bad.machine.L_d_H;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_SALIENCY);
@@ -638,7 +640,8 @@ static void test_pos_unwrapped_precision(void) {
   fw_snapshot_t s;
   fw_get_snapshot(&c, &s);
   TT_CHECK(ref > 8.0e4);
-  double pos_e = ((double)s.pos_hat_mech_rad - (double)s0.pos_hat_mech_rad) * cfg.machine.pole_pairs;
+  double pos_e =
+      ((double)s.pos_hat_mech_rad - (double)s0.pos_hat_mech_rad) * cfg.machine.pole_pairs;
   TT_CHECK_NEAR(pos_e, ref, 0.02);
 }
 

@@ -59,19 +59,19 @@ static void test_inputs(void) {
   fw_config_t cfg;
   fw_config_default(&cfg); /* i_trip 24 A, u_dc 150..420 V */
   fw_inputs_t in = {{1.0f, -0.5f, -0.5f}, 300.0f};
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, true) == FW_FAULT_NONE);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, true) == FW_FAULT_NONE);
   in.i_abc_A[1] = -24.5f;
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, true) == FW_FAULT_OVERCURRENT);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, true) == FW_FAULT_OVERCURRENT);
   in.i_abc_A[2] = NAN; /* invalid input outranks overcurrent */
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, true) == FW_FAULT_INPUT_INVALID);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, true) == FW_FAULT_INPUT_INVALID);
   in.i_abc_A[1] = in.i_abc_A[2] = 0.0f;
   in.u_dc_V = INFINITY;
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, false) == FW_FAULT_INPUT_INVALID);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, false) == FW_FAULT_INPUT_INVALID);
   in.u_dc_V = 421.0f;
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, false) == FW_FAULT_DC_OVERVOLTAGE);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, false) == FW_FAULT_DC_OVERVOLTAGE);
   in.u_dc_V = 100.0f; /* undervoltage only matters with the power stage on */
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, false) == FW_FAULT_NONE);
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, true) == FW_FAULT_DC_UNDERVOLTAGE);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, false) == FW_FAULT_NONE);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, true) == FW_FAULT_DC_UNDERVOLTAGE);
 }
 
 static fw_protect_in_t quiet_in(void) {

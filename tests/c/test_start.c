@@ -11,11 +11,11 @@
 static void test_align_done(void) {
   fw_config_t cfg;
   fw_config_default(&cfg); /* align 0.08 s, n_inj 8: last index 1 */
-  TT_CHECK(!fw_start_align_done(&cfg, 0.079f, 1u, 8u));
-  TT_CHECK(fw_start_align_done(&cfg, 0.08f, 1u, 8u));
-  TT_CHECK(!fw_start_align_done(&cfg, 0.09f, 2u, 8u));
-  TT_CHECK(fw_start_align_done(&cfg, 0.09f, 3u, 16u));
-  TT_CHECK(fw_start_align_done(&cfg, 0.09f, 0u, 2u)); /* n/4 = 0: index 0 */
+  TT_CHECK(!fw_start_align_done(&cfg.estimator, 0.079f, 1u, 8u));
+  TT_CHECK(fw_start_align_done(&cfg.estimator, 0.08f, 1u, 8u));
+  TT_CHECK(!fw_start_align_done(&cfg.estimator, 0.09f, 2u, 8u));
+  TT_CHECK(fw_start_align_done(&cfg.estimator, 0.09f, 3u, 16u));
+  TT_CHECK(fw_start_align_done(&cfg.estimator, 0.09f, 0u, 2u)); /* n/4 = 0: index 0 */
 }
 
 static void test_saliency(void) {
@@ -63,7 +63,7 @@ static fw_pol_result_t run_polarity(float peak_pos, float peak_neg, uint32_t *st
     /* the current follows the voltage of the previous sample */
     const float peak = v_prev > 0.0f ? peak_pos : peak_neg;
     i_d += v_prev / cfg.estimator.pol_pulse_V * peak / (float)N;
-    const float v = fw_start_polarity_step(s, &cfg, i_d, &res);
+    const float v = fw_start_polarity_step(s, &cfg.estimator, i_d, &res);
     if (res == FW_POL_BUSY) {
       const uint32_t seg = (k % (6u * N)) / N;
       const float want = (seg == 1u || seg == 5u) ? cfg.estimator.pol_pulse_V
@@ -111,7 +111,7 @@ static void test_fly_catch(void) {
     float t = 0.0f;
     for (int k = 0; k < 360; k++) { /* 15 ms at zero current: e_ab = u_ab */
       t += dt;
-      fw_start_fly_observe(&s, &cfg, dt, i0, t);
+      fw_start_fly_observe(&s, &cfg.machine, dt, i0, t);
       th += w * (double)dt;
       const fw_vec2_f32_t u = {(float)(-w * psi * sin(th)), (float)(w * psi * cos(th))};
       fw_start_fly_set_u(&s, u);
