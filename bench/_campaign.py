@@ -216,7 +216,7 @@ def _field_error(t: str, plant: dict[str, Any] | None) -> str | None:
         return f"no plant parameter {f!r} (sim_plant_params_t; docs/simulator.md)"
     if kind == "fw":
         from sim_fallback import FwConfig
-        if f not in {n for n, *_ in FwConfig._fields_}:
+        if f not in FwConfig.field_names():
             return f"no drive configuration field {f!r} (fw_config_t; docs/firmware.md)"
     return None
 

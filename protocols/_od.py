@@ -164,6 +164,8 @@ class ObjectDictionary:
     fw_config: dict[str, dict[str, float]] = field(default_factory=dict)
     faults: list[Fault] = field(default_factory=list)
     enums: list[Enum] = field(default_factory=list)
+    #: fw_config_t's parts in struct order: part name -> doc (od.yaml fw_config_parts)
+    fw_config_parts: dict[str, str] = field(default_factory=dict)
 
     def objects(self) -> dict[int, list[OdEntry]]:
         """Entries grouped by index, in order."""
@@ -473,8 +475,13 @@ def _load(path: Path) -> ObjectDictionary:
         if any(g.code == flt.code or g.name == flt.name for g in faults):
             raise OdError(f"{where}: code or name {flt.name} defined twice")
         faults.append(flt)
+    parts = {str(k): str(v) for k, v in (data.get("fw_config_parts", {}) or {}).items()}
+    for name, lim in fw_limits.items():
+        if lim.get("group") not in parts:
+            raise OdError(f"od.yaml fw_config {name}: group {lim.get('group')!r} is not one of "
+                          f"fw_config_parts ({', '.join(parts)})")
     return ObjectDictionary(device=dev, entries=entries, signals=signals,
-                            fw_config=fw_limits, faults=faults,
+                            fw_config=fw_limits, faults=faults, fw_config_parts=parts,
                             enums=_enums(data.get("enums", []) or []))
 
 

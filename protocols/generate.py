@@ -12,7 +12,7 @@ Outputs (checked in; tests/python/test_protocol_od.py fails on drift):
 - firmware_c/include/pmlsm/fw_faults.h            (fw_fault_t: codes and names of the core)
 - firmware_c/include/pmlsm/fw_enums.h             (enums whose values cross the wire)
 - firmware_c/include/pmlsm/fw_version.h           (FW_VERSION_*: device.firmware_version)
-- firmware_c/include/pmlsm/fw_config_fields.h     (fw_config_t field table: types, units, ranges)
+- firmware_c/include/pmlsm/fw_config_fields.h     (fw_config_t, its parts, field table: ranges)
 - protocols/generated/pmlsm_drive.eds           (CiA 306 EDS for canopen.import_od)
 - protocols/generated/od_names.py               (fault codes and names, enums, object indices)
 - docs/od_table.md                               (documentation)
@@ -529,31 +529,64 @@ def _c_f32(x: float) -> str:
 
 
 def gen_config_fields_header(od: ObjectDictionary) -> str:
-    """The firmware's configuration field table (fw_config.c) as an X-macro list, from
-    od.yaml's ``fw_config:`` section, the one source of types, units and ranges."""
+    """fw_config_t, its part structs and the firmware's configuration field table
+    (fw_config.c) as an X-macro list, from od.yaml's ``fw_config_parts:`` and
+    ``fw_config:`` sections, the one source of the layout, types, units and ranges."""
+    items = list(od.fw_config.items())
+    parts = od.fw_config_parts
     lines = [f"/* {HEADER} */",
              "/**",
              " * @file fw_config_fields.h",
-             " * @brief Every fw_config_t field: type, SI unit, inclusive range and default,",
-             " *        in the struct's order (protocols/od.yaml, fw_config:). fw_config.c",
-             " *        builds fw_config_field() from FW_CONFIG_FIELDS(F32, U32) with",
-             " *        F32/U32(name, unit, min, max, default); the defaults of",
-             " *        fw_config_default() are checked against the last argument by",
-             " *        tests/c/test_co_od_config.c.",
+             " * @brief fw_config_t, split into parts (one struct each, protocols/od.yaml",
+             " *        fw_config_parts:), and every field: part, type, SI unit, inclusive",
+             " *        range and default (od.yaml fw_config:). Included by fw_ctrl.h.",
+             " *",
+             " * Parts, in struct order:",
+             *[f" *   - {g} (fw_cfg_{g}_t, {sum(1 for _, v in items if v['group'] == g)} fields):"
+               f" {doc}" for g, doc in parts.items()],
+             " *",
+             " * Field names are unique across the parts: the object dictionary, the field",
+             " * table and the Python side use the flat name (\"R_ohm\"), C code the path",
+             " * (cfg->machine.R_ohm). fw_config.c builds fw_config_field() from",
+             " * FW_CONFIG_FIELDS(F32, U32) with F32/U32(part, name, unit, min, max, default),",
+             " * in od.yaml's order (the order fw_config_check() tests them in); the",
+             " * defaults of fw_config_default() are checked against the last argument by",
+             " * tests/c/test_co_od_config.c.",
              " */",
              "#ifndef PMLSM_FW_CONFIG_FIELDS_H",
              "#define PMLSM_FW_CONFIG_FIELDS_H",
              "",
-             "/* clang-format off */",
-             "#define FW_CONFIG_FIELDS(F32, U32) \\"]
-    items = list(od.fw_config.items())
+             "#include <stdint.h>",
+             ""]
+    for g, doc in parts.items():
+        mine = [(n, v) for n, v in items if v["group"] == g]
+        width = max(len(("uint32_t " if v.get("u32") else "float ") + n + ";") for n, v in mine)
+        lines += [f"/** Configuration part {g}: {doc}. */", "typedef struct {"]
+        for n, v in mine:
+            decl = ("uint32_t " if v.get("u32") else "float ") + n + ";"
+            unit = str(v.get("unit", ""))
+            doc_f = str(v.get("doc", "")) + (f" [{unit}]" if unit else "")
+            lines.append(f"  {decl:<{width}} /**< {doc_f} */")
+        lines += [f"}} fw_cfg_{g}_t;", ""]
+    lines += ["/**",
+              " * Configuration. Every field is range-checked by fw_config_check() against",
+              " * the table returned by fw_config_field(); the field names there are the",
+              " * names in the parts below.",
+              " */",
+              "typedef struct {"]
+    for g, doc in parts.items():
+        lines.append(f"  fw_cfg_{g}_t {g}; /**< {doc} */")
+    lines += ["} fw_config_t;", "",
+              "/* clang-format off */",
+              "#define FW_CONFIG_FIELDS(F32, U32) \\"]
     for k, (name, v) in enumerate(items):
         unit = str(v.get("unit", "")).replace("\\", "").replace('"', "")
+        g = v["group"]
         if v.get("u32"):
-            body = (f"U32({name}, \"{unit}\", {int(v['min'])}.0f, {int(v['max'])}.0f, "
+            body = (f"U32({g}, {name}, \"{unit}\", {int(v['min'])}.0f, {int(v['max'])}.0f, "
                     f"{int(v['default'])}u)")
         else:
-            body = (f"F32({name}, \"{unit}\", {_c_f32(v['min'])}, {_c_f32(v['max'])}, "
+            body = (f"F32({g}, {name}, \"{unit}\", {_c_f32(v['min'])}, {_c_f32(v['max'])}, "
                     f"{_c_f32(v['default'])})")
         lines.append(f"  {body}" + (" \\" if k < len(items) - 1 else ""))
     lines += ["/* clang-format on */", "",

@@ -219,13 +219,12 @@ class DriveBridge:
         keeps the firmware default (logged), so a binding that is out of step
         with the header cannot stop the bridge."""
         dflt = C.create_string_buffer(self._cfg.raw, len(self._cfg))
-        for name, _ in getattr(src, "_fields_", []):
+        for name, v in src.as_dict().items():  # flat field names (FwConfig nests in parts)
             if name not in MOTOR_FIELDS:
                 continue
             f = self._L.fw_config_field_find(name.encode())
             if not f:
                 continue
-            v = getattr(src, name)
             off = f.contents.offset
             if f.contents.is_u32:
                 C.c_uint32.from_buffer(self._cfg, off).value = int(v) & 0xFFFFFFFF

@@ -25,30 +25,50 @@ _u32 = C.c_uint32
 
 # ---- firmware structures (fw_ctrl.h) -------------------------------------
 
-FW_CONFIG_FIELDS: list[tuple[str, type]] = [
-    ("f_pwm_Hz", _f), ("R_ohm", _f), ("L_d_H", _f), ("L_q_H", _f), ("psi_f_Wb", _f),
-    ("pole_pairs", _f), ("pole_pitch_m", _f), ("u_dc_min_V", _f), ("u_dc_max_V", _f),
-    ("i_trip_A", _f), ("i_max_A", _f), ("speed_max_radps_e", _f),
-    ("cur_kp_V_per_A", _f), ("cur_ki_V_per_As", _f),
-    ("spd_kp_A_per_radps", _f), ("spd_ki_A_per_rad", _f), ("spd_filter_Hz", _f),
-    ("u_inj_V", _f), ("f_inj_Hz", _f), ("extractor", _u32), ("sogi_k", _f),
-    ("sogi_k_adapt_max", _f), ("sogi_k_adapt_min", _f), ("sogi_adapt_err_rad", _f),
-    ("pll_kp", _f), ("pll_ki", _f), ("pll_accel_per_A", _f), ("pll_bw_min", _f), ("pll_kd", _f),
-    ("align_time_s", _f), ("pol_pulse_V", _f),
-    ("pol_pulse_samples", _u32), ("pol_pulse_pairs", _u32), ("pol_margin", _f),
-    ("saliency_min", _f), ("hf_min_ratio", _f), ("pll_err_max_rad", _f),
-    ("pll_err_time_s", _f), ("quick_stop_time_s", _f), ("adc_A_per_count", _f),
-    ("adc_offset_counts", _f), ("adc_V_per_count", _f), ("adc_max_count", _u32),
-    ("v_max_mps", _f), ("pos_limit_min_m", _f), ("pos_limit_max_m", _f),
-    ("follow_err_mps", _f), ("follow_err_time_s", _f), ("i_rated_A", _f), ("i2t_time_s", _f),
-    ("quick_stop_option", _u32), ("fault_reaction_option", _u32), ("fault_brake_time_s", _f),
-    ("mon_angle_max_rad", _f), ("mon_detect_time_s", _f), ("mon_sal_tol", _f),
-    ("mon_bemf_max_rad", _f), ("mon_bemf_min_mps", _f), ("i_sum_max_A", _f),
-    ("i_offset_max_A", _f), ("start_speed_max_mps", _f),
-    ("bemf_v_on_mps", _f), ("bemf_v_off_mps", _f), ("bemf_inj_share", _f),
-    ("mass_kg", _f), ("visc_Ns_per_m", _f), ("coulomb_N", _f), ("cur_bw_radps", _f),
-    ("spd_bw_radps", _f), ("gains_auto", _u32),
-    ("bemf_e_on_V", _f), ("bemf_e_off_V", _f), ("mon_bemf_min_V", _f),
+#: fw_config_t's parts in struct order (fw_config_fields.h, generated from
+#: protocols/od.yaml fw_config_parts:); the mirror nests like the C struct.
+FW_CONFIG_PARTS: tuple[str, ...] = ("machine", "sensing", "loops", "estimator", "protection")
+
+#: Every fw_config_t field: (flat name, part, ctypes type), in the order of the
+#: firmware's field table (fw_config_field(i), od.yaml fw_config:); within a part
+#: this is the struct's order. Python keeps the flat names: FwConfig has a property
+#: per field (``cfg.R_ohm`` is ``cfg.machine.R_ohm``).
+FW_CONFIG_FIELDS: list[tuple[str, str, type]] = [
+    ("f_pwm_Hz", "sensing", _f), ("R_ohm", "machine", _f), ("L_d_H", "machine", _f),
+    ("L_q_H", "machine", _f), ("psi_f_Wb", "machine", _f), ("pole_pairs", "machine", _f),
+    ("pole_pitch_m", "machine", _f), ("u_dc_min_V", "protection", _f),
+    ("u_dc_max_V", "protection", _f), ("i_trip_A", "protection", _f), ("i_max_A", "loops", _f),
+    ("speed_max_radps_e", "loops", _f), ("cur_kp_V_per_A", "loops", _f),
+    ("cur_ki_V_per_As", "loops", _f), ("spd_kp_A_per_radps", "loops", _f),
+    ("spd_ki_A_per_rad", "loops", _f), ("spd_filter_Hz", "loops", _f),
+    ("u_inj_V", "estimator", _f), ("f_inj_Hz", "estimator", _f),
+    ("extractor", "estimator", _u32), ("sogi_k", "estimator", _f),
+    ("sogi_k_adapt_max", "estimator", _f), ("sogi_k_adapt_min", "estimator", _f),
+    ("sogi_adapt_err_rad", "estimator", _f), ("pll_kp", "estimator", _f),
+    ("pll_ki", "estimator", _f), ("pll_accel_per_A", "estimator", _f),
+    ("pll_bw_min", "estimator", _f), ("pll_kd", "estimator", _f),
+    ("align_time_s", "estimator", _f), ("pol_pulse_V", "estimator", _f),
+    ("pol_pulse_samples", "estimator", _u32), ("pol_pulse_pairs", "estimator", _u32),
+    ("pol_margin", "estimator", _f), ("saliency_min", "protection", _f),
+    ("hf_min_ratio", "protection", _f), ("pll_err_max_rad", "protection", _f),
+    ("pll_err_time_s", "protection", _f), ("quick_stop_time_s", "protection", _f),
+    ("adc_A_per_count", "sensing", _f), ("adc_offset_counts", "sensing", _f),
+    ("adc_V_per_count", "sensing", _f), ("adc_max_count", "sensing", _u32),
+    ("v_max_mps", "protection", _f), ("pos_limit_min_m", "protection", _f),
+    ("pos_limit_max_m", "protection", _f), ("follow_err_mps", "protection", _f),
+    ("follow_err_time_s", "protection", _f), ("i_rated_A", "protection", _f),
+    ("i2t_time_s", "protection", _f), ("quick_stop_option", "protection", _u32),
+    ("fault_reaction_option", "protection", _u32), ("fault_brake_time_s", "protection", _f),
+    ("mon_angle_max_rad", "protection", _f), ("mon_detect_time_s", "protection", _f),
+    ("mon_sal_tol", "protection", _f), ("mon_bemf_max_rad", "protection", _f),
+    ("mon_bemf_min_mps", "protection", _f), ("i_sum_max_A", "protection", _f),
+    ("i_offset_max_A", "protection", _f), ("start_speed_max_mps", "protection", _f),
+    ("bemf_v_on_mps", "estimator", _f), ("bemf_v_off_mps", "estimator", _f),
+    ("bemf_inj_share", "estimator", _f), ("mass_kg", "machine", _f),
+    ("visc_Ns_per_m", "machine", _f), ("coulomb_N", "machine", _f),
+    ("cur_bw_radps", "loops", _f), ("spd_bw_radps", "loops", _f),
+    ("gains_auto", "loops", _u32), ("bemf_e_on_V", "estimator", _f),
+    ("bemf_e_off_V", "estimator", _f), ("mon_bemf_min_V", "protection", _f),
 ]
 
 
@@ -71,17 +91,53 @@ def _unpack_plan(cls: type) -> tuple[tuple[tuple[str, int], ...], struct.Struct]
     return tuple(names), struct.Struct("".join(parts))
 
 
-class FwConfig(C.Structure):
-    """Mirror of ``fw_config_t``."""
+def _config_part(part: str) -> type[C.Structure]:
+    fields = [(n, t) for n, p, t in FW_CONFIG_FIELDS if p == part]
+    return type(f"FwCfg{part.capitalize()}", (C.Structure,),
+                {"_fields_": fields, "__doc__": f"Mirror of ``fw_cfg_{part}_t``."})
 
-    _fields_ = FW_CONFIG_FIELDS
+
+#: part name -> mirror of fw_cfg_<part>_t
+FW_CONFIG_PART_TYPES: dict[str, type[C.Structure]] = {p: _config_part(p) for p in FW_CONFIG_PARTS}
+
+
+def _config_leaf(part: str, name: str) -> property:
+    def get(self):
+        return getattr(getattr(self, part), name)
+
+    def put(self, value):
+        setattr(getattr(self, part), name, value)
+
+    return property(get, put, doc=f"``fw_config_t.{part}.{name}``")
+
+
+class FwConfig(C.Structure):
+    """Mirror of ``fw_config_t`` (nested in parts like the C struct); every field is
+    also an attribute under its flat name (``cfg.R_ohm`` = ``cfg.machine.R_ohm``)."""
+
+    _fields_ = [(p, FW_CONFIG_PART_TYPES[p]) for p in FW_CONFIG_PARTS]
 
     def as_dict(self) -> dict[str, float | int]:
-        return {name: getattr(self, name) for name, _ in self._fields_}
+        """Every field by flat name, in field-table order."""
+        parts = {p: getattr(self, p) for p in FW_CONFIG_PARTS}
+        return {name: getattr(parts[p], name) for name, p, _ in FW_CONFIG_FIELDS}
 
     @classmethod
     def field_names(cls) -> frozenset[str]:
-        return frozenset(name for name, _ in cls._fields_)
+        return frozenset(name for name, _, _ in FW_CONFIG_FIELDS)
+
+    @classmethod
+    def leaves(cls) -> dict[str, tuple[str, int, type]]:
+        """Flat name -> (C path ``part.name``, byte offset in fw_config_t, ctypes type),
+        in field-table order."""
+        return {name: (f"{p}.{name}",
+                       getattr(cls, p).offset + getattr(FW_CONFIG_PART_TYPES[p], name).offset, t)
+                for name, p, t in FW_CONFIG_FIELDS}
+
+
+for _name, _part, _ in FW_CONFIG_FIELDS:
+    setattr(FwConfig, _name, _config_leaf(_part, _name))
+del _name, _part
 
 
 class FwInputs(C.Structure):

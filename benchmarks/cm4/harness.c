@@ -229,7 +229,7 @@ int main(int argc, char **argv) {
      * periods, or the replayed HF response is out of phase and the core
      * (rightly) trips FW_FAULT_EST_HF_LOW. */
     const fw_config_t *cfg = &g_base.cfg;
-    int period = (int)(cfg->f_pwm_Hz / cfg->f_inj_Hz + 0.5f);
+    int period = (int)(cfg->sensing.f_pwm_Hz / cfg->estimator.f_inj_Hz + 0.5f);
     if (period < 1 || batch % period != 0) {
       printf("CM4: batch %d is not a multiple of the injection period %d\n", batch, period);
       return 1;
@@ -238,11 +238,12 @@ int main(int argc, char **argv) {
     if (isr) { /* the inputs as the ADC delivered them; the core inside the application */
       for (int k = 0; k < batch * nb; k++) {
         for (int j = 0; j < 3; j++) {
-          g_adc[k].i_abc_counts[j] = to_counts(g_rec[k].i_abc_A[j], cfg->adc_A_per_count,
-                                               cfg->adc_offset_counts, cfg->adc_max_count);
+          g_adc[k].i_abc_counts[j] =
+              to_counts(g_rec[k].i_abc_A[j], cfg->sensing.adc_A_per_count,
+                        cfg->sensing.adc_offset_counts, cfg->sensing.adc_max_count);
         }
-        g_adc[k].u_dc_counts = to_counts(g_rec[k].u_dc_V, cfg->adc_V_per_count, 0.0f,
-                                         cfg->adc_max_count);
+        g_adc[k].u_dc_counts = to_counts(g_rec[k].u_dc_V, cfg->sensing.adc_V_per_count, 0.0f,
+                                         cfg->sensing.adc_max_count);
       }
       if (fw_app_init(&g_app, cfg, 1u) != FW_OK) {
         printf("CM4: fw_app_init refused the configuration\n");

@@ -17,19 +17,19 @@
 
 void fw_bemf_init(fw_bemf_t *b, const fw_config_t *cfg, float dt_s) {
   memset(b, 0, sizeof(*b));
-  b->R_ohm = cfg->R_ohm;
-  b->L_d_H = cfg->L_d_H;
-  b->L_q_H = cfg->L_q_H;
-  b->psi_f_Wb = cfg->psi_f_Wb;
+  b->R_ohm = cfg->machine.R_ohm;
+  b->L_d_H = cfg->machine.L_d_H;
+  b->L_q_H = cfg->machine.L_q_H;
+  b->psi_f_Wb = cfg->machine.psi_f_Wb;
   b->dt_s = dt_s;
   b->a_f = 1.0f - expf(-dt_s / BEMF_TAU_S);
   b->inv_dt = 1.0f / dt_s;
-  b->w_on = cfg->bemf_e_on_V / cfg->psi_f_Wb;
-  b->w_off = cfg->bemf_e_off_V / cfg->psi_f_Wb;
-  b->e_on2 = cfg->bemf_e_on_V * cfg->bemf_e_on_V;
-  b->e_off2 = cfg->bemf_e_off_V * cfg->bemf_e_off_V;
+  b->w_on = cfg->estimator.bemf_e_on_V / cfg->machine.psi_f_Wb;
+  b->w_off = cfg->estimator.bemf_e_off_V / cfg->machine.psi_f_Wb;
+  b->e_on2 = cfg->estimator.bemf_e_on_V * cfg->estimator.bemf_e_on_V;
+  b->e_off2 = cfg->estimator.bemf_e_off_V * cfg->estimator.bemf_e_off_V;
   b->e_min2 = 0.25f * b->e_off2; /* (half the switch-off level)^2 */
-  b->inj_share = cfg->bemf_inj_share;
+  b->inj_share = cfg->estimator.bemf_inj_share;
   b->step_down = dt_s / BEMF_RAMP_S * (1.0f - b->inj_share);
   b->step_back = dt_s / BEMF_RAMP_BACK_S * (1.0f - b->inj_share);
   fw_bemf_reset(b);

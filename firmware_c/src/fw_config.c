@@ -14,8 +14,10 @@
  * source of the ranges: engineering limits for this drive class, not tuning
  * advice. The defaults (last argument) are fw_config_default()'s below, checked
  * by tests/c/test_co_od_config.c. */
-#define F32(name, unit, lo, hi, dflt) {#name, unit, offsetof(fw_config_t, name), 0u, lo, hi},
-#define U32(name, unit, lo, hi, dflt) {#name, unit, offsetof(fw_config_t, name), 1u, lo, hi},
+#define F32(part, name, unit, lo, hi, dflt) \
+  {#name, unit, offsetof(fw_config_t, part.name), 0u, lo, hi},
+#define U32(part, name, unit, lo, hi, dflt) \
+  {#name, unit, offsetof(fw_config_t, part.name), 1u, lo, hi},
 static const fw_config_field_t k_fields[] = {FW_CONFIG_FIELDS(F32, U32)};
 #undef F32
 #undef U32
@@ -33,81 +35,84 @@ void fw_config_default(fw_config_t *cfg) {
     return;
   }
   memset(cfg, 0, sizeof(*cfg));
-  cfg->f_pwm_Hz = 24000.0f; /* 8 samples per 3 kHz injection period */
+  cfg->sensing.f_pwm_Hz = 24000.0f; /* 8 samples per 3 kHz injection period */
   /* Paper Table 1, salient variant L_q = 1.5 L_d (Table 1 has L_q = L_d). */
-  cfg->R_ohm = 0.958f;
-  cfg->L_d_H = 0.012f;
-  cfg->L_q_H = 0.018f;
-  cfg->psi_f_Wb = 0.1827f;
-  cfg->pole_pairs = 4.0f;
-  cfg->pole_pitch_m = 0.024f; /* rotary-equivalent choice, see docs */
-  cfg->u_dc_min_V = 150.0f;
-  cfg->u_dc_max_V = 420.0f;
-  cfg->i_trip_A = 24.0f;
-  cfg->i_max_A = 20.0f;
-  cfg->speed_max_radps_e = 1500.0f;
-  cfg->cur_kp_V_per_A = cfg->L_d_H * 1100.0f;
-  cfg->cur_ki_V_per_As = cfg->R_ohm * 1100.0f;
+  cfg->machine.R_ohm = 0.958f;
+  cfg->machine.L_d_H = 0.012f;
+  cfg->machine.L_q_H = 0.018f;
+  cfg->machine.psi_f_Wb = 0.1827f;
+  cfg->machine.pole_pairs = 4.0f;
+  cfg->machine.pole_pitch_m = 0.024f; /* rotary-equivalent choice, see docs */
+  cfg->protection.u_dc_min_V = 150.0f;
+  cfg->protection.u_dc_max_V = 420.0f;
+  cfg->protection.i_trip_A = 24.0f;
+  cfg->loops.i_max_A = 20.0f;
+  cfg->loops.speed_max_radps_e = 1500.0f;
+  cfg->loops.cur_kp_V_per_A = cfg->machine.L_d_H * 1100.0f;
+  cfg->loops.cur_ki_V_per_As = cfg->machine.R_ohm * 1100.0f;
   /* 0.1 A/(r/min) and 0.6 A/(r/min s): 1 r/min = 2 pi p / 60 rad/s (el.) */
-  cfg->spd_kp_A_per_radps = 0.1f * 60.0f / (FW_TWO_PI_F32 * cfg->pole_pairs);
-  cfg->spd_ki_A_per_rad = 0.6f * 60.0f / (FW_TWO_PI_F32 * cfg->pole_pairs);
-  cfg->spd_filter_Hz = 100.0f;
-  cfg->u_inj_V = 50.0f; /* 17 % of a 300 V link; see docs/tuning.md */
-  cfg->f_inj_Hz = 3000.0f;
-  cfg->extractor = (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE;
-  cfg->sogi_k = 0.5f;
-  cfg->sogi_k_adapt_max = 0.8f;
-  cfg->sogi_k_adapt_min = 0.5f; /* = the fixed-k value: adapt only widens in transients */
-  cfg->sogi_adapt_err_rad = 0.02f; /* |filtered error| for full SOGI k and observer bandwidth */
-  cfg->pll_kp = 86.6f;
-  cfg->pll_ki = 5000.0f;
+  cfg->loops.spd_kp_A_per_radps = 0.1f * 60.0f / (FW_TWO_PI_F32 * cfg->machine.pole_pairs);
+  cfg->loops.spd_ki_A_per_rad = 0.6f * 60.0f / (FW_TWO_PI_F32 * cfg->machine.pole_pairs);
+  cfg->loops.spd_filter_Hz = 100.0f;
+  cfg->estimator.u_inj_V = 50.0f; /* 17 % of a 300 V link; see docs/tuning.md */
+  cfg->estimator.f_inj_Hz = 3000.0f;
+  cfg->estimator.extractor = (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE;
+  cfg->estimator.sogi_k = 0.5f;
+  cfg->estimator.sogi_k_adapt_max = 0.8f;
+  cfg->estimator.sogi_k_adapt_min = 0.5f; /* = the fixed-k value: adapt only widens in transients */
+  /* |filtered error| for full SOGI k and observer bandwidth */
+  cfg->estimator.sogi_adapt_err_rad = 0.02f;
+  cfg->estimator.pll_kp = 86.6f;
+  cfg->estimator.pll_ki = 5000.0f;
   /* p K_t / J = p * 1.5 p psi_f / J (electrical rad/s^2 per A) */
-  cfg->pll_accel_per_A = cfg->pole_pairs * 1.5f * cfg->pole_pairs * cfg->psi_f_Wb / 0.03f;
-  cfg->pll_bw_min = 0.5f; /* halve the observer poles when locked: noise */
-  cfg->pll_kd = 1.0e5f; /* poles -28 +/- 50j, -30 rad/s with the paper's kp, ki */
-  cfg->align_time_s = 0.08f;
-  cfg->pol_pulse_V = 60.0f;
-  cfg->pol_pulse_samples = 12u;
-  cfg->pol_pulse_pairs = 4u;
-  cfg->pol_margin = 0.02f;
-  cfg->saliency_min = 0.10f;
-  cfg->hf_min_ratio = 0.3f;
-  cfg->pll_err_max_rad = 0.5f;
-  cfg->pll_err_time_s = 0.05f;
-  cfg->quick_stop_time_s = 0.5f;
-  cfg->adc_A_per_count = 50.0f / 4096.0f; /* +/-25 A over 12 bits */
-  cfg->adc_offset_counts = 2048.0f;
-  cfg->adc_V_per_count = 500.0f / 4096.0f; /* 0..500 V, LSB = FS / 2^12 */
-  cfg->adc_max_count = 4095u;
-  cfg->v_max_mps = 3.0f;
-  cfg->pos_limit_min_m = 0.0f; /* min >= max: software limits off */
-  cfg->pos_limit_max_m = 0.0f;
-  cfg->follow_err_mps = 0.5f;
-  cfg->follow_err_time_s = 0.5f;
-  cfg->i_rated_A = 10.0f;
-  cfg->i2t_time_s = 2.0f;
-  cfg->quick_stop_option = (uint32_t)FW_REACT_QUICK_RAMP;
-  cfg->fault_reaction_option = (uint32_t)FW_REACT_QUICK_RAMP;
-  cfg->fault_brake_time_s = 0.08f; /* heartbeat loss: PWM off within consumer time + 80 ms */
-  cfg->mon_angle_max_rad = 0.5f;
-  cfg->mon_detect_time_s = 0.01f;
-  cfg->mon_sal_tol = 1.0f; /* measured saliency within a factor 2 of the configured */
-  cfg->mon_bemf_max_rad = 0.6f;
-  cfg->mon_bemf_min_mps = 0.21f; /* paper motor: 5.0 V */
-  cfg->i_sum_max_A = 0.2f; /* plus 3 % of |i_a| + |i_b| + |i_c| (fw_mon.c) */
-  cfg->i_offset_max_A = 1.0f;
-  cfg->start_speed_max_mps = 0.05f;
+  cfg->estimator.pll_accel_per_A =
+      cfg->machine.pole_pairs * 1.5f * cfg->machine.pole_pairs * cfg->machine.psi_f_Wb / 0.03f;
+  cfg->estimator.pll_bw_min = 0.5f; /* halve the observer poles when locked: noise */
+  cfg->estimator.pll_kd = 1.0e5f; /* poles -28 +/- 50j, -30 rad/s with the paper's kp, ki */
+  cfg->estimator.align_time_s = 0.08f;
+  cfg->estimator.pol_pulse_V = 60.0f;
+  cfg->estimator.pol_pulse_samples = 12u;
+  cfg->estimator.pol_pulse_pairs = 4u;
+  cfg->estimator.pol_margin = 0.02f;
+  cfg->protection.saliency_min = 0.10f;
+  cfg->protection.hf_min_ratio = 0.3f;
+  cfg->protection.pll_err_max_rad = 0.5f;
+  cfg->protection.pll_err_time_s = 0.05f;
+  cfg->protection.quick_stop_time_s = 0.5f;
+  cfg->sensing.adc_A_per_count = 50.0f / 4096.0f; /* +/-25 A over 12 bits */
+  cfg->sensing.adc_offset_counts = 2048.0f;
+  cfg->sensing.adc_V_per_count = 500.0f / 4096.0f; /* 0..500 V, LSB = FS / 2^12 */
+  cfg->sensing.adc_max_count = 4095u;
+  cfg->protection.v_max_mps = 3.0f;
+  cfg->protection.pos_limit_min_m = 0.0f; /* min >= max: software limits off */
+  cfg->protection.pos_limit_max_m = 0.0f;
+  cfg->protection.follow_err_mps = 0.5f;
+  cfg->protection.follow_err_time_s = 0.5f;
+  cfg->protection.i_rated_A = 10.0f;
+  cfg->protection.i2t_time_s = 2.0f;
+  cfg->protection.quick_stop_option = (uint32_t)FW_REACT_QUICK_RAMP;
+  cfg->protection.fault_reaction_option = (uint32_t)FW_REACT_QUICK_RAMP;
+  /* heartbeat loss: PWM off within consumer time + 80 ms */
+  cfg->protection.fault_brake_time_s = 0.08f;
+  cfg->protection.mon_angle_max_rad = 0.5f;
+  cfg->protection.mon_detect_time_s = 0.01f;
+  cfg->protection.mon_sal_tol = 1.0f; /* measured saliency within a factor 2 of the configured */
+  cfg->protection.mon_bemf_max_rad = 0.6f;
+  cfg->protection.mon_bemf_min_mps = 0.21f; /* paper motor: 5.0 V */
+  cfg->protection.i_sum_max_A = 0.2f; /* plus 3 % of |i_a| + |i_b| + |i_c| (fw_mon.c) */
+  cfg->protection.i_offset_max_A = 1.0f;
+  cfg->protection.start_speed_max_mps = 0.05f;
   /* paper motor: 55 rad/s el. = 131 r/min (10.0 V), above the paper's speeds; down at 6.9 V */
-  cfg->bemf_v_on_mps = 0.42f;
-  cfg->bemf_v_off_mps = 0.29f;
-  cfg->bemf_inj_share = 0.25f;
+  cfg->estimator.bemf_v_on_mps = 0.42f;
+  cfg->estimator.bemf_v_off_mps = 0.29f;
+  cfg->estimator.bemf_inj_share = 0.25f;
   /* paper Table 1 as a linear machine: J = 0.03 kg m^2 over r = p tau / pi */
-  cfg->mass_kg = 32.13f;
-  cfg->visc_Ns_per_m = 8.57f; /* 0.008 N m s/rad / r^2 */
-  cfg->coulomb_N = 49.1f;     /* 1.5 N m / r */
-  cfg->cur_bw_radps = 1100.0f;
-  cfg->spd_bw_radps = 35.0f;  /* the paper's speed PI on this mass */
-  cfg->gains_auto = 0u;       /* defaults keep the paper's explicit gains */
+  cfg->machine.mass_kg = 32.13f;
+  cfg->machine.visc_Ns_per_m = 8.57f; /* 0.008 N m s/rad / r^2 */
+  cfg->machine.coulomb_N = 49.1f;     /* 1.5 N m / r */
+  cfg->loops.cur_bw_radps = 1100.0f;
+  cfg->loops.spd_bw_radps = 35.0f;  /* the paper's speed PI on this mass */
+  cfg->loops.gains_auto = 0u;       /* defaults keep the paper's explicit gains */
   fw_config_derive(cfg);      /* the back-EMF levels of the speeds above */
 }
 
@@ -118,32 +123,33 @@ void fw_config_derive(fw_config_t *cfg) {
   /* Back-EMF levels of the handover and witness speeds: where the handover sits in
    * speed does not depend on psi_f (docs/bemf.md). A bad pole pitch or psi_f makes
    * them non-finite; the range check reports the bad field first. */
-  cfg->bemf_e_on_V = fw_units_bemf_V(cfg, cfg->bemf_v_on_mps);
-  cfg->bemf_e_off_V = fw_units_bemf_V(cfg, cfg->bemf_v_off_mps);
-  cfg->mon_bemf_min_V = fw_units_bemf_V(cfg, cfg->mon_bemf_min_mps);
-  if (cfg->gains_auto == 0u || !(cfg->pole_pitch_m > 0.0f) || !(cfg->mass_kg > 0.0f)) {
+  cfg->estimator.bemf_e_on_V = fw_units_bemf_V(cfg, cfg->estimator.bemf_v_on_mps);
+  cfg->estimator.bemf_e_off_V = fw_units_bemf_V(cfg, cfg->estimator.bemf_v_off_mps);
+  cfg->protection.mon_bemf_min_V = fw_units_bemf_V(cfg, cfg->protection.mon_bemf_min_mps);
+  if (cfg->loops.gains_auto == 0u || !(cfg->machine.pole_pitch_m > 0.0f) ||
+      !(cfg->machine.mass_kg > 0.0f)) {
     return; /* explicit gains; the range check reports bad fields */
   }
-  const float k_e = FW_PI_F32 / cfg->pole_pitch_m; /* el. rad per m */
+  const float k_e = FW_PI_F32 / cfg->machine.pole_pitch_m; /* el. rad per m */
   const float K_F = fw_units_force_per_A(cfg);     /* N per A of i_q */
-  cfg->cur_kp_V_per_A = cfg->L_d_H * cfg->cur_bw_radps;
-  cfg->cur_ki_V_per_As = cfg->R_ohm * cfg->cur_bw_radps;
-  cfg->spd_kp_A_per_radps = cfg->mass_kg * cfg->spd_bw_radps / K_F / k_e;
-  cfg->spd_ki_A_per_rad = cfg->spd_kp_A_per_radps * cfg->spd_bw_radps / 6.0f;
-  cfg->pll_accel_per_A = k_e * K_F / cfg->mass_kg;
+  cfg->loops.cur_kp_V_per_A = cfg->machine.L_d_H * cfg->loops.cur_bw_radps;
+  cfg->loops.cur_ki_V_per_As = cfg->machine.R_ohm * cfg->loops.cur_bw_radps;
+  cfg->loops.spd_kp_A_per_radps = cfg->machine.mass_kg * cfg->loops.spd_bw_radps / K_F / k_e;
+  cfg->loops.spd_ki_A_per_rad = cfg->loops.spd_kp_A_per_radps * cfg->loops.spd_bw_radps / 6.0f;
+  cfg->estimator.pll_accel_per_A = k_e * K_F / cfg->machine.mass_kg;
   /* Observer (PLL) bandwidth w from the mechanics: the angle error of the PLL to an
    * acceleration step a it does not know (a load step) is about a / ki. A load of
    * FW_PLL_DESIGN_LOAD x the peak thrust K_F i_max must leave at most
    * FW_PLL_DESIGN_ERR_RAD, with ki = 3 w^2 (three poles at -w: kp = 3 w, ki = 3 w^2,
    * kd = w^3). Bounded below by the paper's observer (about 30 rad/s) and above by
    * the injection: the HF demodulation is one sample per injection period. */
-  const float a_d = k_e * FW_PLL_DESIGN_LOAD * K_F * cfg->i_max_A / cfg->mass_kg;
-  const float w_max = FW_TWO_PI_F32 * cfg->f_inj_Hz / 40.0f;
+  const float a_d = k_e * FW_PLL_DESIGN_LOAD * K_F * cfg->loops.i_max_A / cfg->machine.mass_kg;
+  const float w_max = FW_TWO_PI_F32 * cfg->estimator.f_inj_Hz / 40.0f;
   float w = sqrtf((a_d > 0.0f ? a_d : 0.0f) / (3.0f * FW_PLL_DESIGN_ERR_RAD));
   w = fw_clampf(w, FW_PLL_W_MIN, (w_max > FW_PLL_W_MIN ? w_max : FW_PLL_W_MIN));
-  cfg->pll_kp = 3.0f * w;
-  cfg->pll_ki = 3.0f * w * w;
-  cfg->pll_kd = w * w * w;
+  cfg->estimator.pll_kp = 3.0f * w;
+  cfg->estimator.pll_ki = 3.0f * w * w;
+  cfg->estimator.pll_kd = w * w * w;
 }
 
 size_t fw_config_field_count(void) { return K_NFIELDS; }
@@ -201,42 +207,46 @@ fw_status_t fw_config_check(const fw_config_t *cfg, fw_config_issue_t *issue) {
     }
   }
   /* Cross-field consistency. */
-  float ratio = cfg->f_pwm_Hz / cfg->f_inj_Hz;
+  float ratio = cfg->sensing.f_pwm_Hz / cfg->estimator.f_inj_Hz;
   uint32_t n = (uint32_t)(ratio + 0.5f);
   float rerr = ratio - (float)n;
   if (rerr > 1e-3f || rerr < -1e-3f || (n % 2u) != 0u || n < 4u || n > FW_INJ_MAX_SAMPLES) {
-    return report(issue, FW_ERR_INCONSISTENT, "f_inj_Hz", cfg->f_inj_Hz,
-                  cfg->f_pwm_Hz / (float)FW_INJ_MAX_SAMPLES, cfg->f_pwm_Hz / 4.0f);
+    return report(issue, FW_ERR_INCONSISTENT, "f_inj_Hz", cfg->estimator.f_inj_Hz,
+                  cfg->sensing.f_pwm_Hz / (float)FW_INJ_MAX_SAMPLES, cfg->sensing.f_pwm_Hz / 4.0f);
   }
-  if (cfg->u_dc_min_V >= cfg->u_dc_max_V) {
-    return report(issue, FW_ERR_INCONSISTENT, "u_dc_min_V", cfg->u_dc_min_V, 1.0f,
-                  cfg->u_dc_max_V);
+  if (cfg->protection.u_dc_min_V >= cfg->protection.u_dc_max_V) {
+    return report(issue, FW_ERR_INCONSISTENT, "u_dc_min_V", cfg->protection.u_dc_min_V, 1.0f,
+                  cfg->protection.u_dc_max_V);
   }
-  if (cfg->i_max_A >= cfg->i_trip_A) {
-    return report(issue, FW_ERR_INCONSISTENT, "i_max_A", cfg->i_max_A, 0.05f, cfg->i_trip_A);
+  if (cfg->loops.i_max_A >= cfg->protection.i_trip_A) {
+    return report(issue, FW_ERR_INCONSISTENT, "i_max_A", cfg->loops.i_max_A, 0.05f,
+                  cfg->protection.i_trip_A);
   }
-  if (cfg->sogi_k_adapt_min > cfg->sogi_k_adapt_max) {
-    return report(issue, FW_ERR_INCONSISTENT, "sogi_k_adapt_min", cfg->sogi_k_adapt_min,
-                  FW_SOGI_K_MIN, cfg->sogi_k_adapt_max);
+  if (cfg->estimator.sogi_k_adapt_min > cfg->estimator.sogi_k_adapt_max) {
+    return report(issue, FW_ERR_INCONSISTENT, "sogi_k_adapt_min", cfg->estimator.sogi_k_adapt_min,
+                  FW_SOGI_K_MIN, cfg->estimator.sogi_k_adapt_max);
   }
-  if (cfg->bemf_v_on_mps > 0.0f && cfg->bemf_v_off_mps >= cfg->bemf_v_on_mps) {
-    return report(issue, FW_ERR_INCONSISTENT, "bemf_v_off_mps", cfg->bemf_v_off_mps, 0.0f,
-                  cfg->bemf_v_on_mps);
+  if (cfg->estimator.bemf_v_on_mps > 0.0f &&
+      cfg->estimator.bemf_v_off_mps >= cfg->estimator.bemf_v_on_mps) {
+    return report(issue, FW_ERR_INCONSISTENT, "bemf_v_off_mps", cfg->estimator.bemf_v_off_mps, 0.0f,
+                  cfg->estimator.bemf_v_on_mps);
   }
-  if (cfg->pll_kd > 0.0f && cfg->pll_kd >= cfg->pll_kp * cfg->pll_ki) {
-    return report(issue, FW_ERR_INCONSISTENT, "pll_kd", cfg->pll_kd, 0.0f,
-                  cfg->pll_kp * cfg->pll_ki);
+  if (cfg->estimator.pll_kd > 0.0f &&
+      cfg->estimator.pll_kd >= cfg->estimator.pll_kp * cfg->estimator.pll_ki) {
+    return report(issue, FW_ERR_INCONSISTENT, "pll_kd", cfg->estimator.pll_kd, 0.0f,
+                  cfg->estimator.pll_kp * cfg->estimator.pll_ki);
   }
   /* Saliency: injection needs |Lq - Ld| / Ld >= saliency_min (method.md 3.1). */
-  float sal = (cfg->L_q_H - cfg->L_d_H) / cfg->L_d_H;
+  float sal = (cfg->machine.L_q_H - cfg->machine.L_d_H) / cfg->machine.L_d_H;
   if (sal < 0.0f) {
     sal = -sal;
   }
   /* 1e-6 absorbs float32 rounding: Lq = 1.1 Ld must pass a 10 % threshold */
   /* sal = 0 is refused even with saliency_min = 0: L_q / (L_q - L_d) is inf */
-  if (sal < cfg->saliency_min - 1e-6f || !(sal > 0.0f)) {
-    return report(issue, FW_ERR_SALIENCY, "L_q_H", cfg->L_q_H,
-                  cfg->L_d_H * (1.0f + cfg->saliency_min), cfg->L_d_H * 10.0f);
+  if (sal < cfg->protection.saliency_min - 1e-6f || !(sal > 0.0f)) {
+    return report(issue, FW_ERR_SALIENCY, "L_q_H", cfg->machine.L_q_H,
+                  cfg->machine.L_d_H * (1.0f + cfg->protection.saliency_min),
+                  cfg->machine.L_d_H * 10.0f);
   }
   return report(issue, FW_OK, NULL, 0.0f, 0.0f, 0.0f);
 }

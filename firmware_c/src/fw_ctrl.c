@@ -47,7 +47,7 @@ static void latch_fault(fw_ctrl_t *c, fw_fault_t code) {
   if (code == FW_FAULT_NONE) {
     return;
   }
-  fw_fault_latch_update(&c->fault, code, c->cfg.fault_reaction_option);
+  fw_fault_latch_update(&c->fault, code, c->cfg.protection.fault_reaction_option);
   if (c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE && c->fault.hard) {
     fw_cia402_fault_reaction_done(&c->sm); /* a hard fault ends any braking */
   } else if (c->sm.state != FW_CIA402_FAULT &&
@@ -60,22 +60,22 @@ static void latch_fault(fw_ctrl_t *c, fw_fault_t code) {
 
 /** Unwrapped estimated position, m. */
 static float pos_m_of(const fw_config_t *cfg, float pos_e) {
-  return pos_e * cfg->pole_pitch_m / FW_PI_F32;
+  return pos_e * cfg->machine.pole_pitch_m / FW_PI_F32;
 }
 
 static float pos_hat_m(const fw_ctrl_t *c) { return pos_m_of(&c->cfg, fw_obs_pos_e(&c->obs)); }
 
 static void foc_param(const fw_config_t *cfg, float dt_s, fw_foc_param_t *p) {
   p->dt_s = dt_s;
-  p->cur_kp_V_per_A = cfg->cur_kp_V_per_A;
-  p->cur_ki_V_per_As = cfg->cur_ki_V_per_As;
-  p->spd_kp_A_per_radps = cfg->spd_kp_A_per_radps;
-  p->spd_ki_A_per_rad = cfg->spd_ki_A_per_rad;
-  p->i_max_A = cfg->i_max_A;
-  p->R_ohm = cfg->R_ohm;
-  p->L_d_H = cfg->L_d_H;
-  p->L_q_H = cfg->L_q_H;
-  p->psi_f_Wb = cfg->psi_f_Wb;
+  p->cur_kp_V_per_A = cfg->loops.cur_kp_V_per_A;
+  p->cur_ki_V_per_As = cfg->loops.cur_ki_V_per_As;
+  p->spd_kp_A_per_radps = cfg->loops.spd_kp_A_per_radps;
+  p->spd_ki_A_per_rad = cfg->loops.spd_ki_A_per_rad;
+  p->i_max_A = cfg->loops.i_max_A;
+  p->R_ohm = cfg->machine.R_ohm;
+  p->L_d_H = cfg->machine.L_d_H;
+  p->L_q_H = cfg->machine.L_q_H;
+  p->psi_f_Wb = cfg->machine.psi_f_Wb;
 }
 
 /** Reset everything that carries history across an enable (the observer's
@@ -85,7 +85,7 @@ static void reset_dynamics(fw_ctrl_t *c) {
   fw_foc_param_t fp;
   foc_param(cfg, c->dt_s, &fp);
   fw_foc_reset(&c->foc, &fp);
-  fw_inj_reset(&c->inj, cfg);
+  fw_inj_reset(&c->inj, &cfg->estimator);
   fw_obs_reset(&c->obs, cfg);
   c->phase = FW_START_IDLE;
   c->phase_time_s = 0.0f;
@@ -100,18 +100,18 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   c->cfg = *cfg;
   c->cfg_ok = (uint8_t)(st == FW_OK || st == FW_ERR_SALIENCY);
   c->saliency_ok = (uint8_t)(st == FW_OK);
-  c->dt_s = 1.0f / cfg->f_pwm_Hz;
+  c->dt_s = 1.0f / cfg->sensing.f_pwm_Hz;
   fw_inj_init(&c->inj, cfg, c->dt_s);
   fw_obs_init(&c->obs, cfg, c->dt_s);
   fw_protect_config(&c->prot, cfg, c->dt_s);
-  c->e_start_max_V = fw_units_bemf_V(cfg, cfg->start_speed_max_mps);
+  c->e_start_max_V = fw_units_bemf_V(cfg, cfg->protection.start_speed_max_mps);
   fw_mon_init(&c->mon, cfg, c->dt_s);
   fw_bemf_init(&c->bemf, cfg, c->dt_s);
   /* references set under the old limits must obey the new ones */
   c->speed_ref_radps_e =
-      fw_clampf(c->speed_ref_radps_e, -cfg->speed_max_radps_e, cfg->speed_max_radps_e);
-  c->i_q_ref_force_A = fw_clampf(c->i_q_ref_force_A, -cfg->i_max_A, cfg->i_max_A);
-  c->i_d_ref_A = fw_clampf(c->i_d_ref_A, -cfg->i_max_A, cfg->i_max_A);
+      fw_clampf(c->speed_ref_radps_e, -cfg->loops.speed_max_radps_e, cfg->loops.speed_max_radps_e);
+  c->i_q_ref_force_A = fw_clampf(c->i_q_ref_force_A, -cfg->loops.i_max_A, cfg->loops.i_max_A);
+  c->i_d_ref_A = fw_clampf(c->i_d_ref_A, -cfg->loops.i_max_A, cfg->loops.i_max_A);
   fw_obs_keep_position(&c->obs); /* the estimate restarts from 0 */
   reset_dynamics(c);
 }
@@ -170,7 +170,7 @@ fw_cia402_state_t fw_state(const fw_ctrl_t *ctrl) { return ctrl->sm.state; }
 static uint16_t statusword_of(const fw_config_t *cfg, fw_cia402_state_t state, float u_dc_V,
                               fw_start_phase_t phase, fw_mode_t mode, float speed_ref,
                               float omega_f) {
-  bool warning = u_dc_V < cfg->u_dc_min_V;
+  bool warning = u_dc_V < cfg->protection.u_dc_min_V;
   bool reached = false;
   if (state == FW_CIA402_OPERATION_ENABLED && phase == FW_START_RUN) {
     if (mode == FW_MODE_SPEED) {
@@ -216,7 +216,7 @@ uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
   if (after == FW_CIA402_QUICK_STOP_ACTIVE && before != FW_CIA402_QUICK_STOP_ACTIVE) {
     ctrl->qs_time_s = 0.0f;
     ctrl->qs_still_s = 0.0f;
-    if (ctrl->cfg.quick_stop_option == (uint32_t)FW_REACT_SWITCH_OFF) {
+    if (ctrl->cfg.protection.quick_stop_option == (uint32_t)FW_REACT_SWITCH_OFF) {
       fw_cia402_quick_stop_done(&ctrl->sm); /* 0x605A = 0: disable drive at once */
       ctrl->phase = FW_START_IDLE;
     }
@@ -248,12 +248,12 @@ static fw_status_t set_clamped(float *dst, float v, float lim) {
 }
 
 fw_status_t fw_set_speed_ref(fw_ctrl_t *ctrl, float w) {
-  return ctrl ? set_clamped(&ctrl->speed_ref_radps_e, w, ctrl->cfg.speed_max_radps_e)
+  return ctrl ? set_clamped(&ctrl->speed_ref_radps_e, w, ctrl->cfg.loops.speed_max_radps_e)
               : FW_ERR_NULL;
 }
 
 fw_status_t fw_set_iq_ref(fw_ctrl_t *ctrl, float i) {
-  return ctrl ? set_clamped(&ctrl->i_q_ref_force_A, i, ctrl->cfg.i_max_A) : FW_ERR_NULL;
+  return ctrl ? set_clamped(&ctrl->i_q_ref_force_A, i, ctrl->cfg.loops.i_max_A) : FW_ERR_NULL;
 }
 
 fw_status_t fw_set_force_ref(fw_ctrl_t *ctrl, float force_N) {
@@ -264,7 +264,7 @@ fw_status_t fw_set_force_ref(fw_ctrl_t *ctrl, float force_N) {
 }
 
 fw_status_t fw_set_id_ref(fw_ctrl_t *ctrl, float i) {
-  return ctrl ? set_clamped(&ctrl->i_d_ref_A, i, ctrl->cfg.i_max_A) : FW_ERR_NULL;
+  return ctrl ? set_clamped(&ctrl->i_d_ref_A, i, ctrl->cfg.loops.i_max_A) : FW_ERR_NULL;
 }
 
 fw_status_t fw_set_extractor(fw_ctrl_t *ctrl, fw_extractor_t ex) {
@@ -274,11 +274,11 @@ fw_status_t fw_set_extractor(fw_ctrl_t *ctrl, fw_extractor_t ex) {
   if (ex != FW_EXTRACTOR_PSEUDO && ex != FW_EXTRACTOR_SOGI && ex != FW_EXTRACTOR_SOGI_ADAPTIVE) {
     return FW_ERR_RANGE;
   }
-  ctrl->cfg.extractor = (uint32_t)ex;
+  ctrl->cfg.estimator.extractor = (uint32_t)ex;
   /* demodulated history belongs to the old path: restart the averages, and
    * hold the PLL and the adaptation until the new path has settled (a change
    * of k moves the SOGI output for a while) */
-  fw_inj_set_extractor(&ctrl->inj, &ctrl->cfg, ex);
+  fw_inj_set_extractor(&ctrl->inj, &ctrl->cfg.estimator, ex);
   fw_obs_hold(&ctrl->obs, FW_EST_SETTLE_S);
   return FW_OK;
 }
@@ -306,7 +306,7 @@ size_t fw_ctrl_sizeof(void) { return sizeof(fw_ctrl_t); }
  */
 static float polarity_step(fw_ctrl_t *c, float i_d) {
   fw_pol_result_t res;
-  const float v = fw_start_polarity_step(&c->start, &c->cfg, i_d, &res);
+  const float v = fw_start_polarity_step(&c->start, &c->cfg.estimator, i_d, &res);
   c->snap.pol_dI_pos_A = c->start.pol_sum_pos;
   c->snap.pol_dI_neg_A = c->start.pol_sum_neg;
   if (res == FW_POL_BUSY) {
@@ -356,7 +356,7 @@ static void saliency_done(fw_ctrl_t *c) {
   float y[4];
   fw_start_saliency_means(&c->start, c->inj.n_inj, y);
   fw_fault_t f = fw_mon_saliency(&c->mon, &c->cfg, y[0], y[1], y[2], y[3],
-                                 c->dt_s * c->cfg.u_inj_V);
+                                 c->dt_s * c->cfg.estimator.u_inj_V);
   c->snap.sal_meas = c->mon.sal_meas;
   c->snap.L_small_meas_H = c->mon.L_small_meas_H;
   c->snap.L_large_meas_H = c->mon.L_large_meas_H;
@@ -434,7 +434,7 @@ typedef struct {
 static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
                          fw_mon_in_t *mi, fw_period_t *p) {
   const fw_fault_t f =
-      fw_fault_check_inputs(&c->cfg, in, fw_cia402_power_enabled(c->sm.state));
+      fw_fault_check_inputs(&c->cfg.protection, in, fw_cia402_power_enabled(c->sm.state));
   *safe = *in;
   if (f != FW_FAULT_NONE) {
     latch_fault(c, f);
@@ -497,7 +497,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
   hf->E_d_A = 0.0f;
   const float w_frame = c->obs.pll.w_hat_radps; /* theta_hat turned at this from k-1 to k */
   if (!p->pulses) {
-    const fw_extractor_t ex = (fw_extractor_t)cfg->extractor;
+    const fw_extractor_t ex = (fw_extractor_t)cfg->estimator.extractor;
     fw_inj_update(&c->inj, ex, p->i_ab, p->sc, c->obs.pll.theta_rad, c->obs.pll.w_i_radps,
                   hf);
     fw_obs_in_t oi;
@@ -511,7 +511,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
     float adapt_r;
     const float eps = fw_obs_update(&c->obs, &oi, &adapt_r);
     if (ex == FW_EXTRACTOR_SOGI_ADAPTIVE) {
-      fw_inj_adapt(&c->inj, cfg, adapt_r);
+      fw_inj_adapt(&c->inj, &cfg->estimator, adapt_r);
     }
     snap->pll_err_rad = eps;
     snap->hf_amp_A = hf->E_d_A;
@@ -551,14 +551,14 @@ static void stage_startup(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p)
    * needs is the back-EMF of a moving mover (judged once the loop and the
    * monitor's filter have settled, and again at the end). */
   if (c->phase == FW_START_ALIGN) {
-    fw_start_fly_observe(&c->start, cfg, c->dt_s, hf->i_f_ab_A, c->phase_time_s);
+    fw_start_fly_observe(&c->start, &cfg->machine, c->dt_s, hf->i_f_ab_A, c->phase_time_s);
   }
   if (c->phase == FW_START_ALIGN && c->phase_time_s >= FW_MOTION_CHECK_S &&
       fw_mon_motion(&c->mon, c->e_start_max_V) != FW_FAULT_NONE) {
     latch_fault(c, fly_catch(c)); /* moving: catch it on the back-EMF, or refuse */
   }
   if (c->phase == FW_START_ALIGN &&
-      fw_start_align_done(cfg, c->phase_time_s, c->inj.inj_idx, n_inj) &&
+      fw_start_align_done(&cfg->estimator, c->phase_time_s, c->inj.inj_idx, n_inj) &&
       c->fault.code == FW_FAULT_NONE) {
     c->phase = FW_START_SALIENCY; /* whole injection periods: ends on the same phase */
     c->phase_time_s = 0.0f;
@@ -591,7 +591,7 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
     c->qs_still_s = still ? c->qs_still_s + dt : 0.0f;
     /* braking after a fault is bounded by fault_brake_time_s: a lost
      * supervisor must see the power stage off soon, at any speed */
-    const float t_max = p->braking ? cfg->fault_brake_time_s : cfg->quick_stop_time_s;
+    const float t_max = p->braking ? cfg->protection.fault_brake_time_s : cfg->protection.quick_stop_time_s;
     if (c->qs_still_s >= FW_QS_STILL_TIME_S || c->qs_time_s >= t_max) {
       if (p->braking) {
         fw_cia402_fault_reaction_done(&c->sm); /* stopped: PWM off, FAULT */
@@ -649,10 +649,10 @@ static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_mon_in_t *mi
 static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_outputs_t *out) {
   fw_snapshot_t *const snap = &c->snap; /* one base address for the stores */
   const fw_config_t *cfg = &c->cfg;
-  const float s = fw_inj_output(&c->inj, !p->pulses && cfg->u_inj_V > 0.0f);
+  const float s = fw_inj_output(&c->inj, !p->pulses && cfg->estimator.u_inj_V > 0.0f);
   const bool inj_q =
       c->phase == FW_START_SALIENCY && fw_start_saliency_on_q(&c->start, c->inj.n_inj);
-  const float u_inj = cfg->u_inj_V * c->bemf.inj_scale;
+  const float u_inj = cfg->estimator.u_inj_V * c->bemf.inj_scale;
   const fw_vec2_f32_t u_dq = p->u_dq;
   const fw_vec2_f32_t u_cmd = {u_dq.x + (inj_q ? 0.0f : s * u_inj),
                                u_dq.y + (inj_q ? s * u_inj : 0.0f)};
@@ -755,16 +755,16 @@ void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
 bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_inputs_t *in) {
   const uint32_t a = adc->i_abc_counts[0], b = adc->i_abc_counts[1], c = adc->i_abc_counts[2];
   const uint32_t u = adc->u_dc_counts;
-  const float off = cfg->adc_offset_counts, k = cfg->adc_A_per_count;
+  const float off = cfg->sensing.adc_offset_counts, k = cfg->sensing.adc_A_per_count;
   in->i_abc_A[0] = ((float)a - off) * k;
   in->i_abc_A[1] = ((float)b - off) * k;
   in->i_abc_A[2] = ((float)c - off) * k;
-  in->u_dc_V = (float)u * cfg->adc_V_per_count;
+  in->u_dc_V = (float)u * cfg->sensing.adc_V_per_count;
   /* one range test: the largest of the four counts (no branch per count) */
   uint32_t m = a > b ? a : b;
   m = m > c ? m : c;
   m = m > u ? m : u;
-  return m <= cfg->adc_max_count;
+  return m <= cfg->sensing.adc_max_count;
 }
 
 void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
@@ -810,7 +810,7 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
   snap->inj_scale = ctrl->bemf.inj_scale;
   snap->bemf_active = ctrl->bemf.active;
   snap->flying_start = ctrl->start.flying;
-  snap->extractor = (uint8_t)ctrl->cfg.extractor;
+  snap->extractor = (uint8_t)ctrl->cfg.estimator.extractor;
   snap->mode = (uint8_t)ctrl->mode;
   snap->polarity_flipped = ctrl->polarity_flipped;
   snap->sogi_k_eff = fw_inj_k(&ctrl->inj);
@@ -829,10 +829,10 @@ void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
   const float w = snap->omega_hat_radps;
   snap->pos_hat_m = pos_m_of(cfg, raw->pos_e_rad);
   snap->speed_hat_mps = fw_units_radps_e_to_mps(cfg, w);
-  snap->pos_hat_mech_rad = raw->pos_e_rad / cfg->pole_pairs;
+  snap->pos_hat_mech_rad = raw->pos_e_rad / cfg->machine.pole_pairs;
   snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, w);
   snap->force_hat_N = fw_units_force_per_A(cfg) * snap->i_dq_A[1];
-  snap->torque_hat_Nm = 1.5f * cfg->pole_pairs * cfg->psi_f_Wb * snap->i_dq_A[1];
+  snap->torque_hat_Nm = 1.5f * cfg->machine.pole_pairs * cfg->machine.psi_f_Wb * snap->i_dq_A[1];
   /* the observer's angle error as at the capture (an atan2f on demand, as fw_bemf_error) */
   snap->bemf_err_rad = raw->bemf_fresh ? raw->bemf_err_rad
                                        : fw_bemf_angle_of(&ctrl->bemf, raw->bemf_e_dq_V[0],
@@ -857,20 +857,20 @@ void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
 /* ---- units ---------------------------------------------------------------- */
 
 float fw_units_mps_to_radps_e(const fw_config_t *cfg, float v) {
-  return FW_PI_F32 * v / cfg->pole_pitch_m;
+  return FW_PI_F32 * v / cfg->machine.pole_pitch_m;
 }
 float fw_units_bemf_V(const fw_config_t *cfg, float v) {
-  return fw_units_mps_to_radps_e(cfg, v) * cfg->psi_f_Wb;
+  return fw_units_mps_to_radps_e(cfg, v) * cfg->machine.psi_f_Wb;
 }
 float fw_units_radps_e_to_mps(const fw_config_t *cfg, float w) {
-  return w * cfg->pole_pitch_m / FW_PI_F32;
+  return w * cfg->machine.pole_pitch_m / FW_PI_F32;
 }
 float fw_units_rpm_to_radps_e(const fw_config_t *cfg, float n) {
-  return n * FW_TWO_PI_F32 * cfg->pole_pairs / 60.0f;
+  return n * FW_TWO_PI_F32 * cfg->machine.pole_pairs / 60.0f;
 }
 float fw_units_radps_e_to_rpm(const fw_config_t *cfg, float w) {
-  return w * 60.0f / (FW_TWO_PI_F32 * cfg->pole_pairs);
+  return w * 60.0f / (FW_TWO_PI_F32 * cfg->machine.pole_pairs);
 }
 float fw_units_force_per_A(const fw_config_t *cfg) {
-  return 1.5f * (FW_PI_F32 / cfg->pole_pitch_m) * cfg->psi_f_Wb;
+  return 1.5f * (FW_PI_F32 / cfg->machine.pole_pitch_m) * cfg->machine.psi_f_Wb;
 }

@@ -62,13 +62,13 @@ uint32_t fw_fault_latch_history(const fw_fault_latch_t *f, uint16_t *codes, uint
 
 void fw_protect_config(fw_protect_t *p, const fw_config_t *cfg, float dt_s) {
   p->dt_s = dt_s;
-  p->w_vmax_radps = fw_units_mps_to_radps_e(cfg, cfg->v_max_mps);
-  p->w_follow_radps = fw_units_mps_to_radps_e(cfg, cfg->follow_err_mps);
+  p->w_vmax_radps = fw_units_mps_to_radps_e(cfg, cfg->protection.v_max_mps);
+  p->w_follow_radps = fw_units_mps_to_radps_e(cfg, cfg->protection.follow_err_mps);
   /* the step's products of configuration values, once */
-  p->ir2_A2 = cfg->i_rated_A * cfg->i_rated_A;
-  p->i2t_max_A2s = (cfg->i_max_A * cfg->i_max_A - p->ir2_A2) * cfg->i2t_time_s;
-  p->i2t_on = (uint8_t)(cfg->i_rated_A < cfg->i_max_A);
-  p->pos_on = (uint8_t)(cfg->pos_limit_min_m < cfg->pos_limit_max_m);
+  p->ir2_A2 = cfg->protection.i_rated_A * cfg->protection.i_rated_A;
+  p->i2t_max_A2s = (cfg->loops.i_max_A * cfg->loops.i_max_A - p->ir2_A2) * cfg->protection.i2t_time_s;
+  p->i2t_on = (uint8_t)(cfg->protection.i_rated_A < cfg->loops.i_max_A);
+  p->pos_on = (uint8_t)(cfg->protection.pos_limit_min_m < cfg->protection.pos_limit_max_m);
 }
 
 void fw_protect_init(fw_protect_t *p, const fw_config_t *cfg, float dt_s) {
@@ -80,7 +80,7 @@ void fw_protect_init(fw_protect_t *p, const fw_config_t *cfg, float dt_s) {
 void fw_protect_reset(fw_protect_t *p) { p->follow_time_s = 0.0f; }
 
 void fw_protect_cool(fw_protect_t *p, const fw_config_t *cfg) {
-  p->i2t_A2s -= cfg->i_rated_A * cfg->i_rated_A * p->dt_s;
+  p->i2t_A2s -= cfg->protection.i_rated_A * cfg->protection.i_rated_A * p->dt_s;
   p->i2t_A2s = p->i2t_A2s > 0.0f ? p->i2t_A2s : 0.0f;
 }
 
@@ -98,15 +98,15 @@ fw_fault_t fw_protect_update(fw_protect_t *p, const fw_config_t *cfg, const fw_p
   }
   if (p->pos_on) {
     const float x = in->pos_m;
-    if ((x > cfg->pos_limit_max_m && !(in->cmd < 0.0f)) ||
-        (x < cfg->pos_limit_min_m && !(in->cmd > 0.0f))) {
+    if ((x > cfg->protection.pos_limit_max_m && !(in->cmd < 0.0f)) ||
+        (x < cfg->protection.pos_limit_min_m && !(in->cmd > 0.0f))) {
       return FW_FAULT_POSITION_LIMIT;
     }
   }
   bool follow = in->speed_mode && !in->quick_stop &&
                 fabsf(in->speed_ref_radps_e - in->omega_f_radps) > p->w_follow_radps;
   p->follow_time_s = follow ? p->follow_time_s + dt : 0.0f;
-  if (p->follow_time_s > cfg->follow_err_time_s) {
+  if (p->follow_time_s > cfg->protection.follow_err_time_s) {
     return FW_FAULT_FOLLOWING_ERROR;
   }
   return FW_FAULT_NONE;

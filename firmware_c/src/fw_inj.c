@@ -9,15 +9,15 @@
 
 void fw_inj_init(fw_inj_t *j, const fw_config_t *cfg, float dt_s) {
   j->dt_s = dt_s;
-  j->n_inj = (uint32_t)(cfg->f_pwm_Hz / cfg->f_inj_Hz + 0.5f);
+  j->n_inj = (uint32_t)(cfg->sensing.f_pwm_Hz / cfg->estimator.f_inj_Hz + 0.5f);
   j->inv_n_inj = 1.0f / (float)j->n_inj;
   /* Group delay of the pre-warped discrete SOGI at its centre: the analog
    * 2/(k w0) times the warping slope dW/dw = (w0 T/2) sec^2(w0 T/2) / tan(w0 T/2). */
-  const float w0 = FW_TWO_PI_F32 * cfg->f_inj_Hz;
+  const float w0 = FW_TWO_PI_F32 * cfg->estimator.f_inj_Hz;
   const float h = 0.5f * w0 * dt_s;
   const float t = tanf(h);
   j->sogi_gd_s_k = (2.0f / w0) * h * (1.0f + t * t) / t;
-  fw_inj_reset(j, cfg);
+  fw_inj_reset(j, &cfg->estimator);
 }
 
 static void restart_averages(fw_inj_t *j) {
@@ -26,11 +26,11 @@ static void restart_averages(fw_inj_t *j) {
   j->sum_ed = j->sum_eq = j->sum_ia = j->sum_ib = 0.0f;
 }
 
-void fw_inj_reset(fw_inj_t *j, const fw_config_t *cfg) {
-  float k = cfg->extractor == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE ? cfg->sogi_k_adapt_max
-                                                                     : cfg->sogi_k;
-  (void)fw_sogi_init_f32(&j->sogi_a, cfg->f_inj_Hz, k, j->dt_s);
-  (void)fw_sogi_init_f32(&j->sogi_b, cfg->f_inj_Hz, k, j->dt_s);
+void fw_inj_reset(fw_inj_t *j, const fw_cfg_estimator_t *est) {
+  float k = est->extractor == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE ? est->sogi_k_adapt_max
+                                                                   : est->sogi_k;
+  (void)fw_sogi_init_f32(&j->sogi_a, est->f_inj_Hz, k, j->dt_s);
+  (void)fw_sogi_init_f32(&j->sogi_b, est->f_inj_Hz, k, j->dt_s);
   j->sogi_gd_s = j->sogi_gd_s_k / j->sogi_a.k;
   memset(j->h_prev_raw, 0, sizeof(j->h_prev_raw));
   memset(j->h_prev_sogi, 0, sizeof(j->h_prev_sogi));
@@ -46,8 +46,8 @@ void fw_inj_set_k(fw_inj_t *j, float k) {
   j->sogi_gd_s = j->sogi_gd_s_k / j->sogi_a.k; /* k is clamped > 0 by set_k */
 }
 
-void fw_inj_set_extractor(fw_inj_t *j, const fw_config_t *cfg, fw_extractor_t ex) {
-  fw_inj_set_k(j, ex == FW_EXTRACTOR_SOGI_ADAPTIVE ? cfg->sogi_k_adapt_max : cfg->sogi_k);
+void fw_inj_set_extractor(fw_inj_t *j, const fw_cfg_estimator_t *est, fw_extractor_t ex) {
+  fw_inj_set_k(j, ex == FW_EXTRACTOR_SOGI_ADAPTIVE ? est->sogi_k_adapt_max : est->sogi_k);
   restart_averages(j); /* the demodulated history belongs to the old path */
 }
 

@@ -60,18 +60,18 @@ void fw_mon_init(fw_mon_t *m, const fw_config_t *cfg, float dt_s) {
   memset(m, 0, sizeof(*m));
   m->dt_s = dt_s;
   m->inv_dt = 1.0f / dt_s;
-  m->angle_max_rad = cfg->mon_angle_max_rad;
-  m->bemf_max_rad = cfg->mon_bemf_max_rad;
-  m->bemf_min_V = cfg->mon_bemf_min_V;
-  m->detect_s = cfg->mon_detect_time_s;
-  m->i_sum_max_A = cfg->i_sum_max_A;
-  m->i_offset_max_A = cfg->i_offset_max_A;
-  m->i_ctrl_max_A = MON_CTRL_SHARE * cfg->i_max_A;
-  m->accel_max = MON_ACCEL_MARGIN * cfg->pll_accel_per_A * cfg->i_max_A;
-  m->R_ohm = cfg->R_ohm;
-  m->L_d_H = cfg->L_d_H;
-  m->L_q_H = cfg->L_q_H;
-  m->psi_f_Wb = cfg->psi_f_Wb;
+  m->angle_max_rad = cfg->protection.mon_angle_max_rad;
+  m->bemf_max_rad = cfg->protection.mon_bemf_max_rad;
+  m->bemf_min_V = cfg->protection.mon_bemf_min_V;
+  m->detect_s = cfg->protection.mon_detect_time_s;
+  m->i_sum_max_A = cfg->protection.i_sum_max_A;
+  m->i_offset_max_A = cfg->protection.i_offset_max_A;
+  m->i_ctrl_max_A = MON_CTRL_SHARE * cfg->loops.i_max_A;
+  m->accel_max = MON_ACCEL_MARGIN * cfg->estimator.pll_accel_per_A * cfg->loops.i_max_A;
+  m->R_ohm = cfg->machine.R_ohm;
+  m->L_d_H = cfg->machine.L_d_H;
+  m->L_q_H = cfg->machine.L_q_H;
+  m->psi_f_Wb = cfg->machine.psi_f_Wb;
   m->a_off = lp_coef(MON_OFF_TAU_S, dt_s);
   /* block low-passes: n periods of a per-period low-pass with a constant input */
   for (uint32_t n = 0u; n <= MON_EVAL_STEPS; n++) {
@@ -124,7 +124,7 @@ fw_fault_t fw_mon_saliency(fw_mon_t *m, const fw_config_t *cfg, float y_dd, floa
   const float r = sqrtf(half * half + b * b);
   const float l_big = mean + r;   /* Ts u / L_small */
   const float l_small = mean - r; /* Ts u / L_large */
-  const bool q_larger = cfg->L_q_H > cfg->L_d_H;
+  const bool q_larger = cfg->machine.L_q_H > cfg->machine.L_d_H;
   if (!(l_small > 0.0f) || !(l_big > 0.0f)) {
     m->sal_meas = 0.0f;
     return FW_FAULT_SALIENCY_MISMATCH; /* no inductive response on some axis */
@@ -136,13 +136,13 @@ fw_fault_t fw_mon_saliency(fw_mon_t *m, const fw_config_t *cfg, float y_dd, floa
    * it should be d^ when L_q > L_d, q^ otherwise */
   const float axis = 0.5f * atan2f(2.0f * b, y_dd - y_qq);
   m->sal_axis_rad = wrap_half_pi(axis - (q_larger ? 0.0f : 0.5f * FW_PI_F32));
-  const float L_lo = q_larger ? cfg->L_d_H : cfg->L_q_H;
-  const float L_hi = q_larger ? cfg->L_q_H : cfg->L_d_H;
+  const float L_lo = q_larger ? cfg->machine.L_d_H : cfg->machine.L_q_H;
+  const float L_hi = q_larger ? cfg->machine.L_q_H : cfg->machine.L_d_H;
   const float sal_cfg = L_hi / L_lo - 1.0f;
   /* measured and configured saliency must agree within a factor (1 + tol) */
   const float ratio = m->sal_meas / sal_cfg;
-  const float f = 1.0f + cfg->mon_sal_tol;
-  if (m->sal_meas < cfg->saliency_min || ratio > f || ratio * f < 1.0f) {
+  const float f = 1.0f + cfg->protection.mon_sal_tol;
+  if (m->sal_meas < cfg->protection.saliency_min || ratio > f || ratio * f < 1.0f) {
     return FW_FAULT_SALIENCY_MISMATCH;
   }
   if (fabsf(m->sal_axis_rad) > m->angle_max_rad) {

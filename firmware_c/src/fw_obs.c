@@ -31,24 +31,24 @@ static FW_ALWAYS_INLINE void pos_add(fw_obs_t *o, float d) {
 
 void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s) {
   o->dt_s = dt_s;
-  o->spd_alpha = lp_alpha(cfg->spd_filter_Hz, dt_s);
+  o->spd_alpha = lp_alpha(cfg->loops.spd_filter_Hz, dt_s);
   o->err_alpha = lp_alpha(FW_ERR_FILTER_HZ, dt_s);
   /* reciprocals and products the step would otherwise divide for */
-  o->eps_gain = cfg->L_q_H / (cfg->L_q_H - cfg->L_d_H);
-  o->inv_adapt_err = 1.0f / cfg->sogi_adapt_err_rad;
-  o->hf_min_A = cfg->hf_min_ratio * dt_s * cfg->u_inj_V / cfg->L_q_H;
+  o->eps_gain = cfg->machine.L_q_H / (cfg->machine.L_q_H - cfg->machine.L_d_H);
+  o->inv_adapt_err = 1.0f / cfg->estimator.sogi_adapt_err_rad;
+  o->hf_min_A = cfg->protection.hf_min_ratio * dt_s * cfg->estimator.u_inj_V / cfg->machine.L_q_H;
   /* the observer's gains and products, so the step reads nothing from cfg */
-  o->bw_min = cfg->pll_bw_min;
-  o->bw_span = 1.0f - cfg->pll_bw_min;
-  o->kp0 = cfg->pll_kp;
-  o->ki0 = cfg->pll_ki;
-  o->ki0_dt = cfg->pll_ki * dt_s;
-  o->kd_dt = dt_s * cfg->pll_kd;
-  o->accel_per_A = cfg->pll_accel_per_A;
+  o->bw_min = cfg->estimator.pll_bw_min;
+  o->bw_span = 1.0f - cfg->estimator.pll_bw_min;
+  o->kp0 = cfg->estimator.pll_kp;
+  o->ki0 = cfg->estimator.pll_ki;
+  o->ki0_dt = cfg->estimator.pll_ki * dt_s;
+  o->kd_dt = dt_s * cfg->estimator.pll_kd;
+  o->accel_per_A = cfg->estimator.pll_accel_per_A;
 }
 
 void fw_obs_reset(fw_obs_t *o, const fw_config_t *cfg) {
-  fw_pll_init_f32(&o->pll, cfg->pll_kp, cfg->pll_ki, cfg->speed_max_radps_e);
+  fw_pll_init_f32(&o->pll, cfg->estimator.pll_kp, cfg->estimator.pll_ki, cfg->loops.speed_max_radps_e);
   o->err_f = 0.0f;
   o->accel_dist = 0.0f;
   o->est_hold_s = 0.0f;
@@ -144,13 +144,13 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
 
 fw_fault_t fw_obs_supervise(fw_obs_t *o, const fw_config_t *cfg, float hf_amp_A,
                             float inj_scale, bool running) {
-  if (cfg->u_inj_V > 0.0f && hf_amp_A < o->hf_min_A * inj_scale) {
+  if (cfg->estimator.u_inj_V > 0.0f && hf_amp_A < o->hf_min_A * inj_scale) {
     return FW_FAULT_EST_HF_LOW;
   }
   if (running) {
-    if (fabsf(o->err_f) > cfg->pll_err_max_rad) {
+    if (fabsf(o->err_f) > cfg->protection.pll_err_max_rad) {
       o->pll_err_time_s += o->dt_s;
-      if (o->pll_err_time_s > cfg->pll_err_time_s) {
+      if (o->pll_err_time_s > cfg->protection.pll_err_time_s) {
         return FW_FAULT_EST_PLL_ERROR;
       }
     } else {

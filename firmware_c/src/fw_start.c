@@ -12,12 +12,12 @@ void fw_start_reset(fw_start_t *s) { memset(s, 0, sizeof(*s)); }
 
 /* ---- ALIGN ---------------------------------------------------------------- */
 
-void fw_start_fly_observe(fw_start_t *s, const fw_config_t *cfg, float dt_s,
+void fw_start_fly_observe(fw_start_t *s, const fw_cfg_machine_t *mach, float dt_s,
                           fw_vec2_f32_t i_f_ab, float phase_time_s) {
-  const float L = 0.5f * (cfg->L_d_H + cfg->L_q_H);
+  const float L = 0.5f * (mach->L_d_H + mach->L_q_H);
   const float inv_dt = 1.0f / dt_s;
-  float ea = s->u_ab_prev_V[0] - cfg->R_ohm * i_f_ab.x - L * (i_f_ab.x - s->i_f_ab_prev_A[0]) * inv_dt;
-  float eb = s->u_ab_prev_V[1] - cfg->R_ohm * i_f_ab.y - L * (i_f_ab.y - s->i_f_ab_prev_A[1]) * inv_dt;
+  float ea = s->u_ab_prev_V[0] - mach->R_ohm * i_f_ab.x - L * (i_f_ab.x - s->i_f_ab_prev_A[0]) * inv_dt;
+  float eb = s->u_ab_prev_V[1] - mach->R_ohm * i_f_ab.y - L * (i_f_ab.y - s->i_f_ab_prev_A[1]) * inv_dt;
   s->i_f_ab_prev_A[0] = i_f_ab.x;
   s->i_f_ab_prev_A[1] = i_f_ab.y;
   const float a = 1.0f - expf(-dt_s / FW_FLY_TAU_S);
@@ -41,10 +41,10 @@ fw_fault_t fw_start_fly_catch(fw_start_t *s, const fw_config_t *cfg, float bemf_
                               float *theta_rad, float *w0_radps) {
   const float ea = s->fly_e_ab_V[0], eb = s->fly_e_ab_V[1];
   const float E = sqrtf(ea * ea + eb * eb);
-  if (!(bemf_w_on > 0.0f) || E < cfg->bemf_e_off_V || fabsf(s->fly_rot_rad) < 0.05f) {
+  if (!(bemf_w_on > 0.0f) || E < cfg->estimator.bemf_e_off_V || fabsf(s->fly_rot_rad) < 0.05f) {
     return FW_FAULT_MOVING_AT_ENABLE; /* too slow for the back-EMF, too fast for injection */
   }
-  const float w0 = (s->fly_rot_rad > 0.0f ? 1.0f : -1.0f) * E / cfg->psi_f_Wb;
+  const float w0 = (s->fly_rot_rad > 0.0f ? 1.0f : -1.0f) * E / cfg->machine.psi_f_Wb;
   /* e_ab = w psi_f (-sin theta, cos theta); the filter lags by about w tau */
   float th = atan2f(-ea, eb) + (w0 < 0.0f ? FW_PI_F32 : 0.0f) + w0 * FW_FLY_TAU_S;
   *theta_rad = fw_wrap_pi_f32(th);
@@ -53,10 +53,10 @@ fw_fault_t fw_start_fly_catch(fw_start_t *s, const fw_config_t *cfg, float bemf_
   return FW_FAULT_NONE;
 }
 
-bool fw_start_align_done(const fw_config_t *cfg, float phase_time_s, uint32_t inj_idx,
+bool fw_start_align_done(const fw_cfg_estimator_t *est, float phase_time_s, uint32_t inj_idx,
                          uint32_t n_inj) {
   const uint32_t last_idx = n_inj / 4u > 0u ? n_inj / 4u - 1u : 0u;
-  return phase_time_s >= cfg->align_time_s && inj_idx == last_idx;
+  return phase_time_s >= est->align_time_s && inj_idx == last_idx;
 }
 
 /* ---- SALIENCY ------------------------------------------------------------- */
@@ -98,21 +98,21 @@ void fw_start_polarity_begin(fw_start_t *s) {
   s->pol_sum_pos = s->pol_sum_neg = 0.0f;
 }
 
-float fw_start_polarity_step(fw_start_t *s, const fw_config_t *cfg, float i_d,
+float fw_start_polarity_step(fw_start_t *s, const fw_cfg_estimator_t *est, float i_d,
                              fw_pol_result_t *res) {
-  const uint32_t n = cfg->pol_pulse_samples;
+  const uint32_t n = est->pol_pulse_samples;
   const uint32_t per_pair = 6u * n;
   const uint32_t pair = s->pol_k / per_pair;
   const uint32_t j = s->pol_k % per_pair;
   const uint32_t seg = j / n;
   const uint32_t in_seg = j % n;
-  const float v = cfg->pol_pulse_V;
+  const float v = est->pol_pulse_V;
 
-  if (pair >= cfg->pol_pulse_pairs) { /* decision */
+  if (pair >= est->pol_pulse_pairs) { /* decision */
     const float p = s->pol_sum_pos, m = s->pol_sum_neg;
-    if (p > m * (1.0f + cfg->pol_margin)) {
+    if (p > m * (1.0f + est->pol_margin)) {
       *res = FW_POL_ALIGNED;
-    } else if (m > p * (1.0f + cfg->pol_margin)) {
+    } else if (m > p * (1.0f + est->pol_margin)) {
       *res = FW_POL_FLIPPED;
     } else {
       *res = FW_POL_UNDETERMINED;

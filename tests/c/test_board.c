@@ -309,7 +309,7 @@ static void test_pending_periods_keep_their_configuration(void) {
   TT_CHECK(fw_board_can_rx_isr(&g_ba, &f));
   g_pa.can_room = CAN_BOX;
   fw_board_background(&g_ba); /* the write, then the five periods */
-  TT_CHECK(fw_get_config(fw_app_ctrl(&g_a))->u_dc_min_V == 400.0f);
+  TT_CHECK(fw_get_config(fw_app_ctrl(&g_a))->protection.u_dc_min_V == 400.0f);
   int answered = 0;
   for (uint32_t i = 0; i < g_pa.can_n; i++) {
     answered += g_pa.can[i].id == 0x580u + NID && g_pa.can[i].data[0] == 0x60u; /* accepted */

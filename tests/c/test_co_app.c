@@ -34,12 +34,12 @@ static void test_init_and_identity(void) {
   fw_can_frame_t f;
   TT_CHECK(fw_app_can_tx_pop(&g_app, &f) && f.id == 0x700 + NID && f.data[0] == 0);
   TT_CHECK(sdo_read(0x2040, 0) == FW_VERSION_U32);
-  TT_CHECK(sdo_read(0x2000, 0) == cfg.extractor);
+  TT_CHECK(sdo_read(0x2000, 0) == cfg.estimator.extractor);
   TT_CHECK(sdo_read(0x2002, 0) == 1u);
   uint32_t k = sdo_read(0x2001, 0);
   float fk;
   memcpy(&fk, &k, 4);
-  TT_CHECK_NEAR(fk, cfg.sogi_k, 0.0);
+  TT_CHECK_NEAR(fk, cfg.estimator.sogi_k, 0.0);
   TT_CHECK(fw_app_sizeof() == sizeof(fw_app_t));
   fw_app_step(NULL, &g_in, &g_out); /* no crash */
   fw_app_step(&g_app, NULL, &g_out);
@@ -81,13 +81,13 @@ static void test_config_writes(void) {
   uint32_t raw;
   memcpy(&raw, &f, 4);
   TT_CHECK(sdo_write(0x2001, 0, raw, 4) == 0);
-  TT_CHECK_NEAR(fw_get_config(fw_app_ctrl(&g_app))->sogi_k, 0.7f, 0.0);
+  TT_CHECK_NEAR(fw_get_config(fw_app_ctrl(&g_app))->estimator.sogi_k, 0.7f, 0.0);
   f = 100.0f;
   memcpy(&raw, &f, 4);
   TT_CHECK(sdo_write(0x2001, 0, raw, 4) == 0x06090031u);
-  TT_CHECK_NEAR(fw_get_config(fw_app_ctrl(&g_app))->sogi_k, 0.7f, 0.0);
+  TT_CHECK_NEAR(fw_get_config(fw_app_ctrl(&g_app))->estimator.sogi_k, 0.7f, 0.0);
   TT_CHECK(sdo_write(0x2000, 0, 0, 1) == 0);
-  TT_CHECK(fw_get_config(fw_app_ctrl(&g_app))->extractor == FW_EXTRACTOR_PSEUDO);
+  TT_CHECK(fw_get_config(fw_app_ctrl(&g_app))->estimator.extractor == FW_EXTRACTOR_PSEUDO);
   TT_CHECK(sdo_read(0x2002, 0) == 0);
   TT_CHECK(sdo_write(0x2002, 0, 1, 1) == 0);
   TT_CHECK(sdo_read(0x2000, 0) == FW_EXTRACTOR_SOGI_ADAPTIVE);
@@ -100,18 +100,18 @@ static void test_config_writes(void) {
   memcpy(&raw, &f, 4);
   uint32_t a = sdo_write(0x2010, 2, raw, 4);
   TT_CHECK(a == 0x06090030u);
-  TT_CHECK_NEAR(fw_get_config(fw_app_ctrl(&g_app))->f_inj_Hz, 3000.0, 0.0);
+  TT_CHECK_NEAR(fw_get_config(fw_app_ctrl(&g_app))->estimator.f_inj_Hz, 3000.0, 0.0);
   /* read-only PWM frequency */
   TT_CHECK(sdo_write(0x2050, 1, raw, 4) == 0x06010002u);
 }
 
 static void test_saliency_refusal_on_enable(void) {
   setup();
-  float lq = fw_get_config(fw_app_ctrl(&g_app))->L_d_H; /* no saliency */
+  float lq = fw_get_config(fw_app_ctrl(&g_app))->machine.L_d_H; /* no saliency */
   uint32_t raw;
   memcpy(&raw, &lq, 4);
   TT_CHECK(sdo_write(0x2050, 4, raw, 4) == 0);
-  TT_CHECK_NEAR(fw_get_config(fw_app_ctrl(&g_app))->L_q_H, lq, 0.0);
+  TT_CHECK_NEAR(fw_get_config(fw_app_ctrl(&g_app))->machine.L_q_H, lq, 0.0);
   TT_CHECK(sdo_write(0x6040, 0, 0x06, 2) == 0);
   TT_CHECK(sdo_write(0x6040, 0, 0x07, 2) == 0);
   pop_id(0, NULL);
@@ -307,7 +307,7 @@ static void test_cia402_protection_objects(void) {
   const fw_config_t *c = fw_get_config(fw_app_ctrl(&g_app));
   TT_CHECK(sdo_read(0x6080, 0) == 3000000u); /* default v_max 3 m/s */
   TT_CHECK(sdo_write(0x6080, 0, 1234567u, 4) == 0);
-  TT_CHECK_NEAR(c->v_max_mps, 1.234567, 1e-7);
+  TT_CHECK_NEAR(c->protection.v_max_mps, 1.234567, 1e-7);
   float f;
   uint32_t raw = sdo_read(0x2051, 1);
   memcpy(&f, &raw, sizeof f);
@@ -318,27 +318,27 @@ static void test_cia402_protection_objects(void) {
   TT_CHECK(sdo_read(0x6080, 0) == 2500000u); /* and the other way round */
   TT_CHECK(sdo_write(0x6080, 0, 999u, 4) == 0x06090032u); /* below 1 mm/s */
   TT_CHECK(sdo_write(0x6065, 0, 200000u, 4) == 0);
-  TT_CHECK_NEAR(c->follow_err_mps, 0.2, 1e-7);
+  TT_CHECK_NEAR(c->protection.follow_err_mps, 0.2, 1e-7);
   TT_CHECK(sdo_write(0x6066, 0, 250u, 2) == 0);
-  TT_CHECK_NEAR(c->follow_err_time_s, 0.25, 1e-7);
+  TT_CHECK_NEAR(c->protection.follow_err_time_s, 0.25, 1e-7);
   TT_CHECK(sdo_write(0x6066, 0, 0u, 2) == 0x06090032u);
   TT_CHECK(sdo_write(0x607D, 1, (uint32_t)-150000, 4) == 0); /* -0.15 m */
   TT_CHECK(sdo_write(0x607D, 2, 2500000u, 4) == 0);
-  TT_CHECK_NEAR(c->pos_limit_min_m, -0.15, 1e-7);
-  TT_CHECK_NEAR(c->pos_limit_max_m, 2.5, 1e-7);
+  TT_CHECK_NEAR(c->protection.pos_limit_min_m, -0.15, 1e-7);
+  TT_CHECK_NEAR(c->protection.pos_limit_max_m, 2.5, 1e-7);
   TT_CHECK(sdo_read(0x607D, 1) == (uint32_t)-150000);
   /* option codes: 0..2 taken, CiA 402 codes not supported (3..8, 5/6 "stay in
    * quick stop") and negative (manufacturer) codes refused as invalid values */
   TT_CHECK(sdo_read(0x605A, 0) == 2u);
   TT_CHECK(sdo_write(0x605A, 0, 0u, 2) == 0);
-  TT_CHECK(c->quick_stop_option == 0u);
+  TT_CHECK(c->protection.quick_stop_option == 0u);
   TT_CHECK(sdo_write(0x605A, 0, 5u, 2) == 0x06090030u);
   TT_CHECK(sdo_write(0x605A, 0, 6u, 2) == 0x06090030u);
   TT_CHECK(sdo_write(0x605A, 0, 0xFFFFu, 2) == 0x06090030u); /* -1 */
-  TT_CHECK(c->quick_stop_option == 0u);
+  TT_CHECK(c->protection.quick_stop_option == 0u);
   TT_CHECK(sdo_read(0x2051, 8) == 0u);
   TT_CHECK(sdo_write(0x605E, 0, 1u, 2) == 0);
-  TT_CHECK(c->fault_reaction_option == 1u && sdo_read(0x2051, 9) == 1u);
+  TT_CHECK(c->protection.fault_reaction_option == 1u && sdo_read(0x2051, 9) == 1u);
   TT_CHECK(sdo_write(0x605E, 0, 3u, 2) == 0x06090030u);
   TT_CHECK(sdo_read(0x605E, 0) == 1u);
   /* refused while the power stage is on */

@@ -47,28 +47,28 @@ static void test_generated_table_and_defaults(void) {
   fw_config_default(&cfg);
   size_t i = 0;
   TT_CHECK(fw_config_field_count() == FW_CONFIG_FIELD_COUNT);
-#define F32(name_, unit_, lo_, hi_, dflt_)                                                \
-  do {                                                                                   \
-    const fw_config_field_t *f = fw_config_field(i++);                                   \
-    TT_CHECK(f != NULL && strcmp(f->name, #name_) == 0 && !f->is_u32);                   \
-    TT_CHECK(f != NULL && f->offset == offsetof(fw_config_t, name_));                    \
+#define F32(part_, name_, unit_, lo_, hi_, dflt_)                                         \
+  do {                                                                                    \
+    const fw_config_field_t *f = fw_config_field(i++);                                    \
+    TT_CHECK(f != NULL && strcmp(f->name, #name_) == 0 && !f->is_u32);                    \
+    TT_CHECK(f != NULL && f->offset == offsetof(fw_config_t, part_.name_));               \
     TT_CHECK(f != NULL && f->min == (lo_) && f->max == (hi_) && strcmp(f->unit, unit_) == 0); \
-    if (cfg.name_ != (dflt_)) {                                                          \
-      printf("  drift: od.yaml fw_config.%s default %.9g, fw_config_default() %.9g\n",  \
-             #name_, (double)(dflt_), (double)cfg.name_);                                \
-    }                                                                                    \
-    TT_CHECK(cfg.name_ == (dflt_));                                                      \
+    if (cfg.part_.name_ != (dflt_)) {                                                     \
+      printf("  drift: od.yaml fw_config.%s default %.9g, fw_config_default() %.9g\n",    \
+             #name_, (double)(dflt_), (double)cfg.part_.name_);                           \
+    }                                                                                     \
+    TT_CHECK(cfg.part_.name_ == (dflt_));                                                 \
   } while (0);
-#define U32(name_, unit_, lo_, hi_, dflt_)                                                \
-  do {                                                                                   \
-    const fw_config_field_t *f = fw_config_field(i++);                                   \
-    TT_CHECK(f != NULL && strcmp(f->name, #name_) == 0 && f->is_u32);                    \
-    TT_CHECK(f != NULL && f->min == (lo_) && f->max == (hi_));                           \
-    if (cfg.name_ != (dflt_)) {                                                          \
-      printf("  drift: od.yaml fw_config.%s default %u, fw_config_default() %u\n",      \
-             #name_, (unsigned)(dflt_), (unsigned)cfg.name_);                            \
-    }                                                                                    \
-    TT_CHECK(cfg.name_ == (dflt_));                                                      \
+#define U32(part_, name_, unit_, lo_, hi_, dflt_)                                         \
+  do {                                                                                    \
+    const fw_config_field_t *f = fw_config_field(i++);                                    \
+    TT_CHECK(f != NULL && strcmp(f->name, #name_) == 0 && f->is_u32);                     \
+    TT_CHECK(f != NULL && f->min == (lo_) && f->max == (hi_));                            \
+    if (cfg.part_.name_ != (dflt_)) {                                                     \
+      printf("  drift: od.yaml fw_config.%s default %u, fw_config_default() %u\n",        \
+             #name_, (unsigned)(dflt_), (unsigned)cfg.part_.name_);                       \
+    }                                                                                     \
+    TT_CHECK(cfg.part_.name_ == (dflt_));                                                 \
   } while (0);
   FW_CONFIG_FIELDS(F32, U32)
 #undef F32

@@ -99,11 +99,11 @@ static void check_demod(fw_extractor_t ex, double tol) {
   for (size_t i = 0; i < sizeof(dths) / sizeof(dths[0]); i++) {
     fw_config_t cfg;
     fw_config_default(&cfg);
-    cfg.pll_kp = 0.0f; /* freeze theta_hat at 0 to read the open-loop error */
-    cfg.pll_ki = 0.0f;
-    cfg.pll_kd = 0.0f; /* the observer extension needs kd < kp ki */
-    cfg.align_time_s = 1.0f;
-    cfg.extractor = (uint32_t)ex;
+    cfg.estimator.pll_kp = 0.0f; /* freeze theta_hat at 0 to read the open-loop error */
+    cfg.estimator.pll_ki = 0.0f;
+    cfg.estimator.pll_kd = 0.0f; /* the observer extension needs kd < kp ki */
+    cfg.estimator.align_time_s = 1.0f;
+    cfg.estimator.extractor = (uint32_t)ex;
     fw_ctrl_t c;
     fw_init(&c, &cfg);
     plant_t p;
@@ -134,8 +134,8 @@ static void test_demod_sogi_adaptive(void) { check_demod(FW_EXTRACTOR_SOGI_ADAPT
 static void test_demod_pi_ambiguity(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  cfg.pll_kp = cfg.pll_ki = cfg.pll_kd = 0.0f;
-  cfg.align_time_s = 1.0f;
+  cfg.estimator.pll_kp = cfg.estimator.pll_ki = cfg.estimator.pll_kd = 0.0f;
+  cfg.estimator.align_time_s = 1.0f;
   double e[2];
   for (int j = 0; j < 2; j++) {
     fw_ctrl_t c;
@@ -279,56 +279,58 @@ static void test_config_checks(void) {
   TT_CHECK(fw_config_field_find("nope") == NULL);
 
   fw_config_t bad = cfg;
-  bad.f_pwm_Hz = 1000.0f;
+  bad.sensing.f_pwm_Hz = 1000.0f;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_RANGE);
   TT_CHECK(iss.field != NULL && strcmp(iss.field, "f_pwm_Hz") == 0);
   TT_CHECK_NEAR(iss.min, 4000.0, 1e-3);
 
   bad = cfg;
-  bad.pll_kp = NAN;
+  bad.estimator.pll_kp = NAN;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_NOT_FINITE);
   TT_CHECK(strcmp(iss.field, "pll_kp") == 0);
 
   bad = cfg;
-  bad.f_inj_Hz = 3500.0f; /* 24000/3500 is not an even integer */
+  bad.estimator.f_inj_Hz = 3500.0f; /* 24000/3500 is not an even integer */
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_INCONSISTENT);
   TT_CHECK(strcmp(iss.field, "f_inj_Hz") == 0);
 
   bad = cfg;
-  bad.f_inj_Hz = 12000.0f; /* 2 samples per period: SOGI at Nyquist, refused */
+  bad.estimator.f_inj_Hz = 12000.0f; /* 2 samples per period: SOGI at Nyquist, refused */
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_INCONSISTENT);
 
   bad = cfg;
-  bad.pll_kd = 2.0f * bad.pll_kp * bad.pll_ki; /* observer unstable: refused */
+  /* observer unstable: refused */
+  bad.estimator.pll_kd = 2.0f * bad.estimator.pll_kp * bad.estimator.pll_ki;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_INCONSISTENT);
   TT_CHECK(strcmp(iss.field, "pll_kd") == 0);
 
   bad = cfg;
-  bad.extractor = 3u;
+  bad.estimator.extractor = 3u;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_RANGE);
 
   bad = cfg;
-  bad.i_max_A = 30.0f; /* above the trip level */
+  bad.loops.i_max_A = 30.0f; /* above the trip level */
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_INCONSISTENT);
 
   /* Saliency: Table 1 (Lq = Ld) and 5 % are refused, 10 % accepted. */
   bad = cfg;
-  bad.L_q_H = bad.L_d_H;
+  bad.machine.L_q_H = bad.machine.L_d_H;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_SALIENCY);
-  bad.L_q_H = 1.05f * bad.L_d_H;
+  bad.machine.L_q_H = 1.05f * bad.machine.L_d_H;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_SALIENCY);
-  bad.L_q_H = 1.1f * bad.L_d_H; /* exactly the threshold, despite float32 rounding */
+  /* exactly the threshold, despite float32 rounding */
+  bad.machine.L_q_H = 1.1f * bad.machine.L_d_H;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_OK);
-  bad.L_q_H = 1.0999f * bad.L_d_H;
+  bad.machine.L_q_H = 1.0999f * bad.machine.L_d_H;
   TT_CHECK(fw_config_check(&bad, &iss) == FW_ERR_SALIENCY);
-  bad.L_q_H = 0.85f * bad.L_d_H; /* Lq < Ld is saliency too */
+  bad.machine.L_q_H = 0.85f * bad.machine.L_d_H; /* Lq < Ld is saliency too */
   TT_CHECK(fw_config_check(&bad, &iss) == FW_OK);
 }
 
 static void test_saliency_refused_on_enable(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  cfg.L_q_H = cfg.L_d_H; /* paper Table 1 */
+  cfg.machine.L_q_H = cfg.machine.L_d_H; /* paper Table 1 */
   fw_ctrl_t c;
   TT_CHECK(fw_init(&c, &cfg) == FW_ERR_SALIENCY);
   TT_CHECK(fw_state(&c) == FW_CIA402_SWITCH_ON_DISABLED);
@@ -346,7 +348,7 @@ static void test_saliency_refused_on_enable(void) {
 static void test_invalid_config_refused(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  cfg.R_ohm = -1.0f;
+  cfg.machine.R_ohm = -1.0f;
   fw_ctrl_t c;
   TT_CHECK(fw_init(&c, &cfg) == FW_ERR_RANGE);
   enable(&c);
@@ -358,9 +360,9 @@ static void test_invalid_config_refused(void) {
   fw_config_issue_t iss;
   TT_CHECK(fw_set_config(&c, &good, &iss) == FW_OK);
   fw_config_t worse = good;
-  worse.pll_ki = -5.0f;
+  worse.estimator.pll_ki = -5.0f;
   TT_CHECK(fw_set_config(&c, &worse, &iss) == FW_ERR_RANGE);
-  TT_CHECK_NEAR(fw_get_config(&c)->pll_ki, 5000.0, 1e-3);
+  TT_CHECK_NEAR(fw_get_config(&c)->estimator.pll_ki, 5000.0, 1e-3);
 }
 
 /* Drive to RUN at a known angle, then apply a bad input and check the fault. */
@@ -480,9 +482,9 @@ static void test_fault_hf_low(void) {
  * then jump the true angle by 0.7 rad and run until a fault; returns the step
  * of the fault (-1: none within 0.3 s). */
 static int pll_error_case(fw_config_t *cfg, fw_ctrl_t *c, fw_outputs_t *out) {
-  cfg->pll_kp = 0.0f;
-  cfg->pll_ki = 0.0f;
-  cfg->pll_kd = 0.0f;
+  cfg->estimator.pll_kp = 0.0f;
+  cfg->estimator.pll_ki = 0.0f;
+  cfg->estimator.pll_kd = 0.0f;
   plant_t p;
   run_to_operation_cfg(c, &p, out, cfg, 0.0, 0.12);
   TT_CHECK(c->phase == FW_START_RUN);
@@ -517,8 +519,8 @@ static void test_fault_pll_error_supervision_alone(void) {
    * the PLL-error supervision still trips on its own after pll_err_time_s. */
   fw_config_t cfg;
   fw_config_default(&cfg);
-  cfg.mon_angle_max_rad = 1.5f;
-  cfg.mon_bemf_max_rad = 3.2f;
+  cfg.protection.mon_angle_max_rad = 1.5f;
+  cfg.protection.mon_bemf_max_rad = 3.2f;
   fw_ctrl_t c;
   fw_outputs_t out;
   int k_fault = pll_error_case(&cfg, &c, &out);
@@ -586,22 +588,22 @@ static void test_units_and_refs(void) {
   fw_ctrl_t c;
   fw_init(&c, &cfg);
   TT_CHECK(fw_set_speed_ref(&c, 1e6f) == FW_ERR_RANGE);
-  TT_CHECK_NEAR(c.speed_ref_radps_e, cfg.speed_max_radps_e, 1e-3);
+  TT_CHECK_NEAR(c.speed_ref_radps_e, cfg.loops.speed_max_radps_e, 1e-3);
   TT_CHECK(fw_set_speed_ref(&c, NAN) == FW_ERR_NOT_FINITE);
-  TT_CHECK_NEAR(c.speed_ref_radps_e, cfg.speed_max_radps_e, 1e-3);
+  TT_CHECK_NEAR(c.speed_ref_radps_e, cfg.loops.speed_max_radps_e, 1e-3);
   TT_CHECK(fw_set_extractor(&c, (fw_extractor_t)7) == FW_ERR_RANGE);
   TT_CHECK(fw_set_extractor(&c, FW_EXTRACTOR_PSEUDO) == FW_OK);
-  TT_CHECK(c.cfg.extractor == 0u);
+  TT_CHECK(c.cfg.estimator.extractor == 0u);
   TT_CHECK(fw_ctrl_sizeof() == sizeof(fw_ctrl_t));
   /* thrust constant K_F = 1.5 (pi / tau) psi_f, computed here in double */
-  const double k_f = 1.5 * M_PI / (double)cfg.pole_pitch_m * (double)cfg.psi_f_Wb;
+  const double k_f = 1.5 * M_PI / (double)cfg.machine.pole_pitch_m * (double)cfg.machine.psi_f_Wb;
   TT_CHECK_NEAR(fw_units_force_per_A(&cfg), k_f, 1e-4 * k_f);
   TT_CHECK(fw_set_force_ref(&c, (float)(2.0 * k_f)) == FW_OK);
   TT_CHECK_NEAR(c.i_q_ref_force_A, 2.0, 1e-5);
-  TT_CHECK(fw_set_force_ref(&c, (float)(1.01 * k_f * cfg.i_max_A)) == FW_ERR_RANGE);
-  TT_CHECK_NEAR(c.i_q_ref_force_A, cfg.i_max_A, 1e-5);
+  TT_CHECK(fw_set_force_ref(&c, (float)(1.01 * k_f * cfg.loops.i_max_A)) == FW_ERR_RANGE);
+  TT_CHECK_NEAR(c.i_q_ref_force_A, cfg.loops.i_max_A, 1e-5);
   TT_CHECK(fw_set_force_ref(&c, NAN) == FW_ERR_NOT_FINITE);
-  TT_CHECK_NEAR(c.i_q_ref_force_A, cfg.i_max_A, 1e-5); /* unchanged */
+  TT_CHECK_NEAR(c.i_q_ref_force_A, cfg.loops.i_max_A, 1e-5); /* unchanged */
   TT_CHECK(fw_set_force_ref(NULL, 1.0f) == FW_ERR_NULL);
 }
 
@@ -612,12 +614,12 @@ static void test_units_and_refs(void) {
 static void test_pos_unwrapped_precision(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  cfg.pll_kp = cfg.pll_ki = cfg.pll_kd = 0.0f;
-  cfg.pll_accel_per_A = 0.0f;
-  cfg.hf_min_ratio = 0.0f;   /* no motor connected: no HF-loss trip */
-  cfg.align_time_s = 5.0f;   /* stay in ALIGN, where the PLL free-runs */
-  cfg.speed_max_radps_e = 20000.0f;
-  cfg.start_speed_max_mps = 100.0f; /* the spun estimate's feed-forward is no back-EMF */
+  cfg.estimator.pll_kp = cfg.estimator.pll_ki = cfg.estimator.pll_kd = 0.0f;
+  cfg.estimator.pll_accel_per_A = 0.0f;
+  cfg.protection.hf_min_ratio = 0.0f;   /* no motor connected: no HF-loss trip */
+  cfg.estimator.align_time_s = 5.0f;   /* stay in ALIGN, where the PLL free-runs */
+  cfg.loops.speed_max_radps_e = 20000.0f;
+  cfg.protection.start_speed_max_mps = 100.0f; /* the spun estimate's feed-forward is no back-EMF */
   fw_ctrl_t c;
   TT_CHECK(fw_init(&c, &cfg) == FW_OK);
   enable(&c);
@@ -638,7 +640,8 @@ static void test_pos_unwrapped_precision(void) {
   fw_snapshot_t s;
   fw_get_snapshot(&c, &s);
   TT_CHECK(ref > 8.0e4);
-  double pos_e = ((double)s.pos_hat_mech_rad - (double)s0.pos_hat_mech_rad) * cfg.pole_pairs;
+  double pos_e =
+      ((double)s.pos_hat_mech_rad - (double)s0.pos_hat_mech_rad) * cfg.machine.pole_pairs;
   TT_CHECK_NEAR(pos_e, ref, 0.02);
 }
 
@@ -671,8 +674,8 @@ static void test_pos_continuous_over_reenable(void) {
 static void test_zero_saliency_refused(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  cfg.saliency_min = 0.0f;
-  cfg.L_q_H = cfg.L_d_H;
+  cfg.protection.saliency_min = 0.0f;
+  cfg.machine.L_q_H = cfg.machine.L_d_H;
   fw_config_issue_t iss;
   TT_CHECK(fw_config_check(&cfg, &iss) == FW_ERR_SALIENCY);
   fw_ctrl_t c;
@@ -701,8 +704,8 @@ static void test_refs_clamped_on_config_change(void) {
   TT_CHECK(fw_set_id_ref(&c, -15.0f) == FW_OK);
   TT_CHECK(fw_set_speed_ref(&c, 1400.0f) == FW_OK);
   fw_config_t small = cfg;
-  small.i_max_A = 5.0f;
-  small.speed_max_radps_e = 1000.0f;
+  small.loops.i_max_A = 5.0f;
+  small.loops.speed_max_radps_e = 1000.0f;
   fw_config_issue_t iss;
   TT_CHECK(fw_set_config(&c, &small, &iss) == FW_OK);
   TT_CHECK(c.i_q_ref_force_A <= 5.0f && c.i_d_ref_A >= -5.0f);
@@ -727,7 +730,7 @@ static void test_refs_clamped_on_config_change(void) {
 static void test_extractor_switch_in_run(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  cfg.extractor = (uint32_t)FW_EXTRACTOR_PSEUDO;
+  cfg.estimator.extractor = (uint32_t)FW_EXTRACTOR_PSEUDO;
   fw_ctrl_t c;
   plant_t p;
   fw_outputs_t out;

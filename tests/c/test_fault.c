@@ -59,19 +59,19 @@ static void test_inputs(void) {
   fw_config_t cfg;
   fw_config_default(&cfg); /* i_trip 24 A, u_dc 150..420 V */
   fw_inputs_t in = {{1.0f, -0.5f, -0.5f}, 300.0f};
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, true) == FW_FAULT_NONE);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, true) == FW_FAULT_NONE);
   in.i_abc_A[1] = -24.5f;
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, true) == FW_FAULT_OVERCURRENT);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, true) == FW_FAULT_OVERCURRENT);
   in.i_abc_A[2] = NAN; /* invalid input outranks overcurrent */
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, true) == FW_FAULT_INPUT_INVALID);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, true) == FW_FAULT_INPUT_INVALID);
   in.i_abc_A[1] = in.i_abc_A[2] = 0.0f;
   in.u_dc_V = INFINITY;
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, false) == FW_FAULT_INPUT_INVALID);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, false) == FW_FAULT_INPUT_INVALID);
   in.u_dc_V = 421.0f;
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, false) == FW_FAULT_DC_OVERVOLTAGE);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, false) == FW_FAULT_DC_OVERVOLTAGE);
   in.u_dc_V = 100.0f; /* undervoltage only matters with the power stage on */
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, false) == FW_FAULT_NONE);
-  TT_CHECK(fw_fault_check_inputs(&cfg, &in, true) == FW_FAULT_DC_UNDERVOLTAGE);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, false) == FW_FAULT_NONE);
+  TT_CHECK(fw_fault_check_inputs(&cfg.protection, &in, true) == FW_FAULT_DC_UNDERVOLTAGE);
 }
 
 static fw_protect_in_t quiet_in(void) {
@@ -84,9 +84,9 @@ static fw_protect_in_t quiet_in(void) {
 static void test_i2t(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  cfg.i_rated_A = 10.0f;
-  cfg.i_max_A = 20.0f;
-  cfg.i2t_time_s = 0.1f;
+  cfg.protection.i_rated_A = 10.0f;
+  cfg.loops.i_max_A = 20.0f;
+  cfg.protection.i2t_time_s = 0.1f;
   const float dt = 1.0f / 24000.0f;
   fw_protect_t p;
   fw_protect_init(&p, &cfg, dt);
@@ -110,7 +110,7 @@ static void test_i2t(void) {
   }
   TT_CHECK(p.i2t_A2s == 0.0f);
   /* i_rated >= i_max: off */
-  cfg.i_rated_A = cfg.i_max_A;
+  cfg.protection.i_rated_A = cfg.loops.i_max_A;
   fw_protect_init(&p, &cfg, dt);
   int n_trip = 0;
   for (int k = 0; k < 30000; k++) {
@@ -122,8 +122,8 @@ static void test_i2t(void) {
 static void test_speed_position_follow(void) {
   fw_config_t cfg;
   fw_config_default(&cfg); /* tau 0.024 m, v_max 3 m/s, follow 0.5 m/s for 0.5 s */
-  cfg.pos_limit_min_m = -0.5f;
-  cfg.pos_limit_max_m = 0.5f;
+  cfg.protection.pos_limit_min_m = -0.5f;
+  cfg.protection.pos_limit_max_m = 0.5f;
   const float dt = 1.0f / 24000.0f;
   fw_protect_t p;
   fw_protect_init(&p, &cfg, dt);

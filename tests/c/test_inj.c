@@ -12,8 +12,8 @@
 
 static void init(fw_inj_t *j, fw_config_t *cfg, fw_extractor_t ex) {
   fw_config_default(cfg); /* 24 kHz / 3 kHz: n_inj = 8 */
-  cfg->extractor = (uint32_t)ex;
-  fw_inj_init(j, cfg, 1.0f / cfg->f_pwm_Hz);
+  cfg->estimator.extractor = (uint32_t)ex;
+  fw_inj_init(j, cfg, 1.0f / cfg->sensing.f_pwm_Hz);
 }
 
 static void test_signs(void) {
@@ -101,31 +101,32 @@ static void test_group_delay_and_k(void) {
   const double w0 = 2.0 * M_PI * 3000.0, h = 0.5 * w0 / 24000.0, t = tan(h);
   const double gd_k = (2.0 / w0) * h * (1.0 + t * t) / t;
   TT_CHECK_NEAR(j.sogi_gd_s_k, gd_k, 1e-9);
-  TT_CHECK_NEAR(fw_inj_k(&j), cfg.sogi_k, 0.0);
-  TT_CHECK_NEAR(j.sogi_gd_s, gd_k / (double)cfg.sogi_k, 1e-9);
+  TT_CHECK_NEAR(fw_inj_k(&j), cfg.estimator.sogi_k, 0.0);
+  TT_CHECK_NEAR(j.sogi_gd_s, gd_k / (double)cfg.estimator.sogi_k, 1e-9);
   fw_inj_set_k(&j, 0.8f);
   TT_CHECK(j.sogi_a.k == 0.8f && j.sogi_b.k == 0.8f && j.sogi_b.p == j.sogi_a.p);
   TT_CHECK_NEAR(j.sogi_gd_s, gd_k / 0.8, 1e-9);
   /* adaptive: k = kmin + (kmax - kmin) r, changed only beyond the step */
-  fw_inj_adapt(&j, &cfg, 1.0f);
-  TT_CHECK_NEAR(fw_inj_k(&j), cfg.sogi_k_adapt_max, 1e-7);
-  fw_inj_adapt(&j, &cfg, 0.0f);
-  TT_CHECK_NEAR(fw_inj_k(&j), cfg.sogi_k_adapt_min, 1e-7);
+  fw_inj_adapt(&j, &cfg.estimator, 1.0f);
+  TT_CHECK_NEAR(fw_inj_k(&j), cfg.estimator.sogi_k_adapt_max, 1e-7);
+  fw_inj_adapt(&j, &cfg.estimator, 0.0f);
+  TT_CHECK_NEAR(fw_inj_k(&j), cfg.estimator.sogi_k_adapt_min, 1e-7);
   const float k0 = fw_inj_k(&j);
-  const float r_small = 0.5f * FW_INJ_SOGI_K_STEP / (cfg.sogi_k_adapt_max - cfg.sogi_k_adapt_min);
-  fw_inj_adapt(&j, &cfg, r_small);
+  const float r_small = 0.5f * FW_INJ_SOGI_K_STEP /
+                        (cfg.estimator.sogi_k_adapt_max - cfg.estimator.sogi_k_adapt_min);
+  fw_inj_adapt(&j, &cfg.estimator, r_small);
   TT_CHECK(fw_inj_k(&j) == k0);
   /* extractor switch: k of the new path, averages restart */
   fw_inj_meas_t m;
   double mean_ia;
   run_ideal(&j, FW_EXTRACTOR_SOGI, 0.0f, 0.0f, 0.01f, 20, &m, &mean_ia);
   TT_CHECK(fw_inj_settled(&j));
-  fw_inj_set_extractor(&j, &cfg, FW_EXTRACTOR_SOGI_ADAPTIVE);
+  fw_inj_set_extractor(&j, &cfg.estimator, FW_EXTRACTOR_SOGI_ADAPTIVE);
   TT_CHECK(j.ring_fill == 0u && j.sum_ed == 0.0f && !fw_inj_settled(&j));
-  TT_CHECK_NEAR(fw_inj_k(&j), cfg.sogi_k_adapt_max, 1e-7);
+  TT_CHECK_NEAR(fw_inj_k(&j), cfg.estimator.sogi_k_adapt_max, 1e-7);
   /* reset: k by the configured extractor, histories cleared */
-  fw_inj_reset(&j, &cfg);
-  TT_CHECK_NEAR(fw_inj_k(&j), cfg.sogi_k, 0.0);
+  fw_inj_reset(&j, &cfg.estimator);
+  TT_CHECK_NEAR(fw_inj_k(&j), cfg.estimator.sogi_k, 0.0);
   TT_CHECK(j.inj_idx == 0u && fw_inj_sign_applied(&j) == 0.0f && j.h_prev_raw[0] == 0.0f);
 }
 

@@ -58,7 +58,7 @@ static void test_saliency_eigenvalues_any_angle(void) {
     /* the axis of the larger response is the true d axis: at +dtheta in the
      * estimated frame (theta^ = theta - dtheta) */
     TT_CHECK_NEAR(m.sal_axis_rad, angles[i], 1e-3);
-    TT_CHECK(f == (fabs(angles[i]) > cfg.mon_angle_max_rad ? FW_FAULT_EST_HF_ANGLE
+    TT_CHECK(f == (fabs(angles[i]) > cfg.protection.mon_angle_max_rad ? FW_FAULT_EST_HF_ANGLE
                                                             : FW_FAULT_NONE));
   }
 }
@@ -136,7 +136,7 @@ static void test_bemf_residual(void) {
   fw_mon_t m;
   setup(&m, &cfg);
   fw_mon_run_start(&m);
-  const double w = 200.0, psi = cfg.psi_f_Wb, R = cfg.R_ohm;
+  const double w = 200.0, psi = cfg.machine.psi_f_Wb, R = cfg.machine.R_ohm;
   const double iq = 3.0;
   const double dths[] = {0.0, 0.3, -0.8};
   for (size_t i = 0; i < sizeof dths / sizeof dths[0]; i++) {
@@ -148,7 +148,7 @@ static void test_bemf_residual(void) {
     in.i_dq_A[1] = (float)iq;
     in.i_dq_ref_A[1] = (float)iq;
     /* steady state: u = R i + w x L i + back-EMF rotated by the angle error */
-    in.u_dq_V[0] = (float)(-w * cfg.L_q_H * iq - w * psi * sin(dths[i]));
+    in.u_dq_V[0] = (float)(-w * cfg.machine.L_q_H * iq - w * psi * sin(dths[i]));
     in.u_dq_V[1] = (float)(R * iq + w * psi * cos(dths[i]));
     fw_fault_t f = FW_FAULT_NONE;
     for (int k = 0; k < 4800; k++) {
@@ -157,7 +157,7 @@ static void test_bemf_residual(void) {
     }
     TT_CHECK_NEAR(m.angle_bemf_rad, fabs(dths[i]), 2e-3);
     TT_CHECK_NEAR(m.e_bemf_V, w * psi, 0.01);
-    TT_CHECK(f == (fabs(dths[i]) > cfg.mon_bemf_max_rad ? FW_FAULT_EST_BEMF_MISMATCH
+    TT_CHECK(f == (fabs(dths[i]) > cfg.protection.mon_bemf_max_rad ? FW_FAULT_EST_BEMF_MISMATCH
                                                         : FW_FAULT_NONE));
     fw_mon_run_start(&m);
   }

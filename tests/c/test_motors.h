@@ -11,13 +11,13 @@
 
 /** iron_core_linear: R, L_d, L_q, psi_f, pole pitch, mover mass (gains derived). */
 static inline void test_motor_iron_core_linear(fw_config_t *c) {
-  c->R_ohm = 2.4f;
-  c->L_d_H = 0.008f;
-  c->L_q_H = 0.011f;
-  c->psi_f_Wb = 0.20372f;
-  c->pole_pitch_m = 0.016f;
-  c->mass_kg = 6.0f;
-  c->gains_auto = 1u;
+  c->machine.R_ohm = 2.4f;
+  c->machine.L_d_H = 0.008f;
+  c->machine.L_q_H = 0.011f;
+  c->machine.psi_f_Wb = 0.20372f;
+  c->machine.pole_pitch_m = 0.016f;
+  c->machine.mass_kg = 6.0f;
+  c->loops.gains_auto = 1u;
 }
 
 #endif /* PMLSM_TEST_MOTORS_H */

@@ -100,7 +100,7 @@ static fw_app_nvm_state_t boot(const fw_app_nvm_t *nvm) {
   return fw_app_attach_nvm(&g_app, nvm);
 }
 
-static float cfg_u_inj(void) { return fw_get_config(fw_app_ctrl(&g_app))->u_inj_V; }
+static float cfg_u_inj(void) { return fw_get_config(fw_app_ctrl(&g_app))->estimator.u_inj_V; }
 
 static void put_le32(uint8_t *p, uint32_t v) {
   p[0] = (uint8_t)v;

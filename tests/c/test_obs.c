@@ -13,7 +13,7 @@
 static void setup(fw_obs_t *o, fw_config_t *cfg) {
   fw_config_default(cfg); /* L_d 12 mH, L_q 18 mH: L_q / (L_q - L_d) = 3 */
   memset(o, 0, sizeof(*o));
-  fw_obs_init(o, cfg, 1.0f / cfg->f_pwm_Hz);
+  fw_obs_init(o, cfg, 1.0f / cfg->sensing.f_pwm_Hz);
   fw_obs_reset(o, cfg);
 }
 
@@ -38,9 +38,9 @@ static void test_error(void) {
   TT_CHECK_NEAR(o.err_f, alpha * 0.06, 1e-8);
   TT_CHECK_NEAR(r, alpha * 0.06 / 0.02, 1e-6); /* |err_f| / sogi_adapt_err_rad */
   /* bandwidth scheduling: kp = pll_kp lam, ki = pll_ki lam^2, lam = bw_min + (1 - bw_min) r */
-  const double lam = cfg.pll_bw_min + (1.0 - cfg.pll_bw_min) * r;
-  TT_CHECK_NEAR(o.pll.kp, cfg.pll_kp * lam, 1e-4);
-  TT_CHECK_NEAR(o.pll.ki, cfg.pll_ki * lam * lam, 1e-2);
+  const double lam = cfg.estimator.pll_bw_min + (1.0 - cfg.estimator.pll_bw_min) * r;
+  TT_CHECK_NEAR(o.pll.kp, cfg.estimator.pll_kp * lam, 1e-4);
+  TT_CHECK_NEAR(o.pll.ki, cfg.estimator.pll_ki * lam * lam, 1e-2);
   /* clamp to +-1 rad */
   in = hf_in(0.05f, -0.05f);
   TT_CHECK_NEAR(fw_obs_update(&o, &in, &r), -1.0, 0.0);
@@ -77,7 +77,7 @@ static void test_mechanical_extension(void) {
   fw_config_t cfg;
   fw_obs_t o;
   setup(&o, &cfg);
-  cfg.pll_accel_per_A = 100.0f;
+  cfg.estimator.pll_accel_per_A = 100.0f;
   fw_obs_init(&o, &cfg, o.dt_s); /* the observer copies its constants at init */
   fw_obs_set_iq(&o, 2.0f);
   fw_obs_in_t in = hf_in(0.0f, 0.0f); /* no error: only the feed-forward acts */

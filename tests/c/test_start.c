@@ -11,11 +11,11 @@
 static void test_align_done(void) {
   fw_config_t cfg;
   fw_config_default(&cfg); /* align 0.08 s, n_inj 8: last index 1 */
-  TT_CHECK(!fw_start_align_done(&cfg, 0.079f, 1u, 8u));
-  TT_CHECK(fw_start_align_done(&cfg, 0.08f, 1u, 8u));
-  TT_CHECK(!fw_start_align_done(&cfg, 0.09f, 2u, 8u));
-  TT_CHECK(fw_start_align_done(&cfg, 0.09f, 3u, 16u));
-  TT_CHECK(fw_start_align_done(&cfg, 0.09f, 0u, 2u)); /* n/4 = 0: index 0 */
+  TT_CHECK(!fw_start_align_done(&cfg.estimator, 0.079f, 1u, 8u));
+  TT_CHECK(fw_start_align_done(&cfg.estimator, 0.08f, 1u, 8u));
+  TT_CHECK(!fw_start_align_done(&cfg.estimator, 0.09f, 2u, 8u));
+  TT_CHECK(fw_start_align_done(&cfg.estimator, 0.09f, 3u, 16u));
+  TT_CHECK(fw_start_align_done(&cfg.estimator, 0.09f, 0u, 2u)); /* n/4 = 0: index 0 */
 }
 
 static void test_saliency(void) {
@@ -52,7 +52,7 @@ static fw_pol_result_t run_polarity(float peak_pos, float peak_neg, uint32_t *st
                                     fw_start_t *s) {
   fw_config_t cfg;
   fw_config_default(&cfg); /* N = 12, 4 pairs, margin */
-  const uint32_t N = cfg.pol_pulse_samples;
+  const uint32_t N = cfg.estimator.pol_pulse_samples;
   fw_start_reset(s);
   fw_start_polarity_begin(s);
   fw_pol_result_t res = FW_POL_BUSY;
@@ -62,12 +62,12 @@ static fw_pol_result_t run_polarity(float peak_pos, float peak_neg, uint32_t *st
   for (; k < 10000u && res == FW_POL_BUSY; k++) {
     /* the current follows the voltage of the previous sample */
     const float peak = v_prev > 0.0f ? peak_pos : peak_neg;
-    i_d += v_prev / cfg.pol_pulse_V * peak / (float)N;
-    const float v = fw_start_polarity_step(s, &cfg, i_d, &res);
+    i_d += v_prev / cfg.estimator.pol_pulse_V * peak / (float)N;
+    const float v = fw_start_polarity_step(s, &cfg.estimator, i_d, &res);
     if (res == FW_POL_BUSY) {
       const uint32_t seg = (k % (6u * N)) / N;
-      const float want = (seg == 1u || seg == 5u) ? cfg.pol_pulse_V
-                         : (seg == 2u || seg == 4u) ? -cfg.pol_pulse_V : 0.0f;
+      const float want = (seg == 1u || seg == 5u) ? cfg.estimator.pol_pulse_V
+                         : (seg == 2u || seg == 4u) ? -cfg.estimator.pol_pulse_V : 0.0f;
       bad_v += v != want;
     } else {
       bad_v += v != 0.0f;
@@ -82,7 +82,7 @@ static fw_pol_result_t run_polarity(float peak_pos, float peak_neg, uint32_t *st
 static void test_polarity(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  const uint32_t total = 6u * cfg.pol_pulse_samples * cfg.pol_pulse_pairs;
+  const uint32_t total = 6u * cfg.estimator.pol_pulse_samples * cfg.estimator.pol_pulse_pairs;
   fw_start_t s;
   uint32_t steps;
   /* the + excursion (along the magnet) larger: estimate right */
@@ -93,15 +93,15 @@ static void test_polarity(void) {
   TT_CHECK_NEAR(s.pol_sum_neg, 4.0 * 1.5, 1e-4);
   TT_CHECK(run_polarity(1.5f, 2.0f, &steps, &s) == FW_POL_FLIPPED);
   /* within the margin: undetermined */
-  const float m = 1.0f + 0.5f * cfg.pol_margin;
+  const float m = 1.0f + 0.5f * cfg.estimator.pol_margin;
   TT_CHECK(run_polarity(2.0f * m, 2.0f, &steps, &s) == FW_POL_UNDETERMINED);
 }
 
 static void test_fly_catch(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
-  const float dt = 1.0f / cfg.f_pwm_Hz;
-  const float psi = cfg.psi_f_Wb;
+  const float dt = 1.0f / cfg.sensing.f_pwm_Hz;
+  const float psi = cfg.machine.psi_f_Wb;
   for (int dir = -1; dir <= 1; dir += 2) {
     fw_start_t s;
     fw_start_reset(&s);
@@ -111,7 +111,7 @@ static void test_fly_catch(void) {
     float t = 0.0f;
     for (int k = 0; k < 360; k++) { /* 15 ms at zero current: e_ab = u_ab */
       t += dt;
-      fw_start_fly_observe(&s, &cfg, dt, i0, t);
+      fw_start_fly_observe(&s, &cfg.machine, dt, i0, t);
       th += w * (double)dt;
       const fw_vec2_f32_t u = {(float)(-w * psi * sin(th)), (float)(w * psi * cos(th))};
       fw_start_fly_set_u(&s, u);

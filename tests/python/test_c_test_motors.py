@@ -1,5 +1,5 @@
 """The C tests' motor data (tests/c/test_motors.h) are the shipped motor files' values:
-each `c-><field> = <value>f;` is compared, as a number, with the motor file."""
+each `c-><part>.<field> = <value>f;` is compared, as a number, with the motor file."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ def test_c_test_motor_data_equal_the_motor_files():
         motor = tomllib.loads((REPO / "sim_fallback" / "motors" / f"{name}.toml").read_text())
         flat = {k: v for section in motor.values() if isinstance(section, dict)
                 for k, v in section.items()}
-        fields = re.findall(r"c->(\w+) = ([-+0-9.eE]+)f;", body)
+        fields = re.findall(r"c->\w+\.(\w+) = ([-+0-9.eE]+)f;", body)
         assert len(fields) >= 6, name
         for field, value in fields:
             assert field in flat, f"{name}: {field} not in the motor file"

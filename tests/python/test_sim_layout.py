@@ -7,15 +7,40 @@ import pytest
 from sim_fallback import _lib
 
 
+def _members(mirror, prefix="", base=0):
+    """(path, offset) of every member; a nested structure (fw_config_t's parts) is
+    listed, then each of its members as ``part.leaf`` with its offset in the whole."""
+    for name, typ in mirror._fields_:
+        off = base + getattr(mirror, name).offset
+        yield prefix + name, off
+        if isinstance(typ, type) and issubclass(typ, C.Structure):
+            yield from _members(typ, prefix + name + ".", off)
+
+
 @pytest.mark.parametrize("type_name", sorted(_lib.MIRRORS))
 def test_mirror_matches_c_layout(type_name):
     L = _lib.lib()
     mirror = _lib.MIRRORS[type_name]
     assert L.sim_layout_sizeof(type_name.encode()) == C.sizeof(mirror), "sizeof differs"
-    for name, _ in mirror._fields_:
+    for name, off in _members(mirror):
         off_c = L.sim_layout_offsetof(type_name.encode(), name.encode())
         assert off_c >= 0, f"{type_name}.{name} unknown to C (mirror has an extra field)"
-        assert off_c == getattr(mirror, name).offset, f"{type_name}.{name} offset"
+        assert off_c == off, f"{type_name}.{name} offset"
+
+
+def test_fw_config_leaves_all_checked():
+    """Every leaf of the nested fw_config_t mirror is in the C layout table (the
+    generator follows the parts), and the flat attributes alias the nested fields."""
+    L = _lib.lib()
+    leaves = _lib.FwConfig.leaves()
+    assert len(leaves) == L.fw_config_field_count()
+    for path, off, _ in leaves.values():
+        assert L.sim_layout_offsetof(b"fw_config_t", path.encode()) == off, path
+    cfg = _lib.FwConfig()
+    for k, name in enumerate(leaves):
+        setattr(cfg, name, k + 1)
+        part, leaf = leaves[name][0].split(".")
+        assert getattr(getattr(cfg, part), leaf) == getattr(cfg, name) == k + 1
 
 
 def test_fw_config_field_table_matches_mirror():
@@ -26,9 +51,11 @@ def test_fw_config_field_table_matches_mirror():
     for i in range(n):
         f = L.fw_config_field(i).contents
         names[f.name.decode()] = (f.offset, f.is_u32)
-    mirror = {name: (getattr(_lib.FwConfig, name).offset, int(t is C.c_uint32))
-              for name, t in _lib.FwConfig._fields_}
+    mirror = {name: (off, int(t is C.c_uint32))
+              for name, (_, off, t) in _lib.FwConfig.leaves().items()}
     assert names == mirror
+    assert [L.fw_config_field(i).contents.name.decode() for i in range(n)] == list(
+        _lib.FwConfig.leaves()), "field table order"
 
 
 def test_fw_ctrl_sizeof_consistent():

@@ -187,7 +187,7 @@ static void fw_app_sync_cfg_to_od(fw_app_t *app) {
     }
   }
   co_node_set_u32(&app->node, CO_OD_2002_00,
-                  cfg->extractor == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE ? 1u : 0u);
+                  cfg->estimator.extractor == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE ? 1u : 0u);
 }
 
 static void fw_app_sync_static_od(fw_app_t *app) {
@@ -432,7 +432,7 @@ static fw_status_t fw_app_start_core(fw_app_t *app, const fw_config_t *cfg) {
   (void)fw_app_time(app, app->step); /* the periods so far at the old rate */
   fw_status_t st = fw_init(&app->ctrl, cfg);
   const fw_config_t *used = fw_get_config(&app->ctrl);
-  float f = used != NULL ? used->f_pwm_Hz : 0.0f;
+  float f = used != NULL ? used->sensing.f_pwm_Hz : 0.0f;
   app->f_pwm_Hz = (f > 0.0f && f < 4.0e9f) ? (uint32_t)lrintf(f) : 1u;
   app->us_rem %= app->f_pwm_Hz;
   return st;
@@ -812,7 +812,7 @@ static void fw_app_apply_commands(fw_app_t *app) {
     float v_mps = (float)co_node_get_i32(n, CO_OD_60FF_00) * 1.0e-6f;
     (void)fw_set_speed_ref(&app->ctrl, fw_units_mps_to_radps_e(cfg, v_mps));
     float t_pm = (float)co_node_get_i32(n, CO_OD_6071_00);
-    (void)fw_set_iq_ref(&app->ctrl, t_pm * 1.0e-3f * cfg->i_max_A);
+    (void)fw_set_iq_ref(&app->ctrl, t_pm * 1.0e-3f * cfg->loops.i_max_A);
   }
   /* a fault reset does not clear a heartbeat that is still missing, nor an
      RPDO deadline that is still missed (once enabled again) */
@@ -839,7 +839,7 @@ static void fw_app_apply_commands(fw_app_t *app) {
 static void fw_app_update_od(fw_app_t *app, const fw_snapshot_t *s) {
   co_node_t *n = &app->node;
   const fw_config_t *cfg = fw_get_config(&app->ctrl);
-  float i_max = (cfg != NULL && cfg->i_max_A > 0.0f) ? cfg->i_max_A : 1.0f;
+  float i_max = (cfg != NULL && cfg->loops.i_max_A > 0.0f) ? cfg->loops.i_max_A : 1.0f;
   co_node_set_u32(n, CO_OD_6041_00, s->statusword);
   co_node_set_i32(n, CO_OD_6061_00, s->mode == (uint8_t)FW_MODE_FORCE ? FW_APP_MODE_CST
                                                                          : FW_APP_MODE_CSV);

@@ -68,106 +68,11 @@ typedef enum {
   FW_ERR_STATE = 6         /**< not allowed in the current drive state */
 } fw_status_t;
 
-/**
- * Configuration. Every field is range-checked by fw_config_check() against
- * the table returned by fw_config_field(); names below are those names.
- */
-typedef struct {
-  /* timing */
-  float f_pwm_Hz; /**< PWM = sampling = control rate, default 24000 */
-  /* nominal machine parameters used by the controller */
-  float R_ohm;        /**< phase resistance */
-  float L_d_H;        /**< d-axis inductance (small-signal, i_d = 0) */
-  float L_q_H;        /**< q-axis inductance */
-  float psi_f_Wb;     /**< PM flux linkage */
-  float pole_pairs;   /**< rotary-equivalent pole pairs p (theta_e = p theta_m) */
-  float pole_pitch_m; /**< pole pitch tau (theta_e = pi x / tau) */
-  /* power stage and protection */
-  float u_dc_min_V;        /**< undervoltage trip (while enabled) */
-  float u_dc_max_V;        /**< overvoltage trip */
-  float i_trip_A;          /**< overcurrent trip, any phase */
-  float i_max_A;           /**< current reference limit (|i_q|, |i_d|) */
-  float speed_max_radps_e; /**< speed reference limit and PLL speed clamp */
-  /* current loop */
-  float cur_kp_V_per_A;  /**< paper: L_d * 1100 */
-  float cur_ki_V_per_As; /**< paper: R * 1100 */
-  /* speed loop (electrical rad/s in, A out) */
-  float spd_kp_A_per_radps; /**< paper 0.1 A/(r/min) = 0.1*60/(2 pi p) */
-  float spd_ki_A_per_rad;   /**< paper 0.6 A/(r/min s) */
-  float spd_filter_Hz;      /**< low-pass on the speed estimate fed to the loop */
-  /* injection */
-  float u_inj_V;  /**< square-wave amplitude on the estimated d axis */
-  float f_inj_Hz; /**< injection frequency; f_pwm / f_inj must be an even integer >= 4 */
-  /* extraction */
-  uint32_t extractor;       /**< fw_extractor_t */
-  float sogi_k;             /**< fixed-k SOGI gain (paper 0.5) */
-  float sogi_k_adapt_max;   /**< adaptive SOGI: k in transients (paper k = 0.8) */
-  float sogi_k_adapt_min;   /**< adaptive SOGI: k when locked */
-  float sogi_adapt_err_rad; /**< |filtered PLL error| at which k reaches k_max */
-  /* PLL */
-  float pll_kp; /**< paper 86.6 */
-  float pll_ki; /**< paper 5000 */
-  float pll_accel_per_A; /**< torque feed-forward: el. rad/s^2 per A of i_q
-                              (p K_t / J or (pi/tau) K_F / m); 0 = paper's pure PI PLL */
-  float pll_bw_min;      /**< observer bandwidth scale when locked (0.1..1; 1 = fixed
-                              paper gains); rises to 1 with |filtered PLL error| */
-  float pll_kd;          /**< disturbance (load/friction) integrator gain, 1/s^3;
-                              0 = none. Stable for pll_kd < pll_kp * pll_ki */
-  /* start-up */
-  float align_time_s;         /**< angle-mod-pi convergence time with injection only */
-  float pol_pulse_V;          /**< polarity pulse voltage on the estimated d axis */
-  uint32_t pol_pulse_samples; /**< samples per pulse half */
-  uint32_t pol_pulse_pairs;   /**< number of +/- pulse pairs averaged */
-  float pol_margin;           /**< min relative difference of +/- responses */
-  /* supervision */
-  float saliency_min;    /**< min |Lq-Ld|/Ld for injection (default 0.10) */
-  float hf_min_ratio;    /**< HF amplitude below ratio*Ts*u_inj/L_q -> fault */
-  float pll_err_max_rad; /**< |filtered PLL error| limit */
-  float pll_err_time_s;  /**< ... for longer than this -> fault */
-  float quick_stop_time_s; /**< max time in QUICK STOP ACTIVE before PWM off */
-  /* ADC scaling used by fw_step_adc() */
-  float adc_A_per_count;     /**< phase current per count */
-  float adc_offset_counts;   /**< zero-current count (mid-scale) */
-  float adc_V_per_count;     /**< DC-link volts per count */
-  uint32_t adc_max_count;    /**< full scale, e.g. 4095 for 12 bit */
-  /* linear-axis protections (0x6080, 0x607D, 0x6065/0x6066, i2t) */
-  float v_max_mps;          /**< |estimated speed| above -> FW_FAULT_OVERSPEED */
-  float pos_limit_min_m;    /**< software limit on the estimated position (min >= max: off) */
-  float pos_limit_max_m;    /**< upper software limit */
-  float follow_err_mps;     /**< speed following-error window */
-  float follow_err_time_s;  /**< ... exceeded for longer than this -> FOLLOWING_ERROR */
-  float i_rated_A;          /**< continuous current for i2t (>= i_max_A: i2t off) */
-  float i2t_time_s;         /**< time at i_max_A from cold before FW_FAULT_I2T */
-  uint32_t quick_stop_option;     /**< fw_reaction_t for QUICK STOP (0x605A) */
-  uint32_t fault_reaction_option; /**< fw_reaction_t for heartbeat-type faults (0x605E) */
-  float fault_brake_time_s; /**< longest controlled braking after a fault, then PWM off */
-  /* integrity monitor (fw_mon.h) */
-  float mon_angle_max_rad;  /**< HF-derived |angle error| limit */
-  float mon_detect_time_s;  /**< a witness must exceed its limit this long to fault */
-  float mon_sal_tol;        /**< measured saliency within a factor (1 + tol) of the configured */
-  float mon_bemf_max_rad;   /**< back-EMF residual angle limit */
-  float mon_bemf_min_mps;   /**< back-EMF witness active above the back-EMF of this speed */
-  float i_sum_max_A;        /**< limit on the filtered |i_a + i_b + i_c| */
-  float i_offset_max_A;     /**< limit on each standstill offset */
-  float start_speed_max_mps;/**< refuse to enable above this mover speed */
-  /* back-EMF observer and handover (fw_bemf.h) */
-  float bemf_v_on_mps;      /**< hand over to the back-EMF above this speed (0: off) */
-  float bemf_v_off_mps;     /**< back to injection below this speed (< bemf_v_on_mps) */
-  float bemf_inj_share;     /**< injection kept on back-EMF, share of u_inj_V */
-  /* physical description and bandwidths: gains derived in the drive (fw_config_derive) */
-  float mass_kg;            /**< mover plus load mass */
-  float visc_Ns_per_m;      /**< viscous friction */
-  float coulomb_N;          /**< Coulomb (kinetic) friction */
-  float cur_bw_radps;       /**< current-loop bandwidth (paper: 1100 rad/s) */
-  float spd_bw_radps;       /**< speed-loop bandwidth */
-  uint32_t gains_auto;      /**< 1: current/speed PI and pll_accel_per_A derived from the above;
-                                 0: the explicit gain fields are used as given */
-  /* derived by fw_config_derive from the speeds above, psi_f and pole_pitch_m (the
-   * back-EMF w psi_f at those speeds; read-only in the object dictionary) */
-  float bemf_e_on_V;        /**< back-EMF at bemf_v_on_mps */
-  float bemf_e_off_V;       /**< back-EMF at bemf_v_off_mps */
-  float mon_bemf_min_V;     /**< back-EMF at mon_bemf_min_mps */
-} fw_config_t;
+/* Configuration: fw_config_t and its parts (fw_cfg_machine_t, fw_cfg_sensing_t,
+ * fw_cfg_loops_t, fw_cfg_estimator_t, fw_cfg_protection_t), generated from
+ * protocols/od.yaml (fw_config_parts:, fw_config:) with each field's doc, unit and
+ * range. */
+#include "fw_config_fields.h"
 
 #include "fw_mon.h"
 #include "fw_bemf.h"
@@ -176,7 +81,7 @@ typedef struct {
 typedef struct {
   const char *name; /**< field name as in fw_config_t */
   const char *unit; /**< SI unit, "" for dimensionless */
-  size_t offset;    /**< offsetof(fw_config_t, name) */
+  size_t offset;    /**< offsetof(fw_config_t, part.name) */
   uint8_t is_u32;   /**< 1: uint32_t field, 0: float field */
   float min;        /**< inclusive */
   float max;        /**< inclusive */

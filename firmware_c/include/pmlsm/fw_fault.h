@@ -62,13 +62,13 @@ bool fw_fault_brakes_first(uint32_t fault_reaction_option, fw_fault_t code);
  * Checks on one period's sampled inputs: NaN/inf, overcurrent on any phase,
  * DC-link overvoltage, and undervoltage while the power stage is enabled.
  */
-static inline fw_fault_t fw_fault_check_inputs(const fw_config_t *cfg, const fw_inputs_t *in,
-                                               bool power_enabled) {
+static inline fw_fault_t fw_fault_check_inputs(const fw_cfg_protection_t *prot,
+                                               const fw_inputs_t *in, bool power_enabled) {
   /* usual case first: every sample inside its limits (each comparison is
    * false for NaN, and for inf against the finite limits) */
-  const float u_min = power_enabled ? cfg->u_dc_min_V : -cfg->u_dc_max_V;
-  if (fabsf(in->i_abc_A[0]) <= cfg->i_trip_A && fabsf(in->i_abc_A[1]) <= cfg->i_trip_A &&
-      fabsf(in->i_abc_A[2]) <= cfg->i_trip_A && in->u_dc_V <= cfg->u_dc_max_V &&
+  const float u_min = power_enabled ? prot->u_dc_min_V : -prot->u_dc_max_V;
+  if (fabsf(in->i_abc_A[0]) <= prot->i_trip_A && fabsf(in->i_abc_A[1]) <= prot->i_trip_A &&
+      fabsf(in->i_abc_A[2]) <= prot->i_trip_A && in->u_dc_V <= prot->u_dc_max_V &&
       in->u_dc_V >= u_min) {
     return FW_FAULT_NONE;
   }
@@ -81,14 +81,14 @@ static inline fw_fault_t fw_fault_check_inputs(const fw_config_t *cfg, const fw_
     return FW_FAULT_INPUT_INVALID;
   }
   for (int i = 0; i < 3; i++) {
-    if (fabsf(in->i_abc_A[i]) > cfg->i_trip_A) {
+    if (fabsf(in->i_abc_A[i]) > prot->i_trip_A) {
       return FW_FAULT_OVERCURRENT;
     }
   }
-  if (in->u_dc_V > cfg->u_dc_max_V) {
+  if (in->u_dc_V > prot->u_dc_max_V) {
     return FW_FAULT_DC_OVERVOLTAGE;
   }
-  if (power_enabled && in->u_dc_V < cfg->u_dc_min_V) {
+  if (power_enabled && in->u_dc_V < prot->u_dc_min_V) {
     return FW_FAULT_DC_UNDERVOLTAGE;
   }
   return FW_FAULT_NONE;

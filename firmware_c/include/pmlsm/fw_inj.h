@@ -69,12 +69,12 @@ typedef struct {
 
 /** Constants from the configuration (n_inj, SOGI group delay); then fw_inj_reset. */
 void fw_inj_init(fw_inj_t *j, const fw_config_t *cfg, float dt_s);
-/** Clear every history; SOGIs restart with k for cfg->extractor. */
-void fw_inj_reset(fw_inj_t *j, const fw_config_t *cfg);
+/** Clear every history; SOGIs restart with k for est->extractor. */
+void fw_inj_reset(fw_inj_t *j, const fw_cfg_estimator_t *est);
 /** Same k on both SOGIs (coefficients computed once). */
 void fw_inj_set_k(fw_inj_t *j, float k);
 /** Extractor switched: k for the new path, the one-period averages restart. */
-void fw_inj_set_extractor(fw_inj_t *j, const fw_config_t *cfg, fw_extractor_t ex);
+void fw_inj_set_extractor(fw_inj_t *j, const fw_cfg_estimator_t *est, fw_extractor_t ex);
 /**
  * One sample: raw difference for the monitor, SOGIs, difference, demodulation
  * at theta_hat - w_hat tau (tau = dt/2 [+ SOGI group delay]), averages.
@@ -86,10 +86,10 @@ void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab_A, fw_sinc
 /** Adaptive SOGI: k from kmin..kmax by r in [0, 1] (r = 1: widest band);
  *  the coefficients are recomputed only when k moves by more than
  *  FW_INJ_SOGI_K_STEP. */
-static inline void fw_inj_adapt(fw_inj_t *j, const fw_config_t *cfg, float r) {
+static inline void fw_inj_adapt(fw_inj_t *j, const fw_cfg_estimator_t *est, float r) {
   /* Observable adaptation (replaces eq. 13's theta - theta_hat): a wide band
    * while the PLL error is large, a narrow one when locked. */
-  const float k = cfg->sogi_k_adapt_min + (cfg->sogi_k_adapt_max - cfg->sogi_k_adapt_min) * r;
+  const float k = est->sogi_k_adapt_min + (est->sogi_k_adapt_max - est->sogi_k_adapt_min) * r;
   const float dk = k - j->sogi_a.k;
   if (dk > FW_INJ_SOGI_K_STEP || dk < -FW_INJ_SOGI_K_STEP) {
     fw_inj_set_k(j, k);

@@ -72,7 +72,7 @@ void fw_start_reset(fw_start_t *s);
 
 /* ---- ALIGN ---- */
 /** Back-EMF observation with this period's fundamental current. */
-void fw_start_fly_observe(fw_start_t *s, const fw_config_t *cfg, float dt_s,
+void fw_start_fly_observe(fw_start_t *s, const fw_cfg_machine_t *mach, float dt_s,
                           fw_vec2_f32_t i_f_ab_A, float phase_time_s);
 /** Fundamental alpha/beta voltage commanded this period (acts next period). */
 void fw_start_fly_set_u(fw_start_t *s, fw_vec2_f32_t u_f_ab_V);
@@ -88,7 +88,7 @@ fw_fault_t fw_start_fly_catch(fw_start_t *s, const fw_config_t *cfg, float bemf_
 /** End of the alignment: align_time_s elapsed and this period commands
  *  injection index n/4 - 1, the last + command before the HF current triangle
  *  crosses its mean (no residual HF current biases the next test). */
-bool fw_start_align_done(const fw_config_t *cfg, float phase_time_s, uint32_t inj_idx,
+bool fw_start_align_done(const fw_cfg_estimator_t *est, float phase_time_s, uint32_t inj_idx,
                          uint32_t n_inj);
 
 /* ---- SALIENCY ---- */
@@ -109,7 +109,7 @@ void fw_start_polarity_begin(fw_start_t *s);
  * and, in *res, the decision once all pulse pairs are done (the voltage is
  * then 0).
  */
-float fw_start_polarity_step(fw_start_t *s, const fw_config_t *cfg, float i_d_A,
+float fw_start_polarity_step(fw_start_t *s, const fw_cfg_estimator_t *est, float i_d_A,
                              fw_pol_result_t *res);
 
 #ifdef __cplusplus
