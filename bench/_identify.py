@@ -28,6 +28,7 @@ from protocols.generated.od_names import StartPhase
 from sim_fallback._identify import (
     IDENT_RESTORED,
     PROBE_SIGNALS,
+    START_WINDOWS,
     Identified,
     Probe,
     ident_overrides,
@@ -37,8 +38,7 @@ from sim_fallback._identify import (
 
 #: Telemetry signals the probe asks for (one frame per millisecond).
 TEL_SIGNALS = (*PROBE_SIGNALS, "fault_code", "start_phase")
-#: 0.15 s windows of drive time the start-up may take before identification gives up
-START_WINDOWS = 4
+
 
 #: Units and descriptions of the identified values (report and motor file).
 QUANTITIES: dict[str, tuple[str, str]] = {

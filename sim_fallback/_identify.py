@@ -38,6 +38,9 @@ from protocols.generated.od_names import StartPhase
 from ._motors import Motor, fw_config
 from ._sim import SIM_REF_FORCE, SIM_REF_SPEED, Sim
 
+#: 0.15 s windows the start-up may take before identification gives up
+START_WINDOWS = 4
+
 #: Relaxed monitor settings while identifying an unknown motor: the saliency
 #: check must measure, not judge, and the start must not depend on guessed gains.
 IDENT_FW = {"mon_sal_tol": 10.0, "saliency_min": 0.05,
@@ -216,11 +219,14 @@ class SimProbe(Probe):
         assert sim is not None
         sim.set_schedule(SIM_REF_FORCE, 0.0)
         sim.enable("force")
-        self._snaps(0.15)
-        s = sim.snapshot()
-        if s["start_phase"] != StartPhase.RUN:
-            raise RuntimeError("start-up did not reach closed loop")
-        return s
+        # about 0.1 s; twice that when the saliency check turned the estimate and
+        # aligned again (FW_SAL_RETRIES)
+        for _ in range(START_WINDOWS):
+            self._snaps(0.15)
+            s = sim.snapshot()
+            if s["start_phase"] == StartPhase.RUN:
+                return s
+        raise RuntimeError(f"start-up did not reach closed loop in {0.15 * START_WINDOWS:.2f} s")
 
     def start(self) -> None:
         if self.sim is None:

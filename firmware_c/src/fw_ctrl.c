@@ -360,6 +360,17 @@ static void saliency_done(fw_ctrl_t *c) {
   c->snap.sal_meas = c->mon.sal_meas;
   c->snap.L_small_meas_H = c->mon.L_small_meas_H;
   c->snap.L_large_meas_H = c->mon.L_large_meas_H;
+  if (f == FW_FAULT_EST_HF_ANGLE && c->start.sal_retries < FW_SAL_RETRIES) {
+    /* The check measured the angle error (mod pi) from the full HF admittance:
+     * the alignment ended on or near its unstable equilibrium pi/2 from the
+     * axis, where the PLL's error signal vanishes too. Turn the estimate by the
+     * measured error, align and check again; a second miss is the fault. */
+    c->start.sal_retries++;
+    fw_obs_rotate(&c->obs, c->mon.sal_axis_rad);
+    c->phase = FW_START_ALIGN;
+    c->phase_time_s = 0.0f;
+    return;
+  }
   if (f != FW_FAULT_NONE) {
     latch_fault(c, f);
     return;

@@ -78,6 +78,14 @@ void fw_obs_flip(fw_obs_t *o) {
   pos_add(o, FW_PI_F32);
 }
 
+void fw_obs_rotate(fw_obs_t *o, float d_rad) {
+  fw_pll_reset_f32(&o->pll, fw_wrap_pi_f32(o->pll.theta_rad + d_rad), 0.0f);
+  o->theta_prev = o->pll.theta_rad;
+  pos_add(o, d_rad);
+  o->err_f = 0.0f;
+  o->accel_dist = 0.0f;
+}
+
 void fw_obs_hold(fw_obs_t *o, float t_s) { o->est_hold_s = t_s; }
 
 float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {

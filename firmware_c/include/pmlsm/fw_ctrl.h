@@ -51,6 +51,9 @@ extern "C" {
 /** Injection periods per axis in the standstill saliency check (the first is
  *  not averaged: the axis change settles). */
 #define FW_SAL_PERIODS 4u
+/** Standstill saliency checks that may find d^ off the axis and turn the estimate
+ *  by the measured angle before a miss is the EST_HF_ANGLE fault. */
+#define FW_SAL_RETRIES 1u
 
 /* Fault codes (fw_fault_t): generated from protocols/od.yaml (faults:), the one
  * list of codes, names and texts for the core, the CANopen slave, the bench and the

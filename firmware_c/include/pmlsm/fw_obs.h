@@ -84,6 +84,10 @@ void fw_obs_set(fw_obs_t *o, float theta_rad, float w_radps);
 void fw_obs_catch(fw_obs_t *o, float theta_rad, float w0_radps);
 /** Polarity: pi added to the estimate and to the position. */
 void fw_obs_flip(fw_obs_t *o);
+/** Turn the estimate by d_rad (|d_rad| <= pi/2, an angle error the standstill
+ *  saliency check measured): the PLL restarts from the corrected angle at zero
+ *  speed, the position estimate moves with it. */
+void fw_obs_rotate(fw_obs_t *o, float d_rad);
 /** Hold the error at 0 for this long (an extractor switch settles). */
 void fw_obs_hold(fw_obs_t *o, float t_s);
 /** Fundamental i_q of this period (for the next period's thrust feed-forward). */

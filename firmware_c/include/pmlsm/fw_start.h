@@ -65,6 +65,7 @@ typedef struct {
   float fly_e_ab_V[2];      /**< low-passed alpha/beta back-EMF */
   float fly_rot_rad;        /**< rotation of that vector over the observation window */
   uint8_t flying;           /**< 1: this run started on a moving mover */
+  uint8_t sal_retries;      /**< saliency checks repeated after turning the estimate */
 } fw_start_t;
 
 /** Everything cleared (an enable, or the handover to closed loop). */
