@@ -767,6 +767,16 @@ bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_input
   return m <= cfg->adc_max_count;
 }
 
+/** Copy one float as a 32-bit word: GCC (hard-float ARM) limits a float load
+ *  or store, even one through core registers, to the FPU's +-1020-byte offset,
+ *  so fields further into fw_ctrl_t cost an address computation each; a word
+ *  has the +4095 of LDR/STR. The same bits either way. */
+static FW_ALWAYS_INLINE void copy_f32(float *dst, const float *src) {
+  uint32_t w;
+  memcpy(&w, src, sizeof w);
+  memcpy(dst, &w, sizeof w);
+}
+
 void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
   const fw_snapshot_t *s = &ctrl->snap;
   /* what fw_step wrote (every field of ctrl->snap that it writes) */
@@ -803,22 +813,22 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
   snap->omega_f_radps = ctrl->obs.omega_f;
   snap->pll_err_f_rad = ctrl->obs.err_f;
   snap->accel_dist_radps2 = ctrl->obs.accel_dist;
-  snap->mon_angle_hf_rad = ctrl->mon.angle_hf_rad; /* the monitor's outputs change */
-  snap->mon_angle_bemf_rad = ctrl->mon.angle_bemf_rad; /* once per block */
-  snap->mon_e_bemf_V = ctrl->mon.e_bemf_V;
-  snap->mon_i_sum_A = ctrl->mon.isum_f;
-  snap->inj_scale = ctrl->bemf.inj_scale;
+  copy_f32(&snap->mon_angle_hf_rad, &ctrl->mon.angle_hf_rad); /* the monitor's outputs change */
+  copy_f32(&snap->mon_angle_bemf_rad, &ctrl->mon.angle_bemf_rad); /* once per block */
+  copy_f32(&snap->mon_e_bemf_V, &ctrl->mon.e_bemf_V);
+  copy_f32(&snap->mon_i_sum_A, &ctrl->mon.isum_f);
+  copy_f32(&snap->inj_scale, &ctrl->bemf.inj_scale);
   snap->bemf_active = ctrl->bemf.active;
   snap->flying_start = ctrl->start.flying;
   snap->extractor = (uint8_t)ctrl->cfg.extractor;
   snap->mode = (uint8_t)ctrl->mode;
   snap->polarity_flipped = ctrl->polarity_flipped;
-  snap->sogi_k_eff = fw_inj_k(&ctrl->inj);
+  copy_f32(&snap->sogi_k_eff, &ctrl->inj.sogi_a.k); /* fw_inj_k */
   snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
   raw->pos_e_rad = fw_obs_pos_e(&ctrl->obs);
-  raw->bemf_e_dq_V[0] = ctrl->bemf.e_d_f;
-  raw->bemf_e_dq_V[1] = ctrl->bemf.e_q_f;
-  raw->bemf_err_rad = ctrl->bemf.err_rad;
+  copy_f32(&raw->bemf_e_dq_V[0], &ctrl->bemf.e_d_f);
+  copy_f32(&raw->bemf_e_dq_V[1], &ctrl->bemf.e_q_f);
+  copy_f32(&raw->bemf_err_rad, &ctrl->bemf.err_rad);
   raw->bemf_fresh = ctrl->bemf.err_fresh;
   raw->bemf_w_neg = ctrl->bemf.w_neg;
 }
