@@ -14,6 +14,7 @@
 #ifndef PMLSM_FW_MATH_H
 #define PMLSM_FW_MATH_H
 
+#include <math.h>
 #include <stdbool.h>
 #include <stdint.h>
 
@@ -148,6 +149,14 @@ static inline float fw_clampf(float x, float lo, float hi) {
 #define FW_NOINLINE
 #endif
 
+/** fw_clampf(x, -lim, lim), the same result for every x and lim (NaN and a
+ *  negative lim included): |x| <= lim implies -lim <= x <= lim, so the usual
+ *  in-range value costs one compare instead of two (FPv4 has no VMAXNM/VMINNM;
+ *  every compare is a VCMP and a VMRS). */
+static FW_ALWAYS_INLINE float fw_clamp_symf(float x, float lim) {
+  return fabsf(x) <= lim ? x : fw_clampf(x, -lim, lim);
+}
+
 /** Wrap an angle into [-pi, pi). Non-finite input returns 0. Inline: the
  *  usual angle is already in range (one compare pair, no call). */
 static FW_ALWAYS_INLINE float fw_wrap_pi_f32(float theta_rad) {
@@ -163,10 +172,16 @@ static FW_ALWAYS_INLINE bool fw_isfinite_f32(float x) {
   return x - x == 0.0f;
 }
 
+/** The limit of fw_pi_core_lim_f32: symmetric limits (out_min = -out_max) take
+ *  fw_clamp_symf, the same values with one compare on the usual path. */
+static FW_ALWAYS_INLINE float fw_pi_clamp_f32(float x, float out_min, float out_max, bool sym) {
+  return sym ? fw_clamp_symf(x, out_max) : fw_clampf(x, out_min, out_max);
+}
+
 /** PI step (see fw_pi_step_f32) once e, ff are known finite and di = ki e dt
- *  is formed. */
-static FW_ALWAYS_INLINE float fw_pi_core_f32(fw_pi_f32_t *pi, float e, float ff, float di,
-                                             float out_min, float out_max) {
+ *  is formed; sym (a constant) when out_min = -out_max. */
+static FW_ALWAYS_INLINE float fw_pi_core_lim_f32(fw_pi_f32_t *pi, float e, float ff, float di,
+                                                 float out_min, float out_max, bool sym) {
   const float p = pi->kp * e;
   const float integ0 = pi->integ;
   float integ = integ0 + di;
@@ -178,11 +193,18 @@ static FW_ALWAYS_INLINE float fw_pi_core_f32(fw_pi_f32_t *pi, float e, float ff,
     const float i_lim = out_min - p - ff;
     integ = i_lim < integ0 ? i_lim : integ0; /* min */
   }
-  integ = fw_clampf(integ, out_min, out_max);
+  integ = fw_pi_clamp_f32(integ, out_min, out_max, sym);
   pi->integ = integ;
-  const float out = fw_clampf(p + integ + ff, out_min, out_max);
+  const float out = fw_pi_clamp_f32(p + integ + ff, out_min, out_max, sym);
   pi->out = out;
   return out;
+}
+
+/** PI step (see fw_pi_step_f32) once e, ff are known finite and di = ki e dt
+ *  is formed. */
+static FW_ALWAYS_INLINE float fw_pi_core_f32(fw_pi_f32_t *pi, float e, float ff, float di,
+                                             float out_min, float out_max) {
+  return fw_pi_core_lim_f32(pi, e, ff, di, out_min, out_max, false);
 }
 
 /**
@@ -198,7 +220,7 @@ static FW_ALWAYS_INLINE float fw_pi_step_cfg_f32(fw_pi_f32_t *pi, float e, float
   if (!(nf == 0.0f)) {
     return pi->out;
   }
-  return fw_pi_core_f32(pi, e, ff, pi->ki_dt * e, -lim, lim);
+  return fw_pi_core_lim_f32(pi, e, ff, pi->ki_dt * e, -lim, lim, true);
 }
 
 #ifdef __cplusplus
