@@ -193,18 +193,23 @@ bool fw_svpwm_f32(fw_vec2_f32_t u_ab_V, float u_dc_V, float duty_abc[3],
       limited = true;
     }
   }
-  float ph[3];
-  fw_inv_clarke_f32(u, ph);
-  float u_hi = ph[0], u_lo = ph[0];
-  for (int i = 1; i < 3; i++) {
-    u_hi = ph[i] > u_hi ? ph[i] : u_hi;
-    u_lo = ph[i] < u_lo ? ph[i] : u_lo;
-  }
+  /* the inverse Clarke (fw_inv_clarke_f32) and the three phases in scalars,
+   * not an array: at -Os an array stays on the stack and the duty loop is not
+   * unrolled (same expressions, same order) */
+  const float h = 0.5f * FW_SQRT3_F32 * u.y;
+  const float ph0 = u.x;
+  const float ph1 = -0.5f * u.x + h;
+  const float ph2 = -0.5f * u.x - h;
+  float u_hi = ph0, u_lo = ph0;
+  u_hi = ph1 > u_hi ? ph1 : u_hi;
+  u_lo = ph1 < u_lo ? ph1 : u_lo;
+  u_hi = ph2 > u_hi ? ph2 : u_hi;
+  u_lo = ph2 < u_lo ? ph2 : u_lo;
   const float u0_V = -0.5f * (u_hi + u_lo);
   const float inv_dc = 1.0f / u_dc_V;
-  for (int i = 0; i < 3; i++) {
-    duty_abc[i] = 0.5f + (ph[i] + u0_V) * inv_dc;
-  }
+  duty_abc[0] = 0.5f + (ph0 + u0_V) * inv_dc;
+  duty_abc[1] = 0.5f + (ph1 + u0_V) * inv_dc;
+  duty_abc[2] = 0.5f + (ph2 + u0_V) * inv_dc;
   /* the duties span (u_hi - u_lo) / u_dc around 1/2; a span within 0.999 of
    * the carrier cannot leave [0, 1] by rounding, so the clamp (which only
    * absorbs rounding on the circle boundary) runs only near the boundary */
