@@ -69,18 +69,7 @@ fw_sincos_f32_t fw_sincos_f32(float theta_rad) {
   return out;
 }
 
-fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, float theta0_rad, float d_rad) {
-  if (!(fabsf(d_rad) <= FW_SINCOS_ADD_MAX_RAD)) { /* also NaN */
-    return fw_sincos_f32(theta0_rad + d_rad);
-  }
-  const float d2 = d_rad * d_rad;
-  const float sd = d_rad + d_rad * d2 * (-1.6666667e-1f + d2 * 8.3333333e-3f);
-  const float cd = 1.0f + d2 * (-0.5f + d2 * 4.1666668e-2f);
-  fw_sincos_f32_t out;
-  out.s = sc0.s * cd + sc0.c * sd;
-  out.c = sc0.c * cd - sc0.s * sd;
-  return out;
-}
+/* fw_sincos_add_f32: inline in fw_math.h */
 
 /* ---- angle wrap -----------------------------------------------------------
  * n = floor((theta - lo) / 2pi), theta - n 2pi with a two-constant split of

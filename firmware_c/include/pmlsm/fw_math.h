@@ -63,7 +63,8 @@ fw_sincos_f32_t fw_sincos_f32(float theta_rad);
  * at theta0 + d for |theta0| < 1e4 rad: below FW_SINCOS_MAX_ERR (tested,
  * test_math.c: 1.7e-7 measured; fw_sincos_f32 alone 9.3e-8).
  */
-fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, float theta0_rad, float d_rad);
+static inline fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, float theta0_rad,
+                                                float d_rad);
 
 /** fw_wrap_pi_f32 for an angle outside [-pi, pi) (any float). */
 float fw_wrap_pi_slow_f32(float theta_rad);
@@ -155,6 +156,23 @@ static inline float fw_clampf(float x, float lo, float hi) {
  *  every compare is a VCMP and a VMRS). */
 static FW_ALWAYS_INLINE float fw_clamp_symf(float x, float lim) {
   return fabsf(x) <= lim ? x : fw_clampf(x, -lim, lim);
+}
+
+/* fw_sincos_add_f32 (declared above) inline: the step calls it twice, and a call
+ * returning the pair cost a stack frame, the pair's moves and two changes of flow
+ * per call on the M4 (-Os keeps it out of line unless forced). */
+static FW_ALWAYS_INLINE fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, float theta0_rad,
+                                                          float d_rad) {
+  if (!(fabsf(d_rad) <= FW_SINCOS_ADD_MAX_RAD)) { /* also NaN */
+    return fw_sincos_f32(theta0_rad + d_rad);
+  }
+  const float d2 = d_rad * d_rad;
+  const float sd = d_rad + d_rad * d2 * (-1.6666667e-1f + d2 * 8.3333333e-3f);
+  const float cd = 1.0f + d2 * (-0.5f + d2 * 4.1666668e-2f);
+  fw_sincos_f32_t out;
+  out.s = sc0.s * cd + sc0.c * sd;
+  out.c = sc0.c * cd - sc0.s * sd;
+  return out;
 }
 
 /** Wrap an angle into [-pi, pi). Non-finite input returns 0. Inline: the
