@@ -491,7 +491,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
   const fw_config_t *cfg = &c->cfg;
   /* theta_hat at the sampling instant: for the current Park and (advanced)
    * the output transform; the demodulation uses its own delayed frame */
-  p->sc = fw_sincos_f32(c->theta_k);
+  p->sc = fw_sincos_fast_f32(c->theta_k);
   hf->i_f_ab_A = p->i_ab;
   hf->e_raw_dq_A.x = hf->e_raw_dq_A.y = 0.0f; /* raw HF difference, for the monitor */
   hf->E_d_A = 0.0f;

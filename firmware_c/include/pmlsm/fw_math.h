@@ -158,6 +158,52 @@ static FW_ALWAYS_INLINE float fw_clamp_symf(float x, float lim) {
   return fabsf(x) <= lim ? x : fw_clampf(x, -lim, lim);
 }
 
+/* sin/cos constants (fw_sincos_f32, fw_math.c: the range reduction). */
+#define FW_PIO2_1 1.5703125f                  /* pi/2 high part, exact */
+#define FW_PIO2_2 4.837512969970703125e-4f    /* pi/2 middle part, exact */
+#define FW_PIO2_3 7.54978995489188216e-8f     /* pi/2 low part */
+#define FW_TWO_OVER_PI 0.636619772367581343f  /* 2/pi */
+/* Fast path: |theta| <= 8192 rad (|k| <= 5216 < 2^13, the reduction is as
+ * exact as the general one). y + 1.5 * 2^23 - 1.5 * 2^23 rounds y (|y| < 2^22)
+ * to the nearest integer in two additions, no compare, no clamp (ties go to
+ * even; either neighbour leaves |r| <= pi/4). */
+#define FW_SINCOS_FAST_MAX 8192.0f
+#define FW_SINCOS_ROUND 12582912.0f /* 1.5 * 2^23 */
+
+/** The polynomials and the quadrant of fw_sincos_f32: sin/cos of k pi/2 + r
+ *  for the reduced angle r (|r| <= ~pi/4) and the quadrant k (an integer in
+ *  float). */
+static FW_ALWAYS_INLINE fw_sincos_f32_t fw_sincos_poly_f32(float r, float kf) {
+  const uint32_t quad = (uint32_t)(int32_t)kf & 3u; /* k mod 4, two's complement */
+  const float z = r * r;
+  const float s = r + r * z * (-1.6666654611e-1f +
+                               z * (8.3321608736e-3f + z * -1.9515295891e-4f));
+  const float c = 1.0f - 0.5f * z +
+                  z * z * (4.166664568298827e-2f +
+                           z * (-1.388731625493765e-3f + z * 2.443315711809948e-5f));
+  /* quadrant without a jump table: swap for odd k, sin negative for k = 2, 3
+   * (mod 4), cos negative for k = 1, 2 */
+  const bool swap = (quad & 1u) != 0u;
+  const float sv = swap ? c : s;
+  const float cv = swap ? s : c;
+  fw_sincos_f32_t out;
+  out.s = (quad & 2u) != 0u ? -sv : sv;
+  out.c = ((quad + 1u) & 2u) != 0u ? -cv : cv;
+  return out;
+}
+
+/** fw_sincos_f32 with its fast path (|theta| <= FW_SINCOS_FAST_MAX) inline and
+ *  the rest a call: the same results. For the step's one full sin/cos per
+ *  period (a call cost a stack frame, the pair's moves and two changes of flow). */
+static FW_ALWAYS_INLINE fw_sincos_f32_t fw_sincos_fast_f32(float theta_rad) {
+  if (fabsf(theta_rad) <= FW_SINCOS_FAST_MAX) { /* false for NaN */
+    const float kf = (theta_rad * FW_TWO_OVER_PI + FW_SINCOS_ROUND) - FW_SINCOS_ROUND;
+    const float r = ((theta_rad - kf * FW_PIO2_1) - kf * FW_PIO2_2) - kf * FW_PIO2_3;
+    return fw_sincos_poly_f32(r, kf);
+  }
+  return fw_sincos_f32(theta_rad);
+}
+
 /* fw_sincos_add_f32 (declared above) inline: the step calls it twice, and a call
  * returning the pair cost a stack frame, the pair's moves and two changes of flow
  * per call on the M4 (-Os keeps it out of line unless forced). */
