@@ -432,7 +432,7 @@ typedef struct {
 /** Input checks (fault on a bad sample; NaN never enters the state), offset
  *  compensation, Clarke. */
 static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
-                         fw_mon_in_t *mi, fw_period_t *p) {
+                         fw_period_t *p) {
   const fw_fault_t f =
       fw_fault_check_inputs(&c->cfg, in, fw_cia402_power_enabled(c->sm.state));
   *safe = *in;
@@ -446,11 +446,6 @@ static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
   if (c->phase != FW_START_IDLE) {
     fw_mon_compensate(&c->mon, safe->i_abc_A); /* offsets learnt at standstill */
   }
-  /* monitor inputs: every field is written before fw_mon_update reads it
-   * (no memset on the hot path) */
-  mi->i_abc_A[0] = safe->i_abc_A[0];
-  mi->i_abc_A[1] = safe->i_abc_A[1];
-  mi->i_abc_A[2] = safe->i_abc_A[2];
   p->i_ab = fw_clarke_f32(safe->i_abc_A[0], safe->i_abc_A[1], safe->i_abc_A[2]);
 }
 
@@ -469,12 +464,16 @@ static bool stage_power(fw_ctrl_t *c, fw_period_t *p) {
 }
 
 /** Power stage off: current-sensor offsets and sum, i2t cools down. */
-static void stage_off(fw_ctrl_t *c, const fw_inputs_t *safe, fw_mon_in_t *mi) {
+static void stage_off(fw_ctrl_t *c, const fw_inputs_t *safe) {
   c->phase = FW_START_IDLE;
   fw_mon_learn_offsets(&c->mon, safe->i_abc_A);
   fw_protect_cool(&c->prot, &c->cfg);
-  memset(&mi->e_hf_dq_A, 0, sizeof(*mi) - offsetof(fw_mon_in_t, e_hf_dq_A));
-  const fw_fault_t mf = fw_mon_update(&c->mon, mi); /* current sum with PWM off */
+  fw_mon_in_t mi;
+  memset(&mi, 0, sizeof mi);
+  mi.i_abc_A[0] = safe->i_abc_A[0];
+  mi.i_abc_A[1] = safe->i_abc_A[1];
+  mi.i_abc_A[2] = safe->i_abc_A[2];
+  const fw_fault_t mf = fw_mon_update(&c->mon, &mi); /* current sum with PWM off */
   if (mf != FW_FAULT_NONE) {
     latch_fault(c, mf);
   }
@@ -607,7 +606,7 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
 
 /** Integrity monitor and protections. Returns false when a hard fault
  *  switches the power stage off now (braking faults go on braking). */
-static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_mon_in_t *mi,
+static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, const fw_inputs_t *safe,
                           fw_period_t *p) {
   const bool running = c->phase == FW_START_RUN;
   const bool scale_full = c->bemf.inj_scale >= 1.0f;
@@ -616,6 +615,13 @@ static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_mon_in_t *mi
    * division while the injection is full, the usual case) */
   const float inv_scale = scale_full ? 1.0f : 1.0f / c->bemf.inj_scale;
   const float *u_applied = fw_foc_u_applied(&c->foc);
+  /* the monitor's inputs in a local that only the inline fw_mon_update reads,
+   * so that its fields stay in registers (every field written, no memset) */
+  fw_mon_in_t m;
+  fw_mon_in_t *const mi = &m;
+  mi->i_abc_A[0] = safe->i_abc_A[0]; /* after the offset compensation */
+  mi->i_abc_A[1] = safe->i_abc_A[1];
+  mi->i_abc_A[2] = safe->i_abc_A[2];
   mi->e_hf_dq_A[0] = hf->e_raw_dq_A.x * inv_scale;
   mi->e_hf_dq_A[1] = hf->e_raw_dq_A.y * inv_scale;
   mi->u_dq_V[0] = u_applied[0];
@@ -688,10 +694,9 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   c->theta_k = c->obs.pll.theta_rad; /* the estimate belonging to this sample */
   fw_period_t p;
   fw_inputs_t safe;
-  fw_mon_in_t mi;
-  stage_inputs(c, in, &safe, &mi, &p);
+  stage_inputs(c, in, &safe, &p);
   if (!stage_power(c, &p)) {
-    stage_off(c, &safe, &mi);
+    stage_off(c, &safe);
     fill_snapshot_common(c, &safe, p.i_ab, out);
     return;
   }
@@ -722,7 +727,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     const float w_ff = c->phase == FW_START_RUN ? c->obs.omega_f : 0.0f;
     p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, safe.u_dc_V);
   }
-  if (!stage_monitor(c, &hf, &mi, &p)) { /* hard fault: switch off now */
+  if (!stage_monitor(c, &hf, &safe, &p)) { /* hard fault: switch off now */
     fill_snapshot_common(c, &safe, p.i_ab, out);
     return;
   }
