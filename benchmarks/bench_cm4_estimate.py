@@ -33,7 +33,8 @@ error, warm-up not reaching RUN, controller leaving RUN during the replay),
 3 when the sources changed during the run. Outputs go to benchmarks/out/cm4/.
 
 Usage: python3 benchmarks/bench_cm4_estimate.py [--opt O2,Os] [--batch 80]
-       [--batches 10] [--no-lto] [--json out.json] [--keep-log]
+       [--batches 10] [--no-lto] [--isr] [--bg] [--by-source] [--json out.json]
+       [--keep-log]
 
 CYCLE MODEL (Cortex-M4 TRM r0p1 table 3-1, FPv4-SP table 7-1; zero-wait-
 state instruction fetch, i.e. code in CCM SRAM or always hitting the
@@ -82,7 +83,8 @@ ISR_OVERHEAD = (22, 56)  # entry + exit cycles, without / with lazy FP context s
 FLASH_WS = 4  # flash wait states of an STM32G4-class part at 170 MHz
 
 CPU_FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard"]
-TOOLS = ["arm-none-eabi-gcc", "arm-none-eabi-objdump", "arm-none-eabi-nm", "qemu-system-arm"]
+TOOLS = ["arm-none-eabi-gcc", "arm-none-eabi-objdump", "arm-none-eabi-nm",
+         "arm-none-eabi-addr2line", "qemu-system-arm"]
 INSTALL_HINT = (
     "install them with: apt-get update && apt-get install -y gcc-arm-none-eabi "
     "libnewlib-arm-none-eabi qemu-system-arm"
@@ -338,13 +340,22 @@ def classify(mn: str, ops: str) -> tuple[str, int, int, bool]:
     return "alu", 1, 1, False
 
 
-def parse_trace(log: Path, insns, syms, batch: int, nb: int, isr: bool = False):
-    """Walk the exec log; count per step from fw_step's entry (``isr``: fw_app_isr's)
-    until the PC is back in replay_batch (replay_isr_batch). Returns per-step insn
-    counts and low/high cycles, per-class and per-function totals."""
+# what is counted: entry symbol and the harness function it returns to
+KINDS = {
+    "step": ("fw_step", "replay_batch", "count"),
+    "isr": ("fw_app_isr", "replay_isr_batch", "count_isr"),
+    "bg": ("fw_app_background", "replay_isr_batch", "count_bg"),
+}
+
+
+def parse_trace(log: Path, insns, syms, batch: int, nb: int, kind: str = "step"):
+    """Walk the exec log; count per call from the entry of KINDS[kind] (fw_step,
+    fw_app_isr or fw_app_background) until the PC is back in the harness function
+    that called it. Returns per-call insn counts and low/high cycles, per-class,
+    per-function and per-PC totals."""
     by_name = {name: (a, s) for a, s, name in syms}
-    entry = by_name["fw_app_isr" if isr else "fw_step"][0]
-    rb_lo, rb_sz = by_name["replay_isr_batch" if isr else "replay_batch"]
+    entry = by_name[KINDS[kind][0]][0]
+    rb_lo, rb_sz = by_name[KINDS[kind][1]]
     rb_hi = rb_lo + rb_sz
     starts = [a for a, _, _ in syms]
 
@@ -356,6 +367,7 @@ def parse_trace(log: Path, insns, syms, batch: int, nb: int, isr: bool = False):
     cls_count: dict[str, int] = {}
     fn_count: dict[str, int] = {}
     pc_count: dict[int, int] = {}
+    pc_cyc: dict[int, list[int]] = {}  # pc -> [low, high] cycles, refill included
     unknown = 0
     inside = False
     n = lo = hi = flow = nbytes = 0
@@ -369,6 +381,9 @@ def parse_trace(log: Path, insns, syms, batch: int, nb: int, isr: bool = False):
             pc = int(fields[1], 16)
             if inside and prev is not None and pc != prev[0] + prev[1]:
                 flow += 1  # the previous instruction changed the flow
+                cyc = pc_cyc[prev[0]]
+                cyc[0] += 1
+                cyc[1] += 3
             if not inside:
                 if pc == entry:
                     inside, n, lo, hi, flow, nbytes, prev = True, 0, 0, 0, 0, 0, None
@@ -397,13 +412,17 @@ def parse_trace(log: Path, insns, syms, batch: int, nb: int, isr: bool = False):
             hi += hc
             cls_count[c] = cls_count.get(c, 0) + 1
             pc_count[pc] = pc_count.get(pc, 0) + 1
+            cyc = pc_cyc.setdefault(pc, [0, 0])
+            cyc[0] += lc
+            cyc[1] += hc
             prev = (pc, size, pipe)
     for pc, k in pc_count.items():
         fn = func_of(pc)
         fn_count[fn] = fn_count.get(fn, 0) + k
     footprint = sum(insns[pc][0] if pc in insns else 2 for pc in pc_count)
     if len(steps_n) != batch * nb:
-        die(f"trace holds {len(steps_n)} complete fw_step calls, expected {batch * nb}")
+        die(f"trace holds {len(steps_n)} complete {KINDS[kind][0]} calls, "
+            f"expected {batch * nb}")
     return (
         steps_n,
         steps_lo,
@@ -414,7 +433,44 @@ def parse_trace(log: Path, insns, syms, batch: int, nb: int, isr: bool = False):
         cls_count,
         fn_count,
         unknown,
+        pc_count,
+        pc_cyc,
     )
+
+
+def by_source(elf: Path, pc_count: dict[int, int], pc_cyc: dict[int, list[int]],
+              nsteps: int) -> list[tuple[str, float, float, float]]:
+    """Attribute every executed instruction to the innermost (inlined) function
+    of its source line (DWARF, addr2line -i): -> [(function (file), insns/step,
+    low cycles/step, high cycles/step)], most high cycles first."""
+    pcs = sorted(pc_count)
+    r = run(["arm-none-eabi-addr2line", "-a", "-f", "-i", "-e", str(elf)],
+            input="\n".join(f"0x{pc:x}" for pc in pcs))
+    owner: dict[int, str] = {}
+    cur = None
+    lines = r.stdout.splitlines()
+    i = 0
+    while i < len(lines):
+        ln = lines[i]
+        if ln.startswith("0x"):
+            cur = int(ln, 16)
+            fn = lines[i + 1] if i + 1 < len(lines) else "?"
+            loc = lines[i + 2] if i + 2 < len(lines) else "?"
+            f = Path(loc.split(":")[0]).name
+            owner[cur] = f"{fn} ({f})"
+            i += 3
+            while i < len(lines) and not lines[i].startswith("0x"):
+                i += 1
+            continue
+        i += 1
+    acc: dict[str, list[float]] = {}
+    for pc in pcs:
+        a = acc.setdefault(owner.get(pc, "?"), [0.0, 0.0, 0.0])
+        a[0] += pc_count[pc]
+        a[1] += pc_cyc[pc][0]
+        a[2] += pc_cyc[pc][1]
+    out = [(k, v[0] / nsteps, v[1] / nsteps, v[2] / nsteps) for k, v in acc.items()]
+    return sorted(out, key=lambda t: -t[3])
 
 
 def batch_medians(v: list[int], batch: int) -> float:
@@ -423,7 +479,7 @@ def batch_medians(v: list[int], batch: int) -> float:
 
 
 def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool,
-            isr: bool = False) -> dict:
+            kind: str = "step", source: bool = False) -> dict:
     outdir = elf.parent
     state = outdir / f"state_{mode}.bin"
     r = qemu(elf, ["warm", str(state), str(batch * nb), mode], [], timeout=600)
@@ -432,7 +488,7 @@ def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool,
     log = outdir / f"exec_{mode}.log"
     r = qemu(
         elf,
-        ["count_isr" if isr else "count", str(state), str(batch), str(nb)],
+        [KINDS[kind][2], str(state), str(batch), str(nb)],
         [*one_insn_per_tb_args(), "-d", "exec,nochain", "-D", str(log)],
         timeout=900,
     )
@@ -443,9 +499,8 @@ def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool,
         )
     syms = symbols(elf)
     insns = disassemble(elf)
-    (steps_n, steps_lo, steps_hi, steps_flow, steps_bytes, footprint, cls, fns, unknown) = (
-        parse_trace(log, insns, syms, batch, nb, isr)
-    )
+    (steps_n, steps_lo, steps_hi, steps_flow, steps_bytes, footprint, cls, fns, unknown,
+     pc_count, pc_cyc) = parse_trace(log, insns, syms, batch, nb, kind)
     # flash fetch bound with no accelerator hits: 64-bit lines, 1 + WS cycles each,
     # one extra line per change of flow
     fetch = [(b / 8 + f) * (1 + FLASH_WS) for b, f in zip(steps_bytes, steps_flow, strict=True)]
@@ -454,7 +509,7 @@ def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool,
     total = sum(steps_n)
     res = {
         "opt": opt,
-        "mode": mode + ("+isr" if isr else ""),
+        "mode": mode + ("" if kind == "step" else "+" + kind),
         "steps": len(steps_n),
         "batch": batch,
         "batches": nb,
@@ -475,17 +530,34 @@ def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool,
         "unknown_pcs": unknown,
         "total_insns": total,
     }
+    if source:
+        res["source_functions_per_step"] = [
+            {"function": k, "insns": n, "cycles_low": lo, "cycles_high": hi}
+            for k, n, lo, hi in by_source(elf, pc_count, pc_cyc, len(steps_n))
+        ]
     return res
+
+
+def report_by_source(res: dict) -> None:
+    if "source_functions_per_step" in res:
+        print("by source function, inlined code attributed to its innermost function "
+              "(insns/call, cycles/call low..high):")
+        for e in res["source_functions_per_step"]:
+            if e["cycles_high"] >= 1.0:
+                print(f"  {e['function']:<52} {e['insns']:7.1f} {e['cycles_low']:7.1f} .. "
+                      f"{e['cycles_high']:7.1f}")
 
 
 def report(res: dict) -> None:
     opt = res["opt"]
     lo, hi = res["cycles_low_median"], res["cycles_high_median"]
     what = {"force": "FORCE mode as bench_fw_step.c", "speed": "SPEED mode, speed loop on"}
-    isr = res["mode"].endswith("+isr")
+    kind = res["mode"].partition("+")[2] or "step"
+    title = {"step": "fw_step", "isr": "fw_app_isr (the control interrupt)",
+             "bg": "fw_app_background (one pass of the background loop per period)"}
     print(
-        f"\n== {'fw_app_isr (the control interrupt)' if isr else 'fw_step'}"
-        f" on Cortex-M4F, -{opt}, {what[res['mode'].removesuffix('+isr')]} "
+        f"\n== {title[kind]}"
+        f" on Cortex-M4F, -{opt}, {what[res['mode'].partition('+')[0]]} "
         f"({res['steps']} closed-loop RUN steps, "
         f"{res['batches']} batches of {res['batch']}) =="
     )
@@ -499,6 +571,21 @@ def report(res: dict) -> None:
     top = list(res["functions_per_step"].items())[:8]
     print("by function (insns/step): " + ", ".join(f"{k} {v:.0f}" for k, v in top))
     worst_step = res["cycles_high_max_step"]
+    if kind == "bg":
+        print(
+            f"estimated cycles per pass (zero-wait fetch): {lo:.0f} .. {hi:.0f}  "
+            f"(worst single pass, high model: {worst_step}); "
+            f"{100 * lo / BUDGET:.1f} % .. {100 * hi / BUDGET:.1f} % of a period "
+            f"(worst pass {100 * worst_step / BUDGET:.1f} %)"
+        )
+        print(
+            "rate: the background loop runs free in the main loop between interrupts "
+            "(fw_board_background); it must average one pass per period "
+            f"({F_ISR_HZ / 1e3:.0f} kHz) to keep the snapshot ring "
+            f"(FW_APP_SNAP_RING periods) from overrunning, in the time the interrupt leaves"
+        )
+        report_by_source(res)
+        return
     print(
         f"estimated cycles/step (zero-wait fetch): {lo:.0f} .. {hi:.0f}  "
         f"(worst single step, high model: {worst_step})"
@@ -518,6 +605,7 @@ def report(res: dict) -> None:
         f"entry/exit: {tgt - worst:+.0f} cycles -> {verdict} the target; "
         f"headroom to 100 %: {BUDGET - worst:+.0f} cycles"
     )
+    report_by_source(res)
     fb = res["cold_flash_fetch_bound_cycles"]
     print(
         f"caveat, code in flash: {res['code_bytes_executed_per_step']:.0f} code bytes "
@@ -553,6 +641,13 @@ def main() -> int:
     ap.add_argument("--isr", action="store_true",
                     help="also measure the whole control interrupt (fw_app_isr: ADC "
                     "conversion, fw_step, publication to the background)")
+    ap.add_argument("--bg", action="store_true",
+                    help="also measure the background loop (fw_app_background, one pass "
+                    "after every period: CANopen, completing the period, faults, "
+                    "telemetry, OD)")
+    ap.add_argument("--by-source", action="store_true",
+                    help="also break the counts down by source function, inlined code "
+                    "attributed to its innermost function (DWARF line info)")
     ap.add_argument("--json", type=Path, help="also write the results as JSON")
     ap.add_argument("--keep-log", action="store_true", help="keep the QEMU exec log")
     a = ap.parse_args()
@@ -578,8 +673,9 @@ def main() -> int:
     for opt in [o.strip() for o in a.opt.split(",") if o.strip()]:
         elf = build(opt, OUT / opt, lto=not a.no_lto)
         for mode in modes:
-            for isr in ([False, True] if a.isr else [False]):
-                res = measure(opt, mode, elf, a.batch, a.batches, a.keep_log, isr)
+            for kind in ["step", *(["isr"] if a.isr else []), *(["bg"] if a.bg else [])]:
+                res = measure(opt, mode, elf, a.batch, a.batches, a.keep_log, kind,
+                              a.by_source)
                 report(res)
                 results.append(res)
     print(
@@ -588,6 +684,14 @@ def main() -> int:
     )
     for r in results:
         lo, hi = r["cycles_low_median"], r["cycles_high_median"]
+        if r["mode"].endswith("+bg"):
+            print(
+                f"  -{r['opt']:<3} {r['mode']:<6} {r['insns_per_step_median']:7.1f} insns  "
+                f"{lo:5.0f} .. {hi:5.0f} cycles per background pass  "
+                f"{100 * lo / BUDGET:4.1f} .. {100 * hi / BUDGET:4.1f} % of a period  "
+                f"(worst pass {r['cycles_high_max_step']} cycles)"
+            )
+            continue
         print(
             f"  -{r['opt']:<3} {r['mode']:<6} {r['insns_per_step_median']:7.1f} insns  "
             f"{lo:5.0f} .. {hi:5.0f} cycles  "

@@ -29,6 +29,14 @@
  *                           return to replay_isr_batch(). The ring is emptied
  *                           between periods as the background would (not
  *                           counted).
+ *   harness count_bg STATE B NB  as count_isr, but the drive application's
+ *                           background loop (fw_app_background: CANopen
+ *                           receive and commands, completing the period's
+ *                           snapshot, faults, serial telemetry, the OD, CANopen
+ *                           transmit) runs once after every period instead of
+ *                           the drain; the script counts from its entry to its
+ *                           return to replay_isr_batch() (the interrupt is not
+ *                           counted).
  *   harness replay TRACE OUT  processor-in-the-loop: read a trace (magic
  *                           "PILT", n steps, n events, sizeof(fw_config_t),
  *                           the configuration, events {step, kind, value}
@@ -80,20 +88,28 @@ __attribute__((used, noipa)) void replay_batch(fw_ctrl_t *c, const fw_inputs_t *
 static fw_app_t g_app;
 static fw_adc_inputs_t g_adc[N_MAX];
 static void (*volatile g_isr)(void *, const fw_adc_inputs_t *, fw_outputs_t *) = fw_app_isr;
+static void (*volatile g_bg)(void *) = fw_app_background;
 
+/* bg = 0: the ring is drained between periods as the background would (not
+ * counted: `count_isr`); bg = 1: the real background loop runs once after
+ * every period (`count_bg`: the script then counts fw_app_background). */
 __attribute__((used, noipa)) void replay_isr_batch(fw_app_t *app, const fw_adc_inputs_t *adc,
-                                                   int n);
+                                                   int n, int bg);
 __attribute__((used, noipa)) void replay_isr_batch(fw_app_t *app, const fw_adc_inputs_t *adc,
-                                                   int n) {
+                                                   int n, int bg) {
   fw_outputs_t out;
   void (*isr)(void *, const fw_adc_inputs_t *, fw_outputs_t *) = g_isr;
+  void (*background)(void *) = g_bg;
   for (int k = 0; k < n; k++) {
     isr(app, &adc[k], &out);
     g_sink += out.duty_abc[0];
-    /* the background drains the ring (not counted) */
-    atomic_store_explicit(&app->ring_tail, atomic_load_explicit(&app->ring_head,
-                                                                memory_order_acquire),
-                          memory_order_release);
+    if (bg) {
+      background(app);
+    } else {
+      atomic_store_explicit(&app->ring_tail, atomic_load_explicit(&app->ring_head,
+                                                                  memory_order_acquire),
+                            memory_order_release);
+    }
   }
 }
 
@@ -206,7 +222,8 @@ int main(int argc, char **argv) {
     printf("CM4: warm ok phase=RUN sizeof(fw_ctrl_t)=%u inputs=%d\n", (unsigned)sizeof g_base, n);
     return 0;
   }
-  int isr = argc >= 5 && strcmp(argv[1], "count_isr") == 0;
+  int bg = argc >= 5 && strcmp(argv[1], "count_bg") == 0;
+  int isr = bg || (argc >= 5 && strcmp(argv[1], "count_isr") == 0);
   if (isr || (argc >= 5 && strcmp(argv[1], "count") == 0)) {
     int batch = atoi(argv[3]), nb = atoi(argv[4]);
     if (batch < 1 || nb < 1 || batch * nb > N_MAX) {
@@ -255,7 +272,7 @@ int main(int argc, char **argv) {
     for (int b = 0; b < nb; b++) {
       memcpy(c, &g_base, sizeof *c);
       if (isr) {
-        replay_isr_batch(&g_app, &g_adc[b * batch], batch);
+        replay_isr_batch(&g_app, &g_adc[b * batch], batch, bg);
       } else {
         replay_batch(c, &g_rec[b * batch], batch);
       }
@@ -266,6 +283,7 @@ int main(int argc, char **argv) {
     return all_run ? 0 : 1;
   }
   printf("usage: harness warm STATE N [force|speed] | harness count STATE BATCH NB | "
-         "harness count_isr STATE BATCH NB | harness replay TRACE OUT\n");
+         "harness count_isr STATE BATCH NB | harness count_bg STATE BATCH NB | "
+         "harness replay TRACE OUT\n");
   return 2;
 }

@@ -443,7 +443,7 @@ typedef struct {
 /** Input checks (fault on a bad sample; NaN never enters the state), offset
  *  compensation, Clarke. */
 static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
-                         fw_mon_in_t *mi, fw_period_t *p) {
+                         fw_period_t *p) {
   const fw_fault_t f =
       fw_fault_check_inputs(&c->cfg.protection, in, fw_cia402_power_enabled(c->sm.state));
   *safe = *in;
@@ -457,11 +457,6 @@ static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
   if (c->phase != FW_START_IDLE) {
     fw_mon_compensate(&c->mon, safe->i_abc_A); /* offsets learnt at standstill */
   }
-  /* monitor inputs: every field is written before fw_mon_update reads it
-   * (no memset on the hot path) */
-  mi->i_abc_A[0] = safe->i_abc_A[0];
-  mi->i_abc_A[1] = safe->i_abc_A[1];
-  mi->i_abc_A[2] = safe->i_abc_A[2];
   p->i_ab = fw_clarke_f32(safe->i_abc_A[0], safe->i_abc_A[1], safe->i_abc_A[2]);
 }
 
@@ -480,12 +475,16 @@ static bool stage_power(fw_ctrl_t *c, fw_period_t *p) {
 }
 
 /** Power stage off: current-sensor offsets and sum, i2t cools down. */
-static void stage_off(fw_ctrl_t *c, const fw_inputs_t *safe, fw_mon_in_t *mi) {
+static void stage_off(fw_ctrl_t *c, const fw_inputs_t *safe) {
   c->phase = FW_START_IDLE;
   fw_mon_learn_offsets(&c->mon, safe->i_abc_A);
   fw_protect_cool(&c->prot, &c->cfg);
-  memset(&mi->e_hf_dq_A, 0, sizeof(*mi) - offsetof(fw_mon_in_t, e_hf_dq_A));
-  const fw_fault_t mf = fw_mon_update(&c->mon, mi); /* current sum with PWM off */
+  fw_mon_in_t mi;
+  memset(&mi, 0, sizeof mi);
+  mi.i_abc_A[0] = safe->i_abc_A[0];
+  mi.i_abc_A[1] = safe->i_abc_A[1];
+  mi.i_abc_A[2] = safe->i_abc_A[2];
+  const fw_fault_t mf = fw_mon_update(&c->mon, &mi); /* current sum with PWM off */
   if (mf != FW_FAULT_NONE) {
     latch_fault(c, mf);
   }
@@ -502,7 +501,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
   const fw_config_t *cfg = &c->cfg;
   /* theta_hat at the sampling instant: for the current Park and (advanced)
    * the output transform; the demodulation uses its own delayed frame */
-  p->sc = fw_sincos_f32(c->theta_k);
+  p->sc = fw_sincos_fast_f32(c->theta_k);
   hf->i_f_ab_A = p->i_ab;
   hf->e_raw_dq_A.x = hf->e_raw_dq_A.y = 0.0f; /* raw HF difference, for the monitor */
   hf->E_d_A = 0.0f;
@@ -618,7 +617,7 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
 
 /** Integrity monitor and protections. Returns false when a hard fault
  *  switches the power stage off now (braking faults go on braking). */
-static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_mon_in_t *mi,
+static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, const fw_inputs_t *safe,
                           fw_period_t *p) {
   const bool running = c->phase == FW_START_RUN;
   const bool scale_full = c->bemf.inj_scale >= 1.0f;
@@ -627,6 +626,13 @@ static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_mon_in_t *mi
    * division while the injection is full, the usual case) */
   const float inv_scale = scale_full ? 1.0f : 1.0f / c->bemf.inj_scale;
   const float *u_applied = fw_foc_u_applied(&c->foc);
+  /* the monitor's inputs in a local that only the inline fw_mon_update reads,
+   * so that its fields stay in registers (every field written, no memset) */
+  fw_mon_in_t m;
+  fw_mon_in_t *const mi = &m;
+  mi->i_abc_A[0] = safe->i_abc_A[0]; /* after the offset compensation */
+  mi->i_abc_A[1] = safe->i_abc_A[1];
+  mi->i_abc_A[2] = safe->i_abc_A[2];
   mi->e_hf_dq_A[0] = hf->e_raw_dq_A.x * inv_scale;
   mi->e_hf_dq_A[1] = hf->e_raw_dq_A.y * inv_scale;
   mi->u_dq_V[0] = u_applied[0];
@@ -699,10 +705,9 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   c->theta_k = c->obs.pll.theta_rad; /* the estimate belonging to this sample */
   fw_period_t p;
   fw_inputs_t safe;
-  fw_mon_in_t mi;
-  stage_inputs(c, in, &safe, &mi, &p);
+  stage_inputs(c, in, &safe, &p);
   if (!stage_power(c, &p)) {
-    stage_off(c, &safe, &mi);
+    stage_off(c, &safe);
     fill_snapshot_common(c, &safe, p.i_ab, out);
     return;
   }
@@ -733,7 +738,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     const float w_ff = c->phase == FW_START_RUN ? c->obs.omega_f : 0.0f;
     p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, safe.u_dc_V);
   }
-  if (!stage_monitor(c, &hf, &mi, &p)) { /* hard fault: switch off now */
+  if (!stage_monitor(c, &hf, &safe, &p)) { /* hard fault: switch off now */
     fill_snapshot_common(c, &safe, p.i_ab, out);
     return;
   }
@@ -778,6 +783,16 @@ bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_input
   return m <= cfg->sensing.adc_max_count;
 }
 
+/** Copy one float as a 32-bit word: GCC (hard-float ARM) limits a float load
+ *  or store, even one through core registers, to the FPU's +-1020-byte offset,
+ *  so fields further into fw_ctrl_t cost an address computation each; a word
+ *  has the +4095 of LDR/STR. The same bits either way. */
+static FW_ALWAYS_INLINE void copy_f32(float *dst, const float *src) {
+  uint32_t w;
+  memcpy(&w, src, sizeof w);
+  memcpy(dst, &w, sizeof w);
+}
+
 void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
   const fw_snapshot_t *s = &ctrl->snap;
   /* what fw_step wrote (every field of ctrl->snap that it writes) */
@@ -814,22 +829,22 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
   snap->omega_f_radps = ctrl->obs.omega_f;
   snap->pll_err_f_rad = ctrl->obs.err_f;
   snap->accel_dist_radps2 = ctrl->obs.accel_dist;
-  snap->mon_angle_hf_rad = ctrl->mon.angle_hf_rad; /* the monitor's outputs change */
-  snap->mon_angle_bemf_rad = ctrl->mon.angle_bemf_rad; /* once per block */
-  snap->mon_e_bemf_V = ctrl->mon.e_bemf_V;
-  snap->mon_i_sum_A = ctrl->mon.isum_f;
-  snap->inj_scale = ctrl->bemf.inj_scale;
+  copy_f32(&snap->mon_angle_hf_rad, &ctrl->mon.angle_hf_rad); /* the monitor's outputs change */
+  copy_f32(&snap->mon_angle_bemf_rad, &ctrl->mon.angle_bemf_rad); /* once per block */
+  copy_f32(&snap->mon_e_bemf_V, &ctrl->mon.e_bemf_V);
+  copy_f32(&snap->mon_i_sum_A, &ctrl->mon.isum_f);
+  copy_f32(&snap->inj_scale, &ctrl->bemf.inj_scale);
   snap->bemf_active = ctrl->bemf.active;
   snap->flying_start = ctrl->start.flying;
   snap->extractor = (uint8_t)ctrl->cfg.estimator.extractor;
   snap->mode = (uint8_t)ctrl->mode;
   snap->polarity_flipped = ctrl->polarity_flipped;
-  snap->sogi_k_eff = fw_inj_k(&ctrl->inj);
+  copy_f32(&snap->sogi_k_eff, &ctrl->inj.sogi_a.k); /* fw_inj_k */
   snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
   raw->pos_e_rad = fw_obs_pos_e(&ctrl->obs);
-  raw->bemf_e_dq_V[0] = ctrl->bemf.e_d_f;
-  raw->bemf_e_dq_V[1] = ctrl->bemf.e_q_f;
-  raw->bemf_err_rad = ctrl->bemf.err_rad;
+  copy_f32(&raw->bemf_e_dq_V[0], &ctrl->bemf.e_d_f);
+  copy_f32(&raw->bemf_e_dq_V[1], &ctrl->bemf.e_q_f);
+  copy_f32(&raw->bemf_err_rad, &ctrl->bemf.err_rad);
   raw->bemf_fresh = ctrl->bemf.err_fresh;
   raw->bemf_w_neg = ctrl->bemf.w_neg;
 }

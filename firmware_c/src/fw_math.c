@@ -19,27 +19,19 @@
  * k*PIO2_1 stops being exact and the error grows (3e-2 near 1e6 rad, where
  * the float angle's own ulp is 0.06 rad). The result stays bounded
  * (|s|, |c| <= 1) for every finite input. */
-#define FW_PIO2_1 1.5703125f                  /* pi/2 high part, exact */
-#define FW_PIO2_2 4.837512969970703125e-4f    /* pi/2 middle part, exact */
-#define FW_PIO2_3 7.54978995489188216e-8f     /* pi/2 low part */
-#define FW_TWO_OVER_PI 0.636619772367581343f  /* 2/pi */
+/* FW_PIO2_1..3, FW_TWO_OVER_PI and the fast path (fw_sincos_fast_f32, with
+ * the polynomials fw_sincos_poly_f32) are in fw_math.h. */
 #define FW_SINCOS_R_MAX 0.8f                  /* |r| clamp, > pi/4 + slack */
 #define FW_SINCOS_K_MAX 16777216.0f           /* 2^24: k still integral */
-/* Fast path: |theta| <= 8192 rad (|k| <= 5216 < 2^13, the reduction is as
- * exact as above). y + 1.5 * 2^23 - 1.5 * 2^23 rounds y (|y| < 2^22) to the
- * nearest integer in two additions, no compare, no clamp (ties go to even;
- * either neighbour leaves |r| <= pi/4). */
-#define FW_SINCOS_FAST_MAX 8192.0f
-#define FW_SINCOS_ROUND 12582912.0f /* 1.5 * 2^23 */
 
 fw_sincos_f32_t fw_sincos_f32(float theta_rad) {
-  fw_sincos_f32_t out = {0.0f, 1.0f};
   float kf, r;
   if (fabsf(theta_rad) <= FW_SINCOS_FAST_MAX) { /* false for NaN */
     kf = (theta_rad * FW_TWO_OVER_PI + FW_SINCOS_ROUND) - FW_SINCOS_ROUND;
     r = ((theta_rad - kf * FW_PIO2_1) - kf * FW_PIO2_2) - kf * FW_PIO2_3;
   } else {
     if (!fw_isfinite_f32(theta_rad)) {
+      const fw_sincos_f32_t out = {0.0f, 1.0f};
       return out;
     }
     /* Nearest quadrant by float->int conversion (no floorf call: Cortex-M4
@@ -51,36 +43,10 @@ fw_sincos_f32_t fw_sincos_f32(float theta_rad) {
      * keeps the polynomials inside their domain so |s|, |c| <= 1. */
     r = fw_clampf(r, -FW_SINCOS_R_MAX, FW_SINCOS_R_MAX);
   }
-  const uint32_t quad = (uint32_t)(int32_t)kf & 3u; /* k mod 4, two's complement */
-
-  const float z = r * r;
-  const float s = r + r * z * (-1.6666654611e-1f +
-                               z * (8.3321608736e-3f + z * -1.9515295891e-4f));
-  const float c = 1.0f - 0.5f * z +
-                  z * z * (4.166664568298827e-2f +
-                           z * (-1.388731625493765e-3f + z * 2.443315711809948e-5f));
-  /* quadrant without a jump table: swap for odd k, sin negative for k = 2, 3
-   * (mod 4), cos negative for k = 1, 2 */
-  const bool swap = (quad & 1u) != 0u;
-  const float sv = swap ? c : s;
-  const float cv = swap ? s : c;
-  out.s = (quad & 2u) != 0u ? -sv : sv;
-  out.c = ((quad + 1u) & 2u) != 0u ? -cv : cv;
-  return out;
+  return fw_sincos_poly_f32(r, kf);
 }
 
-fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, float theta0_rad, float d_rad) {
-  if (!(fabsf(d_rad) <= FW_SINCOS_ADD_MAX_RAD)) { /* also NaN */
-    return fw_sincos_f32(theta0_rad + d_rad);
-  }
-  const float d2 = d_rad * d_rad;
-  const float sd = d_rad + d_rad * d2 * (-1.6666667e-1f + d2 * 8.3333333e-3f);
-  const float cd = 1.0f + d2 * (-0.5f + d2 * 4.1666668e-2f);
-  fw_sincos_f32_t out;
-  out.s = sc0.s * cd + sc0.c * sd;
-  out.c = sc0.c * cd - sc0.s * sd;
-  return out;
-}
+/* fw_sincos_add_f32: inline in fw_math.h */
 
 /* ---- angle wrap -----------------------------------------------------------
  * n = floor((theta - lo) / 2pi), theta - n 2pi with a two-constant split of
@@ -193,18 +159,23 @@ bool fw_svpwm_f32(fw_vec2_f32_t u_ab_V, float u_dc_V, float duty_abc[3],
       limited = true;
     }
   }
-  float ph[3];
-  fw_inv_clarke_f32(u, ph);
-  float u_hi = ph[0], u_lo = ph[0];
-  for (int i = 1; i < 3; i++) {
-    u_hi = ph[i] > u_hi ? ph[i] : u_hi;
-    u_lo = ph[i] < u_lo ? ph[i] : u_lo;
-  }
+  /* the inverse Clarke (fw_inv_clarke_f32) and the three phases in scalars,
+   * not an array: at -Os an array stays on the stack and the duty loop is not
+   * unrolled (same expressions, same order) */
+  const float h = 0.5f * FW_SQRT3_F32 * u.y;
+  const float ph0 = u.x;
+  const float ph1 = -0.5f * u.x + h;
+  const float ph2 = -0.5f * u.x - h;
+  float u_hi = ph0, u_lo = ph0;
+  u_hi = ph1 > u_hi ? ph1 : u_hi;
+  u_lo = ph1 < u_lo ? ph1 : u_lo;
+  u_hi = ph2 > u_hi ? ph2 : u_hi;
+  u_lo = ph2 < u_lo ? ph2 : u_lo;
   const float u0_V = -0.5f * (u_hi + u_lo);
   const float inv_dc = 1.0f / u_dc_V;
-  for (int i = 0; i < 3; i++) {
-    duty_abc[i] = 0.5f + (ph[i] + u0_V) * inv_dc;
-  }
+  duty_abc[0] = 0.5f + (ph0 + u0_V) * inv_dc;
+  duty_abc[1] = 0.5f + (ph1 + u0_V) * inv_dc;
+  duty_abc[2] = 0.5f + (ph2 + u0_V) * inv_dc;
   /* the duties span (u_hi - u_lo) / u_dc around 1/2; a span within 0.999 of
    * the carrier cannot leave [0, 1] by rounding, so the clamp (which only
    * absorbs rounding on the circle boundary) runs only near the boundary */

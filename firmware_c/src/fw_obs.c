@@ -94,7 +94,7 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
   const float floor_A = 1e-6f;
   if (in->E_d_A > floor_A) {
     eps = (in->E_q_A / in->E_d_A) * o->eps_gain;
-    eps = fw_clampf(eps, -1.0f, 1.0f);
+    eps = fw_clamp_symf(eps, 1.0f);
   }
   if (o->est_hold_s > 0.0f) { /* extractor just switched */
     o->est_hold_s -= dt;
@@ -128,7 +128,7 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
   const float w_max = pll->w_max_radps;
   float w_i = pll->w_i_radps;
   if (eps - eps == 0.0f) { /* a non-finite error holds the PLL (as fw_pll_step_f32) */
-    w_i = fw_clampf(w_i + (o->ki0_dt * lam2) * eps, -w_max, w_max);
+    w_i = fw_clamp_symf(w_i + (o->ki0_dt * lam2) * eps, w_max);
     const float w_hat = w_i + kp * eps;
     pll->w_hat_radps = w_hat;
     pll->theta_rad = fw_wrap_pi_f32(pll->theta_rad + w_hat * dt);
@@ -139,7 +139,7 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
    * Error dynamics: e''' + kp e'' + ki e' + kd e = (disturbance changes). */
   if (in->running) {
     w_i += dt * (o->accel_per_A * o->i_q_ff_A + o->accel_dist);
-    w_i = fw_clampf(w_i, -w_max, w_max); /* w_max = speed_max_radps_e (checked > 0) */
+    w_i = fw_clamp_symf(w_i, w_max); /* w_max = speed_max_radps_e (checked > 0) */
     o->accel_dist += o->kd_dt * lam * lam * lam * eps;
   }
   pll->w_i_radps = w_i;

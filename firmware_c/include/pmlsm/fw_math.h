@@ -14,6 +14,7 @@
 #ifndef PMLSM_FW_MATH_H
 #define PMLSM_FW_MATH_H
 
+#include <math.h>
 #include <stdbool.h>
 #include <stdint.h>
 
@@ -62,7 +63,8 @@ fw_sincos_f32_t fw_sincos_f32(float theta_rad);
  * at theta0 + d for |theta0| < 1e4 rad: below FW_SINCOS_MAX_ERR (tested,
  * test_math.c: 1.7e-7 measured; fw_sincos_f32 alone 9.3e-8).
  */
-fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, float theta0_rad, float d_rad);
+static inline fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, float theta0_rad,
+                                                float d_rad);
 
 /** fw_wrap_pi_f32 for an angle outside [-pi, pi) (any float). */
 float fw_wrap_pi_slow_f32(float theta_rad);
@@ -148,6 +150,77 @@ static inline float fw_clampf(float x, float lo, float hi) {
 #define FW_NOINLINE
 #endif
 
+/** fw_clampf(x, -lim, lim), the same result for every x and lim (NaN and a
+ *  negative lim included): |x| <= lim implies -lim <= x <= lim, so the usual
+ *  in-range value costs one compare instead of two (FPv4 has no VMAXNM/VMINNM;
+ *  every compare is a VCMP and a VMRS). */
+static FW_ALWAYS_INLINE float fw_clamp_symf(float x, float lim) {
+  return fabsf(x) <= lim ? x : fw_clampf(x, -lim, lim);
+}
+
+/* sin/cos constants (fw_sincos_f32, fw_math.c: the range reduction). */
+#define FW_PIO2_1 1.5703125f                  /* pi/2 high part, exact */
+#define FW_PIO2_2 4.837512969970703125e-4f    /* pi/2 middle part, exact */
+#define FW_PIO2_3 7.54978995489188216e-8f     /* pi/2 low part */
+#define FW_TWO_OVER_PI 0.636619772367581343f  /* 2/pi */
+/* Fast path: |theta| <= 8192 rad (|k| <= 5216 < 2^13, the reduction is as
+ * exact as the general one). y + 1.5 * 2^23 - 1.5 * 2^23 rounds y (|y| < 2^22)
+ * to the nearest integer in two additions, no compare, no clamp (ties go to
+ * even; either neighbour leaves |r| <= pi/4). */
+#define FW_SINCOS_FAST_MAX 8192.0f
+#define FW_SINCOS_ROUND 12582912.0f /* 1.5 * 2^23 */
+
+/** The polynomials and the quadrant of fw_sincos_f32: sin/cos of k pi/2 + r
+ *  for the reduced angle r (|r| <= ~pi/4) and the quadrant k (an integer in
+ *  float). */
+static FW_ALWAYS_INLINE fw_sincos_f32_t fw_sincos_poly_f32(float r, float kf) {
+  const uint32_t quad = (uint32_t)(int32_t)kf & 3u; /* k mod 4, two's complement */
+  const float z = r * r;
+  const float s = r + r * z * (-1.6666654611e-1f +
+                               z * (8.3321608736e-3f + z * -1.9515295891e-4f));
+  const float c = 1.0f - 0.5f * z +
+                  z * z * (4.166664568298827e-2f +
+                           z * (-1.388731625493765e-3f + z * 2.443315711809948e-5f));
+  /* quadrant without a jump table: swap for odd k, sin negative for k = 2, 3
+   * (mod 4), cos negative for k = 1, 2 */
+  const bool swap = (quad & 1u) != 0u;
+  const float sv = swap ? c : s;
+  const float cv = swap ? s : c;
+  fw_sincos_f32_t out;
+  out.s = (quad & 2u) != 0u ? -sv : sv;
+  out.c = ((quad + 1u) & 2u) != 0u ? -cv : cv;
+  return out;
+}
+
+/** fw_sincos_f32 with its fast path (|theta| <= FW_SINCOS_FAST_MAX) inline and
+ *  the rest a call: the same results. For the step's one full sin/cos per
+ *  period (a call cost a stack frame, the pair's moves and two changes of flow). */
+static FW_ALWAYS_INLINE fw_sincos_f32_t fw_sincos_fast_f32(float theta_rad) {
+  if (fabsf(theta_rad) <= FW_SINCOS_FAST_MAX) { /* false for NaN */
+    const float kf = (theta_rad * FW_TWO_OVER_PI + FW_SINCOS_ROUND) - FW_SINCOS_ROUND;
+    const float r = ((theta_rad - kf * FW_PIO2_1) - kf * FW_PIO2_2) - kf * FW_PIO2_3;
+    return fw_sincos_poly_f32(r, kf);
+  }
+  return fw_sincos_f32(theta_rad);
+}
+
+/* fw_sincos_add_f32 (declared above) inline: the step calls it twice, and a call
+ * returning the pair cost a stack frame, the pair's moves and two changes of flow
+ * per call on the M4 (-Os keeps it out of line unless forced). */
+static FW_ALWAYS_INLINE fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, float theta0_rad,
+                                                          float d_rad) {
+  if (!(fabsf(d_rad) <= FW_SINCOS_ADD_MAX_RAD)) { /* also NaN */
+    return fw_sincos_f32(theta0_rad + d_rad);
+  }
+  const float d2 = d_rad * d_rad;
+  const float sd = d_rad + d_rad * d2 * (-1.6666667e-1f + d2 * 8.3333333e-3f);
+  const float cd = 1.0f + d2 * (-0.5f + d2 * 4.1666668e-2f);
+  fw_sincos_f32_t out;
+  out.s = sc0.s * cd + sc0.c * sd;
+  out.c = sc0.c * cd - sc0.s * sd;
+  return out;
+}
+
 /** Wrap an angle into [-pi, pi). Non-finite input returns 0. Inline: the
  *  usual angle is already in range (one compare pair, no call). */
 static FW_ALWAYS_INLINE float fw_wrap_pi_f32(float theta_rad) {
@@ -163,10 +236,16 @@ static FW_ALWAYS_INLINE bool fw_isfinite_f32(float x) {
   return x - x == 0.0f;
 }
 
+/** The limit of fw_pi_core_lim_f32: symmetric limits (out_min = -out_max) take
+ *  fw_clamp_symf, the same values with one compare on the usual path. */
+static FW_ALWAYS_INLINE float fw_pi_clamp_f32(float x, float out_min, float out_max, bool sym) {
+  return sym ? fw_clamp_symf(x, out_max) : fw_clampf(x, out_min, out_max);
+}
+
 /** PI step (see fw_pi_step_f32) once e, ff are known finite and di = ki e dt
- *  is formed. */
-static FW_ALWAYS_INLINE float fw_pi_core_f32(fw_pi_f32_t *pi, float e, float ff, float di,
-                                             float out_min, float out_max) {
+ *  is formed; sym (a constant) when out_min = -out_max. */
+static FW_ALWAYS_INLINE float fw_pi_core_lim_f32(fw_pi_f32_t *pi, float e, float ff, float di,
+                                                 float out_min, float out_max, bool sym) {
   const float p = pi->kp * e;
   const float integ0 = pi->integ;
   float integ = integ0 + di;
@@ -178,11 +257,18 @@ static FW_ALWAYS_INLINE float fw_pi_core_f32(fw_pi_f32_t *pi, float e, float ff,
     const float i_lim = out_min - p - ff;
     integ = i_lim < integ0 ? i_lim : integ0; /* min */
   }
-  integ = fw_clampf(integ, out_min, out_max);
+  integ = fw_pi_clamp_f32(integ, out_min, out_max, sym);
   pi->integ = integ;
-  const float out = fw_clampf(p + integ + ff, out_min, out_max);
+  const float out = fw_pi_clamp_f32(p + integ + ff, out_min, out_max, sym);
   pi->out = out;
   return out;
+}
+
+/** PI step (see fw_pi_step_f32) once e, ff are known finite and di = ki e dt
+ *  is formed. */
+static FW_ALWAYS_INLINE float fw_pi_core_f32(fw_pi_f32_t *pi, float e, float ff, float di,
+                                             float out_min, float out_max) {
+  return fw_pi_core_lim_f32(pi, e, ff, di, out_min, out_max, false);
 }
 
 /**
@@ -198,7 +284,7 @@ static FW_ALWAYS_INLINE float fw_pi_step_cfg_f32(fw_pi_f32_t *pi, float e, float
   if (!(nf == 0.0f)) {
     return pi->out;
   }
-  return fw_pi_core_f32(pi, e, ff, pi->ki_dt * e, -lim, lim);
+  return fw_pi_core_lim_f32(pi, e, ff, pi->ki_dt * e, -lim, lim, true);
 }
 
 #ifdef __cplusplus
