@@ -601,7 +601,8 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
     c->qs_still_s = still ? c->qs_still_s + dt : 0.0f;
     /* braking after a fault is bounded by fault_brake_time_s: a lost
      * supervisor must see the power stage off soon, at any speed */
-    const float t_max = p->braking ? cfg->protection.fault_brake_time_s : cfg->protection.quick_stop_time_s;
+    const float t_max = p->braking ? cfg->protection.fault_brake_time_s
+                                   : cfg->protection.quick_stop_time_s;
     if (c->qs_still_s >= FW_QS_STILL_TIME_S || c->qs_time_s >= t_max) {
       if (p->braking) {
         fw_cia402_fault_reaction_done(&c->sm); /* stopped: PWM off, FAULT */

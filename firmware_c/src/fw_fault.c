@@ -66,7 +66,8 @@ void fw_protect_config(fw_protect_t *p, const fw_config_t *cfg, float dt_s) {
   p->w_follow_radps = fw_units_mps_to_radps_e(cfg, cfg->protection.follow_err_mps);
   /* the step's products of configuration values, once */
   p->ir2_A2 = cfg->protection.i_rated_A * cfg->protection.i_rated_A;
-  p->i2t_max_A2s = (cfg->loops.i_max_A * cfg->loops.i_max_A - p->ir2_A2) * cfg->protection.i2t_time_s;
+  p->i2t_max_A2s =
+      (cfg->loops.i_max_A * cfg->loops.i_max_A - p->ir2_A2) * cfg->protection.i2t_time_s;
   p->i2t_on = (uint8_t)(cfg->protection.i_rated_A < cfg->loops.i_max_A);
   p->pos_on = (uint8_t)(cfg->protection.pos_limit_min_m < cfg->protection.pos_limit_max_m);
 }

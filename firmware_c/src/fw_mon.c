@@ -31,9 +31,9 @@
 #define MON_OFF_WAIT_S 0.05f  /* PWM off this long before offsets are learnt */
 #define MON_BEMF_RATIO 2.0f   /* |r| / (|w^| psi_f) must lie in [1/2, 2] */
 #define MON_CTRL_SHARE 0.5f   /* current-error limit as a share of i_max_A */
-#define MON_ACCEL_MARGIN 2.0f
-#define MON_EVAL_STEPS FW_MON_EVAL_STEPS
-#define MON_SUM_SHARE 0.03f   /* current-sum limit grows by this share of sum |i_k| */     /* witnesses judged every 8 periods (3 kHz at 24 kHz) */ /* disturbance limit: 2 x the thrust acceleration at i_max */
+#define MON_ACCEL_MARGIN 2.0f /* disturbance limit: 2 x the thrust acceleration at i_max */
+#define MON_EVAL_STEPS FW_MON_EVAL_STEPS /* witnesses judged every 8 periods (3 kHz at 24 kHz) */
+#define MON_SUM_SHARE 0.03f   /* current-sum limit grows by this share of sum |i_k| */
 
 _Static_assert(sizeof(((fw_mon_t *)0)->inv_n) / sizeof(float) == MON_EVAL_STEPS + 1u,
                "block tables hold n = 0..MON_EVAL_STEPS");

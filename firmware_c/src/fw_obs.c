@@ -48,7 +48,8 @@ void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s) {
 }
 
 void fw_obs_reset(fw_obs_t *o, const fw_config_t *cfg) {
-  fw_pll_init_f32(&o->pll, cfg->estimator.pll_kp, cfg->estimator.pll_ki, cfg->loops.speed_max_radps_e);
+  fw_pll_init_f32(&o->pll, cfg->estimator.pll_kp, cfg->estimator.pll_ki,
+                  cfg->loops.speed_max_radps_e);
   o->err_f = 0.0f;
   o->accel_dist = 0.0f;
   o->est_hold_s = 0.0f;

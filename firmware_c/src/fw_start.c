@@ -16,8 +16,10 @@ void fw_start_fly_observe(fw_start_t *s, const fw_cfg_machine_t *mach, float dt_
                           fw_vec2_f32_t i_f_ab, float phase_time_s) {
   const float L = 0.5f * (mach->L_d_H + mach->L_q_H);
   const float inv_dt = 1.0f / dt_s;
-  float ea = s->u_ab_prev_V[0] - mach->R_ohm * i_f_ab.x - L * (i_f_ab.x - s->i_f_ab_prev_A[0]) * inv_dt;
-  float eb = s->u_ab_prev_V[1] - mach->R_ohm * i_f_ab.y - L * (i_f_ab.y - s->i_f_ab_prev_A[1]) * inv_dt;
+  float ea = s->u_ab_prev_V[0] - mach->R_ohm * i_f_ab.x -
+             L * (i_f_ab.x - s->i_f_ab_prev_A[0]) * inv_dt;
+  float eb = s->u_ab_prev_V[1] - mach->R_ohm * i_f_ab.y -
+             L * (i_f_ab.y - s->i_f_ab_prev_A[1]) * inv_dt;
   s->i_f_ab_prev_A[0] = i_f_ab.x;
   s->i_f_ab_prev_A[1] = i_f_ab.y;
   const float a = 1.0f - expf(-dt_s / FW_FLY_TAU_S);

@@ -689,7 +689,8 @@ static void fw_app_event_locked(fw_app_t *app, co_event_t ev, uint32_t arg) {
       fw_app_ring_discard(app);
     } else {
       fw_app_power_off(app);
-      (void)fw_app_nvm_boot(app, true); /* the stored communication objects are their power-on values */
+      /* the stored communication objects are their power-on values */
+      (void)fw_app_nvm_boot(app, true);
     }
     /* the OD went back to its defaults: show the core's real state again */
     fw_app_sync_static_od(app);

@@ -6,7 +6,8 @@
  * frame the voltage equation leaves
  *     e_d = u_d - R i_d - L_d di_d/dt + w^ L_q i_q = -E sin dtheta,
  *     e_q = u_q - R i_q - L_q di_q/dt - w^ L_d i_d =  E cos dtheta,   E = w psi_f,
- * (w^ the speed the estimated frame turns at, w the mover's) so dtheta = atan2(-e_d, e_q) (plus pi for w < 0) is an angle error the PLL
+ * (w^ the speed the estimated frame turns at, w the mover's) so
+ * dtheta = atan2(-e_d, e_q) (plus pi for w < 0) is an angle error the PLL
  * can track instead of the HF error. The handover has hysteresis on |w^| psi_f
  * and on the measured |e| (bemf_e_on_V up, bemf_e_off_V down: the back-EMF of the
  * configured speeds bemf_v_on_mps, bemf_v_off_mps, fw_config_derive): going up, the
