@@ -272,6 +272,16 @@ def test_enums_are_one_list_for_c_and_python(od):
     assert not any(f"}} {en.ctype};" in ctrl for en in od.enums)
 
 
+def _expect_od_error(tmp_path, old: str, new: str, match: str) -> None:
+    """od.yaml with one edit (``old`` must be there) is refused with ``match``."""
+    src = Path(generate.ROOT, "protocols", "od.yaml").read_text()
+    assert old in src
+    p = tmp_path / "od.yaml"
+    p.write_text(src.replace(old, new, 1))
+    with pytest.raises(OdError, match=match):
+        load(p)
+
+
 @pytest.mark.parametrize("old, new, match", [
     ("{name: RUN, value: 3, key: run,", "{name: RUN, value: 2, key: run,",
      r"enums\[2\]\.values\[3\]: name RUN or value 2 defined twice"),
@@ -280,12 +290,7 @@ def test_enums_are_one_list_for_c_and_python(od):
     ("    ctype: fw_mode_t\n", "", r"enums\[1\]: missing 'ctype'"),
 ])
 def test_bad_enum_is_reported_with_its_place(tmp_path, old, new, match):
-    src = Path(generate.ROOT, "protocols", "od.yaml").read_text()
-    assert old in src
-    p = tmp_path / "od.yaml"
-    p.write_text(src.replace(old, new, 1))
-    with pytest.raises(OdError, match=match):
-        load(p)
+    _expect_od_error(tmp_path, old, new, match)
 
 
 def test_firmware_version_is_written_once(od):
@@ -314,9 +319,4 @@ def test_firmware_version_is_written_once(od):
      r"0x100A: default 'device.firmware', the device section has no 'firmware'"),
 ])
 def test_bad_device_section_is_a_one_line_error(tmp_path, old, new, match):
-    src = Path(generate.ROOT, "protocols", "od.yaml").read_text()
-    assert old in src
-    p = tmp_path / "od.yaml"
-    p.write_text(src.replace(old, new, 1))
-    with pytest.raises(OdError, match=match):
-        load(p)
+    _expect_od_error(tmp_path, old, new, match)
