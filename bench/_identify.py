@@ -190,7 +190,7 @@ def _cfg_view(drive: Any) -> SimpleNamespace:
     return SimpleNamespace(**{
         name: float(drive.get(name)[0])
         for name in ("i_max_A", "f_pwm_Hz", "u_inj_V", "L_d_H", "L_q_H", "spd_bw_radps",
-                     "spd_kp_A_per_radps", "spd_ki_A_per_rad", "pole_pitch_m")})
+                     "spd_kp_A_per_radps", "spd_ki_A_per_rad", "pole_pitch_m", "v_max_mps")})
 
 
 def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,

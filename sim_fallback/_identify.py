@@ -35,6 +35,7 @@ import numpy as np
 
 from protocols.generated.od_names import StartPhase
 
+from ._firmware import CW_DISABLE_VOLTAGE
 from ._motors import Motor, fw_config
 from ._sim import SIM_REF_FORCE, SIM_REF_SPEED, Sim
 
@@ -149,7 +150,9 @@ class Probe:
         raise NotImplementedError
 
     def start(self) -> None:
-        """Enable in FORCE mode with zero thrust; closed loop after 0.15 s, else raise."""
+        """Enable in FORCE mode with zero thrust; closed loop within :data:`START_WINDOWS`
+        windows of 0.15 s (a second alignment after the saliency check turned the
+        estimate takes the second), else raise."""
         raise NotImplementedError
 
     def run(self, seconds: float) -> dict[str, np.ndarray]:
@@ -254,7 +257,7 @@ class SimProbe(Probe):
         sim = self.sim
         assert sim is not None
         L, h = sim._L, sim.firmware.handle
-        L.fw_controlword(h, 0x00)  # disable voltage
+        L.fw_controlword(h, CW_DISABLE_VOLTAGE)
         self._snaps(0.01)
         cfg = _lib.FwConfig.from_buffer_copy(bytes(sim.cfg))
         for k, v in fields.items():
@@ -457,10 +460,7 @@ def _friction_passes(probe: Probe, cfg0: Any, tau: float, travel_m: float, x_rel
     K_F = 1.5 * k_e * psi
     a = PASS_ACCEL
     lo, hi = PASS_MARGIN * travel_m, (1.0 - PASS_MARGIN) * travel_m
-    v_cap = PASS_V_MAX
-    v_max_cfg = float(getattr(cfg0, "v_max_mps", 0.0) or 0.0)
-    if v_max_cfg > 0.0:
-        v_cap = min(v_cap, 0.5 * v_max_cfg)
+    v_cap = min(PASS_V_MAX, 0.5 * float(cfg0.v_max_mps))
 
     def length(v: float) -> float:
         """Travel of a pass at v: the ramps at a, the settling, an averaging window of
@@ -472,10 +472,13 @@ def _friction_passes(probe: Probe, cfg0: Any, tau: float, travel_m: float, x_rel
         """The fastest pass (up to v_cap) that fits in ``dist``; 0 if none does."""
         if length(v_cap) <= dist:
             return v_cap
-        v0, v1 = 0.0, v_cap
+        v0, v1 = 0.0, v_cap  # length() grows with v: bisection
         for _ in range(40):
-            v0, v1 = ((v0 + v1) / 2, v1) if length((v0 + v1) / 2) <= dist else \
-                (v0, (v0 + v1) / 2)
+            mid = 0.5 * (v0 + v1)
+            if length(mid) <= dist:
+                v0 = mid
+            else:
+                v1 = mid
         return v0 if length(v0) <= dist else 0.0
 
     v_hi = top_speed(hi - lo)
