@@ -382,6 +382,14 @@ def gen_py_names(od: ObjectDictionary) -> str:
         "",
     ]
     lines += _py_enums(od) + [""]
+    lines += ["", "#: fw_config_t's parts in struct order (od.yaml fw_config_parts:)",
+              f"FW_CONFIG_PARTS: tuple[str, ...] = {tuple(od.fw_config_parts)!r}",
+              "#: every fw_config_t field as (name, part, uint32_t?) in the firmware's field-table",
+              "#: order (od.yaml fw_config:; within a part, the struct's order)",
+              "FW_CONFIG_FIELDS: tuple[tuple[str, str, bool], ...] = ("]
+    lines += [f"    ({n!r}, {v['group']!r}, {bool(v.get('u32'))}),"
+              for n, v in od.fw_config.items()]
+    lines += [")", ""]
     seen: dict[str, int] = {}
     for index, entries in od.objects().items():
         ident = "INDEX_" + _py_ident(entries[0].object_name)

@@ -17,6 +17,8 @@ import os
 import struct
 from pathlib import Path
 
+from protocols.generated import od_names as _od_names
+
 _f = C.c_float
 _d = C.c_double
 _u8 = C.c_uint8
@@ -25,51 +27,14 @@ _u32 = C.c_uint32
 
 # ---- firmware structures (fw_ctrl.h) -------------------------------------
 
-#: fw_config_t's parts in struct order (fw_config_fields.h, generated from
-#: protocols/od.yaml fw_config_parts:); the mirror nests like the C struct.
-FW_CONFIG_PARTS: tuple[str, ...] = ("machine", "sensing", "loops", "estimator", "protection")
-
-#: Every fw_config_t field: (flat name, part, ctypes type), in the order of the
-#: firmware's field table (fw_config_field(i), od.yaml fw_config:); within a part
-#: this is the struct's order. Python keeps the flat names: FwConfig has a property
-#: per field (``cfg.R_ohm`` is ``cfg.machine.R_ohm``).
+#: fw_config_t's parts in struct order and every field as (flat name, part, ctypes type)
+#: in the order of the firmware's field table (fw_config_field(i)); within a part this
+#: is the struct's order. Generated from protocols/od.yaml (fw_config_parts:,
+#: fw_config:) like the C structs, so the mirror cannot drift from them. Python keeps the
+#: flat names: FwConfig has a property per field (``cfg.R_ohm`` is ``cfg.machine.R_ohm``).
+FW_CONFIG_PARTS: tuple[str, ...] = _od_names.FW_CONFIG_PARTS
 FW_CONFIG_FIELDS: list[tuple[str, str, type]] = [
-    ("f_pwm_Hz", "sensing", _f), ("R_ohm", "machine", _f), ("L_d_H", "machine", _f),
-    ("L_q_H", "machine", _f), ("psi_f_Wb", "machine", _f), ("pole_pairs", "machine", _f),
-    ("pole_pitch_m", "machine", _f), ("u_dc_min_V", "protection", _f),
-    ("u_dc_max_V", "protection", _f), ("i_trip_A", "protection", _f), ("i_max_A", "loops", _f),
-    ("speed_max_radps_e", "loops", _f), ("cur_kp_V_per_A", "loops", _f),
-    ("cur_ki_V_per_As", "loops", _f), ("spd_kp_A_per_radps", "loops", _f),
-    ("spd_ki_A_per_rad", "loops", _f), ("spd_filter_Hz", "loops", _f),
-    ("u_inj_V", "estimator", _f), ("f_inj_Hz", "estimator", _f),
-    ("extractor", "estimator", _u32), ("sogi_k", "estimator", _f),
-    ("sogi_k_adapt_max", "estimator", _f), ("sogi_k_adapt_min", "estimator", _f),
-    ("sogi_adapt_err_rad", "estimator", _f), ("pll_kp", "estimator", _f),
-    ("pll_ki", "estimator", _f), ("pll_accel_per_A", "estimator", _f),
-    ("pll_bw_min", "estimator", _f), ("pll_kd", "estimator", _f),
-    ("align_time_s", "estimator", _f), ("pol_pulse_V", "estimator", _f),
-    ("pol_pulse_samples", "estimator", _u32), ("pol_pulse_pairs", "estimator", _u32),
-    ("pol_margin", "estimator", _f), ("saliency_min", "protection", _f),
-    ("hf_min_ratio", "protection", _f), ("pll_err_max_rad", "protection", _f),
-    ("pll_err_time_s", "protection", _f), ("quick_stop_time_s", "protection", _f),
-    ("adc_A_per_count", "sensing", _f), ("adc_offset_counts", "sensing", _f),
-    ("adc_V_per_count", "sensing", _f), ("adc_max_count", "sensing", _u32),
-    ("v_max_mps", "protection", _f), ("pos_limit_min_m", "protection", _f),
-    ("pos_limit_max_m", "protection", _f), ("follow_err_mps", "protection", _f),
-    ("follow_err_time_s", "protection", _f), ("i_rated_A", "protection", _f),
-    ("i2t_time_s", "protection", _f), ("quick_stop_option", "protection", _u32),
-    ("fault_reaction_option", "protection", _u32), ("fault_brake_time_s", "protection", _f),
-    ("mon_angle_max_rad", "protection", _f), ("mon_detect_time_s", "protection", _f),
-    ("mon_sal_tol", "protection", _f), ("mon_bemf_max_rad", "protection", _f),
-    ("mon_bemf_min_mps", "protection", _f), ("i_sum_max_A", "protection", _f),
-    ("i_offset_max_A", "protection", _f), ("start_speed_max_mps", "protection", _f),
-    ("bemf_v_on_mps", "estimator", _f), ("bemf_v_off_mps", "estimator", _f),
-    ("bemf_inj_share", "estimator", _f), ("mass_kg", "machine", _f),
-    ("visc_Ns_per_m", "machine", _f), ("coulomb_N", "machine", _f),
-    ("cur_bw_radps", "loops", _f), ("spd_bw_radps", "loops", _f),
-    ("gains_auto", "loops", _u32), ("bemf_e_on_V", "estimator", _f),
-    ("bemf_e_off_V", "estimator", _f), ("mon_bemf_min_V", "protection", _f),
-]
+    (name, part, _u32 if is_u32 else _f) for name, part, is_u32 in _od_names.FW_CONFIG_FIELDS]
 
 
 @functools.cache
