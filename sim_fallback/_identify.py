@@ -36,7 +36,7 @@ import numpy as np
 from protocols.generated.od_names import StartPhase
 
 from ._firmware import CW_DISABLE_VOLTAGE
-from ._motors import Motor, fw_config
+from ._motors import Motor, electrical_rad_per_m, force_constant_N_per_A, fw_config
 from ._sim import SIM_REF_FORCE, SIM_REF_SPEED, Sim
 
 #: 0.15 s windows the start-up may take before identification gives up
@@ -456,8 +456,8 @@ def _friction_passes(probe: Probe, cfg0: Any, tau: float, travel_m: float, x_rel
     psi, m = float(values["psi_f_Wb"]), float(values["mass_kg"])
     if not (psi > 0.0 and m > 0.0):
         return None
-    k_e = math.pi / tau
-    K_F = 1.5 * k_e * psi
+    k_e = electrical_rad_per_m(tau)
+    K_F = force_constant_N_per_A(psi, tau)
     a = PASS_ACCEL
     lo, hi = PASS_MARGIN * travel_m, (1.0 - PASS_MARGIN) * travel_m
     v_cap = min(PASS_V_MAX, 0.5 * float(cfg0.v_max_mps))
@@ -625,7 +625,7 @@ def _fit_motion(runs: list[dict[str, np.ndarray]], dt: float, R: float, L_q: flo
     speed estimate of the observer lags during acceleration and biases both fits).
     """
     g, g1, g2 = _gauss_kernels(dt, sigma_s)
-    k_e = math.pi / tau
+    k_e = electrical_rad_per_m(tau)
 
     def conv(x: np.ndarray, k: np.ndarray) -> np.ndarray:
         return np.correlate(x, k, mode="valid")
@@ -658,7 +658,7 @@ def _fit_motion(runs: list[dict[str, np.ndarray]], dt: float, R: float, L_q: flo
     # residuals are correlated over the filter's width: effective sample count
     n_eff = max(len(Yp) * dt / (2.5 * sigma_s), 3.0)
     cov_p = np.linalg.inv(Xp.T @ Xp) * float(np.var(rp)) * len(Yp) / n_eff
-    K_F = 1.5 * k_e * psi
+    K_F = force_constant_N_per_A(psi, tau)
     M = np.vstack(rows)
     y = K_F * np.concatenate(iq_f)
     coef, *_ = np.linalg.lstsq(M, y, rcond=None)

@@ -32,6 +32,18 @@ from . import _lib
 MOTOR_DIR = Path(__file__).resolve().parent / "motors"
 
 
+def electrical_rad_per_m(pole_pitch_m: float) -> float:
+    """k_e = pi / tau: electrical angle per metre of travel (theta_e = k_e x)."""
+    return math.pi / pole_pitch_m
+
+
+def force_constant_N_per_A(psi_f_Wb: float, pole_pitch_m: float) -> float:
+    """Thrust per ampere of i_q on a non-salient machine, K_F = 1.5 (pi / tau) psi_f
+    (the firmware's ``fw_units_force_per_A`` in float32). The one Python copy: the
+    motor files, identification, the bench's rated force and the tools use it."""
+    return 1.5 * electrical_rad_per_m(pole_pitch_m) * psi_f_Wb
+
+
 class MotorFileError(ValueError):
     """A motor file is missing a field, has an unknown one or a value out of range.
 
@@ -221,8 +233,8 @@ class Motor:
 
     @property
     def force_const_N_per_A(self) -> float:
-        """K_f = 1.5 (pi / tau) psi_f."""
-        return 1.5 * math.pi / self.tau_m * float(self.plant["psi_f_Wb"])
+        """K_f = 1.5 (pi / tau) psi_f (:func:`force_constant_N_per_A`)."""
+        return force_constant_N_per_A(float(self.plant["psi_f_Wb"]), self.tau_m)
 
     # unit helpers (rotary equivalent: n[r/min] = 60 w_e / (2 pi p))
     def rpm_to_radps_e(self, n_rpm: float) -> float:
@@ -232,7 +244,7 @@ class Motor:
         return w * 60.0 / (2.0 * math.pi * self.pole_pairs)
 
     def mps_to_radps_e(self, v_mps: float):
-        return v_mps * math.pi / self.tau_m
+        return v_mps * electrical_rad_per_m(self.tau_m)
 
     def nm_to_N(self, torque_Nm: float) -> float:
         return torque_Nm / self.radius_m

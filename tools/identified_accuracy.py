@@ -15,7 +15,6 @@ seed, and a summary per speed counts the runs that meet the target, miss it, and
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from collections import Counter
 from pathlib import Path
@@ -25,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from sim_fallback import run_scenario  # noqa: E402
 from sim_fallback._faults import FAULT_NAMES  # noqa: E402
 from sim_fallback._identify import identify, randomized_plant, seed_range  # noqa: E402
-from sim_fallback._motors import fw_config, load_motor  # noqa: E402
+from sim_fallback._motors import force_constant_N_per_A, fw_config, load_motor  # noqa: E402
 
 
 def main() -> int:
@@ -54,7 +53,7 @@ def main() -> int:
               "psi_f_Wb": v["psi_f_Wb"], "mass_kg": v["mass_kg"],
               "visc_Ns_per_m": max(v["b_visc_Ns_per_m"], 0.0),
               "coulomb_N": max(v["F_coulomb_N"], 0.0), "gains_auto": 1}
-        k_f = 1.5 * math.pi / mot.tau_m * plant["psi_f_Wb"]
+        k_f = force_constant_N_per_A(plant["psi_f_Wb"], mot.tau_m)
         load = 0.2 * float(fw_config(mot, **fw).i_rated_A) * k_f
         for sim_seed in sim_seeds:
             cells = []

@@ -93,6 +93,12 @@ def test_force_setter_uses_the_analytic_thrust_constant():
     fw = sf.Firmware("iron_core_linear")
     k_f = 1.5 * math.pi / fw.cfg.pole_pitch_m * fw.cfg.psi_f_Wb   # numpy-free reference
     assert fw.force_per_A == pytest.approx(k_f, rel=1e-6)
+    # the Python copy (motor files, identification, the bench's rated force) agrees
+    from sim_fallback._motors import force_constant_N_per_A
+    assert force_constant_N_per_A(fw.cfg.psi_f_Wb, fw.cfg.pole_pitch_m) == pytest.approx(
+        k_f, rel=1e-12)
+    assert sf.load_motor("iron_core_linear").force_const_N_per_A == pytest.approx(
+        fw.force_per_A, rel=1e-6)
     i_max = fw.cfg.i_max_A
     # the clamp sits exactly at F = K_F i_max: +-0.1 % around it tells K_F to 0.1 %
     assert fw.set_force_ref_N(0.999 * k_f * i_max) == 0
