@@ -6,7 +6,7 @@ C compiler's answer (``sim_layout_offsetof`` / ``sim_layout_sizeof``).
 
 Library search order: ``$PMLSM_SIM_LIB``, the package directory (wheel
 install), ``$PMLSM_BUILD_DIR/sim_fallback``, then any ``build/*/sim_fallback``
-(newest first).
+(newest first); the first one whose structure layout matches the mirrors below.
 """
 
 from __future__ import annotations
@@ -267,19 +267,35 @@ class FwConfigField(C.Structure):
 _LIBNAME = "libpmlsm_sim.so"
 
 
-def _candidates() -> list[Path]:
+def _candidates() -> list[tuple[Path, bool]]:
+    """(path, explicit) in search order; explicit = named by the user (environment)."""
     here = Path(__file__).resolve().parent
-    out: list[Path] = []
+    out: list[tuple[Path, bool]] = []
     env = os.environ.get("PMLSM_SIM_LIB")
     if env:
-        out.append(Path(env))
-    out.append(here / _LIBNAME)
+        out.append((Path(env), True))
+    out.append((here / _LIBNAME, False))
     if os.environ.get("PMLSM_BUILD_DIR"):
-        out.append(Path(os.environ["PMLSM_BUILD_DIR"]) / "sim_fallback" / _LIBNAME)
+        out.append((Path(os.environ["PMLSM_BUILD_DIR"]) / "sim_fallback" / _LIBNAME, True))
     root = here.parent
-    out += sorted((root / "build").glob(f"*/sim_fallback/{_LIBNAME}"),
-                  key=lambda p: -p.stat().st_mtime)
+    out += [(p, False) for p in sorted((root / "build").glob(f"*/sim_fallback/{_LIBNAME}"),
+                                       key=lambda p: -p.stat().st_mtime)]
     return out
+
+
+def _mismatch(lib: C.CDLL) -> str | None:
+    """Why ``lib`` was not built from this checkout's sources, or None: every mirrored
+    structure's size and the configuration field count must be what the mirrors here
+    say (a library left in a build directory from an older checkout would otherwise be
+    fed structures of another layout, silently)."""
+    for name, mirror in MIRRORS.items():
+        n = int(lib.sim_layout_sizeof(name.encode()))
+        if n != C.sizeof(mirror):
+            return f"{name} is {n} B there, {C.sizeof(mirror)} B in this checkout"
+    n = int(lib.fw_config_field_count())
+    if n != len(FW_CONFIG_FIELDS):
+        return f"{n} configuration fields there, {len(FW_CONFIG_FIELDS)} in this checkout"
+    return None
 
 
 def _declare(lib: C.CDLL) -> None:
@@ -347,16 +363,29 @@ _LIB: C.CDLL | None = None
 
 
 def lib() -> C.CDLL:
-    """Load (once) and return the simulator library."""
+    """Load (once) and return the simulator library: the first candidate built from
+    these sources. A stale one named by $PMLSM_SIM_LIB or $PMLSM_BUILD_DIR is an error;
+    a stale one found under build/ is passed over (both say why)."""
     global _LIB
     if _LIB is None:
         tried = []
-        for path in _candidates():
-            if path.is_file():
-                _LIB = C.CDLL(str(path))
-                _declare(_LIB)
+        for path, explicit in _candidates():
+            if not path.is_file():
+                tried.append(f"{path} (missing)")
+                continue
+            cand = C.CDLL(str(path))
+            try:
+                _declare(cand)
+                why = _mismatch(cand)
+            except AttributeError as e:  # a symbol this checkout needs is not there
+                why = f"no {str(e).split(':')[-1].strip()}"
+            if why is None:
+                _LIB = cand
                 break
-            tried.append(str(path))
+            if explicit:
+                raise OSError(f"{path}: built from other sources ({why}); rebuild it "
+                              "(cmake --build <build dir>) or unset PMLSM_SIM_LIB/PMLSM_BUILD_DIR")
+            tried.append(f"{path} (stale: {why})")
         else:
             raise OSError(
                 "libpmlsm_sim.so not found; build it with `cmake -S . -B build/sim -G Ninja "

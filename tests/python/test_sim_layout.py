@@ -1,6 +1,7 @@
 """The ctypes mirrors in sim_fallback/_lib.py match the C layout exactly."""
 
 import ctypes as C
+from pathlib import Path
 
 import pytest
 
@@ -112,3 +113,50 @@ def test_snapshot_as_dict_reads_every_field_as_getattr():
                         strict=True)]
             assert all(same), (k, g, w)
     assert running.as_dict()["step_count"] > 0
+
+
+def test_the_loaded_library_is_built_from_these_sources():
+    assert _lib._mismatch(_lib.lib()) is None
+
+
+def test_a_library_of_another_layout_is_named_stale():
+    """A library left in build/ by an older checkout reports other sizes: refused with
+    the structure and both sizes (checked against a stand-in that differs in one)."""
+    real = _lib.lib()
+
+    class Stale:
+        def sim_layout_sizeof(self, name):
+            n = real.sim_layout_sizeof(name)
+            return n + 4 if name == b"fw_snapshot_t" else n
+
+        def fw_config_field_count(self):
+            return real.fw_config_field_count()
+
+    why = _lib._mismatch(Stale())
+    assert why is not None and "fw_snapshot_t" in why
+    assert str(C.sizeof(_lib.FwSnapshot)) in why and str(C.sizeof(_lib.FwSnapshot) + 4) in why
+
+
+def test_a_stale_library_named_by_the_user_is_a_one_line_error(tmp_path):
+    """$PMLSM_SIM_LIB pointing at a library without this checkout's symbols: one line
+    naming the file, no traceback, no silent fallback to another library."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        pytest.skip("no C compiler")
+    src = tmp_path / "old.c"
+    src.write_text("#include <stddef.h>\nsize_t sim_layout_sizeof(const char *t) "
+                   "{ (void)t; return 1; }\n")
+    so = tmp_path / "libpmlsm_sim.so"
+    subprocess.run([cc, "-shared", "-fPIC", "-o", str(so), str(src)], check=True)
+    env = dict(os.environ, PMLSM_SIM_LIB=str(so))
+    code = ("from sim_fallback import _lib\n"
+            "try:\n    _lib.lib()\nexcept OSError as e:\n    print(e)\n")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, timeout=60, cwd=Path(__file__).resolve().parents[2])
+    assert out.returncode == 0, out.stderr
+    line = out.stdout.strip()
+    assert "\n" not in line and str(so) in line and "built from other sources" in line
