@@ -146,7 +146,7 @@ uint8_t co_tpdo_pack(const co_node_t *node, uint8_t n, uint8_t data[8]) {
 }
 
 void co_tpdo_send(co_node_t *node, uint8_t n, const uint8_t *data, uint8_t len) {
-  uint32_t cob = co_get(node, (uint16_t)(0x1800u + n), 1u);
+  uint32_t cob = CO_TPDO_COMM(node, n, 01);
   co_tpdo_rt_t *rt = &node->tpdo[n];
   co_send(node, (uint16_t)(cob & 0x7FFu), len, data);
   memcpy(rt->last, data, len);
@@ -157,14 +157,14 @@ void co_tpdo_send(co_node_t *node, uint8_t n, const uint8_t *data, uint8_t len) 
 
 bool co_rpdo_frame(co_node_t *node, const fw_can_frame_t *f) {
   for (uint8_t n = 0u; n < CO_OD_NR_RPDO; n++) {
-    uint32_t cob = co_get(node, (uint16_t)(0x1400u + n), 1u);
+    uint32_t cob = CO_RPDO_COMM(node, n, 01);
     if ((cob & CO_COB_INVALID) != 0u || (cob & 0x7FFu) != f->id) {
       continue;
     }
     if (f->rtr) {
       return true;
     }
-    uint32_t type = co_get(node, (uint16_t)(0x1400u + n), 2u);
+    uint32_t type = CO_RPDO_COMM(node, n, 02);
     if (type <= 240u) {
       node->rpdo[n].pending = 1u;
       node->rpdo[n].dlc = f->dlc;
@@ -187,10 +187,9 @@ void co_rpdo_check(co_node_t *node, uint32_t now_us) {
   }
   for (uint8_t n = 0u; n < CO_OD_NR_RPDO; n++) {
     co_rpdo_rt_t *rt = &node->rpdo[n];
-    uint16_t comm = (uint16_t)(0x1400u + n);
-    uint32_t ms = co_get(node, comm, 5u);
+    uint32_t ms = CO_RPDO_COMM(node, n, 05);
     if (ms == 0u || !rt->watched || rt->timed_out ||
-        (co_get(node, comm, 1u) & CO_COB_INVALID) != 0u) {
+        (CO_RPDO_COMM(node, n, 01) & CO_COB_INVALID) != 0u) {
       continue;
     }
     if (co_elapsed(now_us, rt->applied_us, ms * 1000u)) {
@@ -207,16 +206,15 @@ void co_tpdo_process(co_node_t *node, uint32_t now_us) {
     return;
   }
   for (uint8_t n = 0u; n < CO_OD_NR_TPDO; n++) {
-    uint16_t comm = (uint16_t)(0x1800u + n);
-    uint32_t cob = co_get(node, comm, 1u);
-    uint32_t type = co_get(node, comm, 2u);
+    uint32_t cob = CO_TPDO_COMM(node, n, 01);
+    uint32_t type = CO_TPDO_COMM(node, n, 02);
     co_tpdo_rt_t *rt = &node->tpdo[n];
     uint8_t data[8];
     if ((cob & CO_COB_INVALID) != 0u || type < 254u) {
       continue;
     }
-    uint32_t inhibit_us = co_get(node, comm, 3u) * 100u;
-    uint32_t event_us = co_get(node, comm, 5u) * 1000u;
+    uint32_t inhibit_us = CO_TPDO_COMM(node, n, 03) * 100u;
+    uint32_t event_us = CO_TPDO_COMM(node, n, 05) * 1000u;
     if (rt->sent_once && !co_elapsed(now_us, rt->last_tx_us, inhibit_us)) {
       continue;
     }
