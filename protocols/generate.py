@@ -88,6 +88,10 @@ def gen_c_header(od: ObjectDictionary) -> str:
         tail = e.c_ident[len("CO_OD_"):]
         lines.append(f"#define CO_OD_OFF_{tail} {off}u")
         lines.append(f"#define CO_OD_LEN_{tail} {e.size}u")
+    lines += ["", "/** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */",
+              "#define CO_OD_ENTRIES(X) \\"]
+    lines += [f"  X({e.c_ident[len('CO_OD_'):]}) \\" for e in od.entries]
+    lines.append("  /* end */")
     lines += [
         "",
         "extern const co_od_entry_t co_od_table[CO_OD_COUNT];",

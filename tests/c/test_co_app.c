@@ -217,6 +217,40 @@ static void test_telemetry_and_trace(void) {
   TT_CHECK(dec.frames_lost == 0);
 }
 
+/* An SDO write of the telemetry configuration (0x2060) is used from the next
+ * period on: decimation, signal count and signal ids. */
+static void test_telemetry_config_write(void) {
+  setup();
+  fw_serial_decoder_t dec;
+  fw_serial_msg_t msg;
+  uint8_t buf[512];
+  size_t n;
+  fw_serial_decoder_init(&dec);
+  step_n(45);
+  TT_CHECK(sdo_write(0x2060, 2, 2, 1) == 0); /* each write takes one period */
+  TT_CHECK(sdo_write(0x2060, 3, 7, 1) == 0);
+  TT_CHECK(sdo_write(0x2060, 4, 13, 1) == 0);
+  TT_CHECK(sdo_write(0x2060, 1, 10, 2) == 0);
+  while (fw_app_uart_read(&g_app, buf, sizeof buf) > 0) {
+  }
+  step_n(100); /* periods 49..148 */
+  int telem = 0;
+  while ((n = fw_app_uart_read(&g_app, buf, sizeof buf)) > 0) {
+    for (size_t i = 0; i < n; i++) {
+      if (fw_serial_decoder_push(&dec, buf[i], &msg) == FW_SERIAL_OK &&
+          msg.type == FW_SERIAL_TYPE_TELEMETRY) {
+        telem++;
+        TT_CHECK(msg.payload[4] == 2 && msg.payload[5] == 7 && msg.payload[6] == 13);
+        TT_CHECK(msg.len == 5u + 2u * 5u);
+      }
+    }
+  }
+  TT_CHECK(telem == 10);
+  TT_CHECK(sdo_write(0x2060, 1, 0, 2) == 0); /* off */
+  step_n(100);
+  TT_CHECK(fw_app_uart_read(&g_app, buf, sizeof buf) == 0);
+}
+
 static void rx_sdo_write(uint16_t idx, uint8_t sub, uint32_t v, uint8_t n) {
   uint8_t req[8] = {(uint8_t)(0x23 | ((4 - n) << 2)), (uint8_t)idx, (uint8_t)(idx >> 8), sub,
                     (uint8_t)v, (uint8_t)(v >> 8), (uint8_t)(v >> 16), (uint8_t)(v >> 24)};
@@ -381,5 +415,6 @@ int main(void) {
   TT_RUN(test_error_register_after_nmt_reset);
   TT_RUN(test_cia402_protection_objects);
   TT_RUN(test_nmt_stop_switches_off);
+  TT_RUN(test_telemetry_config_write);
   return TT_SUMMARY();
 }
