@@ -82,13 +82,14 @@ def gen_c_header(od: ObjectDictionary) -> str:
         " *  application's per-period access, co_node.h CO_NODE_PUT/CO_NODE_GET):",
         " *  CO_OD_OFF_<index>_<sub> byte offset, CO_OD_LEN_<index>_<sub> bytes",
         " *  (strings: maximum length, after a length byte). Equal to co_od_table[pos]",
-        " *  .offset / .size (tests/c/test_co_od_config.c checks every entry). */",
+        " *  .offset / .size (tests/c/test_co_node.c checks every entry). */",
     ]
-    for e, off in zip(od.entries, offsets):
+    for e, off in zip(od.entries, offsets, strict=True):
         tail = e.c_ident[len("CO_OD_"):]
         lines.append(f"#define CO_OD_OFF_{tail} {off}u")
         lines.append(f"#define CO_OD_LEN_{tail} {e.size}u")
-    lines += ["", "/** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */",
+    lines += ["",
+              "/** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */",
               "#define CO_OD_ENTRIES(X) \\"]
     lines += [f"  X({e.c_ident[len('CO_OD_'):]}) \\" for e in od.entries]
     lines.append("  /* end */")

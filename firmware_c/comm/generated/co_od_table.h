@@ -298,7 +298,7 @@
  *  application's per-period access, co_node.h CO_NODE_PUT/CO_NODE_GET):
  *  CO_OD_OFF_<index>_<sub> byte offset, CO_OD_LEN_<index>_<sub> bytes
  *  (strings: maximum length, after a length byte). Equal to co_od_table[pos]
- *  .offset / .size (tests/c/test_co_od_config.c checks every entry). */
+ *  .offset / .size (tests/c/test_co_node.c checks every entry). */
 #define CO_OD_OFF_1000_00 0u
 #define CO_OD_LEN_1000_00 4u
 #define CO_OD_OFF_1001_00 4u
