@@ -120,6 +120,42 @@ _Static_assert(CO_OD_NR_RPDO == 4u && CO_OD_NR_TPDO == 4u &&
     CO_OD_OFF_1803_05 == CO_OD_OFF_1800_05 + 3u * CO_TPDO_COMM_STRIDE &&
     CO_OD_LEN_1803_05 == CO_OD_LEN_1800_05,
                "PDO communication records of one layout");
+/* Likewise the mapping records 0x1600+n / 0x1A00+n: count (sub 0), then
+ * subs 1..8, 4 bytes each, back to back. */
+#define CO_RPDO_MAP_STRIDE (CO_OD_OFF_1601_00 - CO_OD_OFF_1600_00)
+#define CO_TPDO_MAP_STRIDE (CO_OD_OFF_1A01_00 - CO_OD_OFF_1A00_00)
+_Static_assert(
+    CO_OD_OFF_1601_00 == CO_OD_OFF_1600_00 + 1u * CO_RPDO_MAP_STRIDE &&
+    CO_OD_OFF_1601_08 == CO_OD_OFF_1600_08 + 1u * CO_RPDO_MAP_STRIDE &&
+    CO_OD_OFF_1602_00 == CO_OD_OFF_1600_00 + 2u * CO_RPDO_MAP_STRIDE &&
+    CO_OD_OFF_1602_08 == CO_OD_OFF_1600_08 + 2u * CO_RPDO_MAP_STRIDE &&
+    CO_OD_OFF_1603_00 == CO_OD_OFF_1600_00 + 3u * CO_RPDO_MAP_STRIDE &&
+    CO_OD_OFF_1603_08 == CO_OD_OFF_1600_08 + 3u * CO_RPDO_MAP_STRIDE &&
+    CO_OD_LEN_1600_01 == 4u && CO_OD_OFF_1600_08 == CO_OD_OFF_1600_01 + 28u &&
+    CO_OD_OFF_1A01_00 == CO_OD_OFF_1A00_00 + 1u * CO_TPDO_MAP_STRIDE &&
+    CO_OD_OFF_1A01_08 == CO_OD_OFF_1A00_08 + 1u * CO_TPDO_MAP_STRIDE &&
+    CO_OD_OFF_1A02_00 == CO_OD_OFF_1A00_00 + 2u * CO_TPDO_MAP_STRIDE &&
+    CO_OD_OFF_1A02_08 == CO_OD_OFF_1A00_08 + 2u * CO_TPDO_MAP_STRIDE &&
+    CO_OD_OFF_1A03_00 == CO_OD_OFF_1A00_00 + 3u * CO_TPDO_MAP_STRIDE &&
+    CO_OD_OFF_1A03_08 == CO_OD_OFF_1A00_08 + 3u * CO_TPDO_MAP_STRIDE &&
+    CO_OD_LEN_1A00_01 == 4u && CO_OD_OFF_1A00_08 == CO_OD_OFF_1A00_01 + 28u,
+    "PDO mapping records of one layout");
+/** Mapping count of PDO n (sub 0). */
+#define CO_RPDO_MAP_COUNT(node, n) \
+  co_node_get_at((node), (uint16_t)(CO_OD_OFF_1600_00 + (uint32_t)(n) * CO_RPDO_MAP_STRIDE), 1u)
+#define CO_TPDO_MAP_COUNT(node, n) \
+  co_node_get_at((node), (uint16_t)(CO_OD_OFF_1A00_00 + (uint32_t)(n) * CO_TPDO_MAP_STRIDE), 1u)
+/** Mapping entry k (1..8) of PDO n. */
+#define CO_RPDO_MAP(node, n, k)                                                       \
+  co_node_get_at((node),                                                              \
+                 (uint16_t)(CO_OD_OFF_1600_01 + (uint32_t)(n) * CO_RPDO_MAP_STRIDE +  \
+                            4u * ((uint32_t)(k) - 1u)),                               \
+                 4u)
+#define CO_TPDO_MAP(node, n, k)                                                       \
+  co_node_get_at((node),                                                              \
+                 (uint16_t)(CO_OD_OFF_1A00_01 + (uint32_t)(n) * CO_TPDO_MAP_STRIDE +  \
+                            4u * ((uint32_t)(k) - 1u)),                               \
+                 4u)
 #define CO_RPDO_COMM(node, n, ss)                                                   \
   co_node_get_at((node), (uint16_t)(CO_OD_OFF_1400_##ss + (uint32_t)(n) * CO_RPDO_COMM_STRIDE), \
                  CO_OD_LEN_1400_##ss)

@@ -84,15 +84,14 @@ co_abort_t co_pdo_check_config(const co_node_t *node, uint16_t index, uint8_t su
 }
 
 void co_rpdo_apply(co_node_t *node, uint8_t n, const uint8_t *data, uint8_t dlc) {
-  uint16_t map = (uint16_t)(0x1600u + n);
   co_rpdo_rt_t *rt = &node->rpdo[n];
-  uint32_t count = co_get(node, map, 0u);
+  uint32_t count = CO_RPDO_MAP_COUNT(node, n);
   uint32_t bit = 0u;
   if (count > 8u) {
     count = 8u;
   }
   for (uint8_t k = 1u; k <= (uint8_t)count; k++) {
-    uint32_t m = co_get(node, map, k);
+    uint32_t m = CO_RPDO_MAP(node, n, k);
     uint32_t bits = m & 0xFFu;
     if (bits % 8u != 0u || bit + bits > (uint32_t)dlc * 8u) {
       node->count.rpdo_errors++;
@@ -102,7 +101,7 @@ void co_rpdo_apply(co_node_t *node, uint8_t n, const uint8_t *data, uint8_t dlc)
   }
   bit = 0u;
   for (uint8_t k = 1u; k <= (uint8_t)count; k++) {
-    uint32_t m = co_get(node, map, k);
+    uint32_t m = CO_RPDO_MAP(node, n, k);
     uint32_t nbytes = (m & 0xFFu) / 8u;
     uint16_t pos;
     if (co_od_find((uint16_t)(m >> 16), (uint8_t)(m >> 8), &pos) == CO_OD_OK &&
@@ -119,15 +118,14 @@ void co_rpdo_apply(co_node_t *node, uint8_t n, const uint8_t *data, uint8_t dlc)
 }
 
 uint8_t co_tpdo_pack(const co_node_t *node, uint8_t n, uint8_t data[8]) {
-  uint16_t map = (uint16_t)(0x1A00u + n);
-  uint32_t count = co_get(node, map, 0u);
+  uint32_t count = CO_TPDO_MAP_COUNT(node, n);
   uint32_t byte = 0u;
   if (count > 8u) {
     count = 8u;
   }
   memset(data, 0, 8u);
   for (uint8_t k = 1u; k <= (uint8_t)count; k++) {
-    uint32_t m = co_get(node, map, k);
+    uint32_t m = CO_TPDO_MAP(node, n, k);
     uint32_t nbytes = (m & 0xFFu) / 8u;
     uint16_t pos;
     if (byte + nbytes > 8u) {
