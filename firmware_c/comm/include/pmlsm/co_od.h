@@ -152,6 +152,9 @@ void co_le_put(uint8_t *p, size_t n, uint32_t v);
 #endif
 
 static inline uint32_t co_le_load(const uint8_t *p, size_t n) {
+  if (n == 1u) {
+    return p[0];
+  }
 #if CO_LE_HOST
   if (n == 4u) {
     uint32_t v;
@@ -172,6 +175,10 @@ static inline uint32_t co_le_load(const uint8_t *p, size_t n) {
 }
 
 static inline void co_le_store(uint8_t *p, size_t n, uint32_t v) {
+  if (n == 1u) {
+    p[0] = (uint8_t)v;
+    return;
+  }
   if (n > 4u) {
     return;
   }
