@@ -75,6 +75,24 @@ def gen_c_header(od: ObjectDictionary) -> str:
     ]
     for pos, e in enumerate(od.entries):
         lines.append(f"#define {e.c_ident} {pos}u /* {e.object_name}: {e.name} */")
+    offsets, _ = _ram_layout(od)
+    lines += [
+        "",
+        "/** Where each entry's value lives in the OD RAM (compile-time handles for the",
+        " *  application's per-period access, co_node.h CO_NODE_PUT/CO_NODE_GET):",
+        " *  CO_OD_OFF_<index>_<sub> byte offset, CO_OD_LEN_<index>_<sub> bytes",
+        " *  (strings: maximum length, after a length byte). Equal to co_od_table[pos]",
+        " *  .offset / .size (tests/c/test_co_node.c checks every entry). */",
+    ]
+    for e, off in zip(od.entries, offsets, strict=True):
+        tail = e.c_ident[len("CO_OD_"):]
+        lines.append(f"#define CO_OD_OFF_{tail} {off}u")
+        lines.append(f"#define CO_OD_LEN_{tail} {e.size}u")
+    lines += ["",
+              "/** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */",
+              "#define CO_OD_ENTRIES(X) \\"]
+    lines += [f"  X({e.c_ident[len('CO_OD_'):]}) \\" for e in od.entries]
+    lines.append("  /* end */")
     lines += [
         "",
         "extern const co_od_entry_t co_od_table[CO_OD_COUNT];",

@@ -4,6 +4,7 @@
  *        through fw_set_config, heartbeat loss -> fault + EMCY, fault reset,
  *        telemetry on the serial link, trace upload.
  */
+#include <math.h>
 #include <string.h>
 
 #include "pmlsm/fw_app.h"
@@ -217,6 +218,70 @@ static void test_telemetry_and_trace(void) {
   TT_CHECK(dec.frames_lost == 0);
 }
 
+/* An SDO write of the telemetry configuration (0x2060) is used from the next
+ * period on: decimation, signal count and signal ids. */
+static void test_telemetry_config_write(void) {
+  setup();
+  fw_serial_decoder_t dec;
+  fw_serial_msg_t msg;
+  uint8_t buf[512];
+  size_t n;
+  fw_serial_decoder_init(&dec);
+  step_n(45);
+  TT_CHECK(sdo_write(0x2060, 2, 2, 1) == 0); /* each write takes one period */
+  TT_CHECK(sdo_write(0x2060, 3, 7, 1) == 0);
+  TT_CHECK(sdo_write(0x2060, 4, 13, 1) == 0);
+  TT_CHECK(sdo_write(0x2060, 1, 10, 2) == 0);
+  while (fw_app_uart_read(&g_app, buf, sizeof buf) > 0) {
+  }
+  step_n(100); /* periods 49..148 */
+  int telem = 0;
+  while ((n = fw_app_uart_read(&g_app, buf, sizeof buf)) > 0) {
+    for (size_t i = 0; i < n; i++) {
+      if (fw_serial_decoder_push(&dec, buf[i], &msg) == FW_SERIAL_OK &&
+          msg.type == FW_SERIAL_TYPE_TELEMETRY) {
+        telem++;
+        TT_CHECK(msg.payload[4] == 2 && msg.payload[5] == 7 && msg.payload[6] == 13);
+        TT_CHECK(msg.len == 5u + 2u * 5u);
+      }
+    }
+  }
+  TT_CHECK(telem == 10);
+  TT_CHECK(sdo_write(0x2060, 1, 0, 2) == 0); /* off */
+  step_n(100);
+  TT_CHECK(fw_app_uart_read(&g_app, buf, sizeof buf) == 0);
+}
+
+/* fw_app_round_i32 (the OD's conversions) is lrintf, saturated, for ties, the
+ * 2^22 / 2^23 boundaries, and every 97th float bit pattern. */
+static int32_t round_ref(float v) {
+  if (!(v == v)) return 0;
+  if (v >= 2147483520.0f) return INT32_MAX;
+  if (v <= -2147483520.0f) return INT32_MIN;
+  return (int32_t)lrintf(v);
+}
+
+static void test_round_matches_lrintf(void) {
+  static const float special[] = {0.0f, -0.0f, 0.5f, -0.5f, 1.5f, -1.5f, 2.5f, -2.5f,
+                                  0.49999997f, -0.49999997f, 1.0e-30f, 4194303.5f,
+                                  -4194303.5f, 4194304.0f, 4194304.5f, -4194304.5f,
+                                  8388607.5f, -8388607.5f, 8388608.0f, -8388609.0f,
+                                  2147483520.0f, -2147483520.0f, 2147483392.0f,
+                                  -2147483392.0f, 1.0e30f, -1.0e30f, INFINITY, -INFINITY,
+                                  NAN};
+  for (size_t k = 0; k < sizeof special / sizeof special[0]; k++) {
+    TT_CHECK(fw_app_round_i32(special[k]) == round_ref(special[k]));
+  }
+  int bad = 0;
+  for (uint64_t b = 0; b <= 0xFFFFFFFFull; b += 97u) {
+    uint32_t u = (uint32_t)b;
+    float v;
+    memcpy(&v, &u, sizeof v);
+    bad += fw_app_round_i32(v) != round_ref(v);
+  }
+  TT_CHECK(bad == 0);
+}
+
 static void rx_sdo_write(uint16_t idx, uint8_t sub, uint32_t v, uint8_t n) {
   uint8_t req[8] = {(uint8_t)(0x23 | ((4 - n) << 2)), (uint8_t)idx, (uint8_t)(idx >> 8), sub,
                     (uint8_t)v, (uint8_t)(v >> 8), (uint8_t)(v >> 16), (uint8_t)(v >> 24)};
@@ -381,5 +446,7 @@ int main(void) {
   TT_RUN(test_error_register_after_nmt_reset);
   TT_RUN(test_cia402_protection_objects);
   TT_RUN(test_nmt_stop_switches_off);
+  TT_RUN(test_telemetry_config_write);
+  TT_RUN(test_round_matches_lrintf);
   return TT_SUMMARY();
 }

@@ -614,6 +614,102 @@ static void test_od_table(void) {
   TT_CHECK(co_od_entry(co_od_count()) == NULL);
 }
 
+/* ---- compile-time handles and word-wise little-endian access -------------- */
+
+/* Every generated handle CO_OD_OFF_/CO_OD_LEN_<index>_<sub> is the table's offset
+ * and size of the entry co_od_find finds, and every entry lies inside the OD RAM. */
+static void test_od_handles(void) {
+  uint16_t pos;
+#define CHECK_HANDLE(id)                                                                  \
+  TT_CHECK(co_od_table[CO_OD_##id].offset == CO_OD_OFF_##id &&                           \
+           co_od_table[CO_OD_##id].size == CO_OD_LEN_##id);                              \
+  TT_CHECK(co_od_find(co_od_table[CO_OD_##id].index, co_od_table[CO_OD_##id].sub, &pos) == \
+               CO_OD_OK &&                                                                \
+           pos == CO_OD_##id);
+  CO_OD_ENTRIES(CHECK_HANDLE)
+#undef CHECK_HANDLE
+  for (uint16_t k = 0u; k < co_od_count(); k++) {
+    const co_od_entry_t *e = co_od_entry(k);
+    size_t need = (size_t)e->offset + e->size + (e->type == CO_TYPE_VSTRING ? 1u : 0u);
+    TT_CHECK(need <= CO_OD_RAM_SIZE);
+  }
+}
+
+static uint32_t le_get_ref(const uint8_t *p, size_t n) {
+  uint32_t v = 0u;
+  for (size_t i = 0u; i < n; i++) {
+    v |= (uint32_t)p[i] << (8u * i);
+  }
+  return v;
+}
+
+/* co_le_load / co_le_store (word-wise on a little-endian host) and co_le_get /
+ * co_le_put against a byte-wise reference, at every alignment. */
+static void test_le_word_access(void) {
+  static const uint32_t vals[] = {0u, 1u, 0x80u, 0xFFu, 0x1234u, 0x8001u, 0xFFFFu,
+                                  0x123456u, 0x80000000u, 0xDEADBEEFu, 0xFFFFFFFFu};
+  for (size_t n = 1u; n <= 4u; n++) {
+    for (size_t at = 0u; at < 4u; at++) {
+      for (size_t k = 0u; k < sizeof vals / sizeof vals[0]; k++) {
+        uint8_t a[12], b[12], ref[12];
+        memset(a, 0xA5, sizeof a);
+        memset(b, 0xA5, sizeof b);
+        memset(ref, 0xA5, sizeof ref);
+        for (size_t i = 0u; i < n; i++) {
+          ref[at + i] = (uint8_t)(vals[k] >> (8u * i));
+        }
+        co_le_store(&a[at], n, vals[k]);
+        co_le_put(&b[at], n, vals[k]);
+        TT_CHECK(memcmp(a, ref, sizeof a) == 0 && memcmp(b, ref, sizeof b) == 0);
+        uint32_t want = le_get_ref(&ref[at], n);
+        TT_CHECK(co_le_load(&ref[at], n) == want && co_le_get(&ref[at], n) == want);
+      }
+    }
+  }
+  uint8_t z[8] = {1, 2, 3, 4, 5, 6, 7, 8};
+  co_le_store(z, 5u, 0u); /* n > 4: nothing */
+  co_le_put(z, 5u, 0u);
+  TT_CHECK(z[0] == 1u && z[4] == 5u);
+  TT_CHECK(co_le_get(z, 5u) == 0u && co_le_get(NULL, 2u) == 0u);
+}
+
+/* CO_NODE_PUT / _GET / _GET_I / _F32 store and read exactly what co_node_set_* /
+ * co_node_get_* do, for every integer size, signed and unsigned, and REAL32. */
+static void test_handle_access_matches_setters(void) {
+  static co_node_t a, b;
+  TT_CHECK(co_node_init(&a, NID, NULL) == CO_OK && co_node_init(&b, NID, NULL) == CO_OK);
+  static const int32_t ivals[] = {0, 1, -1, 127, -128, 255, 32767, -32768, 65535, 100000,
+                                  -100000, INT32_MAX, INT32_MIN};
+  for (size_t k = 0u; k < sizeof ivals / sizeof ivals[0]; k++) {
+    int32_t v = ivals[k];
+    CO_NODE_PUT(&a, 6041_00, v); /* U16 */
+    co_node_set_u32(&b, CO_OD_6041_00, (uint32_t)v);
+    CO_NODE_PUT(&a, 6061_00, v); /* I8 */
+    co_node_set_i32(&b, CO_OD_6061_00, v);
+    CO_NODE_PUT(&a, 6077_00, v); /* I16 */
+    co_node_set_i32(&b, CO_OD_6077_00, v);
+    CO_NODE_PUT(&a, 6064_00, v); /* I32 */
+    co_node_set_i32(&b, CO_OD_6064_00, v);
+    CO_NODE_PUT(&a, 2020_08, v); /* U8 */
+    co_node_set_u32(&b, CO_OD_2020_08, (uint32_t)v);
+    CO_NODE_PUT(&a, 1016_01, v); /* U32 */
+    co_node_set_u32(&b, CO_OD_1016_01, (uint32_t)v);
+    TT_CHECK(memcmp(a.od, b.od, sizeof a.od) == 0);
+    TT_CHECK(CO_NODE_GET(&a, 6041_00) == co_node_get_u32(&b, CO_OD_6041_00));
+    TT_CHECK(CO_NODE_GET(&a, 1016_01) == co_node_get_u32(&b, CO_OD_1016_01));
+    TT_CHECK(CO_NODE_GET_I(&a, 6061_00) == co_node_get_i32(&b, CO_OD_6061_00));
+    TT_CHECK(CO_NODE_GET_I(&a, 6077_00) == co_node_get_i32(&b, CO_OD_6077_00));
+    TT_CHECK(CO_NODE_GET_I(&a, 6064_00) == co_node_get_i32(&b, CO_OD_6064_00));
+  }
+  static const float fvals[] = {0.0f, -0.0f, 1.5f, -3.25e-7f, 1.0e30f};
+  for (size_t k = 0u; k < sizeof fvals / sizeof fvals[0]; k++) {
+    CO_NODE_PUT_F32(&a, 2020_01, fvals[k]);
+    co_node_set_f32(&b, CO_OD_2020_01, fvals[k]);
+    TT_CHECK(memcmp(a.od, b.od, sizeof a.od) == 0);
+    TT_CHECK(CO_NODE_GET_F32(&a, 2020_01) == co_node_get_f32(&b, CO_OD_2020_01));
+  }
+}
+
 int main(void) {
   TT_RUN(test_od_table);
   TT_RUN(test_boot_and_nmt);
@@ -628,5 +724,8 @@ int main(void) {
   TT_RUN(test_heartbeat_timeout_seen_in_rx);
   TT_RUN(test_rpdo_deadline);
   TT_RUN(test_emcy_and_queues);
+  TT_RUN(test_od_handles);
+  TT_RUN(test_le_word_access);
+  TT_RUN(test_handle_access_matches_setters);
   return TT_SUMMARY();
 }

@@ -263,8 +263,37 @@ static void test_trace(void) {
   TT_CHECK(fw_trace_init(&tr, NULL, 10) == FW_SERIAL_ERR_NULL);
 }
 
+/* The byte-at-a-time CRC against the bit-wise definition (poly 0x1021, init
+ * 0xFFFF), on every length up to 300 of a pseudo-random message. */
+static uint16_t crc16_bitwise(const uint8_t *d, size_t n) {
+  uint16_t crc = 0xFFFFu;
+  for (size_t i = 0u; i < n; i++) {
+    crc = (uint16_t)(crc ^ (uint16_t)((uint16_t)d[i] << 8));
+    for (int b = 0; b < 8; b++) {
+      crc = (crc & 0x8000u) != 0u ? (uint16_t)((uint16_t)(crc << 1) ^ 0x1021u)
+                                  : (uint16_t)(crc << 1);
+    }
+  }
+  return crc;
+}
+
+static void test_crc_bytewise_matches_bitwise(void) {
+  uint8_t msg[300];
+  uint32_t x = 12345u;
+  for (size_t i = 0u; i < sizeof msg; i++) {
+    x = x * 1103515245u + 12345u;
+    msg[i] = (uint8_t)(x >> 16);
+  }
+  for (size_t n = 0u; n <= sizeof msg; n++) {
+    TT_CHECK(fw_serial_crc16(msg, n) == crc16_bitwise(msg, n));
+  }
+  uint8_t ff[4] = {0xFFu, 0xFFu, 0x00u, 0x80u};
+  TT_CHECK(fw_serial_crc16(ff, 4u) == crc16_bitwise(ff, 4u));
+}
+
 int main(void) {
   TT_RUN(test_crc);
+  TT_RUN(test_crc_bytewise_matches_bitwise);
   TT_RUN(test_cobs_vectors);
   TT_RUN(test_frames);
   TT_RUN(test_decoder_stream);

@@ -70,6 +70,98 @@ static inline bool co_is_store_cmd(uint16_t i, uint8_t sub) {
 CO_INTERNAL void co_send(co_node_t *node, uint16_t id, uint8_t dlc, const uint8_t *data);
 /** OD value of (index, sub) as u32; 0 when the object does not exist. */
 CO_INTERNAL uint32_t co_get(const co_node_t *node, uint16_t index, uint8_t sub);
+
+/* The PDO communication records 0x1400+n / 0x1800+n (n < 4) share one layout
+ * in the OD RAM: sub ss of record n by compile-time handle (co_node.h), for the
+ * per-period paths (RPDO/TPDO processing, SYNC) without a lookup. */
+#define CO_RPDO_COMM_STRIDE (CO_OD_OFF_1401_00 - CO_OD_OFF_1400_00)
+#define CO_TPDO_COMM_STRIDE (CO_OD_OFF_1801_00 - CO_OD_OFF_1800_00)
+_Static_assert(CO_OD_NR_RPDO == 4u && CO_OD_NR_TPDO == 4u &&
+    CO_OD_OFF_1401_01 == CO_OD_OFF_1400_01 + 1u * CO_RPDO_COMM_STRIDE &&
+    CO_OD_LEN_1401_01 == CO_OD_LEN_1400_01 &&
+    CO_OD_OFF_1401_02 == CO_OD_OFF_1400_02 + 1u * CO_RPDO_COMM_STRIDE &&
+    CO_OD_LEN_1401_02 == CO_OD_LEN_1400_02 &&
+    CO_OD_OFF_1401_05 == CO_OD_OFF_1400_05 + 1u * CO_RPDO_COMM_STRIDE &&
+    CO_OD_LEN_1401_05 == CO_OD_LEN_1400_05 &&
+    CO_OD_OFF_1402_01 == CO_OD_OFF_1400_01 + 2u * CO_RPDO_COMM_STRIDE &&
+    CO_OD_LEN_1402_01 == CO_OD_LEN_1400_01 &&
+    CO_OD_OFF_1402_02 == CO_OD_OFF_1400_02 + 2u * CO_RPDO_COMM_STRIDE &&
+    CO_OD_LEN_1402_02 == CO_OD_LEN_1400_02 &&
+    CO_OD_OFF_1402_05 == CO_OD_OFF_1400_05 + 2u * CO_RPDO_COMM_STRIDE &&
+    CO_OD_LEN_1402_05 == CO_OD_LEN_1400_05 &&
+    CO_OD_OFF_1403_01 == CO_OD_OFF_1400_01 + 3u * CO_RPDO_COMM_STRIDE &&
+    CO_OD_LEN_1403_01 == CO_OD_LEN_1400_01 &&
+    CO_OD_OFF_1403_02 == CO_OD_OFF_1400_02 + 3u * CO_RPDO_COMM_STRIDE &&
+    CO_OD_LEN_1403_02 == CO_OD_LEN_1400_02 &&
+    CO_OD_OFF_1403_05 == CO_OD_OFF_1400_05 + 3u * CO_RPDO_COMM_STRIDE &&
+    CO_OD_LEN_1403_05 == CO_OD_LEN_1400_05 &&
+    CO_OD_OFF_1801_01 == CO_OD_OFF_1800_01 + 1u * CO_TPDO_COMM_STRIDE &&
+    CO_OD_LEN_1801_01 == CO_OD_LEN_1800_01 &&
+    CO_OD_OFF_1801_02 == CO_OD_OFF_1800_02 + 1u * CO_TPDO_COMM_STRIDE &&
+    CO_OD_LEN_1801_02 == CO_OD_LEN_1800_02 &&
+    CO_OD_OFF_1801_03 == CO_OD_OFF_1800_03 + 1u * CO_TPDO_COMM_STRIDE &&
+    CO_OD_LEN_1801_03 == CO_OD_LEN_1800_03 &&
+    CO_OD_OFF_1801_05 == CO_OD_OFF_1800_05 + 1u * CO_TPDO_COMM_STRIDE &&
+    CO_OD_LEN_1801_05 == CO_OD_LEN_1800_05 &&
+    CO_OD_OFF_1802_01 == CO_OD_OFF_1800_01 + 2u * CO_TPDO_COMM_STRIDE &&
+    CO_OD_LEN_1802_01 == CO_OD_LEN_1800_01 &&
+    CO_OD_OFF_1802_02 == CO_OD_OFF_1800_02 + 2u * CO_TPDO_COMM_STRIDE &&
+    CO_OD_LEN_1802_02 == CO_OD_LEN_1800_02 &&
+    CO_OD_OFF_1802_03 == CO_OD_OFF_1800_03 + 2u * CO_TPDO_COMM_STRIDE &&
+    CO_OD_LEN_1802_03 == CO_OD_LEN_1800_03 &&
+    CO_OD_OFF_1802_05 == CO_OD_OFF_1800_05 + 2u * CO_TPDO_COMM_STRIDE &&
+    CO_OD_LEN_1802_05 == CO_OD_LEN_1800_05 &&
+    CO_OD_OFF_1803_01 == CO_OD_OFF_1800_01 + 3u * CO_TPDO_COMM_STRIDE &&
+    CO_OD_LEN_1803_01 == CO_OD_LEN_1800_01 &&
+    CO_OD_OFF_1803_02 == CO_OD_OFF_1800_02 + 3u * CO_TPDO_COMM_STRIDE &&
+    CO_OD_LEN_1803_02 == CO_OD_LEN_1800_02 &&
+    CO_OD_OFF_1803_03 == CO_OD_OFF_1800_03 + 3u * CO_TPDO_COMM_STRIDE &&
+    CO_OD_LEN_1803_03 == CO_OD_LEN_1800_03 &&
+    CO_OD_OFF_1803_05 == CO_OD_OFF_1800_05 + 3u * CO_TPDO_COMM_STRIDE &&
+    CO_OD_LEN_1803_05 == CO_OD_LEN_1800_05,
+               "PDO communication records of one layout");
+/* Likewise the mapping records 0x1600+n / 0x1A00+n: count (sub 0), then
+ * subs 1..8, 4 bytes each, back to back. */
+#define CO_RPDO_MAP_STRIDE (CO_OD_OFF_1601_00 - CO_OD_OFF_1600_00)
+#define CO_TPDO_MAP_STRIDE (CO_OD_OFF_1A01_00 - CO_OD_OFF_1A00_00)
+_Static_assert(
+    CO_OD_OFF_1601_00 == CO_OD_OFF_1600_00 + 1u * CO_RPDO_MAP_STRIDE &&
+    CO_OD_OFF_1601_08 == CO_OD_OFF_1600_08 + 1u * CO_RPDO_MAP_STRIDE &&
+    CO_OD_OFF_1602_00 == CO_OD_OFF_1600_00 + 2u * CO_RPDO_MAP_STRIDE &&
+    CO_OD_OFF_1602_08 == CO_OD_OFF_1600_08 + 2u * CO_RPDO_MAP_STRIDE &&
+    CO_OD_OFF_1603_00 == CO_OD_OFF_1600_00 + 3u * CO_RPDO_MAP_STRIDE &&
+    CO_OD_OFF_1603_08 == CO_OD_OFF_1600_08 + 3u * CO_RPDO_MAP_STRIDE &&
+    CO_OD_LEN_1600_01 == 4u && CO_OD_OFF_1600_08 == CO_OD_OFF_1600_01 + 28u &&
+    CO_OD_OFF_1A01_00 == CO_OD_OFF_1A00_00 + 1u * CO_TPDO_MAP_STRIDE &&
+    CO_OD_OFF_1A01_08 == CO_OD_OFF_1A00_08 + 1u * CO_TPDO_MAP_STRIDE &&
+    CO_OD_OFF_1A02_00 == CO_OD_OFF_1A00_00 + 2u * CO_TPDO_MAP_STRIDE &&
+    CO_OD_OFF_1A02_08 == CO_OD_OFF_1A00_08 + 2u * CO_TPDO_MAP_STRIDE &&
+    CO_OD_OFF_1A03_00 == CO_OD_OFF_1A00_00 + 3u * CO_TPDO_MAP_STRIDE &&
+    CO_OD_OFF_1A03_08 == CO_OD_OFF_1A00_08 + 3u * CO_TPDO_MAP_STRIDE &&
+    CO_OD_LEN_1A00_01 == 4u && CO_OD_OFF_1A00_08 == CO_OD_OFF_1A00_01 + 28u,
+    "PDO mapping records of one layout");
+/** Mapping count of PDO n (sub 0). */
+#define CO_RPDO_MAP_COUNT(node, n) \
+  co_node_get_at((node), (uint16_t)(CO_OD_OFF_1600_00 + (uint32_t)(n) * CO_RPDO_MAP_STRIDE), 1u)
+#define CO_TPDO_MAP_COUNT(node, n) \
+  co_node_get_at((node), (uint16_t)(CO_OD_OFF_1A00_00 + (uint32_t)(n) * CO_TPDO_MAP_STRIDE), 1u)
+/** Mapping entry k (1..8) of PDO n. */
+#define CO_RPDO_MAP(node, n, k)                                                       \
+  co_node_get_at((node),                                                              \
+                 (uint16_t)(CO_OD_OFF_1600_01 + (uint32_t)(n) * CO_RPDO_MAP_STRIDE +  \
+                            4u * ((uint32_t)(k) - 1u)),                               \
+                 4u)
+#define CO_TPDO_MAP(node, n, k)                                                       \
+  co_node_get_at((node),                                                              \
+                 (uint16_t)(CO_OD_OFF_1A00_01 + (uint32_t)(n) * CO_TPDO_MAP_STRIDE +  \
+                            4u * ((uint32_t)(k) - 1u)),                               \
+                 4u)
+#define CO_RPDO_COMM(node, n, ss)                                                   \
+  co_node_get_at((node), (uint16_t)(CO_OD_OFF_1400_##ss + (uint32_t)(n) * CO_RPDO_COMM_STRIDE), \
+                 CO_OD_LEN_1400_##ss)
+#define CO_TPDO_COMM(node, n, ss)                                                   \
+  co_node_get_at((node), (uint16_t)(CO_OD_OFF_1800_##ss + (uint32_t)(n) * CO_TPDO_COMM_STRIDE), \
+                 CO_OD_LEN_1800_##ss)
 /** Checked write of OD position pos (SDO download, RPDO); from_pdo skips the
  *  communication-parameter rules. Returns the abort code. */
 CO_INTERNAL co_abort_t co_write_pos(co_node_t *node, uint16_t pos, const uint8_t *data,

@@ -270,7 +270,7 @@ void co_node_process_rx(co_node_t *node, uint32_t now_us) {
       }
       continue;
     }
-    uint32_t sync_cob = co_get(node, 0x1005u, 0u);
+    uint32_t sync_cob = CO_NODE_GET(node, 1005_00);
     if (id == (sync_cob & 0x7FFu) && !f.rtr) {
       co_sync(node);
     } else if (id == CO_COB_SDO_RX + node->node_id) {

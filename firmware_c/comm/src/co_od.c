@@ -10,22 +10,12 @@
 #include "co_od_table.h"
 
 uint32_t co_le_get(const uint8_t *p, size_t n) {
-  uint32_t v = 0u;
-  if (p == NULL || n > 4u) {
-    return 0u;
-  }
-  for (size_t i = 0u; i < n; i++) {
-    v |= (uint32_t)p[i] << (8u * i);
-  }
-  return v;
+  return (p == NULL || n > 4u) ? 0u : co_le_load(p, n);
 }
 
 void co_le_put(uint8_t *p, size_t n, uint32_t v) {
-  if (p == NULL || n > 4u) {
-    return;
-  }
-  for (size_t i = 0u; i < n; i++) {
-    p[i] = (uint8_t)(v >> (8u * i));
+  if (p != NULL && n <= 4u) {
+    co_le_store(p, n, v);
   }
 }
 
@@ -74,12 +64,15 @@ co_od_status_t co_od_find(uint16_t index, uint8_t sub, uint16_t *pos) {
 }
 
 static bool co_od_in_ram(const co_od_entry_t *e, size_t ram_size) {
+  if (ram_size >= CO_OD_RAM_SIZE) {
+    return true; /* every generated entry lies inside CO_OD_RAM_SIZE (test_co_od_config) */
+  }
   size_t need = (size_t)e->offset + e->size + (e->type == CO_TYPE_VSTRING ? 1u : 0u);
   return need <= ram_size;
 }
 
 static int64_t co_od_decode_int(const co_od_entry_t *e, const uint8_t *data) {
-  uint32_t raw = co_le_get(data, e->size);
+  uint32_t raw = co_le_load(data, e->size);
   switch (e->type) {
   case CO_TYPE_I8:
     return (int64_t)(int8_t)(uint8_t)raw;
@@ -213,7 +206,7 @@ uint32_t co_od_get_u32(const uint8_t *ram, size_t ram_size, uint16_t pos) {
       !co_od_in_ram(e, ram_size)) {
     return 0u;
   }
-  return co_le_get(&ram[e->offset], e->size);
+  return co_le_load(&ram[e->offset], e->size);
 }
 
 int32_t co_od_get_i32(const uint8_t *ram, size_t ram_size, uint16_t pos) {
@@ -231,7 +224,7 @@ float co_od_get_f32(const uint8_t *ram, size_t ram_size, uint16_t pos) {
   if (ram == NULL || e == NULL || e->type != CO_TYPE_REAL32 || !co_od_in_ram(e, ram_size)) {
     return 0.0f;
   }
-  uint32_t raw = co_le_get(&ram[e->offset], 4u);
+  uint32_t raw = co_le_load(&ram[e->offset], 4u);
   memcpy(&f, &raw, sizeof f);
   return f;
 }
@@ -242,7 +235,7 @@ void co_od_set_u32(uint8_t *ram, size_t ram_size, uint16_t pos, uint32_t v) {
       e->type == CO_TYPE_REAL32 || !co_od_in_ram(e, ram_size)) {
     return;
   }
-  co_le_put(&ram[e->offset], e->size, v);
+  co_le_store(&ram[e->offset], e->size, v);
 }
 
 void co_od_set_i32(uint8_t *ram, size_t ram_size, uint16_t pos, int32_t v) {
@@ -256,5 +249,5 @@ void co_od_set_f32(uint8_t *ram, size_t ram_size, uint16_t pos, float v) {
     return;
   }
   memcpy(&raw, &v, sizeof raw);
-  co_le_put(&ram[e->offset], 4u, raw);
+  co_le_store(&ram[e->offset], 4u, raw);
 }

@@ -84,15 +84,14 @@ co_abort_t co_pdo_check_config(const co_node_t *node, uint16_t index, uint8_t su
 }
 
 void co_rpdo_apply(co_node_t *node, uint8_t n, const uint8_t *data, uint8_t dlc) {
-  uint16_t map = (uint16_t)(0x1600u + n);
   co_rpdo_rt_t *rt = &node->rpdo[n];
-  uint32_t count = co_get(node, map, 0u);
+  uint32_t count = CO_RPDO_MAP_COUNT(node, n);
   uint32_t bit = 0u;
   if (count > 8u) {
     count = 8u;
   }
   for (uint8_t k = 1u; k <= (uint8_t)count; k++) {
-    uint32_t m = co_get(node, map, k);
+    uint32_t m = CO_RPDO_MAP(node, n, k);
     uint32_t bits = m & 0xFFu;
     if (bits % 8u != 0u || bit + bits > (uint32_t)dlc * 8u) {
       node->count.rpdo_errors++;
@@ -102,7 +101,7 @@ void co_rpdo_apply(co_node_t *node, uint8_t n, const uint8_t *data, uint8_t dlc)
   }
   bit = 0u;
   for (uint8_t k = 1u; k <= (uint8_t)count; k++) {
-    uint32_t m = co_get(node, map, k);
+    uint32_t m = CO_RPDO_MAP(node, n, k);
     uint32_t nbytes = (m & 0xFFu) / 8u;
     uint16_t pos;
     if (co_od_find((uint16_t)(m >> 16), (uint8_t)(m >> 8), &pos) == CO_OD_OK &&
@@ -119,15 +118,14 @@ void co_rpdo_apply(co_node_t *node, uint8_t n, const uint8_t *data, uint8_t dlc)
 }
 
 uint8_t co_tpdo_pack(const co_node_t *node, uint8_t n, uint8_t data[8]) {
-  uint16_t map = (uint16_t)(0x1A00u + n);
-  uint32_t count = co_get(node, map, 0u);
+  uint32_t count = CO_TPDO_MAP_COUNT(node, n);
   uint32_t byte = 0u;
   if (count > 8u) {
     count = 8u;
   }
   memset(data, 0, 8u);
   for (uint8_t k = 1u; k <= (uint8_t)count; k++) {
-    uint32_t m = co_get(node, map, k);
+    uint32_t m = CO_TPDO_MAP(node, n, k);
     uint32_t nbytes = (m & 0xFFu) / 8u;
     uint16_t pos;
     if (byte + nbytes > 8u) {
@@ -146,7 +144,7 @@ uint8_t co_tpdo_pack(const co_node_t *node, uint8_t n, uint8_t data[8]) {
 }
 
 void co_tpdo_send(co_node_t *node, uint8_t n, const uint8_t *data, uint8_t len) {
-  uint32_t cob = co_get(node, (uint16_t)(0x1800u + n), 1u);
+  uint32_t cob = CO_TPDO_COMM(node, n, 01);
   co_tpdo_rt_t *rt = &node->tpdo[n];
   co_send(node, (uint16_t)(cob & 0x7FFu), len, data);
   memcpy(rt->last, data, len);
@@ -157,14 +155,14 @@ void co_tpdo_send(co_node_t *node, uint8_t n, const uint8_t *data, uint8_t len) 
 
 bool co_rpdo_frame(co_node_t *node, const fw_can_frame_t *f) {
   for (uint8_t n = 0u; n < CO_OD_NR_RPDO; n++) {
-    uint32_t cob = co_get(node, (uint16_t)(0x1400u + n), 1u);
+    uint32_t cob = CO_RPDO_COMM(node, n, 01);
     if ((cob & CO_COB_INVALID) != 0u || (cob & 0x7FFu) != f->id) {
       continue;
     }
     if (f->rtr) {
       return true;
     }
-    uint32_t type = co_get(node, (uint16_t)(0x1400u + n), 2u);
+    uint32_t type = CO_RPDO_COMM(node, n, 02);
     if (type <= 240u) {
       node->rpdo[n].pending = 1u;
       node->rpdo[n].dlc = f->dlc;
@@ -187,10 +185,9 @@ void co_rpdo_check(co_node_t *node, uint32_t now_us) {
   }
   for (uint8_t n = 0u; n < CO_OD_NR_RPDO; n++) {
     co_rpdo_rt_t *rt = &node->rpdo[n];
-    uint16_t comm = (uint16_t)(0x1400u + n);
-    uint32_t ms = co_get(node, comm, 5u);
+    uint32_t ms = CO_RPDO_COMM(node, n, 05);
     if (ms == 0u || !rt->watched || rt->timed_out ||
-        (co_get(node, comm, 1u) & CO_COB_INVALID) != 0u) {
+        (CO_RPDO_COMM(node, n, 01) & CO_COB_INVALID) != 0u) {
       continue;
     }
     if (co_elapsed(now_us, rt->applied_us, ms * 1000u)) {
@@ -207,16 +204,15 @@ void co_tpdo_process(co_node_t *node, uint32_t now_us) {
     return;
   }
   for (uint8_t n = 0u; n < CO_OD_NR_TPDO; n++) {
-    uint16_t comm = (uint16_t)(0x1800u + n);
-    uint32_t cob = co_get(node, comm, 1u);
-    uint32_t type = co_get(node, comm, 2u);
+    uint32_t cob = CO_TPDO_COMM(node, n, 01);
+    uint32_t type = CO_TPDO_COMM(node, n, 02);
     co_tpdo_rt_t *rt = &node->tpdo[n];
     uint8_t data[8];
     if ((cob & CO_COB_INVALID) != 0u || type < 254u) {
       continue;
     }
-    uint32_t inhibit_us = co_get(node, comm, 3u) * 100u;
-    uint32_t event_us = co_get(node, comm, 5u) * 1000u;
+    uint32_t inhibit_us = CO_TPDO_COMM(node, n, 03) * 100u;
+    uint32_t event_us = CO_TPDO_COMM(node, n, 05) * 1000u;
     if (rt->sent_once && !co_elapsed(now_us, rt->last_tx_us, inhibit_us)) {
       continue;
     }

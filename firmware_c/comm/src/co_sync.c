@@ -17,8 +17,8 @@ void co_sync(co_node_t *node) {
     }
   }
   for (uint8_t n = 0u; n < CO_OD_NR_TPDO; n++) {
-    uint32_t cob = co_get(node, (uint16_t)(0x1800u + n), 1u);
-    uint32_t type = co_get(node, (uint16_t)(0x1800u + n), 2u);
+    uint32_t cob = CO_TPDO_COMM(node, n, 01);
+    uint32_t type = CO_TPDO_COMM(node, n, 02);
     co_tpdo_rt_t *rt = &node->tpdo[n];
     uint8_t data[8];
     if ((cob & CO_COB_INVALID) != 0u || type > 240u) {

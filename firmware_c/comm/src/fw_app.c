@@ -4,6 +4,7 @@
  */
 #include "pmlsm/fw_app.h"
 
+#include <float.h>
 #include <math.h>
 #include <string.h>
 
@@ -16,7 +17,7 @@
 
 /* ---- helpers ------------------------------------------------------------- */
 
-static int32_t fw_app_sat_i32(float v) {
+int32_t fw_app_round_i32(float v) {
   if (!(v == v)) {
     return 0;
   }
@@ -26,11 +27,25 @@ static int32_t fw_app_sat_i32(float v) {
   if (v <= -2147483520.0f) {
     return INT32_MIN;
   }
+#if defined(FLT_EVAL_METHOD) && FLT_EVAL_METHOD == 0
+  /* lrintf without the library call (about 100 instructions on the M4 per
+     conversion): below 2^22, adding and subtracting 1.5 * 2^23 rounds to an
+     integer in the current rounding mode, as lrintf does; from 2^23 on a float
+     is an integer. Needs float arithmetic in float (FLT_EVAL_METHOD 0) and no
+     reassociation (no -ffast-math); test_co_app compares it with lrintf. */
+  float a = fabsf(v);
+  if (a < 4194304.0f) {
+    return (int32_t)((v + 12582912.0f) - 12582912.0f);
+  }
+  if (a >= 8388608.0f) {
+    return (int32_t)v;
+  }
+#endif
   return (int32_t)lrintf(v);
 }
 
 static int32_t fw_app_sat_i16(float v) {
-  int32_t x = fw_app_sat_i32(v);
+  int32_t x = fw_app_round_i32(v);
   return x > 32767 ? 32767 : (x < -32768 ? -32768 : x);
 }
 
@@ -66,9 +81,18 @@ uint8_t fw_app_error_register(uint16_t code) {
  * f_pwm (fw_app_start_core) converts up to the present period first. */
 static uint32_t fw_app_time(fw_app_t *app, uint32_t step) {
   uint32_t f = app->f_pwm_Hz > 0u ? app->f_pwm_Hz : 1u;
-  uint64_t acc = (uint64_t)app->us_rem + (uint64_t)(step - app->time_step) * 1000000u;
-  app->now_us += (uint32_t)(acc / f); /* modulo 2^32 */
-  app->us_rem = (uint32_t)(acc % f);
+  uint32_t d = step - app->time_step;
+  if (d <= 4000u && app->us_rem <= 294967295u) {
+    /* the usual pass (a few periods): the sum fits 32 bits, one hardware
+       division instead of the 64-bit library one; the same result */
+    uint32_t acc = app->us_rem + d * 1000000u;
+    app->now_us += acc / f;
+    app->us_rem = acc % f;
+  } else {
+    uint64_t acc = (uint64_t)app->us_rem + (uint64_t)d * 1000000u;
+    app->now_us += (uint32_t)(acc / f); /* modulo 2^32 */
+    app->us_rem = (uint32_t)(acc % f);
+  }
   app->time_step = step;
   return app->now_us;
 }
@@ -183,7 +207,7 @@ static void fw_app_sync_cfg_to_od(fw_app_t *app) {
     if (e->type == CO_TYPE_U32) {
       co_node_set_u32(&app->node, l->pos, w >= 4294967040.0f ? UINT32_MAX : (uint32_t)lrintf(w));
     } else {
-      co_node_set_i32(&app->node, l->pos, fw_app_sat_i32(w));
+      co_node_set_i32(&app->node, l->pos, fw_app_round_i32(w));
     }
   }
   co_node_set_u32(&app->node, CO_OD_2002_00,
@@ -804,15 +828,15 @@ static void fw_app_apply_commands(fw_app_t *app) {
     app->cw_pending = 0u;
     (void)fw_controlword(&app->ctrl, app->cw);
   }
-  int32_t mode = co_node_get_i32(n, CO_OD_6060_00);
+  int32_t mode = CO_NODE_GET_I(n, 6060_00);
   fw_mode_t m = mode == FW_APP_MODE_CST ? FW_MODE_FORCE : FW_MODE_SPEED;
   if (app->mode_applied != (int32_t)m && fw_set_mode(&app->ctrl, m) == FW_OK) {
     app->mode_applied = (int32_t)m;
   }
   if (cfg != NULL) {
-    float v_mps = (float)co_node_get_i32(n, CO_OD_60FF_00) * 1.0e-6f;
+    float v_mps = (float)CO_NODE_GET_I(n, 60FF_00) * 1.0e-6f;
     (void)fw_set_speed_ref(&app->ctrl, fw_units_mps_to_radps_e(cfg, v_mps));
-    float t_pm = (float)co_node_get_i32(n, CO_OD_6071_00);
+    float t_pm = (float)CO_NODE_GET_I(n, 6071_00);
     (void)fw_set_iq_ref(&app->ctrl, t_pm * 1.0e-3f * cfg->loops.i_max_A);
   }
   /* a fault reset does not clear a heartbeat that is still missing, nor an
@@ -837,38 +861,47 @@ static void fw_app_apply_commands(fw_app_t *app) {
   fw_app_unlock(app, key);
 }
 
+/* The OD entries the background writes or reads every period are addressed by
+ * their generated compile-time handles (co_node.h CO_NODE_PUT/GET): the same
+ * bytes as co_node_set_* / co_node_get_*, without a lookup or a check. Runs of
+ * entries indexed by a counter rely on their subs lying back to back: */
+_Static_assert(CO_OD_OFF_2030_08 == CO_OD_OFF_2030_01 + 7u * CO_OD_LEN_2030_01,
+               "0x2030:1..8 contiguous");
+_Static_assert(CO_OD_LEN_2060_03 == 1u && CO_OD_OFF_2060_0A == CO_OD_OFF_2060_03 + 7u,
+               "0x2060:3..10 contiguous bytes");
+
 static void fw_app_update_od(fw_app_t *app, const fw_snapshot_t *s) {
   co_node_t *n = &app->node;
   const fw_config_t *cfg = fw_get_config(&app->ctrl);
   float i_max = (cfg != NULL && cfg->loops.i_max_A > 0.0f) ? cfg->loops.i_max_A : 1.0f;
-  co_node_set_u32(n, CO_OD_6041_00, s->statusword);
-  co_node_set_i32(n, CO_OD_6061_00, s->mode == (uint8_t)FW_MODE_FORCE ? FW_APP_MODE_CST
-                                                                         : FW_APP_MODE_CSV);
-  co_node_set_i32(n, CO_OD_6064_00, fw_app_sat_i32(s->pos_hat_m * 1.0e6f));
-  co_node_set_i32(n, CO_OD_606C_00, fw_app_sat_i32(s->speed_hat_mps * 1.0e6f));
-  co_node_set_i32(n, CO_OD_6077_00, fw_app_sat_i16(s->i_dq_A[1] / i_max * 1000.0f));
-  co_node_set_u32(n, CO_OD_603F_00, s->fault_code);
-  co_node_set_f32(n, CO_OD_2020_01, s->theta_hat_rad);
-  co_node_set_f32(n, CO_OD_2020_02, s->omega_hat_radps);
-  co_node_set_f32(n, CO_OD_2020_03, s->speed_hat_mps);
-  co_node_set_f32(n, CO_OD_2020_04, s->pll_err_rad);
-  co_node_set_f32(n, CO_OD_2020_05, s->hf_amp_A);
-  co_node_set_f32(n, CO_OD_2020_06, s->pll_err_f_rad);
-  co_node_set_f32(n, CO_OD_2020_07, s->sogi_k_eff);
-  co_node_set_u32(n, CO_OD_2020_08, s->start_phase);
-  co_node_set_f32(n, CO_OD_2020_09, s->accel_dist_radps2);
+  CO_NODE_PUT(n, 6041_00, s->statusword);
+  CO_NODE_PUT(n, 6061_00, s->mode == (uint8_t)FW_MODE_FORCE ? FW_APP_MODE_CST : FW_APP_MODE_CSV);
+  CO_NODE_PUT(n, 6064_00, fw_app_round_i32(s->pos_hat_m * 1.0e6f));
+  CO_NODE_PUT(n, 606C_00, fw_app_round_i32(s->speed_hat_mps * 1.0e6f));
+  CO_NODE_PUT(n, 6077_00, fw_app_sat_i16(s->i_dq_A[1] / i_max * 1000.0f));
+  CO_NODE_PUT(n, 603F_00, s->fault_code);
+  CO_NODE_PUT_F32(n, 2020_01, s->theta_hat_rad);
+  CO_NODE_PUT_F32(n, 2020_02, s->omega_hat_radps);
+  CO_NODE_PUT_F32(n, 2020_03, s->speed_hat_mps);
+  CO_NODE_PUT_F32(n, 2020_04, s->pll_err_rad);
+  CO_NODE_PUT_F32(n, 2020_05, s->hf_amp_A);
+  CO_NODE_PUT_F32(n, 2020_06, s->pll_err_f_rad);
+  CO_NODE_PUT_F32(n, 2020_07, s->sogi_k_eff);
+  CO_NODE_PUT(n, 2020_08, s->start_phase);
+  CO_NODE_PUT_F32(n, 2020_09, s->accel_dist_radps2);
   uint16_t hist[FW_FAULT_HISTORY_LEN];
   uint32_t nh = fw_fault_history(&app->ctrl, hist, FW_FAULT_HISTORY_LEN);
   for (uint32_t k = 0u; k < 8u; k++) {
-    co_node_set_u32(n, (uint16_t)(CO_OD_2030_01 + k), k < nh ? hist[k] : 0u);
+    co_node_put_at(n, (uint16_t)(CO_OD_OFF_2030_01 + k * CO_OD_LEN_2030_01), CO_OD_LEN_2030_01,
+                   k < nh ? hist[k] : 0u);
   }
-  co_node_set_u32(n, CO_OD_2070_02, (uint32_t)app->trace.state);
-  co_node_set_f32(n, CO_OD_2080_02, s->L_small_meas_H);
-  co_node_set_f32(n, CO_OD_2080_03, s->L_large_meas_H);
+  CO_NODE_PUT(n, 2070_02, (uint32_t)app->trace.state);
+  CO_NODE_PUT_F32(n, 2080_02, s->L_small_meas_H);
+  CO_NODE_PUT_F32(n, 2080_03, s->L_large_meas_H);
   if (s->cia402_state != (uint8_t)FW_CIA402_OPERATION_ENABLED &&
-      co_node_get_f32(n, CO_OD_2080_01) != 0.0f) {
+      CO_NODE_GET_F32(n, 2080_01) != 0.0f) {
     /* an identification's d-axis current never survives leaving OPERATION ENABLED */
-    co_node_set_f32(n, CO_OD_2080_01, 0.0f);
+    CO_NODE_PUT_F32(n, 2080_01, 0.0f);
     uint32_t key = fw_app_lock(app);
     (void)fw_set_id_ref(&app->ctrl, 0.0f);
     fw_app_unlock(app, key);
@@ -892,18 +925,17 @@ static void fw_app_faults(fw_app_t *app, const fw_snapshot_t *s) {
 
 static void fw_app_serial(fw_app_t *app, const fw_snapshot_t *s, uint32_t step) {
   co_node_t *n = &app->node;
-  uint32_t dec = co_node_get_u32(n, CO_OD_2060_01);
+  /* the telemetry configuration (0x2060) read in place: as cheap as a cached
+     copy, and an SDO write is seen at the next period without a hook */
+  uint32_t dec = CO_NODE_GET(n, 2060_01);
   if (dec > 0u && step % dec == 0u) {
-    uint8_t ids[FW_SERIAL_MAX_SIGNALS];
-    uint8_t cnt = (uint8_t)co_node_get_u32(n, CO_OD_2060_02);
+    uint8_t cnt = (uint8_t)CO_NODE_GET(n, 2060_02);
     uint8_t payload[FW_SERIAL_MAX_PAYLOAD];
     if (cnt > FW_SERIAL_MAX_SIGNALS) {
       cnt = FW_SERIAL_MAX_SIGNALS;
     }
-    for (uint8_t k = 0u; k < cnt; k++) {
-      ids[k] = (uint8_t)co_node_get_u32(n, (uint16_t)(CO_OD_2060_03 + k));
-    }
-    size_t len = fw_serial_telemetry_payload(s, ids, cnt, payload, sizeof payload);
+    size_t len = fw_serial_telemetry_payload(s, &n->od[CO_OD_OFF_2060_03], cnt, payload,
+                                             sizeof payload);
     if (len > 0u) {
       fw_app_send_frame(app, FW_SERIAL_TYPE_TELEMETRY, payload, len);
       app->count.telemetry_sent++;

@@ -33,12 +33,13 @@ uint16_t fw_serial_crc16(const uint8_t *data, size_t len) {
   if (data == NULL) {
     return crc;
   }
+  /* CRC-16/CCITT-FALSE (poly 0x1021) a byte at a time without a table: the
+     eight shift/xor steps of the bit-wise form folded into shifts of the
+     byte's combined feedback x (the same value; test_serial compares both) */
   for (size_t i = 0u; i < len; i++) {
-    crc = (uint16_t)(crc ^ (uint16_t)((uint16_t)data[i] << 8));
-    for (int b = 0; b < 8; b++) {
-      crc = (crc & 0x8000u) != 0u ? (uint16_t)((uint16_t)(crc << 1) ^ 0x1021u)
-                                  : (uint16_t)(crc << 1);
-    }
+    uint32_t x = ((uint32_t)crc >> 8) ^ data[i];
+    x ^= x >> 4;
+    crc = (uint16_t)(((uint32_t)crc << 8) ^ (x << 12) ^ (x << 5) ^ x);
   }
   return crc;
 }

@@ -26,6 +26,7 @@
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "co_od_table.h"
 #include "pmlsm/co_od.h"
@@ -216,6 +217,52 @@ void co_node_set_u32(co_node_t *node, uint16_t pos, uint32_t v);
 void co_node_set_i32(co_node_t *node, uint16_t pos, int32_t v);
 void co_node_set_f32(co_node_t *node, uint16_t pos, float v);
 void co_node_set_str(co_node_t *node, uint16_t pos, const char *s);
+
+/*
+ * Per-period OD access for the application by compile-time handle: the
+ * generated CO_OD_OFF_<index>_<sub> / CO_OD_LEN_<index>_<sub> (co_od_table.h)
+ * locate the value in the OD RAM, so no lookup and no check runs; the value is
+ * stored exactly as co_node_set_u32 / _i32 / _f32 store it (integers: the
+ * entry's LEN low bytes, little endian). ii_ss is the entry as in the position
+ * constants, e.g. CO_NODE_PUT(node, 6041_00, sw).
+ */
+static inline void co_node_put_at(co_node_t *node, uint16_t off, uint16_t len, uint32_t v) {
+  co_le_store(&node->od[off], len, v);
+}
+static inline uint32_t co_node_get_at(const co_node_t *node, uint16_t off, uint16_t len) {
+  return co_le_load(&node->od[off], len);
+}
+/** Signed value of an entry of len (1..4) bytes: sign-extended as co_node_get_i32 does. */
+static inline int32_t co_node_get_i_at(const co_node_t *node, uint16_t off, uint16_t len) {
+  uint32_t raw = co_le_load(&node->od[off], len);
+  if (len >= 4u) {
+    return (int32_t)raw;
+  }
+  uint32_t m = 1u << (8u * len - 1u);
+  return (int32_t)(raw ^ m) - (int32_t)m;
+}
+static inline void co_node_put_f32_at(co_node_t *node, uint16_t off, float v) {
+  uint32_t raw;
+  memcpy(&raw, &v, sizeof raw);
+  co_le_store(&node->od[off], 4u, raw);
+}
+static inline float co_node_get_f32_at(const co_node_t *node, uint16_t off) {
+  uint32_t raw = co_le_load(&node->od[off], 4u);
+  float f;
+  memcpy(&f, &raw, sizeof f);
+  return f;
+}
+/* 0 when the entry is 4 bytes long; else a compile error (negative array size) */
+#define CO_NODE_LEN4_(ii_ss) ((void)sizeof(char[CO_OD_LEN_##ii_ss == 4u ? 1 : -1]))
+#define CO_NODE_PUT(node, ii_ss, v) \
+  co_node_put_at((node), CO_OD_OFF_##ii_ss, CO_OD_LEN_##ii_ss, (uint32_t)(v))
+#define CO_NODE_GET(node, ii_ss) co_node_get_at((node), CO_OD_OFF_##ii_ss, CO_OD_LEN_##ii_ss)
+#define CO_NODE_GET_I(node, ii_ss) \
+  co_node_get_i_at((node), CO_OD_OFF_##ii_ss, CO_OD_LEN_##ii_ss)
+#define CO_NODE_PUT_F32(node, ii_ss, v) \
+  (CO_NODE_LEN4_(ii_ss), co_node_put_f32_at((node), CO_OD_OFF_##ii_ss, (v)))
+#define CO_NODE_GET_F32(node, ii_ss) \
+  (CO_NODE_LEN4_(ii_ss), co_node_get_f32_at((node), CO_OD_OFF_##ii_ss))
 
 /* Frame ring helpers (also used for the application's queues). */
 void co_queue_init(co_queue_t *q);

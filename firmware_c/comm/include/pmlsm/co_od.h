@@ -16,6 +16,7 @@
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -133,10 +134,69 @@ void co_od_set_u32(uint8_t *ram, size_t ram_size, uint16_t pos, uint32_t v);
 void co_od_set_i32(uint8_t *ram, size_t ram_size, uint16_t pos, int32_t v);
 void co_od_set_f32(uint8_t *ram, size_t ram_size, uint16_t pos, float v);
 
-/** Read a little-endian unsigned integer of n (1..4) bytes. */
+/** Read a little-endian unsigned integer of n (1..4) bytes (0 for NULL or n > 4). */
 uint32_t co_le_get(const uint8_t *p, size_t n);
-/** Write v as n (1..4) little-endian bytes. */
+/** Write v as n (1..4) little-endian bytes (nothing for NULL or n > 4). */
 void co_le_put(uint8_t *p, size_t n, uint32_t v);
+
+/* Little-endian access without the argument checks, for the per-period paths
+ * (p valid, n 1..4; n > 4 reads 0 / writes nothing). On a little-endian
+ * target (the compiler says so) 2 and 4 bytes are one memcpy, i.e. one
+ * (unaligned) load or store on the Cortex-M4; elsewhere byte by byte. Both
+ * give the same bytes (tests/c/test_co_od_config.c compares them). */
+#if defined(__BYTE_ORDER__) && defined(__ORDER_LITTLE_ENDIAN__) && \
+    __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+#define CO_LE_HOST 1
+#else
+#define CO_LE_HOST 0
+#endif
+
+static inline uint32_t co_le_load(const uint8_t *p, size_t n) {
+  if (n == 1u) {
+    return p[0];
+  }
+#if CO_LE_HOST
+  if (n == 4u) {
+    uint32_t v;
+    memcpy(&v, p, sizeof v);
+    return v;
+  }
+  if (n == 2u) {
+    uint16_t v;
+    memcpy(&v, p, sizeof v);
+    return v;
+  }
+#endif
+  uint32_t v = 0u;
+  for (size_t i = 0u; i < n && i < 4u; i++) {
+    v |= (uint32_t)p[i] << (8u * i);
+  }
+  return v;
+}
+
+static inline void co_le_store(uint8_t *p, size_t n, uint32_t v) {
+  if (n == 1u) {
+    p[0] = (uint8_t)v;
+    return;
+  }
+  if (n > 4u) {
+    return;
+  }
+#if CO_LE_HOST
+  if (n == 4u) {
+    memcpy(p, &v, sizeof v);
+    return;
+  }
+  if (n == 2u) {
+    uint16_t h = (uint16_t)v;
+    memcpy(p, &h, sizeof h);
+    return;
+  }
+#endif
+  for (size_t i = 0u; i < n; i++) {
+    p[i] = (uint8_t)(v >> (8u * i));
+  }
+}
 
 #ifdef __cplusplus
 }

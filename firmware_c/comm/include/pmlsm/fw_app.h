@@ -231,6 +231,11 @@ fw_ctrl_t *fw_app_ctrl(fw_app_t *app);
 co_node_t *fw_app_node(fw_app_t *app);
 const fw_app_counters_t *fw_app_counters(const fw_app_t *app);
 
+/** v rounded to the nearest integer as lrintf (ties to even in the default
+ *  rounding mode), saturated to int32; NaN gives 0 (the OD's position, speed
+ *  and current objects). */
+int32_t fw_app_round_i32(float v);
+
 /** Error register (0x1001) bits for a fault code. */
 uint8_t fw_app_error_register(uint16_t fault_code);
 
