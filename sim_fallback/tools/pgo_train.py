@@ -8,13 +8,17 @@ Mostly the campaign case (paper load step, lean recording, adaptive SOGI), plus 
 runs of the other paper scenarios, extractors, the linear motor, full recording and
 n_sub = 2, so that none of them is laid out as never executed. Deterministic (fixed
 seeds): the same profile on every build. Without numpy (e.g. an isolated wheel build
-environment) it trains nothing and the library is built without a profile.
+environment), or when the Python side cannot run the instrumented library, it says so and
+trains nothing (or what ran before the failure): the library is then built without (or
+with a partial) profile, the same values either way; the tests report the failure.
 """
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
@@ -25,6 +29,17 @@ def main() -> int:
     except ImportError as e:  # no numpy: build without a profile
         print(f"pgo_train: skipped ({e}); the simulator is built without a profile")
         return 0
+    try:
+        train(paper_scenario)
+    except Exception as e:  # noqa: BLE001 - a profile is an optimisation, never a build error
+        print(f"pgo_train: stopped ({type(e).__name__}: {e}); partial profile")
+        return 0
+    print("pgo_train: done")
+    return 0
+
+
+def train(paper_scenario: Callable[..., Any]) -> None:
+    """The training runs (sim_fallback.paper_scenario on the instrumented library)."""
     lean = ["position_error_rms_rad"]
     for seed in range(8):  # the campaign run (bench campaign, benchmarks/bench_campaign.py)
         paper_scenario("load_step", seed=seed, t_end=0.5, record_decimation=8, metrics=lean)
@@ -35,8 +50,6 @@ def main() -> int:
         paper_scenario("load_step", extractor=ex, seed=4, t_end=0.3, metrics=lean)
     paper_scenario("load_step", motor="iron_core_linear", seed=5, t_end=0.3, metrics=lean)
     paper_scenario("load_step", seed=6, t_end=0.2, plant={"n_sub": 2}, metrics=lean)
-    print("pgo_train: done")
-    return 0
 
 
 if __name__ == "__main__":
