@@ -9,6 +9,7 @@
  * call.
  */
 #include <math.h>
+#include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -68,10 +69,17 @@ int sim_params_check(const sim_plant_params_t *p, const char **bad_field) {
 
 /* ---- life cycle -------------------------------------------------------- */
 
+_Static_assert(offsetof(sim_t, flux_tab) + sizeof(((sim_t *)0)->flux_tab) == sizeof(sim_t),
+               "sim_new leaves the flux grid, the last member of sim_t, unzeroed");
+
 sim_t *sim_new(const sim_plant_params_t *p) {
   if (sim_params_check(p, NULL) != 0) return NULL;
-  sim_t *s = (sim_t *)calloc(1, sizeof(sim_t));
+  /* Zeroed but for the flux grid (the last member, ~90 KiB): an entry is only
+   * read once flux_ok marks it computed. calloc zeroed all of it in every
+   * run (a reused heap block), ~100k instructions and the cache lines with them. */
+  sim_t *s = (sim_t *)malloc(sizeof(sim_t));
   if (!s) return NULL;
+  memset(s, 0, offsetof(sim_t, flux_tab));
   s->p = *p;
   sim_plant_derive(s);
   sim_rng_seed(s, p->seed);
@@ -231,23 +239,30 @@ static inline double adc_quantise(double x, double max) {
  * present state (noise drawn in the order phase a, b, c, DC link). Per-phase
  * constants from sim_plant_derive: adc_base = adc_mid + offset, adc_gain1 =
  * 1 + gain error, so cnt = adc_base + i (1 + gain err) / lsb is evaluated as the
- * model writes it, operation for operation. */
+ * model writes it, operation for operation. The counts are held in scalars, not
+ * an array: the compiler kept the array on the stack, stored its elements one by
+ * one and read two of them back as one 16-byte load (adc_last_cnt), which cannot
+ * be forwarded from two stores and stalled every period (~12 % of sample_adc). */
 SIM_INLINE void sample_counts(sim_t *s, double cnt[4]) {
   const sim_plant_params_t *p = &s->p;
   double c, sn;
   sim_plant_sincos(s, s->st.x_m, &c, &sn);
   const double i_al = c * s->st.i_d_A - sn * s->st.i_q_A;
   const double i_be = sn * s->st.i_d_A + c * s->st.i_q_A;
-  const double i_abc[3] = {i_al, -0.5 * i_al + 0.5 * SIM_SQRT3 * i_be,
-                           -0.5 * i_al - 0.5 * SIM_SQRT3 * i_be};
-  for (int j = 0; j < 3; ++j)
-    cnt[j] = s->adc_base[j] + i_abc[j] * s->adc_gain1[j] * s->inv_adc_lsb_A;
+  const double i_b = -0.5 * i_al + 0.5 * SIM_SQRT3 * i_be;
+  const double i_c = -0.5 * i_al - 0.5 * SIM_SQRT3 * i_be;
+  double ca = s->adc_base[0] + i_al * s->adc_gain1[0] * s->inv_adc_lsb_A;
+  double cb = s->adc_base[1] + i_b * s->adc_gain1[1] * s->inv_adc_lsb_A;
+  double cc = s->adc_base[2] + i_c * s->adc_gain1[2] * s->inv_adc_lsb_A;
   double u = p->u_dc_V;
   const double sig_i = p->adc_noise_counts, sig_u = p->udc_noise_V;
   if (sig_i > 0.0 || sig_u > 0.0) {
     uint64_t ra = s->rng[0], rb = s->rng[1], rc = s->rng[2], rd = s->rng[3];
-    if (sig_i > 0.0)
-      for (int j = 0; j < 3; ++j) cnt[j] += sig_i * sim_rng_gauss4(s, &ra, &rb, &rc, &rd);
+    if (sig_i > 0.0) {
+      ca += sig_i * sim_rng_gauss4(s, &ra, &rb, &rc, &rd);
+      cb += sig_i * sim_rng_gauss4(s, &ra, &rb, &rc, &rd);
+      cc += sig_i * sim_rng_gauss4(s, &ra, &rb, &rc, &rd);
+    }
     if (sig_u > 0.0) u += sig_u * sim_rng_gauss4(s, &ra, &rb, &rc, &rd);
     s->rng[0] = ra;
     s->rng[1] = rb;
@@ -255,13 +270,19 @@ SIM_INLINE void sample_counts(sim_t *s, double cnt[4]) {
     s->rng[3] = rd;
   }
   const double top = s->adc_max;
-  for (int j = 0; j < 3; ++j) cnt[j] = adc_quantise(cnt[j], top);
-  cnt[3] = adc_quantise(u * s->inv_udc_lsb_V, top);
+  ca = adc_quantise(ca, top);
+  cb = adc_quantise(cb, top);
+  cc = adc_quantise(cc, top);
   const uint32_t stuck = p->adc_stuck_mask;
-  if (stuck)
-    for (int j = 0; j < 3; ++j)
-      if (stuck & (1u << j)) cnt[j] = s->adc_last_cnt[j]; /* frozen converter */
-  for (int j = 0; j < 3; ++j) s->adc_last_cnt[j] = cnt[j];
+  if (stuck) { /* frozen converter */
+    if (stuck & 1u) ca = s->adc_last_cnt[0];
+    if (stuck & 2u) cb = s->adc_last_cnt[1];
+    if (stuck & 4u) cc = s->adc_last_cnt[2];
+  }
+  s->adc_last_cnt[0] = cnt[0] = ca;
+  s->adc_last_cnt[1] = cnt[1] = cb;
+  s->adc_last_cnt[2] = cnt[2] = cc;
+  cnt[3] = adc_quantise(u * s->inv_udc_lsb_V, top);
 }
 
 void sim_sample(sim_t *s, fw_inputs_t *in, fw_adc_inputs_t *adc) {
