@@ -126,6 +126,9 @@ void sim_plant_derive(sim_t *s) {
   s->inv_flux_grid_A = 1.0 / s->flux_grid_A;
   s->flux_far_A = (p->dL_sat_H == 0.0) ? (double)INFINITY : BASIS_FAR_DZ * p->I_sat_A;
   s->basis_valid = 0;
+  /* the flux grid's coefficients depend on psi_f, L_d0, dL_sat and I_sat: after a
+   * parameter change (sim_set_params) every entry is computed afresh when used */
+  memset(s->flux_ok, 0, sizeof s->flux_ok);
 }
 
 /** ln cosh(z), overflow free. */
