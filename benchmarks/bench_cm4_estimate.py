@@ -150,14 +150,30 @@ def harness_sources() -> tuple[list[str], list[str]]:
     return srcs, incs
 
 
+def speed_sources(opt: str) -> dict[str, str]:
+    """The sources the CM4 image compiles at another level than its build type's
+    (firmware_c/CMakeLists.txt: PMLSM_CM4_FAST_SOURCES, at PMLSM_CM4_FAST_OPT),
+    by absolute path; only for -Os (MinSizeRel, the shipped image)."""
+    if opt != "Os":
+        return {}
+    text = (FW / "CMakeLists.txt").read_text()
+    m = re.search(r"set\(PMLSM_CM4_FAST_SOURCES([^)]*)\)", text)
+    lvl = re.search(r"set\(PMLSM_CM4_FAST_OPT\s+-(O\w+)\)", text)
+    if not m or not lvl:
+        return {}
+    out = {}
+    for tok in m.group(1).split():
+        name = tok.replace("${CMAKE_CURRENT_SOURCE_DIR}/", "")
+        out[str((FW / name).resolve())] = lvl.group(1)
+    return out
+
+
 def build(opt: str, outdir: Path, lto: bool = True) -> Path:
     outdir.mkdir(parents=True, exist_ok=True)
     elf = outdir / "harness.elf"
     srcs, incs = harness_sources()
-    cmd = [
-        "arm-none-eabi-gcc",
+    common = [
         *CPU_FLAGS,
-        f"-{opt}",
         *(["-flto"] if lto else []),  # as the CM4 image: inlining across the blocks
         "-std=c11",
         "-DNDEBUG",
@@ -167,8 +183,24 @@ def build(opt: str, outdir: Path, lto: bool = True) -> Path:
         "-Wextra",
         "-g",
         *incs,
-        *srcs,
-        str(CM4 / "startup.c"),
+    ]
+    # one object per source, each at the level the CM4 image compiles it at
+    # (speed_sources), then one link (with -flto, every function keeps the
+    # level it was compiled at)
+    fast = speed_sources(opt)
+    objs = []
+    for i, src in enumerate([*srcs, str(CM4 / "startup.c")]):
+        obj = outdir / f"{i:02d}_{Path(src).stem}.o"
+        lvl = fast.get(str(Path(src).resolve()), opt)
+        r = run(["arm-none-eabi-gcc", f"-{lvl}", *common, "-c", src, "-o", str(obj)])
+        if r.returncode != 0:
+            die(f"cross build (-{lvl}, {src}) failed:\n{r.stderr}")
+        objs.append(str(obj))
+    cmd = [
+        "arm-none-eabi-gcc",
+        f"-{opt}",
+        *common,
+        *objs,
         "-T",
         str(CM4 / "cm4.ld"),
         "--specs=nano.specs",

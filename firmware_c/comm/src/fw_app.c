@@ -929,7 +929,7 @@ static void fw_app_serial(fw_app_t *app, const fw_snapshot_t *s, uint32_t step) 
 /* After the step: publish the period to the background (the snapshot's raw
  * half; the background completes it), count the period. One release fence
  * for the slot and both counters. */
-static void fw_app_publish(fw_app_t *app) {
+FW_ISR_OPT static void fw_app_publish(fw_app_t *app) {
   uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
   uint32_t tail = atomic_load_explicit(&app->ring_tail, memory_order_acquire);
   const uint32_t step = app->step;
@@ -951,7 +951,7 @@ static void fw_app_publish(fw_app_t *app) {
   atomic_store_explicit(&app->isr_step, step + 1u, memory_order_relaxed);
 }
 
-void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *out) {
+FW_ISR_OPT void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *out) {
   fw_app_t *app = (fw_app_t *)ctx;
   if (app == NULL || adc == NULL || out == NULL) {
     if (out != NULL) {

@@ -150,6 +150,16 @@ static inline float fw_clampf(float x, float lo, float hi) {
 #define FW_NOINLINE
 #endif
 
+/** The control interrupt's functions outside the sources the Cortex-M4F image
+ *  compiles at -O2 (firmware_c/CMakeLists.txt, PMLSM_CM4_FAST_SOURCES): the
+ *  same level, so that the core's code is inlined into them (GCC does not
+ *  inline across optimisation levels). ARM GCC only; elsewhere nothing. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__arm__) && defined(__OPTIMIZE_SIZE__)
+#define FW_ISR_OPT __attribute__((optimize("O2")))
+#else
+#define FW_ISR_OPT
+#endif
+
 /** fw_clampf(x, -lim, lim), the same result for every x and lim (NaN and a
  *  negative lim included): |x| <= lim implies -lim <= x <= lim, so the usual
  *  in-range value costs one compare instead of two (FPv4 has no VMAXNM/VMINNM;
