@@ -179,7 +179,7 @@ bool fw_svpwm_f32(fw_vec2_f32_t u_ab_V, float u_dc_V, float duty_abc[3],
   /* the duties span (u_hi - u_lo) / u_dc around 1/2; a span within 0.999 of
    * the carrier cannot leave [0, 1] by rounding, so the clamp (which only
    * absorbs rounding on the circle boundary) runs only near the boundary */
-  if (!((u_hi - u_lo) * inv_dc < 0.999f)) {
+  if (FW_UNLIKELY(!((u_hi - u_lo) * inv_dc < 0.999f))) {
     for (int i = 0; i < 3; i++) {
       duty_abc[i] = fw_clampf(duty_abc[i], 0.0f, 1.0f);
     }

@@ -19,10 +19,10 @@ static float lp_alpha(float f_Hz, float dt_s) {
  *  increments once the position is large (ulp 0.06 rad at 1e6 rad). */
 static FW_ALWAYS_INLINE void pos_add(fw_obs_t *o, float d) {
   float x = o->pos_unwrapped_e + d;
-  if (x >= FW_PI_F32) {
+  if (FW_UNLIKELY(x >= FW_PI_F32)) {
     x -= FW_TWO_PI_F32;
     o->pos_turns++;
-  } else if (x < -FW_PI_F32) {
+  } else if (FW_UNLIKELY(x < -FW_PI_F32)) {
     x += FW_TWO_PI_F32;
     o->pos_turns--;
   }
@@ -128,7 +128,7 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
   fw_pll_f32_t *const pll = &o->pll;
   const float w_max = pll->w_max_radps;
   float w_i = pll->w_i_radps;
-  if (eps - eps == 0.0f) { /* a non-finite error holds the PLL (as fw_pll_step_f32) */
+  if (FW_LIKELY(eps - eps == 0.0f)) { /* a non-finite error holds the PLL (as fw_pll_step_f32) */
     w_i = fw_clamp_symf(w_i + (o->ki0_dt * lam2) * eps, w_max);
     const float w_hat = w_i + kp * eps;
     pll->w_hat_radps = w_hat;
@@ -157,7 +157,7 @@ fw_fault_t fw_obs_supervise(fw_obs_t *o, const fw_config_t *cfg, float hf_amp_A,
     return FW_FAULT_EST_HF_LOW;
   }
   if (running) {
-    if (fabsf(o->err_f) > cfg->protection.pll_err_max_rad) {
+    if (FW_UNLIKELY(fabsf(o->err_f) > cfg->protection.pll_err_max_rad)) {
       o->pll_err_time_s += o->dt_s;
       if (o->pll_err_time_s > cfg->protection.pll_err_time_s) {
         return FW_FAULT_EST_PLL_ERROR;

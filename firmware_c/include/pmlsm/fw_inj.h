@@ -91,7 +91,7 @@ static inline void fw_inj_adapt(fw_inj_t *j, const fw_cfg_estimator_t *est, floa
    * while the PLL error is large, a narrow one when locked. */
   const float k = est->sogi_k_adapt_min + (est->sogi_k_adapt_max - est->sogi_k_adapt_min) * r;
   const float dk = k - j->sogi_a.k;
-  if (dk > FW_INJ_SOGI_K_STEP || dk < -FW_INJ_SOGI_K_STEP) {
+  if (FW_UNLIKELY(dk > FW_INJ_SOGI_K_STEP || dk < -FW_INJ_SOGI_K_STEP)) {
     fw_inj_set_k(j, k);
   }
 }

@@ -177,7 +177,7 @@ static FW_ALWAYS_INLINE fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t 
     m->i_last_A[1] = iq;
     m->n_pwm++;
   }
-  if (!in->running) {
+  if (FW_UNLIKELY(!in->running)) {
     m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
     m->verdict = FW_FAULT_NONE;
   } else {
