@@ -446,8 +446,13 @@ static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
                          fw_period_t *p) {
   const fw_fault_t f =
       fw_fault_check_inputs(&c->cfg.protection, in, fw_cia402_power_enabled(c->sm.state));
-  *safe = *in;
-  if (f != FW_FAULT_NONE) {
+  /* field by field: the copy can then stay in registers (a struct copy is an
+   * LDM/STM pair through the stack) */
+  safe->i_abc_A[0] = in->i_abc_A[0];
+  safe->i_abc_A[1] = in->i_abc_A[1];
+  safe->i_abc_A[2] = in->i_abc_A[2];
+  safe->u_dc_V = in->u_dc_V;
+  if (FW_UNLIKELY(f != FW_FAULT_NONE)) {
     latch_fault(c, f);
     if (f == FW_FAULT_INPUT_INVALID) {
       memset(safe, 0, sizeof(*safe)); /* never propagate NaN into the state */
@@ -471,7 +476,8 @@ static bool stage_power(fw_ctrl_t *c, fw_period_t *p) {
       fw_cia402_fault_reaction_done(&c->sm);
     }
   }
-  return (fw_cia402_power_enabled(c->sm.state) || p->braking) && c->phase != FW_START_IDLE;
+  const bool on = fw_cia402_power_enabled(c->sm.state) || p->braking;
+  return FW_LIKELY(on && c->phase != FW_START_IDLE);
 }
 
 /** Power stage off: current-sensor offsets and sum, i2t cools down. */

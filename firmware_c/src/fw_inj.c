@@ -80,7 +80,7 @@ static FW_ALWAYS_INLINE void ring_push(fw_inj_t *j, float ed, float eq, float ia
     j->sum_ia += ia;
     j->sum_ib += ib;
   }
-  j->ring_idx = FW_UNLIKELY(i + 1u == j->n_inj) ? 0u : i + 1u;
+  j->ring_idx = (i + 1u == j->n_inj) ? 0u : i + 1u;
 }
 
 void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab, fw_sincos_f32_t sc_k,

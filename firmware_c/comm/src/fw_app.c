@@ -933,7 +933,7 @@ FW_ISR_OPT static void fw_app_publish(fw_app_t *app) {
   uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
   uint32_t tail = atomic_load_explicit(&app->ring_tail, memory_order_acquire);
   const uint32_t step = app->step;
-  if (head - tail < FW_APP_SNAP_RING) {
+  if (FW_LIKELY(head - tail < FW_APP_SNAP_RING)) {
     /* through a volatile: the compiler keeps the slot's address in one
        register instead of rebuilding it for every field (-Os, GCC 12) */
     fw_app_period_t *volatile slot = &app->ring[head % FW_APP_SNAP_RING];
