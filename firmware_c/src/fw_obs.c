@@ -35,7 +35,9 @@ void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s) {
   o->err_alpha = lp_alpha(FW_ERR_FILTER_HZ, dt_s);
   /* reciprocals and products the step would otherwise divide for */
   o->eps_gain = cfg->machine.L_q_H / (cfg->machine.L_q_H - cfg->machine.L_d_H);
-  o->inv_adapt_err = 1.0f / cfg->estimator.sogi_adapt_err_rad;
+  /* > 0 (sogi_adapt_err_rad >= 0.001, checked; fabsf: never negative, so that
+   * fw_obs_update's ratio needs no lower clamp) */
+  o->inv_adapt_err = fabsf(1.0f / cfg->estimator.sogi_adapt_err_rad);
   o->hf_min_A = cfg->protection.hf_min_ratio * dt_s * cfg->estimator.u_inj_V / cfg->machine.L_q_H;
   /* the observer's gains and products, so the step reads nothing from cfg */
   o->bw_min = cfg->estimator.pll_bw_min;
@@ -110,7 +112,9 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
    * per-sample eps carries ~0.04 rad of sensor noise, so a filtered |eps|
    * would measure the noise, not the lock. */
   o->err_f += o->err_alpha * (eps - o->err_f);
-  const float r = fw_clampf(fabsf(o->err_f) * o->inv_adapt_err, 0.0f, 1.0f);
+  /* fw_clampf(x, 0, 1) for an x that is >= 0 or NaN (inv_adapt_err >= 0) */
+  const float r_raw = fabsf(o->err_f) * o->inv_adapt_err;
+  const float r = FW_UNLIKELY(r_raw > 1.0f) ? 1.0f : r_raw;
   *adapt_r = r;
 
   if (!in->settled) {
