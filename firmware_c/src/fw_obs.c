@@ -126,7 +126,6 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
   const float lam = o->bw_min + o->bw_span * r;
   const float lam2 = lam * lam;
   const float kp = o->kp0 * lam;
-  o->pll_scale = lam;
   o->pll.kp = kp;
   o->pll.ki = o->ki0 * lam2;
   fw_pll_f32_t *const pll = &o->pll;
