@@ -6,9 +6,12 @@ What it does
      target flags (-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard)
      plus the harness in benchmarks/cm4/ into a bare-metal image for QEMU's
      mps2-an386 board (a Cortex-M4F), once per optimisation level (-O2 and
-     -Os by default; -Os is what the project's MinSizeRel CM4 image uses),
-     with link-time optimisation (-flto) as the CM4 image is built
-     (firmware_c/CMakeLists.txt); --no-lto measures separate translation units.
+     -Os by default; -Os is what the project's MinSizeRel CM4 image uses, with
+     the control path's sources at -O2 as that image compiles them:
+     firmware_c/CMakeLists.txt, PMLSM_CM4_FAST_SOURCES / PMLSM_CM4_FAST_OPT,
+     read from there), with link-time optimisation (-flto) as the CM4 image is
+     built (one object per source, then the LTO link); --no-lto measures
+     separate translation units.
   2. Runs it once untraced ("warm"): the locked-mover plant of
      benchmarks/bench_fw_step.c drives the core into closed-loop RUN (0.2 s +
      24 000 samples, same as the host benchmark); the controller state and
@@ -692,7 +695,9 @@ def main() -> int:
     g = run(["arm-none-eabi-gcc", "--version"]).stdout.splitlines()[0]
     print(f"tools: {g}; {v}; board mps2-an386 (Cortex-M4F)")
     print(
-        f"flags: {' '.join(CPU_FLAGS)} -O<level> -DNDEBUG{'' if a.no_lto else ' -flto'}; "
+        f"flags: {' '.join(CPU_FLAGS)} -O<level> -DNDEBUG{'' if a.no_lto else ' -flto'}"
+        f" (-Os: {len(speed_sources('Os'))} control-path sources at "
+        f"-{next(iter(speed_sources('Os').values()), 'Os')}, as the MinSizeRel image); "
         f"budget {BUDGET:.0f} cycles, "
         f"target <= {TARGET_SHARE * BUDGET:.0f}"
     )

@@ -935,7 +935,8 @@ FW_ISR_OPT static void fw_app_publish(fw_app_t *app) {
   const uint32_t step = app->step;
   if (FW_LIKELY(head - tail < FW_APP_SNAP_RING)) {
     /* through a volatile: the compiler keeps the slot's address in one
-       register instead of rebuilding it for every field (-Os, GCC 12) */
+       register instead of rebuilding it for every field (GCC 12, -Os and the
+       -O2 of FW_ISR_OPT: 1564 against 1494 cycles, SPEED) */
     fw_app_period_t *volatile slot = &app->ring[head % FW_APP_SNAP_RING];
     fw_app_period_t *p = slot;
     fw_snapshot_capture(&app->ctrl, &p->snap, &p->raw);
