@@ -6,9 +6,12 @@ What it does
      target flags (-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard)
      plus the harness in benchmarks/cm4/ into a bare-metal image for QEMU's
      mps2-an386 board (a Cortex-M4F), once per optimisation level (-O2 and
-     -Os by default; -Os is what the project's MinSizeRel CM4 image uses),
-     with link-time optimisation (-flto) as the CM4 image is built
-     (firmware_c/CMakeLists.txt); --no-lto measures separate translation units.
+     -Os by default; -Os is what the project's MinSizeRel CM4 image uses, with
+     the control path's sources at -O2 as that image compiles them:
+     firmware_c/CMakeLists.txt, PMLSM_CM4_FAST_SOURCES / PMLSM_CM4_FAST_OPT,
+     read from there), with link-time optimisation (-flto) as the CM4 image is
+     built (one object per source, then the LTO link); --no-lto measures
+     separate translation units.
   2. Runs it once untraced ("warm"): the locked-mover plant of
      benchmarks/bench_fw_step.c drives the core into closed-loop RUN (0.2 s +
      24 000 samples, same as the host benchmark); the controller state and
@@ -150,14 +153,30 @@ def harness_sources() -> tuple[list[str], list[str]]:
     return srcs, incs
 
 
+def speed_sources(opt: str) -> dict[str, str]:
+    """The sources the CM4 image compiles at another level than its build type's
+    (firmware_c/CMakeLists.txt: PMLSM_CM4_FAST_SOURCES, at PMLSM_CM4_FAST_OPT),
+    by absolute path; only for -Os (MinSizeRel, the shipped image)."""
+    if opt != "Os":
+        return {}
+    text = (FW / "CMakeLists.txt").read_text()
+    m = re.search(r"set\(PMLSM_CM4_FAST_SOURCES([^)]*)\)", text)
+    lvl = re.search(r"set\(PMLSM_CM4_FAST_OPT\s+-(O\w+)\)", text)
+    if not m or not lvl:
+        return {}
+    out = {}
+    for tok in m.group(1).split():
+        name = tok.replace("${CMAKE_CURRENT_SOURCE_DIR}/", "")
+        out[str((FW / name).resolve())] = lvl.group(1)
+    return out
+
+
 def build(opt: str, outdir: Path, lto: bool = True) -> Path:
     outdir.mkdir(parents=True, exist_ok=True)
     elf = outdir / "harness.elf"
     srcs, incs = harness_sources()
-    cmd = [
-        "arm-none-eabi-gcc",
+    common = [
         *CPU_FLAGS,
-        f"-{opt}",
         *(["-flto"] if lto else []),  # as the CM4 image: inlining across the blocks
         "-std=c11",
         "-DNDEBUG",
@@ -167,8 +186,24 @@ def build(opt: str, outdir: Path, lto: bool = True) -> Path:
         "-Wextra",
         "-g",
         *incs,
-        *srcs,
-        str(CM4 / "startup.c"),
+    ]
+    # one object per source, each at the level the CM4 image compiles it at
+    # (speed_sources), then one link (with -flto, every function keeps the
+    # level it was compiled at)
+    fast = speed_sources(opt)
+    objs = []
+    for i, src in enumerate([*srcs, str(CM4 / "startup.c")]):
+        obj = outdir / f"{i:02d}_{Path(src).stem}.o"
+        lvl = fast.get(str(Path(src).resolve()), opt)
+        r = run(["arm-none-eabi-gcc", f"-{lvl}", *common, "-c", src, "-o", str(obj)])
+        if r.returncode != 0:
+            die(f"cross build (-{lvl}, {src}) failed:\n{r.stderr}")
+        objs.append(str(obj))
+    cmd = [
+        "arm-none-eabi-gcc",
+        f"-{opt}",
+        *common,
+        *objs,
         "-T",
         str(CM4 / "cm4.ld"),
         "--specs=nano.specs",
@@ -660,7 +695,9 @@ def main() -> int:
     g = run(["arm-none-eabi-gcc", "--version"]).stdout.splitlines()[0]
     print(f"tools: {g}; {v}; board mps2-an386 (Cortex-M4F)")
     print(
-        f"flags: {' '.join(CPU_FLAGS)} -O<level> -DNDEBUG{'' if a.no_lto else ' -flto'}; "
+        f"flags: {' '.join(CPU_FLAGS)} -O<level> -DNDEBUG{'' if a.no_lto else ' -flto'}"
+        f" (-Os: {len(speed_sources('Os'))} control-path sources at "
+        f"-{next(iter(speed_sources('Os').values()), 'Os')}, as the MinSizeRel image); "
         f"budget {BUDGET:.0f} cycles, "
         f"target <= {TARGET_SHARE * BUDGET:.0f}"
     )

@@ -389,7 +389,7 @@ static fw_fault_t protect(fw_ctrl_t *c, fw_vec2_f32_t i_dq, bool quick_stop) {
   pi.omega_hat_radps = c->obs.pll.w_i_radps;
   pi.omega_f_radps = c->obs.omega_f;
   /* the position (a division) only when the limits are on */
-  pi.pos_m = c->prot.pos_on ? pos_hat_m(c) : 0.0f;
+  pi.pos_m = FW_UNLIKELY(c->prot.pos_on) ? pos_hat_m(c) : 0.0f; /* off by default */
   pi.cmd = c->mode == FW_MODE_SPEED ? c->speed_ref_radps_e : c->i_q_ref_force_A;
   pi.speed_ref_radps_e = c->speed_ref_radps_e;
   pi.speed_mode = (uint8_t)(c->mode == FW_MODE_SPEED);
@@ -446,15 +446,20 @@ static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
                          fw_period_t *p) {
   const fw_fault_t f =
       fw_fault_check_inputs(&c->cfg.protection, in, fw_cia402_power_enabled(c->sm.state));
-  *safe = *in;
-  if (f != FW_FAULT_NONE) {
+  /* field by field: the copy can then stay in registers (a struct copy is an
+   * LDM/STM pair through the stack) */
+  safe->i_abc_A[0] = in->i_abc_A[0];
+  safe->i_abc_A[1] = in->i_abc_A[1];
+  safe->i_abc_A[2] = in->i_abc_A[2];
+  safe->u_dc_V = in->u_dc_V;
+  if (FW_UNLIKELY(f != FW_FAULT_NONE)) {
     latch_fault(c, f);
     if (f == FW_FAULT_INPUT_INVALID) {
       memset(safe, 0, sizeof(*safe)); /* never propagate NaN into the state */
     }
   }
   c->u_dc_V = safe->u_dc_V; /* for the statusword's warning bit */
-  if (c->phase != FW_START_IDLE) {
+  if (FW_LIKELY(c->phase != FW_START_IDLE)) {
     fw_mon_compensate(&c->mon, safe->i_abc_A); /* offsets learnt at standstill */
   }
   p->i_ab = fw_clarke_f32(safe->i_abc_A[0], safe->i_abc_A[1], safe->i_abc_A[2]);
@@ -464,14 +469,15 @@ static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
  *  Returns false when the power stage is off. */
 static bool stage_power(fw_ctrl_t *c, fw_period_t *p) {
   p->braking = false;
-  if (c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE) {
+  if (FW_UNLIKELY(c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE)) {
     if (!c->fault.hard && c->phase == FW_START_RUN) {
       p->braking = true;
     } else {
       fw_cia402_fault_reaction_done(&c->sm);
     }
   }
-  return (fw_cia402_power_enabled(c->sm.state) || p->braking) && c->phase != FW_START_IDLE;
+  const bool on = fw_cia402_power_enabled(c->sm.state) || p->braking;
+  return FW_LIKELY(on && c->phase != FW_START_IDLE);
 }
 
 /** Power stage off: current-sensor offsets and sum, i2t cools down. */
@@ -506,7 +512,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
   hf->e_raw_dq_A.x = hf->e_raw_dq_A.y = 0.0f; /* raw HF difference, for the monitor */
   hf->E_d_A = 0.0f;
   const float w_frame = c->obs.pll.w_hat_radps; /* theta_hat turned at this from k-1 to k */
-  if (!p->pulses) {
+  if (FW_LIKELY(!p->pulses)) {
     const fw_extractor_t ex = (fw_extractor_t)cfg->estimator.extractor;
     fw_inj_update(&c->inj, ex, p->i_ab, p->sc, c->obs.pll.theta_rad, c->obs.pll.w_i_radps,
                   hf);
@@ -516,11 +522,12 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
     oi.hold = (uint8_t)(c->phase == FW_START_SALIENCY);
     oi.bemf_active = c->bemf.active;
     oi.bemf_err_rad = c->bemf.active ? fw_bemf_error(&c->bemf) : 0.0f;
-    oi.settled = (uint8_t)!(!fw_inj_settled(&c->inj) || c->phase_time_s < FW_EST_SETTLE_S);
+    oi.settled =
+        (uint8_t)FW_LIKELY(!(!fw_inj_settled(&c->inj) || c->phase_time_s < FW_EST_SETTLE_S));
     oi.running = (uint8_t)(c->phase == FW_START_RUN);
     float adapt_r;
     const float eps = fw_obs_update(&c->obs, &oi, &adapt_r);
-    if (ex == FW_EXTRACTOR_SOGI_ADAPTIVE) {
+    if (FW_LIKELY(ex == FW_EXTRACTOR_SOGI_ADAPTIVE)) { /* the default */
       fw_inj_adapt(&c->inj, &cfg->estimator, adapt_r);
     }
     snap->pll_err_rad = eps;
@@ -530,7 +537,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
     snap->i_h_ab_A[1] = hf->i_h_ab_A.y;
   }
   p->i_dq = fw_foc_measure(hf->i_f_ab_A, p->sc);
-  if (c->phase == FW_START_RUN && !p->pulses) {
+  if (FW_LIKELY(c->phase == FW_START_RUN && !p->pulses)) {
     const float i_dq_arr[2] = {p->i_dq.x, p->i_dq.y};
     fw_bemf_update(&c->bemf, fw_foc_u_applied(&c->foc), i_dq_arr, c->obs.pll.w_i_radps,
                    w_frame);
@@ -549,18 +556,19 @@ static void stage_startup(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p)
     if (c->phase == FW_START_RUN) {
       fw_mon_run_start(&c->mon);
     }
-  } else if (c->phase != FW_START_SALIENCY && c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S &&
-             fw_inj_settled(&c->inj)) {
+  } else if (FW_LIKELY(c->phase != FW_START_SALIENCY &&
+                       c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S &&
+                       fw_inj_settled(&c->inj))) {
     const fw_fault_t ef =
         fw_obs_supervise(&c->obs, cfg, hf->E_d_A, c->bemf.inj_scale, c->phase == FW_START_RUN);
-    if (ef != FW_FAULT_NONE) {
+    if (FW_UNLIKELY(ef != FW_FAULT_NONE)) {
       latch_fault(c, ef);
     }
   }
   /* During the alignment the zero-current loop holds i = 0: the voltage it
    * needs is the back-EMF of a moving mover (judged once the loop and the
    * monitor's filter have settled, and again at the end). */
-  if (c->phase == FW_START_ALIGN) {
+  if (FW_UNLIKELY(c->phase == FW_START_ALIGN)) {
     fw_start_fly_observe(&c->start, &cfg->machine, c->dt_s, hf->i_f_ab_A, c->phase_time_s);
   }
   if (c->phase == FW_START_ALIGN && c->phase_time_s >= FW_MOTION_CHECK_S &&
@@ -585,7 +593,7 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
   const fw_config_t *cfg = &c->cfg;
   const float dt = c->dt_s;
   p->i_ref.x = p->i_ref.y = 0.0f;
-  if (c->phase == FW_START_RUN) {
+  if (FW_LIKELY(c->phase == FW_START_RUN)) {
     const float w_ref = p->quick_stop ? 0.0f : c->speed_ref_radps_e;
     p->i_ref.x = c->i_d_ref_A;
     if (c->mode == FW_MODE_SPEED) {
@@ -594,7 +602,7 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
       p->i_ref.y = p->quick_stop ? 0.0f : c->i_q_ref_force_A;
     }
   }
-  if (p->quick_stop) {
+  if (FW_UNLIKELY(p->quick_stop)) {
     c->qs_time_s += dt;
     const bool still = c->mode == FW_MODE_FORCE || fabsf(c->obs.omega_f) < FW_QS_STILL_RADPS ||
                        c->phase != FW_START_RUN;
@@ -645,15 +653,16 @@ static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, const fw_inputs
   mi->omega_hat_radps = c->obs.pll.w_i_radps;
   mi->accel_dist_radps2 = c->obs.accel_dist;
   mi->running = (uint8_t)running;
-  mi->hf_valid = (uint8_t)(running && !p->pulses && scale_steady && fw_inj_settled(&c->inj) &&
-                           c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S &&
-                           fw_inj_sign_applied(&c->inj) != 0.0f);
+  mi->hf_valid = (uint8_t)FW_LIKELY(running && !p->pulses && scale_steady &&
+                                     fw_inj_settled(&c->inj) &&
+                                     c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S &&
+                                     fw_inj_sign_applied(&c->inj) != 0.0f);
   mi->pwm_on = 1u;
   fw_fault_t mf = fw_mon_update(&c->mon, mi);
-  if (mf == FW_FAULT_NONE && running) {
+  if (FW_LIKELY(mf == FW_FAULT_NONE && running)) {
     mf = protect(c, p->i_dq, p->quick_stop);
   }
-  if (mf != FW_FAULT_NONE) {
+  if (FW_UNLIKELY(mf != FW_FAULT_NONE)) {
     latch_fault(c, mf);
     if (c->fault.hard) {
       return false;
@@ -707,7 +716,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   fw_period_t p;
   fw_inputs_t safe;
   stage_inputs(c, in, &safe, &p);
-  if (!stage_power(c, &p)) {
+  if (FW_UNLIKELY(!stage_power(c, &p))) {
     stage_off(c, &safe);
     fill_snapshot_common(c, &safe, p.i_ab, out);
     return;
@@ -720,13 +729,13 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   stage_estimate(c, &hf, &p);
   stage_startup(c, &hf, &p);
   p.braking = p.braking && c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE;
-  if (!(fw_cia402_power_enabled(c->sm.state) || p.braking) || /* a fault was latched above */
-      !stage_references(c, &p)) {                              /* quick stop / braking done */
+  if (FW_UNLIKELY(!(fw_cia402_power_enabled(c->sm.state) || p.braking) || /* a fault, above */
+                  !stage_references(c, &p))) { /* quick stop / braking done */
     fill_snapshot_common(c, &safe, p.i_ab, out);
     return;
   }
   /* current loop in the estimated frame, or the polarity pulses */
-  if (p.pulses) {
+  if (FW_UNLIKELY(p.pulses)) {
     p.u_dq.x = p.u_d_pulse;
     p.u_dq.y = 0.0f;
   } else {
@@ -736,10 +745,10 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
      * is a phantom back-EMF of tens of volts that the current loop turns into
      * real thrust, and the motion check then refuses the mover it pushed. A
      * moving mover's back-EMF is held by the PI's integrator instead. */
-    const float w_ff = c->phase == FW_START_RUN ? c->obs.omega_f : 0.0f;
+    const float w_ff = FW_LIKELY(c->phase == FW_START_RUN) ? c->obs.omega_f : 0.0f;
     p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, safe.u_dc_V);
   }
-  if (!stage_monitor(c, &hf, &safe, &p)) { /* hard fault: switch off now */
+  if (FW_UNLIKELY(!stage_monitor(c, &hf, &safe, &p))) { /* hard fault: switch off now */
     fill_snapshot_common(c, &safe, p.i_ab, out);
     return;
   }

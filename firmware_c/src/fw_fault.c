@@ -94,10 +94,10 @@ fw_fault_t fw_protect_update(fw_protect_t *p, const fw_config_t *cfg, const fw_p
   if (p->i2t_on && i2t > p->i2t_max_A2s) {
     return FW_FAULT_I2T;
   }
-  if (fabsf(in->omega_hat_radps) > p->w_vmax_radps) {
+  if (FW_UNLIKELY(fabsf(in->omega_hat_radps) > p->w_vmax_radps)) {
     return FW_FAULT_OVERSPEED;
   }
-  if (p->pos_on) {
+  if (FW_UNLIKELY(p->pos_on)) { /* software limits: off by default */
     const float x = in->pos_m;
     if ((x > cfg->protection.pos_limit_max_m && !(in->cmd < 0.0f)) ||
         (x < cfg->protection.pos_limit_min_m && !(in->cmd > 0.0f))) {
@@ -107,7 +107,7 @@ fw_fault_t fw_protect_update(fw_protect_t *p, const fw_config_t *cfg, const fw_p
   bool follow = in->speed_mode && !in->quick_stop &&
                 fabsf(in->speed_ref_radps_e - in->omega_f_radps) > p->w_follow_radps;
   p->follow_time_s = follow ? p->follow_time_s + dt : 0.0f;
-  if (p->follow_time_s > cfg->protection.follow_err_time_s) {
+  if (FW_UNLIKELY(p->follow_time_s > cfg->protection.follow_err_time_s)) {
     return FW_FAULT_FOLLOWING_ERROR;
   }
   return FW_FAULT_NONE;

@@ -60,7 +60,7 @@ static FW_ALWAYS_INLINE void ring_push(fw_inj_t *j, float ed, float eq, float ia
   const uint32_t i = j->ring_idx;
   float *row = j->ring[i];
   const bool full = j->ring_fill == j->n_inj;
-  if (full) {
+  if (FW_LIKELY(full)) {
     j->sum_ed -= row[0];
     j->sum_eq -= row[1];
   } else {

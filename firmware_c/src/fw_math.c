@@ -166,11 +166,14 @@ bool fw_svpwm_f32(fw_vec2_f32_t u_ab_V, float u_dc_V, float duty_abc[3],
   const float ph0 = u.x;
   const float ph1 = -0.5f * u.x + h;
   const float ph2 = -0.5f * u.x - h;
-  float u_hi = ph0, u_lo = ph0;
-  u_hi = ph1 > u_hi ? ph1 : u_hi;
-  u_lo = ph1 < u_lo ? ph1 : u_lo;
-  u_hi = ph2 > u_hi ? ph2 : u_hi;
-  u_lo = ph2 < u_lo ? ph2 : u_lo;
+  /* largest and smallest phase in three compares: ph1 - ph2 is 2 h, and as
+   * rounding is monotonic ph1 >= ph2 exactly when h >= 0 (the duties do not
+   * depend on which of two equal phases is taken) */
+  const bool h_pos = h >= 0.0f;
+  const float hi12 = h_pos ? ph1 : ph2;
+  const float lo12 = h_pos ? ph2 : ph1;
+  const float u_hi = hi12 > ph0 ? hi12 : ph0;
+  const float u_lo = lo12 < ph0 ? lo12 : ph0;
   const float u0_V = -0.5f * (u_hi + u_lo);
   const float inv_dc = 1.0f / u_dc_V;
   duty_abc[0] = 0.5f + (ph0 + u0_V) * inv_dc;
@@ -179,7 +182,7 @@ bool fw_svpwm_f32(fw_vec2_f32_t u_ab_V, float u_dc_V, float duty_abc[3],
   /* the duties span (u_hi - u_lo) / u_dc around 1/2; a span within 0.999 of
    * the carrier cannot leave [0, 1] by rounding, so the clamp (which only
    * absorbs rounding on the circle boundary) runs only near the boundary */
-  if (!((u_hi - u_lo) * inv_dc < 0.999f)) {
+  if (FW_UNLIKELY(!((u_hi - u_lo) * inv_dc < 0.999f))) {
     for (int i = 0; i < 3; i++) {
       duty_abc[i] = fw_clampf(duty_abc[i], 0.0f, 1.0f);
     }

@@ -45,7 +45,9 @@ static float persist(float t, bool over, float dt) { return over ? t + dt : 0.0f
 /** Clear the sums of the running witnesses' block (closed loop (re)starts). */
 static void sums_clear_run(fw_mon_t *m) {
   m->s_rd = m->s_rq = m->s_w = m->s_ed = m->s_eq = m->s_ictrl = 0.0f;
-  m->n_pwm = m->n_hf = m->n_run = 0u;
+  /* the periods of the block so far are not in the sums (eval_k: 0 at a
+   * block's end, the periods since its start in mid-block) */
+  m->miss_pwm = m->miss_hf = m->miss_run = m->eval_k;
 }
 
 /** Closed loop (re)starts: the block's running sums restart; the residual's
@@ -203,7 +205,7 @@ FW_NOINLINE void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float acce
   m->sum_bad = (uint32_t)(m->t_sum >= m->detect_s);
   /* back-EMF residual over the periods with PWM on: L di/dt summed is
    * L (i_last - i_prev) / T */
-  const uint32_t np = m->n_pwm;
+  const uint32_t np = MON_EVAL_STEPS - m->miss_pwm;
   if (np > 0u) {
     const float sd = m->s_rd - m->L_d_H * (m->i_last_A[0] - m->i_prev_A[0]) * m->inv_dt;
     const float sq = m->s_rq - m->L_q_H * (m->i_last_A[1] - m->i_prev_A[1]) * m->inv_dt;
@@ -213,7 +215,7 @@ FW_NOINLINE void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float acce
     m->r_q_f = lp_n(m->r_q_f, sq, np, m->a_slow_n, inv_n);
     m->w_f = lp_n(m->w_f, m->s_w, np, m->a_slow_n, inv_n);
   }
-  const uint32_t nh = m->n_hf, nr = m->n_run;
+  const uint32_t nh = MON_EVAL_STEPS - m->miss_hf, nr = MON_EVAL_STEPS - m->miss_run;
   if (nh > 0u) {
     m->e_d_f = lp_n(m->e_d_f, m->s_ed, nh, m->a_hf_n, inv_n);
     m->e_q_f = lp_n(m->e_q_f, m->s_eq, nh, m->a_hf_n, inv_n);

@@ -19,10 +19,10 @@ static float lp_alpha(float f_Hz, float dt_s) {
  *  increments once the position is large (ulp 0.06 rad at 1e6 rad). */
 static FW_ALWAYS_INLINE void pos_add(fw_obs_t *o, float d) {
   float x = o->pos_unwrapped_e + d;
-  if (x >= FW_PI_F32) {
+  if (FW_UNLIKELY(x >= FW_PI_F32)) {
     x -= FW_TWO_PI_F32;
     o->pos_turns++;
-  } else if (x < -FW_PI_F32) {
+  } else if (FW_UNLIKELY(x < -FW_PI_F32)) {
     x += FW_TWO_PI_F32;
     o->pos_turns--;
   }
@@ -35,7 +35,9 @@ void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s) {
   o->err_alpha = lp_alpha(FW_ERR_FILTER_HZ, dt_s);
   /* reciprocals and products the step would otherwise divide for */
   o->eps_gain = cfg->machine.L_q_H / (cfg->machine.L_q_H - cfg->machine.L_d_H);
-  o->inv_adapt_err = 1.0f / cfg->estimator.sogi_adapt_err_rad;
+  /* > 0 (sogi_adapt_err_rad >= 0.001, checked; fabsf: never negative, so that
+   * fw_obs_update's ratio needs no lower clamp) */
+  o->inv_adapt_err = fabsf(1.0f / cfg->estimator.sogi_adapt_err_rad);
   o->hf_min_A = cfg->protection.hf_min_ratio * dt_s * cfg->estimator.u_inj_V / cfg->machine.L_q_H;
   /* the observer's gains and products, so the step reads nothing from cfg */
   o->bw_min = cfg->estimator.pll_bw_min;
@@ -110,7 +112,9 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
    * per-sample eps carries ~0.04 rad of sensor noise, so a filtered |eps|
    * would measure the noise, not the lock. */
   o->err_f += o->err_alpha * (eps - o->err_f);
-  const float r = fw_clampf(fabsf(o->err_f) * o->inv_adapt_err, 0.0f, 1.0f);
+  /* fw_clampf(x, 0, 1) for an x that is >= 0 or NaN (inv_adapt_err >= 0) */
+  const float r_raw = fabsf(o->err_f) * o->inv_adapt_err;
+  const float r = FW_UNLIKELY(r_raw > 1.0f) ? 1.0f : r_raw;
   *adapt_r = r;
 
   if (!in->settled) {
@@ -122,13 +126,12 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
   const float lam = o->bw_min + o->bw_span * r;
   const float lam2 = lam * lam;
   const float kp = o->kp0 * lam;
-  o->pll_scale = lam;
   o->pll.kp = kp;
   o->pll.ki = o->ki0 * lam2;
   fw_pll_f32_t *const pll = &o->pll;
   const float w_max = pll->w_max_radps;
   float w_i = pll->w_i_radps;
-  if (eps - eps == 0.0f) { /* a non-finite error holds the PLL (as fw_pll_step_f32) */
+  if (FW_LIKELY(eps - eps == 0.0f)) { /* a non-finite error holds the PLL (as fw_pll_step_f32) */
     w_i = fw_clamp_symf(w_i + (o->ki0_dt * lam2) * eps, w_max);
     const float w_hat = w_i + kp * eps;
     pll->w_hat_radps = w_hat;
@@ -157,7 +160,7 @@ fw_fault_t fw_obs_supervise(fw_obs_t *o, const fw_config_t *cfg, float hf_amp_A,
     return FW_FAULT_EST_HF_LOW;
   }
   if (running) {
-    if (fabsf(o->err_f) > cfg->protection.pll_err_max_rad) {
+    if (FW_UNLIKELY(fabsf(o->err_f) > cfg->protection.pll_err_max_rad)) {
       o->pll_err_time_s += o->dt_s;
       if (o->pll_err_time_s > cfg->protection.pll_err_time_s) {
         return FW_FAULT_EST_PLL_ERROR;

@@ -68,3 +68,30 @@ def test_core_uses_no_double_precision(cm4_build: tuple[Path, str]) -> None:
                              check=True).stdout
         bad = re.findall(r"__aeabi_d\w+|__(?:add|sub|mul|div)df3|\bvmov\.f64|\bvadd\.f64", dis)
         assert not bad, f"{obj.name} uses double precision: {sorted(set(bad))}"
+
+
+def test_control_path_sources_at_o2(cm4_build: tuple[Path, str]) -> None:
+    """The MinSizeRel image compiles the control interrupt's sources at -O2 (the
+    last -O on their command lines), the rest at -Os; the cycle benchmark
+    (benchmarks/bench_cm4_estimate.py) compiles the same sources at the same levels."""
+    import importlib.util
+
+    build, _ = cm4_build
+    cmds = subprocess.run(["cmake", "--build", str(build), "--", "-t", "commands"],
+                          capture_output=True, text=True, check=True).stdout.splitlines()
+    spec = importlib.util.spec_from_file_location(
+        "bench_cm4_estimate", ROOT / "benchmarks" / "bench_cm4_estimate.py")
+    bench = importlib.util.module_from_spec(spec)
+    assert spec.loader is not None
+    spec.loader.exec_module(bench)
+    fast = {Path(p).name for p in bench.speed_sources("Os")}
+    assert {"fw_ctrl.c", "fw_obs.c", "fw_inj.c", "fw_mon.c", "fw_math.c"} <= fast
+    levels = {}
+    for line in cmds:
+        m = re.search(r"-c (\S+\.c)\s*$", line)
+        if m and "-O" in line:
+            levels[Path(m.group(1)).name] = re.findall(r"\s-O(\w)", line)[-1]
+    for name in fast:
+        assert levels.get(name) == "2", (name, levels.get(name))
+    for name in ("fw_config.c", "fw_app.c"):
+        assert levels.get(name) == "s", (name, levels.get(name))

@@ -961,13 +961,14 @@ static void fw_app_serial(fw_app_t *app, const fw_snapshot_t *s, uint32_t step) 
 /* After the step: publish the period to the background (the snapshot's raw
  * half; the background completes it), count the period. One release fence
  * for the slot and both counters. */
-static void fw_app_publish(fw_app_t *app) {
+FW_ISR_OPT static void fw_app_publish(fw_app_t *app) {
   uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
   uint32_t tail = atomic_load_explicit(&app->ring_tail, memory_order_acquire);
   const uint32_t step = app->step;
-  if (head - tail < FW_APP_SNAP_RING) {
+  if (FW_LIKELY(head - tail < FW_APP_SNAP_RING)) {
     /* through a volatile: the compiler keeps the slot's address in one
-       register instead of rebuilding it for every field (-Os, GCC 12) */
+       register instead of rebuilding it for every field (GCC 12, -Os and the
+       -O2 of FW_ISR_OPT: 1564 against 1494 cycles, SPEED) */
     fw_app_period_t *volatile slot = &app->ring[head % FW_APP_SNAP_RING];
     fw_app_period_t *p = slot;
     fw_snapshot_capture(&app->ctrl, &p->snap, &p->raw);
@@ -983,7 +984,7 @@ static void fw_app_publish(fw_app_t *app) {
   atomic_store_explicit(&app->isr_step, step + 1u, memory_order_relaxed);
 }
 
-void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *out) {
+FW_ISR_OPT void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *out) {
   fw_app_t *app = (fw_app_t *)ctx;
   if (app == NULL || adc == NULL || out == NULL) {
     if (out != NULL) {

@@ -49,7 +49,8 @@ typedef struct {
   fw_sogi_f32_t sogi_a, sogi_b;
   float sogi_gd_s;        /**< SOGI group delay at the present k (s) */
   uint32_t inj_idx;       /**< position inside the injection period */
-  float sign_hist[4];     /**< injection signs; [0] = newest commanded */
+  float sign_hist[2];     /**< injection signs; [0] = newest commanded, [1] = the one
+                           *   before (applied over the present period) */
   float h_prev_raw[2];    /**< previous raw alpha/beta current (pseudo-filter) */
   float h_prev_sogi[2];   /**< previous SOGI output */
   /** moving average over one injection period: E_d, E_q, i_a, i_b per sample
@@ -91,7 +92,7 @@ static inline void fw_inj_adapt(fw_inj_t *j, const fw_cfg_estimator_t *est, floa
    * while the PLL error is large, a narrow one when locked. */
   const float k = est->sogi_k_adapt_min + (est->sogi_k_adapt_max - est->sogi_k_adapt_min) * r;
   const float dk = k - j->sogi_a.k;
-  if (dk > FW_INJ_SOGI_K_STEP || dk < -FW_INJ_SOGI_K_STEP) {
+  if (FW_UNLIKELY(dk > FW_INJ_SOGI_K_STEP || dk < -FW_INJ_SOGI_K_STEP)) {
     fw_inj_set_k(j, k);
   }
 }
@@ -103,8 +104,6 @@ static inline float fw_inj_output(fw_inj_t *j, bool on) {
     s = (j->inj_idx < j->n_inj / 2u) ? 1.0f : -1.0f;
     j->inj_idx = (j->inj_idx + 1u == j->n_inj) ? 0u : j->inj_idx + 1u;
   }
-  j->sign_hist[3] = j->sign_hist[2];
-  j->sign_hist[2] = j->sign_hist[1];
   j->sign_hist[1] = j->sign_hist[0];
   j->sign_hist[0] = s;
   return s;

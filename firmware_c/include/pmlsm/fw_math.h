@@ -150,12 +150,34 @@ static inline float fw_clampf(float x, float lo, float hi) {
 #define FW_NOINLINE
 #endif
 
+/** Branch hints for the control step's usual path (closed loop, no fault, no
+ *  limit reached): GCC then lays that path out straight, without the taken
+ *  branches to out-of-line blocks and back it otherwise guesses (each costs a
+ *  pipeline refill on the Cortex-M4). Code layout only: the same results. */
+#if defined(__GNUC__) || defined(__clang__)
+#define FW_LIKELY(x) __builtin_expect(!!(x), 1)
+#define FW_UNLIKELY(x) __builtin_expect(!!(x), 0)
+#else
+#define FW_LIKELY(x) (x)
+#define FW_UNLIKELY(x) (x)
+#endif
+
+/** The control interrupt's functions outside the sources the Cortex-M4F image
+ *  compiles at -O2 (firmware_c/CMakeLists.txt, PMLSM_CM4_FAST_SOURCES): the
+ *  same level, so that the core's code is inlined into them (GCC does not
+ *  inline across optimisation levels). ARM GCC only; elsewhere nothing. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__arm__) && defined(__OPTIMIZE_SIZE__)
+#define FW_ISR_OPT __attribute__((optimize("O2")))
+#else
+#define FW_ISR_OPT
+#endif
+
 /** fw_clampf(x, -lim, lim), the same result for every x and lim (NaN and a
  *  negative lim included): |x| <= lim implies -lim <= x <= lim, so the usual
  *  in-range value costs one compare instead of two (FPv4 has no VMAXNM/VMINNM;
  *  every compare is a VCMP and a VMRS). */
 static FW_ALWAYS_INLINE float fw_clamp_symf(float x, float lim) {
-  return fabsf(x) <= lim ? x : fw_clampf(x, -lim, lim);
+  return FW_LIKELY(fabsf(x) <= lim) ? x : fw_clampf(x, -lim, lim);
 }
 
 /* sin/cos constants (fw_sincos_f32, fw_math.c: the range reduction). */
@@ -224,7 +246,7 @@ static FW_ALWAYS_INLINE fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, f
 /** Wrap an angle into [-pi, pi). Non-finite input returns 0. Inline: the
  *  usual angle is already in range (one compare pair, no call). */
 static FW_ALWAYS_INLINE float fw_wrap_pi_f32(float theta_rad) {
-  return (theta_rad >= -FW_PI_F32 && theta_rad < FW_PI_F32) ? theta_rad
+  return FW_LIKELY(theta_rad >= -FW_PI_F32 && theta_rad < FW_PI_F32) ? theta_rad
                                                             : fw_wrap_pi_slow_f32(theta_rad);
 }
 
@@ -250,10 +272,19 @@ static FW_ALWAYS_INLINE float fw_pi_core_lim_f32(fw_pi_f32_t *pi, float e, float
   const float integ0 = pi->integ;
   float integ = integ0 + di;
   const float u_try = p + integ + ff;
-  if (u_try > out_max && di > 0.0f) {
+  if (sym && FW_LIKELY(fabsf(u_try) <= out_max && fabsf(integ) <= out_max)) {
+    /* the usual period, inside the limits: no anti-windup (u_try is within
+     * [out_min, out_max] = [-out_max, out_max]), the integrator unclamped and the
+     * output p + integ + ff is u_try itself. The same results as below with two
+     * compares instead of four. */
+    pi->integ = integ;
+    pi->out = u_try;
+    return u_try;
+  }
+  if (FW_UNLIKELY(u_try > out_max && di > 0.0f)) {
     const float i_lim = out_max - p - ff;
     integ = i_lim > integ0 ? i_lim : integ0; /* max */
-  } else if (u_try < out_min && di < 0.0f) {
+  } else if (FW_UNLIKELY(u_try < out_min && di < 0.0f)) {
     const float i_lim = out_min - p - ff;
     integ = i_lim < integ0 ? i_lim : integ0; /* min */
   }

@@ -87,7 +87,11 @@ typedef struct {
   float s_rd, s_rq, s_w;      /**< residual without L di/dt, speed (PWM on) */
   float s_ed, s_eq;           /**< raw HF response (HF valid) */
   float s_ictrl;              /**< |i_ref - i|^2 (closed loop) */
-  uint32_t n_pwm, n_hf, n_run; /**< periods in those sums */
+  /** periods of the block NOT in those sums (PWM off, HF not valid, not running),
+   *  counting from the block's start or the last clear of the sums: the sums hold
+   *  FW_MON_EVAL_STEPS - miss_* periods at the block's end (no count per period
+   *  on the usual path) */
+  uint32_t miss_pwm, miss_hf, miss_run;
   float isum_f, ictrl_f;
   float imag_f;       /**< low-passed |i_a| + |i_b| + |i_c| */
   float off_f[3];
@@ -175,21 +179,24 @@ static FW_ALWAYS_INLINE fw_fault_t fw_mon_update(fw_mon_t *m, const fw_mon_in_t 
     m->s_w += w;
     m->i_last_A[0] = id;
     m->i_last_A[1] = iq;
-    m->n_pwm++;
+  } else {
+    m->miss_pwm++;
   }
-  if (!in->running) {
+  if (FW_UNLIKELY(!in->running)) {
     m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
     m->verdict = FW_FAULT_NONE;
+    m->miss_run++;
+    m->miss_hf++;
   } else {
-    if (in->hf_valid) {
+    if (FW_LIKELY(in->hf_valid)) {
       m->s_ed += in->e_hf_dq_A[0];
       m->s_eq += in->e_hf_dq_A[1];
-      m->n_hf++;
+    } else {
+      m->miss_hf++;
     }
     const float ed = in->i_dq_ref_A[0] - in->i_dq_A[0];
     const float eq = in->i_dq_ref_A[1] - in->i_dq_A[1];
     m->s_ictrl += ed * ed + eq * eq; /* mean-square error */
-    m->n_run++;
   }
   if (++m->eval_k >= FW_MON_EVAL_STEPS) {
     m->eval_k = 0u;

@@ -50,7 +50,6 @@ typedef struct {
   /* state */
   float est_hold_s;       /**< the error is held at 0 while > 0 (after an extractor switch) */
   float accel_dist;       /**< estimated disturbance acceleration (el. rad/s^2) */
-  float pll_scale;        /**< present observer bandwidth scale */
   float pll_err_time_s;   /**< time with |err_f| above pll_err_max_rad */
   float omega_f;          /**< filtered speed for the loops */
   float i_q_ff_A;         /**< fundamental i_q of the last full period (thrust feed-forward) */
