@@ -198,10 +198,14 @@ def open_sim(motor: str = "paper_salient", extractor: str = "sogi_adaptive", see
                    record_decimation=record_decimation, plant=plant).start()
     try:
         bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        sim.peer_bus = bus
         net = canopen.Network(bus)
         net.NOTIFIER_CYCLE = 0.01  # disconnect in 10 ms, not 100; frames come at once
         net.connect()
-        drive = Drive(net, node_id, clock=sim.clock)
+        # the simulated drive answers in its next chunk (well under a millisecond): a
+        # wall-clock SDO timeout only fires when this machine stalls, and its retry
+        # would be an extra frame that moves the simulated clock (not reproducible)
+        drive = Drive(net, node_id, clock=sim.clock, sdo_timeout_s=5.0)
         drive.setup(read_pdos=read_pdos)
     except Exception:
         sim.close()

@@ -176,6 +176,7 @@ class SimDrive(DriveBridge):
         self.cpu_s = 0.0  # CPU time of the simulation thread while stepping (s)
         self.serial = SimSerial()
         self.epoch = time.time()
+        self.peer_bus: Any = None  # the bench's bus on the virtual channel (open_sim)
         self._t = 0.0
         self._held: list[can.Message] = []
         self._uart_buf = C.create_string_buffer(8192)
@@ -256,6 +257,20 @@ class SimDrive(DriveBridge):
                 if deadline is not None and time.monotonic() > deadline:
                     raise TimeoutError(f"simulation did not reach {t_s} s")
                 self._cond.wait(0.1)
+        self._drain_peer()
+
+    def _drain_peer(self, timeout_s: float = 1.0) -> None:
+        """Wait until the bench's side of the virtual bus (``peer_bus``, set by
+        ``open_sim``) has taken every frame sent so far, so that what the bench reads
+        after a wait (a TPDO's statusword) does not depend on its receive thread's
+        timing: simulated runs stay reproducible."""
+        q = getattr(self.peer_bus, "queue", None)
+        if q is None:
+            return
+        end = time.monotonic() + timeout_s
+        while not q.empty() and time.monotonic() < end:
+            time.sleep(0.0001)
+        time.sleep(0)  # let the receive thread finish dispatching the last frame
 
     def set_realtime(self, on: bool) -> None:
         """Switch pacing; wall-clock pacing resumes from the present simulated time."""
@@ -309,10 +324,10 @@ class SimDrive(DriveBridge):
         self.frames_from_bus += n
         return n
 
-    def _flush_tx(self) -> None:
+    def _flush_tx(self, t_s: float | None = None) -> None:
         """Frames from the C slave to the bus, stamped with the simulated time."""
         f = FwCanFrame()
-        ts = self.epoch + self._t
+        ts = self.epoch + (self._t if t_s is None else t_s)
         while self._can_pop(f):
             self.bus.send(can.Message(arbitration_id=f.id, data=bytes(f.data[: f.dlc]),
                                       is_extended_id=False, is_remote_frame=bool(f.rtr),
@@ -356,8 +371,11 @@ class SimDrive(DriveBridge):
         rec = self.sim.advance(self.n_chunk, self.record_decimation,
                                ["t_s", *SIM_CHANNELS] if self.sink else [])
         self.steps += self.n_chunk
-        self._t = self.sim.t_s
-        self._flush_tx()
+        # the chunk's frames are on the bus before its time is: a waiter that sees the
+        # new time (run_until) also finds the drive's answers of that chunk
+        t = self.sim.t_s
+        self._flush_tx(t)
+        self._t = t
         return rec
 
     @staticmethod
