@@ -130,7 +130,7 @@ void fw_config_derive(fw_config_t *cfg) {
       !(cfg->machine.mass_kg > 0.0f)) {
     return; /* explicit gains; the range check reports bad fields */
   }
-  const float k_e = FW_PI_F32 / cfg->machine.pole_pitch_m; /* el. rad per m */
+  const float k_e = fw_units_mps_to_radps_e(cfg, 1.0f); /* el. rad per m */
   const float K_F = fw_units_force_per_A(cfg);     /* N per A of i_q */
   cfg->loops.cur_kp_V_per_A = cfg->machine.L_d_H * cfg->loops.cur_bw_radps;
   cfg->loops.cur_ki_V_per_As = cfg->machine.R_ohm * cfg->loops.cur_bw_radps;

@@ -58,9 +58,10 @@ static void latch_fault(fw_ctrl_t *c, fw_fault_t code) {
   }
 }
 
-/** Unwrapped estimated position, m. */
+/** Unwrapped estimated position, m: rad_e -> m is the factor tau / pi of the
+ *  speed conversion rad_e/s -> m/s. */
 static float pos_m_of(const fw_config_t *cfg, float pos_e) {
-  return pos_e * cfg->machine.pole_pitch_m / FW_PI_F32;
+  return fw_units_radps_e_to_mps(cfg, pos_e);
 }
 
 static float pos_hat_m(const fw_ctrl_t *c) { return pos_m_of(&c->cfg, fw_obs_pos_e(&c->obs)); }
