@@ -11,9 +11,9 @@
 #include "pmlsm/fw_ctrl.h"
 
 /* The table itself is generated from protocols/od.yaml (fw_config:), the one
- * source of the ranges: engineering limits for this drive class, not tuning
- * advice. The defaults (last argument) are fw_config_default()'s below, checked
- * by tests/c/test_co_od_config.c. */
+ * source of the ranges (engineering limits for this drive class, not tuning
+ * advice) and of the defaults (last argument), which fw_config_default() below
+ * applies. */
 #define F32(part, name, unit, lo, hi, dflt) \
   {#name, unit, offsetof(fw_config_t, part.name), 0u, lo, hi},
 #define U32(part, name, unit, lo, hi, dflt) \
@@ -35,85 +35,14 @@ void fw_config_default(fw_config_t *cfg) {
     return;
   }
   memset(cfg, 0, sizeof(*cfg));
-  cfg->sensing.f_pwm_Hz = 24000.0f; /* 8 samples per 3 kHz injection period */
-  /* Paper Table 1, salient variant L_q = 1.5 L_d (Table 1 has L_q = L_d). */
-  cfg->machine.R_ohm = 0.958f;
-  cfg->machine.L_d_H = 0.012f;
-  cfg->machine.L_q_H = 0.018f;
-  cfg->machine.psi_f_Wb = 0.1827f;
-  cfg->machine.pole_pairs = 4.0f;
-  cfg->machine.pole_pitch_m = 0.024f; /* rotary-equivalent choice, see docs */
-  cfg->protection.u_dc_min_V = 150.0f;
-  cfg->protection.u_dc_max_V = 420.0f;
-  cfg->protection.i_trip_A = 24.0f;
-  cfg->loops.i_max_A = 20.0f;
-  cfg->loops.speed_max_radps_e = 1500.0f;
-  cfg->loops.cur_kp_V_per_A = cfg->machine.L_d_H * 1100.0f;
-  cfg->loops.cur_ki_V_per_As = cfg->machine.R_ohm * 1100.0f;
-  /* 0.1 A/(r/min) and 0.6 A/(r/min s): 1 r/min = 2 pi p / 60 rad/s (el.) */
-  cfg->loops.spd_kp_A_per_radps = 0.1f * 60.0f / (FW_TWO_PI_F32 * cfg->machine.pole_pairs);
-  cfg->loops.spd_ki_A_per_rad = 0.6f * 60.0f / (FW_TWO_PI_F32 * cfg->machine.pole_pairs);
-  cfg->loops.spd_filter_Hz = 100.0f;
-  cfg->estimator.u_inj_V = 50.0f; /* 17 % of a 300 V link; see docs/tuning.md */
-  cfg->estimator.f_inj_Hz = 3000.0f;
-  cfg->estimator.extractor = (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE;
-  cfg->estimator.sogi_k = 0.5f;
-  cfg->estimator.sogi_k_adapt_max = 0.8f;
-  cfg->estimator.sogi_k_adapt_min = 0.5f; /* = the fixed-k value: adapt only widens in transients */
-  /* |filtered error| for full SOGI k and observer bandwidth */
-  cfg->estimator.sogi_adapt_err_rad = 0.02f;
-  cfg->estimator.pll_kp = 86.6f;
-  cfg->estimator.pll_ki = 5000.0f;
-  /* p K_t / J = p * 1.5 p psi_f / J (electrical rad/s^2 per A) */
-  cfg->estimator.pll_accel_per_A =
-      cfg->machine.pole_pairs * 1.5f * cfg->machine.pole_pairs * cfg->machine.psi_f_Wb / 0.03f;
-  cfg->estimator.pll_bw_min = 0.5f; /* halve the observer poles when locked: noise */
-  cfg->estimator.pll_kd = 1.0e5f; /* poles -28 +/- 50j, -30 rad/s with the paper's kp, ki */
-  cfg->estimator.align_time_s = 0.08f;
-  cfg->estimator.pol_pulse_V = 60.0f;
-  cfg->estimator.pol_pulse_samples = 12u;
-  cfg->estimator.pol_pulse_pairs = 4u;
-  cfg->estimator.pol_margin = 0.02f;
-  cfg->protection.saliency_min = 0.10f;
-  cfg->protection.hf_min_ratio = 0.3f;
-  cfg->protection.pll_err_max_rad = 0.5f;
-  cfg->protection.pll_err_time_s = 0.05f;
-  cfg->protection.quick_stop_time_s = 0.5f;
-  cfg->sensing.adc_A_per_count = 50.0f / 4096.0f; /* +/-25 A over 12 bits */
-  cfg->sensing.adc_offset_counts = 2048.0f;
-  cfg->sensing.adc_V_per_count = 500.0f / 4096.0f; /* 0..500 V, LSB = FS / 2^12 */
-  cfg->sensing.adc_max_count = 4095u;
-  cfg->protection.v_max_mps = 3.0f;
-  cfg->protection.pos_limit_min_m = 0.0f; /* min >= max: software limits off */
-  cfg->protection.pos_limit_max_m = 0.0f;
-  cfg->protection.follow_err_mps = 0.5f;
-  cfg->protection.follow_err_time_s = 0.5f;
-  cfg->protection.i_rated_A = 10.0f;
-  cfg->protection.i2t_time_s = 2.0f;
-  cfg->protection.quick_stop_option = (uint32_t)FW_REACT_QUICK_RAMP;
-  cfg->protection.fault_reaction_option = (uint32_t)FW_REACT_QUICK_RAMP;
-  /* heartbeat loss: PWM off within consumer time + 80 ms */
-  cfg->protection.fault_brake_time_s = 0.08f;
-  cfg->protection.mon_angle_max_rad = 0.5f;
-  cfg->protection.mon_detect_time_s = 0.01f;
-  cfg->protection.mon_sal_tol = 1.0f; /* measured saliency within a factor 2 of the configured */
-  cfg->protection.mon_bemf_max_rad = 0.6f;
-  cfg->protection.mon_bemf_min_mps = 0.21f; /* paper motor: 5.0 V */
-  cfg->protection.i_sum_max_A = 0.2f; /* plus 3 % of |i_a| + |i_b| + |i_c| (fw_mon.c) */
-  cfg->protection.i_offset_max_A = 1.0f;
-  cfg->protection.start_speed_max_mps = 0.05f;
-  /* paper motor: 55 rad/s el. = 131 r/min (10.0 V), above the paper's speeds; down at 6.9 V */
-  cfg->estimator.bemf_v_on_mps = 0.42f;
-  cfg->estimator.bemf_v_off_mps = 0.29f;
-  cfg->estimator.bemf_inj_share = 0.25f;
-  /* paper Table 1 as a linear machine: J = 0.03 kg m^2 over r = p tau / pi */
-  cfg->machine.mass_kg = 32.13f;
-  cfg->machine.visc_Ns_per_m = 8.57f; /* 0.008 N m s/rad / r^2 */
-  cfg->machine.coulomb_N = 49.1f;     /* 1.5 N m / r */
-  cfg->loops.cur_bw_radps = 1100.0f;
-  cfg->loops.spd_bw_radps = 35.0f;  /* the paper's speed PI on this mass */
-  cfg->loops.gains_auto = 0u;       /* defaults keep the paper's explicit gains */
-  fw_config_derive(cfg);      /* the back-EMF levels of the speeds above */
+  /* every default is od.yaml's (fw_config: default:, with the reasons in each
+     field's doc): the paper's motor and loops, this drive class's protections */
+#define F32(part, name, unit, lo, hi, dflt) cfg->part.name = (dflt);
+#define U32(part, name, unit, lo, hi, dflt) cfg->part.name = (dflt);
+  FW_CONFIG_FIELDS(F32, U32)
+#undef F32
+#undef U32
+  fw_config_derive(cfg); /* the back-EMF levels of the speeds above */
 }
 
 void fw_config_derive(fw_config_t *cfg) {

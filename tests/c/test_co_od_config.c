@@ -5,9 +5,11 @@
  *        fw_config_field() and the default of fw_config_default().
  *
  * And: the field table generated from od.yaml (fw_config_fields.h) is the
- * one fw_config_field() serves, and every default written there is
- * fw_config_default()'s value. On failure it prints the defaults od.yaml
- * should have (--yaml prints them all).
+ * one fw_config_field() serves, and fw_config_default() leaves every field at
+ * the default written there: the derived ones (fw_config_derive, e.g. the
+ * back-EMF levels) included, so od.yaml's value for those must be the
+ * derivation's. On failure it prints what fw_config_default() gives (--yaml
+ * prints them all).
  */
 #include <math.h>
 #include <string.h>

@@ -320,3 +320,44 @@ def test_firmware_version_is_written_once(od):
 ])
 def test_bad_device_section_is_a_one_line_error(tmp_path, old, new, match):
     _expect_od_error(tmp_path, old, new, match)
+
+
+def test_defaults_derived_from_the_paper_motor(od):
+    """od.yaml's defaults are the firmware's (fw_config_default applies them): the ones
+    derived from the paper's motor are recomputed here from their formulas in float32,
+    in the operation order the firmware used when it computed them, and must be the
+    same float32 value (those rounded for readability: within their last digit)."""
+    import numpy as np
+    f = np.float32
+    d = {k: v["default"] for k, v in od.fw_config.items()}
+    two_pi_p = f(2 * np.pi) * f(d["pole_pairs"])
+    exact = {
+        "cur_kp_V_per_A": f(d["L_d_H"]) * f(1100.0),          # paper: L_d x 1100 rad/s
+        "cur_ki_V_per_As": f(d["R_ohm"]) * f(1100.0),         # R x 1100 rad/s
+        "spd_kp_A_per_radps": f(0.1) * f(60.0) / two_pi_p,    # 0.1 A/(r/min)
+        "spd_ki_A_per_rad": f(0.6) * f(60.0) / two_pi_p,      # 0.6 A/(r/min s)
+        # p K_t / J, K_t = 1.5 p psi_f, J = 0.03 kg m^2
+        "pll_accel_per_A": f(d["pole_pairs"]) * f(1.5) * f(d["pole_pairs"])
+        * f(d["psi_f_Wb"]) / f(0.03),
+        "adc_A_per_count": f(50.0) / f(4096.0),               # +/-25 A over 12 bits
+        "adc_V_per_count": f(500.0) / f(4096.0),              # 0..500 V over 12 bits
+        "L_q_H": f(1.5) * f(d["L_d_H"]),                      # the salient variant
+        "f_pwm_Hz": f(8) * f(d["f_inj_Hz"]),                  # 8 samples per period
+    }
+    for name, want in exact.items():
+        assert f(d[name]) == want, f"od.yaml fw_config.{name} default {d[name]!r}, " \
+            f"formula {float(want)!r}"
+    # the paper's rotary machine as a linear one: r = p tau / pi
+    r = d["pole_pairs"] * d["pole_pitch_m"] / np.pi
+    rounded = {"mass_kg": 0.03 / r**2, "visc_Ns_per_m": 0.008 / r**2, "coulomb_N": 1.5 / r}
+    for name, want in rounded.items():
+        assert abs(d[name] - want) <= 5e-3 * want, (name, d[name], want)
+    # the observer's disturbance gain: poles -28 +/- 50j and -30 rad/s with the paper's
+    # kp, ki (s^3 + kp s^2 + ki s + kd)
+    poles = np.sort_complex(np.roots([1.0, d["pll_kp"], d["pll_ki"], d["pll_kd"]]))
+    assert np.allclose(poles, [-30.4, -28.1 - 50.0j, -28.1 + 50.0j], atol=0.5), poles
+    # the enum defaults by name: the adaptive SOGI, quick-stop ramps
+    names = {e.name: {v.value: v.key for v in e.values} for e in od.enums}
+    assert names["extractor"][d["extractor"]] == "sogi_adaptive"
+    assert names["reaction"][d["quick_stop_option"]] == "quick_ramp"
+    assert names["reaction"][d["fault_reaction_option"]] == "quick_ramp"

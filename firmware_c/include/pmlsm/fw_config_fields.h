@@ -16,9 +16,8 @@
  * table and the Python side use the flat name ("R_ohm"), C code the path
  * (cfg->machine.R_ohm). fw_config.c builds fw_config_field() from
  * FW_CONFIG_FIELDS(F32, U32) with F32/U32(part, name, unit, min, max, default),
- * in od.yaml's order (the order fw_config_check() tests them in); the
- * defaults of fw_config_default() are checked against the last argument by
- * tests/c/test_co_od_config.c.
+ * in od.yaml's order (the order fw_config_check() tests them in), and
+ * fw_config_default() applies the last argument (the default) of each.
  */
 #ifndef PMLSM_FW_CONFIG_FIELDS_H
 #define PMLSM_FW_CONFIG_FIELDS_H
@@ -27,23 +26,23 @@
 
 /** Configuration part machine: nominal machine parameters the controller uses (electrical and mechanical). */
 typedef struct {
-  float R_ohm;         /**< phase resistance [ohm] */
+  float R_ohm;         /**< phase resistance (default: the paper's Table 1 motor, as are L_d_H, L_q_H and psi_f_Wb) [ohm] */
   float L_d_H;         /**< d-axis inductance (small-signal, i_d = 0) [H] */
-  float L_q_H;         /**< q-axis inductance [H] */
+  float L_q_H;         /**< q-axis inductance (default: the salient variant L_q = 1.5 L_d; the paper's Table 1 has L_q = L_d, which injection cannot track) [H] */
   float psi_f_Wb;      /**< PM flux linkage [Wb] */
   float pole_pairs;    /**< rotary-equivalent pole pairs p (theta_e = p theta_m) */
-  float pole_pitch_m;  /**< pole pitch tau (theta_e = pi x / tau) [m] */
-  float mass_kg;       /**< mover plus load mass [kg] */
-  float visc_Ns_per_m; /**< viscous friction [N s/m] */
-  float coulomb_N;     /**< Coulomb (kinetic) friction [N] */
+  float pole_pitch_m;  /**< pole pitch tau (theta_e = pi x / tau); the default is a rotary-equivalent choice (docs/method.md) [m] */
+  float mass_kg;       /**< mover plus load mass; default: the paper's J = 0.03 kg m^2 over r = p tau / pi [kg] */
+  float visc_Ns_per_m; /**< viscous friction; default: the paper's 0.008 N m s/rad over r^2 [N s/m] */
+  float coulomb_N;     /**< Coulomb (kinetic) friction; default: the paper's 1.5 N m over r [N] */
 } fw_cfg_machine_t;
 
 /** Configuration part sensing: sampling rate and ADC scaling (fw_step_adc). */
 typedef struct {
-  float f_pwm_Hz;          /**< PWM = sampling = control rate, default 24000 [Hz] */
-  float adc_A_per_count;   /**< phase current per count [A] */
+  float f_pwm_Hz;          /**< PWM = sampling = control rate; default 24000: 8 samples per 3 kHz injection period [Hz] */
+  float adc_A_per_count;   /**< phase current per count; default +/-25 A over 12 bits (50 / 4096) [A] */
   float adc_offset_counts; /**< zero-current count (mid-scale) */
-  float adc_V_per_count;   /**< DC-link volts per count [V] */
+  float adc_V_per_count;   /**< DC-link volts per count; default 0..500 V over 12 bits (500 / 4096) [V] */
   uint32_t adc_max_count;  /**< full scale, e.g. 4095 for 12 bit */
 } fw_cfg_sensing_t;
 
@@ -51,37 +50,37 @@ typedef struct {
 typedef struct {
   float i_max_A;            /**< current reference limit (|i_q|, |i_d|) [A] */
   float speed_max_radps_e;  /**< speed reference limit and PLL speed clamp [rad/s] */
-  float cur_kp_V_per_A;     /**< paper: L_d * 1100 [V/A] */
-  float cur_ki_V_per_As;    /**< paper: R * 1100 [V/(A s)] */
-  float spd_kp_A_per_radps; /**< paper 0.1 A/(r/min) = 0.1*60/(2 pi p) [A s/rad] */
-  float spd_ki_A_per_rad;   /**< paper 0.6 A/(r/min s) [A/rad] */
+  float cur_kp_V_per_A;     /**< default: the paper's L_d x 1100 rad/s (float32 0.012 x 1100) [V/A] */
+  float cur_ki_V_per_As;    /**< default: the paper's R x 1100 rad/s (float32 0.958 x 1100) [V/(A s)] */
+  float spd_kp_A_per_radps; /**< default: the paper's 0.1 A/(r/min), 1 r/min = 2 pi p / 60 el. rad/s: 0.1 x 60 / (2 pi x 4) [A s/rad] */
+  float spd_ki_A_per_rad;   /**< default: the paper's 0.6 A/(r/min s): 0.6 x 60 / (2 pi x 4) [A/rad] */
   float spd_filter_Hz;      /**< low-pass on the speed estimate fed to the loop [Hz] */
   float cur_bw_radps;       /**< current-loop bandwidth (paper: 1100 rad/s) [rad/s] */
-  float spd_bw_radps;       /**< speed-loop bandwidth [rad/s] */
-  uint32_t gains_auto;      /**< 1: current/speed PI and pll_accel_per_A derived from the above; 0: the explicit gain fields are used as given */
+  float spd_bw_radps;       /**< speed-loop bandwidth (default: what the paper's speed PI gives on this mass) [rad/s] */
+  uint32_t gains_auto;      /**< 1: current/speed PI and pll_accel_per_A derived from the above; 0 (default, the paper's explicit gains): the explicit gain fields are used as given */
 } fw_cfg_loops_t;
 
 /** Configuration part estimator: injection, HF extraction, PLL observer, start-up (align, polarity), back-EMF observer and handover. */
 typedef struct {
-  float u_inj_V;              /**< square-wave amplitude on the estimated d axis [V] */
+  float u_inj_V;              /**< square-wave amplitude on the estimated d axis; default 17 % of a 300 V link (docs/tuning.md) [V] */
   float f_inj_Hz;             /**< injection frequency; f_pwm / f_inj must be an even integer >= 4 [Hz] */
   uint32_t extractor;         /**< fw_extractor_t */
   float sogi_k;               /**< fixed-k SOGI gain (paper 0.5) */
   float sogi_k_adapt_max;     /**< adaptive SOGI: k in transients (paper k = 0.8) */
-  float sogi_k_adapt_min;     /**< adaptive SOGI: k when locked */
-  float sogi_adapt_err_rad;   /**< |filtered PLL error| at which k reaches k_max [rad] */
+  float sogi_k_adapt_min;     /**< adaptive SOGI: k when locked; default = the fixed-k value, so adaptation only widens the band in transients */
+  float sogi_adapt_err_rad;   /**< |filtered PLL error| at which k reaches k_max and the observer its full bandwidth [rad] */
   float pll_kp;               /**< paper 86.6 [1/s] */
   float pll_ki;               /**< paper 5000 [1/s^2] */
-  float pll_accel_per_A;      /**< torque feed-forward: el. rad/s^2 per A of i_q (p K_t / J or (pi/tau) K_F / m); 0 = paper's pure PI PLL [rad/(s^2 A)] */
-  float pll_bw_min;           /**< observer bandwidth scale when locked (0.1..1; 1 = fixed paper gains); rises to 1 with |filtered PLL error| */
-  float pll_kd;               /**< disturbance (load/friction) integrator gain, 1/s^3; 0 = none. Stable for pll_kd < pll_kp * pll_ki [1/s^3] */
+  float pll_accel_per_A;      /**< torque feed-forward: el. rad/s^2 per A of i_q (p K_t / J or (pi/tau) K_F / m); 0 = paper's pure PI PLL. Default: the paper's motor, p x 1.5 p psi_f / J with J = 0.03 kg m^2 [rad/(s^2 A)] */
+  float pll_bw_min;           /**< observer bandwidth scale when locked (0.1..1; 1 = fixed paper gains); rises to 1 with |filtered PLL error|. Default 0.5: the observer poles halved when locked, against noise */
+  float pll_kd;               /**< disturbance (load/friction) integrator gain, 1/s^3; 0 = none. Stable for pll_kd < pll_kp * pll_ki. Default: poles at -28 +/- 50j and -30 rad/s with the paper's kp, ki [1/s^3] */
   float align_time_s;         /**< angle-mod-pi convergence time with injection only [s] */
   float pol_pulse_V;          /**< polarity pulse voltage on the estimated d axis [V] */
   uint32_t pol_pulse_samples; /**< samples per pulse half */
   uint32_t pol_pulse_pairs;   /**< number of +/- pulse pairs averaged */
   float pol_margin;           /**< min relative difference of +/- responses */
-  float bemf_v_on_mps;        /**< hand over to the back-EMF above this speed (0: off) [m/s] */
-  float bemf_v_off_mps;       /**< back to injection below this speed (< bemf_v_on_mps) [m/s] */
+  float bemf_v_on_mps;        /**< hand over to the back-EMF above this speed (0: off); default on the paper's motor 55 el. rad/s = 131 r/min (10.0 V), above the paper's speeds [m/s] */
+  float bemf_v_off_mps;       /**< back to injection below this speed (< bemf_v_on_mps); default 6.9 V on the paper's motor [m/s] */
   float bemf_inj_share;       /**< injection kept on back-EMF, share of u_inj_V */
   float bemf_e_on_V;          /**< back-EMF at bemf_v_on_mps (derived by fw_config_derive: w psi_f at that speed; read-only in the object dictionary) [V] */
   float bemf_e_off_V;         /**< back-EMF at bemf_v_off_mps (derived by fw_config_derive: w psi_f at that speed; read-only in the object dictionary) [V] */
@@ -106,13 +105,13 @@ typedef struct {
   float i2t_time_s;               /**< time at i_max_A from cold before FW_FAULT_I2T [s] */
   uint32_t quick_stop_option;     /**< fw_reaction_t for QUICK STOP (0x605A) */
   uint32_t fault_reaction_option; /**< fw_reaction_t for heartbeat-type faults (0x605E) */
-  float fault_brake_time_s;       /**< longest controlled braking after a fault, then PWM off [s] */
+  float fault_brake_time_s;       /**< longest controlled braking after a fault, then PWM off (heartbeat loss: PWM off within the consumer time + this) [s] */
   float mon_angle_max_rad;        /**< HF-derived |angle error| limit [rad] */
   float mon_detect_time_s;        /**< a witness must exceed its limit this long to fault [s] */
-  float mon_sal_tol;              /**< measured saliency within a factor (1 + tol) of the configured */
+  float mon_sal_tol;              /**< measured saliency within a factor (1 + tol) of the configured (default: a factor 2) */
   float mon_bemf_max_rad;         /**< back-EMF residual angle limit [rad] */
-  float mon_bemf_min_mps;         /**< back-EMF witness active above the back-EMF of this speed [m/s] */
-  float i_sum_max_A;              /**< limit on the filtered |i_a + i_b + i_c| [A] */
+  float mon_bemf_min_mps;         /**< back-EMF witness active above the back-EMF of this speed (default: 5.0 V on the paper's motor) [m/s] */
+  float i_sum_max_A;              /**< limit on the filtered |i_a + i_b + i_c|, plus 3 % of |i_a| + |i_b| + |i_c| (fw_mon.c) [A] */
   float i_offset_max_A;           /**< limit on each standstill offset [A] */
   float start_speed_max_mps;      /**< refuse to enable above this mover speed [m/s] */
   float mon_bemf_min_V;           /**< back-EMF at mon_bemf_min_mps (derived by fw_config_derive: w psi_f at that speed; read-only in the object dictionary) [V] */
