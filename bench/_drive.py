@@ -434,7 +434,7 @@ class Drive:
             i_max = float(self.var(od.DRIVE_CONFIGURATION__I_MAX_A).raw)
             psi = float(self.var(od.DRIVE_CONFIGURATION__PSI_F_WB).raw)
             tau = float(self.var(od.DRIVE_CONFIGURATION__POLE_PITCH_M).raw)
-            from sim_fallback._motors import force_constant_N_per_A
+            from protocols.units import force_constant_N_per_A
             self._force_rated_N = force_constant_N_per_A(psi, tau) * i_max
         return self._force_rated_N
 

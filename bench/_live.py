@@ -70,6 +70,8 @@ from typing import Any
 
 import numpy as np
 
+from protocols.units import radps_e_to_rpm
+
 TIMELINE = "drive_time"
 DEFAULT_RATE_HZ = 50.0
 #: one column per entity and batch: 100 ms (50 ms doubles the chunks; rerun's web viewer in
@@ -726,8 +728,9 @@ class LiveFeed:
         self._wake = threading.Event()  #: set by close(): the sender stops sleeping
         if transport is not None:
             self._attached.set()
-        self.rpm = 60.0 / (_TWO_PI * pole_pairs)
-        self.mps_rpm = (60.0 / (_TWO_PI * radius_m)) if radius_m else float("nan")
+        self.rpm = radps_e_to_rpm(1.0, pole_pairs)
+        # r/min per m/s: a mechanical rad/s is r m/s
+        self.mps_rpm = (radps_e_to_rpm(1.0, 1.0) / radius_m) if radius_m else float("nan")
         self.rate_hz = float(rate_hz)
         self.batch_s = float(batch_s)
         self.truth = tuple(truth)

@@ -34,6 +34,7 @@ import yaml
 
 from bench._units import FORCE_UNITS, SPEED_UNITS
 from protocols.generated.od_names import Extractor
+from protocols.units import m_per_electrical_rad
 from sim_fallback.metrics import METRIC_NAMES
 
 EXTRACTORS: tuple[str, ...] = tuple(e.key for e in Extractor)  # od.yaml enums:
@@ -465,7 +466,8 @@ def drive_envelope(motor: str) -> dict[str, float]:
     cfg = fw_config(m)
     lo, hi, _ = firmware_field_ranges().get("pos_limit_max_m", (-1e4, 1e4, "m"))
     return {"speed_max_mps": min(float(cfg.v_max_mps),
-                                 float(cfg.speed_max_radps_e) * m.tau_m / math.pi),
+                                 float(cfg.speed_max_radps_e)
+                                 * m_per_electrical_rad(m.tau_m)),
             "force_max_N": m.force_const_N_per_A * float(cfg.i_max_A),
             "x_min_m": lo, "x_max_m": hi, "f_pwm_Hz": float(m.plant["f_pwm_Hz"]),
             "radius_m": m.radius_m, "pole_pitch_m": m.tau_m,

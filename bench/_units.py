@@ -14,9 +14,10 @@ The bench works in linear SI units internally (m/s, N); per-mille force values
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
+
+from protocols import units as U
 
 #: Speed units accepted in sequence files.
 SPEED_UNITS: tuple[str, ...] = ("r/min", "rpm", "m/s", "mm/s")
@@ -42,12 +43,12 @@ class MotorUnits:
     @property
     def radius_m(self) -> float:
         """Equivalent radius ``r = p tau / pi`` (m)."""
-        return self.pole_pairs * self.pole_pitch_m / math.pi
+        return U.radius_m(self.pole_pairs, self.pole_pitch_m)
 
     def speed_to_mps(self, value: float, unit: str) -> float:
         """Convert a speed in ``unit`` (one of :data:`SPEED_UNITS`) to m/s."""
         if unit in ("r/min", "rpm"):
-            return value * 2.0 * math.pi / 60.0 * self.radius_m
+            return U.rpm_to_mps(value, self.pole_pairs, self.pole_pitch_m)
         if unit == "m/s":
             return float(value)
         if unit == "mm/s":
@@ -56,7 +57,7 @@ class MotorUnits:
 
     def mps_to_rpm(self, v_mps: float) -> float:
         """Linear speed (m/s) to rotary-equivalent speed (r/min)."""
-        return v_mps / self.radius_m * 60.0 / (2.0 * math.pi)
+        return U.mps_to_rpm(v_mps, self.pole_pairs, self.pole_pitch_m)
 
     def force_to_N(self, value: float, unit: str) -> float:
         """Convert a force (N) or rotary-equivalent torque (N·m) to N."""
@@ -68,11 +69,11 @@ class MotorUnits:
 
     def theta_e_rad(self, x_m: float) -> float:
         """Electrical angle (rad) of a position x (m)."""
-        return math.pi * x_m / self.pole_pitch_m
+        return x_m * U.electrical_rad_per_m(self.pole_pitch_m)
 
     def rad_e_to_mm(self, angle_rad: float) -> float:
         """Electrical angle (rad) to mover displacement (mm)."""
-        return angle_rad * self.pole_pitch_m / math.pi * 1e3
+        return angle_rad * U.m_per_electrical_rad(self.pole_pitch_m) * 1e3
 
 
 #: Units the drive's CiA 402 objects use on the wire (od.yaml's ``unit:``) -> (SI unit, factor

@@ -9,12 +9,12 @@ MCU run; see ``examples/byo_plant.py``.
 from __future__ import annotations
 
 import ctypes as C
-import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from protocols import units as U
 from protocols.generated.od_names import Mode
 
 from . import _lib
@@ -172,7 +172,7 @@ class Firmware:
 
     def set_torque_ref_Nm(self, torque_Nm: float) -> int:
         """Force mode, rotary equivalent: T = F r with r = p tau / pi."""
-        r = self.cfg.pole_pairs * self.cfg.pole_pitch_m / math.pi
+        r = U.radius_m(self.cfg.pole_pairs, self.cfg.pole_pitch_m)
         return self.set_force_ref_N(torque_Nm / r)
 
     def bemf_V(self, v_mps: float) -> float:

@@ -34,9 +34,10 @@ from typing import Any
 import numpy as np
 
 from protocols.generated.od_names import StartPhase
+from protocols.units import electrical_rad_per_m, force_constant_N_per_A
 
 from ._firmware import CW_DISABLE_VOLTAGE
-from ._motors import Motor, electrical_rad_per_m, force_constant_N_per_A, fw_config
+from ._motors import Motor, fw_config
 from ._sim import SIM_REF_FORCE, SIM_REF_SPEED, Sim
 
 #: 0.15 s windows the start-up may take before identification gives up

@@ -25,23 +25,12 @@ try:
 except ImportError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
+from protocols import units as U
 from protocols.generated.od_names import Extractor
 
 from . import _lib
 
 MOTOR_DIR = Path(__file__).resolve().parent / "motors"
-
-
-def electrical_rad_per_m(pole_pitch_m: float) -> float:
-    """k_e = pi / tau: electrical angle per metre of travel (theta_e = k_e x)."""
-    return math.pi / pole_pitch_m
-
-
-def force_constant_N_per_A(psi_f_Wb: float, pole_pitch_m: float) -> float:
-    """Thrust per ampere of i_q on a non-salient machine, K_F = 1.5 (pi / tau) psi_f
-    (the firmware's ``fw_units_force_per_A`` in float32). The one Python copy: the
-    motor files, identification, the bench's rated force and the tools use it."""
-    return 1.5 * electrical_rad_per_m(pole_pitch_m) * psi_f_Wb
 
 
 class MotorFileError(ValueError):
@@ -233,18 +222,18 @@ class Motor:
 
     @property
     def force_const_N_per_A(self) -> float:
-        """K_f = 1.5 (pi / tau) psi_f (:func:`force_constant_N_per_A`)."""
-        return force_constant_N_per_A(float(self.plant["psi_f_Wb"]), self.tau_m)
+        """K_f = 1.5 (pi / tau) psi_f (:func:`protocols.units.force_constant_N_per_A`)."""
+        return U.force_constant_N_per_A(float(self.plant["psi_f_Wb"]), self.tau_m)
 
     # unit helpers (rotary equivalent: n[r/min] = 60 w_e / (2 pi p))
     def rpm_to_radps_e(self, n_rpm: float) -> float:
-        return n_rpm * 2.0 * math.pi * self.pole_pairs / 60.0
+        return U.rpm_to_radps_e(n_rpm, self.pole_pairs)
 
     def radps_e_to_rpm(self, w: float):
-        return w * 60.0 / (2.0 * math.pi * self.pole_pairs)
+        return U.radps_e_to_rpm(w, self.pole_pairs)
 
     def mps_to_radps_e(self, v_mps: float):
-        return v_mps * electrical_rad_per_m(self.tau_m)
+        return v_mps * U.electrical_rad_per_m(self.tau_m)
 
     def nm_to_N(self, torque_Nm: float) -> float:
         return torque_Nm / self.radius_m
@@ -403,7 +392,7 @@ def _build(path: Path, doc: dict[str, Any]) -> Motor:
             if k in doc["mechanical"]:
                 raise _err(path, f"mechanical.{k}", "linear field in a rotary file")
         p = float(g["pole_pairs"])
-        r = p * tau / math.pi
+        r = U.radius_m(p, tau)
         mass = float(g["inertia_kgm2"]) / r**2
         b = float(g["viscous_Nms_per_rad"]) / r**2
         F_s = float(g["static_friction_Nm"]) / r
@@ -423,7 +412,7 @@ def _build(path: Path, doc: dict[str, Any]) -> Motor:
             if k in doc["mechanical"]:
                 raise _err(path, f"mechanical.{k}", "rotary field in a linear file")
         p = float(g["pole_pairs"] or 1.0)
-        r = p * tau / math.pi
+        r = U.radius_m(p, tau)
         mass = float(g["mass_kg"])
         b = float(g["viscous_Ns_per_m"])
         F_s = float(g["static_friction_N"])

@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from protocols.units import m_per_electrical_rad, radps_e_to_rpm
+
 #: Settling band on the averaged position error (rad electrical).
 SETTLE_BAND_RAD = 0.05
 #: Moving-average length applied to |position error| before the band test (s).
@@ -208,8 +210,8 @@ def compute_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pa
         t0, t1 = float(window_s[0]), float(window_s[1])
     m = window_mask(t, t0, t1)
     tw = t[m]
-    rpm_per_radps = 60.0 / (2.0 * math.pi * pole_pairs)
-    mps_per_radps = pole_pitch_m / math.pi
+    rpm_per_radps = radps_e_to_rpm(1.0, pole_pairs)
+    mps_per_radps = m_per_electrical_rad(pole_pitch_m)
 
     def sig(a: str, b: str) -> np.ndarray:
         return np.asarray(data[a], dtype=float)[m] - np.asarray(data[b], dtype=float)[m]

@@ -21,10 +21,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from protocols.units import force_constant_N_per_A  # noqa: E402
 from sim_fallback import run_scenario  # noqa: E402
 from sim_fallback._faults import FAULT_NAMES  # noqa: E402
 from sim_fallback._identify import identify, randomized_plant, seed_range  # noqa: E402
-from sim_fallback._motors import force_constant_N_per_A, fw_config, load_motor  # noqa: E402
+from sim_fallback._motors import fw_config, load_motor  # noqa: E402
 
 
 def main() -> int:

@@ -3,6 +3,7 @@ field, its value and the allowed range; setters in m/s and N agree with the
 analytic unit conversions (w_e = pi v / tau, K_F = 1.5 (pi/tau) psi_f); motor
 files with only a Coulomb friction level load; one DC-link ADC scaling rule."""
 
+import ctypes as C
 import math
 
 import numpy as np
@@ -94,7 +95,7 @@ def test_force_setter_uses_the_analytic_thrust_constant():
     k_f = 1.5 * math.pi / fw.cfg.pole_pitch_m * fw.cfg.psi_f_Wb   # numpy-free reference
     assert fw.force_per_A == pytest.approx(k_f, rel=1e-6)
     # the Python copy (motor files, identification, the bench's rated force) agrees
-    from sim_fallback._motors import force_constant_N_per_A
+    from protocols.units import force_constant_N_per_A
     assert force_constant_N_per_A(fw.cfg.psi_f_Wb, fw.cfg.pole_pitch_m) == pytest.approx(
         k_f, rel=1e-12)
     assert sf.load_motor("iron_core_linear").force_const_N_per_A == pytest.approx(
@@ -160,3 +161,35 @@ def test_dc_link_scaling_is_one_rule():
     assert cfg.adc_V_per_count == pytest.approx(500.0 / 4096.0, rel=1e-7)
     assert default.adc_V_per_count == pytest.approx(cfg.adc_V_per_count, rel=1e-7)
     assert default.adc_A_per_count == pytest.approx(cfg.adc_A_per_count, rel=1e-7)
+
+
+@pytest.mark.parametrize("motor", ["paper_salient", "iron_core_linear"])
+def test_python_units_are_the_firmwares(motor):
+    """protocols.units (the bench's, the simulator's and the tools' one copy of the
+    machine geometry) against the firmware's fw_units_* in float32, and against the
+    rotary-equivalent definitions written out here (r = p tau / pi)."""
+    from protocols import units as U
+    fw = sf.Firmware(motor)
+    L, cfg = _lib.lib(), C.byref(fw.cfg)
+    p, tau = fw.cfg.pole_pairs, fw.cfg.pole_pitch_m
+    rel = 2e-7  # float32 against float64
+    for n in (-3000.0, -1.0, 0.5, 100.0, 2500.0):
+        assert U.rpm_to_radps_e(n, p) == pytest.approx(L.fw_units_rpm_to_radps_e(cfg, n),
+                                                       rel=rel)
+        assert U.radps_e_to_rpm(U.rpm_to_radps_e(n, p), p) == pytest.approx(n, rel=1e-12)
+        v = U.rpm_to_mps(n, p, tau)
+        assert v == pytest.approx(n / 60.0 * 2.0 * p * tau, rel=1e-12)  # 2 p tau per rev
+        assert U.mps_to_rpm(v, p, tau) == pytest.approx(n, rel=1e-12)
+    for v in (-2.0, 0.01, 1.5):
+        assert v * U.electrical_rad_per_m(tau) == pytest.approx(
+            L.fw_units_mps_to_radps_e(cfg, v), rel=rel)
+        w = L.fw_units_mps_to_radps_e(cfg, v)
+        assert w * U.m_per_electrical_rad(tau) == pytest.approx(
+            L.fw_units_radps_e_to_mps(cfg, w), rel=rel)
+    assert U.radius_m(p, tau) == pytest.approx(p * tau / math.pi, rel=1e-15)
+    # the bench's sequence units are these
+    from bench._units import MotorUnits
+    mu = MotorUnits(pole_pitch_m=tau, pole_pairs=p)
+    assert mu.speed_to_mps(100.0, "r/min") == U.rpm_to_mps(100.0, p, tau)
+    assert mu.force_to_N(2.0, "N*m") == 2.0 / U.radius_m(p, tau)
+    assert mu.theta_e_rad(tau) == pytest.approx(math.pi, rel=1e-15)
