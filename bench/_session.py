@@ -194,14 +194,16 @@ def open_sim(motor: str = "paper_salient", extractor: str = "sogi_adaptive", see
 
     channel = f"pmlsm-sim-{uuid.uuid4().hex[:8]}-vcan"  # no trailing digits (BLF channel)
     sim = SimDrive(channel, motor=motor, extractor=extractor, seed=seed, x0=x0,
-                   node_id=node_id, realtime=realtime, chunk_s=chunk_s,
+                   node_id=node_id, realtime=False, chunk_s=chunk_s,
                    record_decimation=record_decimation, plant=plant).start()
     try:
         bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-        sim.peer_bus = bus
         net = canopen.Network(bus)
         net.NOTIFIER_CYCLE = 0.01  # disconnect in 10 ms, not 100; frames come at once
         net.connect()
+        sim.attach_peer(bus, net.notifier)  # run_until waits for canopen's dispatch
+        if realtime:
+            sim.set_realtime(True)  # after attach_peer: the drive was idle until here
         # the simulated drive answers in its next chunk (well under a millisecond): a
         # wall-clock SDO timeout only fires when this machine stalls, and its retry
         # would be an extra frame that moves the simulated clock (not reproducible)

@@ -28,7 +28,11 @@ Pacing
     per frame the bench sends (one frame enters the C slave per chunk; an SDO
     request is answered within that chunk). The bench's own latency therefore
     eats no simulated time, sequence events land at their nominal times, and a
-    run is reproducible: the same sequence and seed give the same samples.
+    run is reproducible: the same sequence and seed give the same samples,
+    whatever the machine's load. Two hand-overs make it so: a wait returns only
+    after the bench's receive thread has dispatched every frame the drive sent
+    (:meth:`SimDrive.attach_peer`), and the bench reads the time only after the
+    chunk that answered it has published its end (``t_s``).
     Runs go as fast as the CPU allows.
     ``realtime=True`` (live): the simulated clock follows the wall clock and
     every pending frame enters at the next chunk.
@@ -176,7 +180,12 @@ class SimDrive(DriveBridge):
         self.cpu_s = 0.0  # CPU time of the simulation thread while stepping (s)
         self.serial = SimSerial()
         self.epoch = time.time()
-        self.peer_bus: Any = None  # the bench's bus on the virtual channel (open_sim)
+        self.peer_bus: Any = None  # the bench's bus on the virtual channel (attach_peer)
+        self._sent = 0  # frames this drive put on the bus (TPDOs, answers, SYNC, ...)
+        self._peer_base = 0  # ... of them before the bench's bus was attached
+        self._peer_seen = 0  # ... of them the bench's receive thread has dispatched
+        self._peer_cond = threading.Condition()
+        self._t_lock = threading.Lock()  # a chunk's frames out + its time published
         self._t = 0.0
         self._held: list[can.Message] = []
         self._uart_buf = C.create_string_buffer(8192)
@@ -240,8 +249,9 @@ class SimDrive(DriveBridge):
     # ---- clock ------------------------------------------------------------------------
     @property
     def t_s(self) -> float:
-        """Simulated time (s)."""
-        return self._t
+        """Simulated time (s): the end of the last chunk whose frames are on the bus."""
+        with self._t_lock:
+            return self._t
 
     def run_until(self, t_s: float, timeout_s: float | None = None) -> None:
         """Let the simulation run to ``t_s`` and block until it got there."""
@@ -259,18 +269,44 @@ class SimDrive(DriveBridge):
                 self._cond.wait(0.1)
         self._drain_peer()
 
-    def _drain_peer(self, timeout_s: float = 1.0) -> None:
-        """Wait until the bench's side of the virtual bus (``peer_bus``, set by
-        ``open_sim``) has taken every frame sent so far, so that what the bench reads
-        after a wait (a TPDO's statusword) does not depend on its receive thread's
-        timing: simulated runs stay reproducible."""
-        q = getattr(self.peer_bus, "queue", None)
-        if q is None:
+    def attach_peer(self, bus: Any, notifier: Any) -> None:
+        """The bench's side of the virtual bus: ``bus`` and the ``can.Notifier`` that
+        dispatches its frames (canopen's). A listener added after the bench's own counts
+        the frames the notifier has handed to every listener before it, so that
+        :meth:`run_until` returns only when the bench has processed each frame the drive
+        sent so far (a TPDO's statusword included). Without it, what the bench reads
+        after a wait, and so the simulated time of its next command, depended on its
+        receive thread's timing: a loaded machine gave a different run."""
+        with self._peer_cond:
+            self.peer_bus = bus
+            # sent before (boot-up): the bench never receives them. The drive must be
+            # idle here (not paced), or frames in flight would be miscounted
+            self._peer_base = self._sent
+            self._peer_seen = 0
+        notifier.add_listener(self._peer_dispatched)
+
+    def _peer_dispatched(self, msg: can.Message) -> None:
+        with self._peer_cond:
+            self._peer_seen += 1
+            self._peer_cond.notify_all()
+
+    def _send(self, msg: can.Message) -> None:
+        with self._peer_cond:
+            self._sent += 1
+        self.bus.send(msg)
+
+    def _drain_peer(self, timeout_s: float = 5.0) -> None:
+        """Wait until the bench has dispatched every frame sent so far (attach_peer);
+        not when paced to the wall clock, where runs are not reproducible anyway."""
+        if self.peer_bus is None or self.paced:
             return
-        end = time.monotonic() + timeout_s
-        while not q.empty() and time.monotonic() < end:
-            time.sleep(0.0001)
-        time.sleep(0)  # let the receive thread finish dispatching the last frame
+        with self._peer_cond:
+            ok = self._peer_cond.wait_for(
+                lambda: self._peer_seen >= self._sent - self._peer_base, timeout_s)
+            if not ok:
+                # a stalled or closed bench: not fatal for the drive; the run may differ
+                log.warning("the bench dispatched %d of %d frames within %.1f s",
+                            self._peer_seen, self._sent - self._peer_base, timeout_s)
 
     def set_realtime(self, on: bool) -> None:
         """Switch pacing; wall-clock pacing resumes from the present simulated time."""
@@ -329,9 +365,9 @@ class SimDrive(DriveBridge):
         f = FwCanFrame()
         ts = self.epoch + (self._t if t_s is None else t_s)
         while self._can_pop(f):
-            self.bus.send(can.Message(arbitration_id=f.id, data=bytes(f.data[: f.dlc]),
-                                      is_extended_id=False, is_remote_frame=bool(f.rtr),
-                                      timestamp=ts))
+            self._send(can.Message(arbitration_id=f.id, data=bytes(f.data[: f.dlc]),
+                                   is_extended_id=False, is_remote_frame=bool(f.rtr),
+                                   timestamp=ts))
             self.frames_to_bus += 1
             self.sent_by_id[f.id] = self.sent_by_id.get(f.id, 0) + 1
         n = self._uart_read(self._uart_buf, len(self._uart_buf))
@@ -365,17 +401,21 @@ class SimDrive(DriveBridge):
         self._flush_rx(None if self.paced else 1)
         self._apply_pending()
         self._can_rx(self._sync)  # we are the SYNC producer
-        self.bus.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False,
-                                  timestamp=self.epoch + self._t))
+        self._send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False,
+                               timestamp=self.epoch + self._t))
         self.syncs_sent += 1
         rec = self.sim.advance(self.n_chunk, self.record_decimation,
                                ["t_s", *SIM_CHANNELS] if self.sink else [])
         self.steps += self.n_chunk
         # the chunk's frames are on the bus before its time is: a waiter that sees the
-        # new time (run_until) also finds the drive's answers of that chunk
+        # new time (run_until) also finds the drive's answers of that chunk; and both
+        # under one lock with the clock's reader (t_s): a bench that got an answer of
+        # this chunk and reads the time gets the chunk's end, never the time before it
+        # (which depended on the threads' timing and moved every later event by a chunk)
         t = self.sim.t_s
-        self._flush_tx(t)
-        self._t = t
+        with self._t_lock:
+            self._flush_tx(t)
+            self._t = t
         return rec
 
     @staticmethod

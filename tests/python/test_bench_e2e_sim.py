@@ -219,6 +219,74 @@ def test_simulated_runs_are_reproducible(tmp_path: Path) -> None:
     assert got[0] == got[1]
 
 
+def test_runs_do_not_depend_on_thread_timing(tmp_path: Path,
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """A slow bench receive thread (1 ms per frame) or a slow drive thread (10 ms
+    between the frames of a chunk that answered the bench and its time), as on a
+    loaded machine, give the same run as fast ones, and run_until returns only after
+    the bench dispatched every frame the drive sent. The simulated time of the bench's
+    next command depends neither on when its receive thread got to a TPDO nor on
+    whether it read the clock before the drive published the time of the chunk that
+    answered it. (Before: under CPU load one run in eight came out different, 0.0282
+    vs 0.0272 rad, the last command one chunk early.)"""
+    import time
+
+    from bench import run_sequence, validate_sequence
+    from bench._simdrive import SimDrive
+
+    seq = validate_sequence(
+        "name: repro\nmotor: paper_salient\nextractor: sogi_adaptive\nseed: 7\nsteps:\n"
+        "  - enable: {}\n  - set_speed: {value: 100, unit: r/min}\n"
+        "  - wait: {duration_s: 0.1}\n  - load_step: {value: 1, unit: N*m}\n"
+        "  - wait: {duration_s: 0.05}\n"
+        "  - expect: {metric: position_error_rms_rad, op: '<', limit: 1, window_s: [0.05, 0.15]}\n"
+        "  - disable: {}\n")
+    attach = SimDrive.attach_peer
+    lag: list[int] = []
+
+    def slow_attach(self: SimDrive, bus: object, notifier: object) -> None:
+        seen = [0]
+
+        def slow(msg: object) -> None:  # dispatched after canopen's, before the drive's count
+            time.sleep(0.001)
+            seen[0] += 1
+        notifier.add_listener(slow)  # type: ignore[attr-defined]
+        attach(self, bus, notifier)
+        base = self._sent
+        run_until = self.run_until
+
+        def checked(t_s: float, timeout_s: float | None = None) -> None:
+            run_until(t_s, timeout_s)
+            lag.append(self._sent - base - seen[0])  # frames sent, not yet dispatched
+        self.run_until = checked  # type: ignore[method-assign]
+
+    flush = SimDrive._flush_tx
+
+    def slow_flush(self: SimDrive, t_s: float | None = None) -> None:
+        answered = self.frames_from_bus != getattr(self, "_answered", 0)
+        self._answered = self.frames_from_bus  # type: ignore[attr-defined]
+        flush(self, t_s)
+        if answered and self.peer_bus is not None:
+            time.sleep(0.01)  # the answer is out, the chunk's time not yet
+
+    got = []
+    for k, slowed in enumerate(("", "receive", "drive")):
+        if slowed == "receive":
+            monkeypatch.setattr(SimDrive, "attach_peer", slow_attach)
+        elif slowed == "drive":
+            monkeypatch.setattr(SimDrive, "attach_peer", attach)
+            monkeypatch.setattr(SimDrive, "_flush_tx", slow_flush)
+        c = open_sim(seed=seq.seed)
+        try:
+            out = run_sequence(seq, c, runs_root=str(tmp_path / f"r{k}"), progress=False,
+                               report=False)
+            got.append((out.result.metrics, c.sim.steps))
+        finally:
+            c.close()
+    assert lag and max(lag) == 0, f"run_until returned with {max(lag)} frames undispatched"
+    assert got[0] == got[1] == got[2]
+
+
 _SHORT = ("name: short\nmotor: paper_salient\nextractor: sogi_adaptive\nseed: 3\nsteps:\n"
           "  - enable: {}\n  - set_speed: {value: 100, unit: r/min}\n"
           "  - wait: {duration_s: 0.2}\n"
