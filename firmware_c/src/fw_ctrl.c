@@ -447,23 +447,29 @@ static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
                          fw_period_t *p) {
   const fw_fault_t f =
       fw_fault_check_inputs(&c->cfg.protection, in, fw_cia402_power_enabled(c->sm.state));
-  /* field by field: the copy can then stay in registers (a struct copy is an
-   * LDM/STM pair through the stack) */
-  safe->i_abc_A[0] = in->i_abc_A[0];
-  safe->i_abc_A[1] = in->i_abc_A[1];
-  safe->i_abc_A[2] = in->i_abc_A[2];
-  safe->u_dc_V = in->u_dc_V;
+  /* in scalars, written to safe once at the end: safe then stays in
+   * registers (a struct copy is an LDM/STM pair through the stack, and the
+   * memset and the compensation through a pointer kept it on the stack) */
+  float ia = in->i_abc_A[0], ib = in->i_abc_A[1], ic = in->i_abc_A[2];
+  float u_dc = in->u_dc_V;
   if (FW_UNLIKELY(f != FW_FAULT_NONE)) {
     latch_fault(c, f);
     if (f == FW_FAULT_INPUT_INVALID) {
-      memset(safe, 0, sizeof(*safe)); /* never propagate NaN into the state */
+      ia = ib = ic = u_dc = 0.0f; /* never propagate NaN into the state */
     }
   }
-  c->u_dc_V = safe->u_dc_V; /* for the statusword's warning bit */
+  c->u_dc_V = u_dc; /* for the statusword's warning bit */
   if (FW_LIKELY(c->phase != FW_START_IDLE)) {
-    fw_mon_compensate(&c->mon, safe->i_abc_A); /* offsets learnt at standstill */
+    /* offsets learnt at standstill (fw_mon_compensate, written out) */
+    ia -= c->mon.offset_A[0];
+    ib -= c->mon.offset_A[1];
+    ic -= c->mon.offset_A[2];
   }
-  p->i_ab = fw_clarke_f32(safe->i_abc_A[0], safe->i_abc_A[1], safe->i_abc_A[2]);
+  safe->i_abc_A[0] = ia;
+  safe->i_abc_A[1] = ib;
+  safe->i_abc_A[2] = ic;
+  safe->u_dc_V = u_dc;
+  p->i_ab = fw_clarke_f32(ia, ib, ic);
 }
 
 /** Fault reaction (brake under control first, or switch off now: latch_fault).
