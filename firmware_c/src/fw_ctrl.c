@@ -713,9 +713,11 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   if (c == NULL || out == NULL) {
     return;
   }
-  outputs_off(out);
+  /* outputs_off on every path that does not reach stage_output (which writes
+   * every output): not stored twice in the usual period */
   c->step_count++;
   if (in == NULL) {
+    outputs_off(out);
     latch_fault(c, FW_FAULT_INPUT_INVALID);
     return;
   }
@@ -725,6 +727,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   stage_inputs(c, in, &safe, &p);
   if (FW_UNLIKELY(!stage_power(c, &p))) {
     stage_off(c, &safe);
+    outputs_off(out);
     fill_snapshot_common(c, &safe, p.i_ab, out);
     return;
   }
@@ -738,6 +741,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   p.braking = p.braking && c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE;
   if (FW_UNLIKELY(!(fw_cia402_power_enabled(c->sm.state) || p.braking) || /* a fault, above */
                   !stage_references(c, &p))) { /* quick stop / braking done */
+    outputs_off(out);
     fill_snapshot_common(c, &safe, p.i_ab, out);
     return;
   }
@@ -756,6 +760,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, safe.u_dc_V);
   }
   if (FW_UNLIKELY(!stage_monitor(c, &hf, &safe, &p))) { /* hard fault: switch off now */
+    outputs_off(out);
     fill_snapshot_common(c, &safe, p.i_ab, out);
     return;
   }
@@ -858,7 +863,8 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
   snap->polarity_flipped = ctrl->polarity_flipped;
   copy_f32(&snap->sogi_k_eff, &ctrl->inj.sogi_a.k); /* fw_inj_k */
   snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
-  raw->pos_e_rad = fw_obs_pos_e(&ctrl->obs);
+  raw->pos_turns = ctrl->obs.pos_turns; /* two words: the sum is the background's */
+  raw->pos_unwrapped_e = ctrl->obs.pos_unwrapped_e;
   copy_f32(&raw->bemf_e_dq_V[0], &ctrl->bemf.e_d_f);
   copy_f32(&raw->bemf_e_dq_V[1], &ctrl->bemf.e_q_f);
   copy_f32(&raw->bemf_err_rad, &ctrl->bemf.err_rad);
@@ -870,9 +876,10 @@ void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
                           const fw_snapshot_raw_t *raw) {
   const fw_config_t *cfg = &ctrl->cfg;
   const float w = snap->omega_hat_radps;
-  snap->pos_hat_m = pos_m_of(cfg, raw->pos_e_rad);
+  const float pos_e_rad = fw_obs_pos_e_of(raw->pos_turns, raw->pos_unwrapped_e);
+  snap->pos_hat_m = pos_m_of(cfg, pos_e_rad);
   snap->speed_hat_mps = fw_units_radps_e_to_mps(cfg, w);
-  snap->pos_hat_mech_rad = raw->pos_e_rad / cfg->machine.pole_pairs;
+  snap->pos_hat_mech_rad = pos_e_rad / cfg->machine.pole_pairs;
   snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, w);
   snap->force_hat_N = fw_units_force_per_A(cfg) * snap->i_dq_A[1];
   snap->torque_hat_Nm = 1.5f * cfg->machine.pole_pairs * cfg->machine.psi_f_Wb * snap->i_dq_A[1];

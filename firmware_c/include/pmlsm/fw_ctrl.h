@@ -346,7 +346,8 @@ void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap);
 
 /** What fw_snapshot_complete needs besides the captured snapshot fields. */
 typedef struct {
-  float pos_e_rad;     /**< unwrapped electrical position estimate */
+  int32_t pos_turns;      /**< the observer's position (fw_obs_pos_e_of: whole turns ... */
+  float pos_unwrapped_e;  /**< ... and the remainder), summed in fw_snapshot_complete */
   float bemf_e_dq_V[2]; /**< the back-EMF observer's filtered back-EMF */
   float bemf_err_rad;  /**< its angle error, when bemf_fresh */
   uint8_t bemf_fresh;  /**< bemf_err_rad is computed (fw_bemf_t.err_fresh) */
