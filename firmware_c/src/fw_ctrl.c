@@ -410,19 +410,22 @@ static void outputs_off(fw_outputs_t *out) {
  *  disturbance, the monitor's outputs, the injection scale and the back-EMF
  *  flags: only fw_step and the commands that restart the blocks change them)
  *  are read in fw_get_snapshot (off the hot path). */
-static void fill_snapshot_common(fw_ctrl_t *c, const fw_inputs_t *in, fw_vec2_f32_t i_ab,
-                                 const fw_outputs_t *out) {
+static void fill_snapshot_common(fw_ctrl_t *c, const fw_inputs_t *in, fw_vec2_f32_t i_ab) {
   fw_snapshot_t *s = &c->snap;
-  s->step_count = c->step_count;
   s->cia402_state = (uint8_t)c->sm.state;
   s->start_phase = (uint8_t)c->phase;
   s->fault_code = (uint16_t)c->fault.code;
   s->i_ab_A[0] = i_ab.x;
   s->i_ab_A[1] = i_ab.y;
   s->u_dc_V = in->u_dc_V;
-  s->duty_abc[0] = out->duty_abc[0];
-  s->duty_abc[1] = out->duty_abc[1];
-  s->duty_abc[2] = out->duty_abc[2];
+}
+
+/** The duties into the snapshot (stage_output copies them right after the
+ *  modulation, while they are still in registers). */
+static void snapshot_duties(fw_ctrl_t *c, const fw_outputs_t *out) {
+  c->snap.duty_abc[0] = out->duty_abc[0];
+  c->snap.duty_abc[1] = out->duty_abc[1];
+  c->snap.duty_abc[2] = out->duty_abc[2];
 }
 
 /** Signals of one period, passed between the stages of fw_step (each stage
@@ -693,6 +696,7 @@ static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_ou
   const fw_sincos_f32_t sc_out =
       fw_foc_output(u_cmd, p->sc, c->theta_k, c->obs.pll.w_hat_radps, c->dt_s, u_dc_V,
                     out->duty_abc);
+  snapshot_duties(c, out);
   if (c->phase == FW_START_ALIGN) { /* fundamental only, for the flying-start observer */
     fw_start_fly_set_u(&c->start, fw_inv_park_f32(u_dq, sc_out));
   }
@@ -721,6 +725,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     latch_fault(c, FW_FAULT_INPUT_INVALID);
     return;
   }
+  c->snap.step_count = c->step_count; /* while it is in a register */
   c->theta_k = c->obs.pll.theta_rad; /* the estimate belonging to this sample */
   fw_period_t p;
   fw_inputs_t safe;
@@ -728,7 +733,8 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   if (FW_UNLIKELY(!stage_power(c, &p))) {
     stage_off(c, &safe);
     outputs_off(out);
-    fill_snapshot_common(c, &safe, p.i_ab, out);
+    snapshot_duties(c, out);
+    fill_snapshot_common(c, &safe, p.i_ab);
     return;
   }
   c->phase_time_s += c->dt_s;
@@ -742,7 +748,8 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   if (FW_UNLIKELY(!(fw_cia402_power_enabled(c->sm.state) || p.braking) || /* a fault, above */
                   !stage_references(c, &p))) { /* quick stop / braking done */
     outputs_off(out);
-    fill_snapshot_common(c, &safe, p.i_ab, out);
+    snapshot_duties(c, out);
+    fill_snapshot_common(c, &safe, p.i_ab);
     return;
   }
   /* current loop in the estimated frame, or the polarity pulses */
@@ -761,7 +768,8 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   }
   if (FW_UNLIKELY(!stage_monitor(c, &hf, &safe, &p))) { /* hard fault: switch off now */
     outputs_off(out);
-    fill_snapshot_common(c, &safe, p.i_ab, out);
+    snapshot_duties(c, out);
+    fill_snapshot_common(c, &safe, p.i_ab);
     return;
   }
   fw_foc_commit(&c->foc, p.u_dq);
@@ -770,9 +778,10 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     saliency_done(c);
     if (c->fault.hard) {
       outputs_off(out);
+      snapshot_duties(c, out);
     }
   }
-  fill_snapshot_common(c, &safe, p.i_ab, out);
+  fill_snapshot_common(c, &safe, p.i_ab);
 }
 
 void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
