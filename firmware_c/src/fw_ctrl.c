@@ -405,21 +405,6 @@ static void outputs_off(fw_outputs_t *out) {
   out->pwm_enable = 0u;
 }
 
-/** Raw signals of this step into the snapshot; unit conversions, the
- *  statusword and the blocks' states (the estimator's angle, speeds, error and
- *  disturbance, the monitor's outputs, the injection scale and the back-EMF
- *  flags: only fw_step and the commands that restart the blocks change them)
- *  are read in fw_get_snapshot (off the hot path). */
-static void fill_snapshot_common(fw_ctrl_t *c, const fw_inputs_t *in, fw_vec2_f32_t i_ab) {
-  fw_snapshot_t *s = &c->snap;
-  s->cia402_state = (uint8_t)c->sm.state;
-  s->start_phase = (uint8_t)c->phase;
-  s->fault_code = (uint16_t)c->fault.code;
-  s->i_ab_A[0] = i_ab.x;
-  s->i_ab_A[1] = i_ab.y;
-  s->u_dc_V = in->u_dc_V;
-}
-
 /** The duties into the snapshot (stage_output copies them right after the
  *  modulation, while they are still in registers). */
 static void snapshot_duties(fw_ctrl_t *c, const fw_outputs_t *out) {
@@ -433,6 +418,8 @@ static void snapshot_duties(fw_ctrl_t *c, const fw_outputs_t *out) {
  *  pointer (inputs, monitor inputs, extraction results) lives in separate
  *  locals, so this one stays in registers. */
 typedef struct {
+  float i_abc[3];          /**< phase currents, checked and offset-compensated */
+  float u_dc_V;            /**< DC link, checked */
   fw_vec2_f32_t i_ab;      /**< measured alpha/beta current */
   bool braking;            /**< controlled braking after a fault */
   bool quick_stop;         /**< quick stop or fault braking */
@@ -444,15 +431,30 @@ typedef struct {
   fw_vec2_f32_t u_dq;      /**< fundamental voltage command */
 } fw_period_t;
 
+/** Raw signals of this step into the snapshot; unit conversions, the
+ *  statusword and the blocks' states (the estimator's angle, speeds, error and
+ *  disturbance, the monitor's outputs, the injection scale and the back-EMF
+ *  flags: only fw_step and the commands that restart the blocks change them)
+ *  are read in fw_get_snapshot (off the hot path). */
+static void fill_snapshot_common(fw_ctrl_t *c, const fw_period_t *p) {
+  fw_snapshot_t *s = &c->snap;
+  s->cia402_state = (uint8_t)c->sm.state;
+  s->start_phase = (uint8_t)c->phase;
+  s->fault_code = (uint16_t)c->fault.code;
+  s->i_ab_A[0] = p->i_ab.x;
+  s->i_ab_A[1] = p->i_ab.y;
+  s->u_dc_V = p->u_dc_V;
+}
+
 /** Input checks (fault on a bad sample; NaN never enters the state), offset
  *  compensation, Clarke. */
-static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
-                         fw_period_t *p) {
+static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_period_t *p) {
   const fw_fault_t f =
       fw_fault_check_inputs(&c->cfg.protection, in, fw_cia402_power_enabled(c->sm.state));
-  /* in scalars, written to safe once at the end: safe then stays in
-   * registers (a struct copy is an LDM/STM pair through the stack, and the
-   * memset and the compensation through a pointer kept it on the stack) */
+  /* in scalars, into the period's values at the end: they then stay in
+   * registers (a struct copy is an LDM/STM pair through the stack, and a
+   * memset, a compensation through a pointer or a struct whose address a
+   * cold path takes keep them on the stack) */
   float ia = in->i_abc_A[0], ib = in->i_abc_A[1], ic = in->i_abc_A[2];
   float u_dc = in->u_dc_V;
   if (FW_UNLIKELY(f != FW_FAULT_NONE)) {
@@ -468,10 +470,10 @@ static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
     ib -= c->mon.offset_A[1];
     ic -= c->mon.offset_A[2];
   }
-  safe->i_abc_A[0] = ia;
-  safe->i_abc_A[1] = ib;
-  safe->i_abc_A[2] = ic;
-  safe->u_dc_V = u_dc;
+  p->i_abc[0] = ia;
+  p->i_abc[1] = ib;
+  p->i_abc[2] = ic;
+  p->u_dc_V = u_dc;
   p->i_ab = fw_clarke_f32(ia, ib, ic);
 }
 
@@ -491,15 +493,16 @@ static bool stage_power(fw_ctrl_t *c, fw_period_t *p) {
 }
 
 /** Power stage off: current-sensor offsets and sum, i2t cools down. */
-static void stage_off(fw_ctrl_t *c, const fw_inputs_t *safe) {
+static void stage_off(fw_ctrl_t *c, const fw_period_t *p) {
   c->phase = FW_START_IDLE;
-  fw_mon_learn_offsets(&c->mon, safe->i_abc_A);
+  const float i_abc[3] = {p->i_abc[0], p->i_abc[1], p->i_abc[2]};
+  fw_mon_learn_offsets(&c->mon, i_abc);
   fw_protect_cool(&c->prot, &c->cfg);
   fw_mon_in_t mi;
   memset(&mi, 0, sizeof mi);
-  mi.i_abc_A[0] = safe->i_abc_A[0];
-  mi.i_abc_A[1] = safe->i_abc_A[1];
-  mi.i_abc_A[2] = safe->i_abc_A[2];
+  mi.i_abc_A[0] = p->i_abc[0];
+  mi.i_abc_A[1] = p->i_abc[1];
+  mi.i_abc_A[2] = p->i_abc[2];
   const fw_fault_t mf = fw_mon_update(&c->mon, &mi); /* current sum with PWM off */
   if (mf != FW_FAULT_NONE) {
     latch_fault(c, mf);
@@ -636,8 +639,7 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
 
 /** Integrity monitor and protections. Returns false when a hard fault
  *  switches the power stage off now (braking faults go on braking). */
-static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, const fw_inputs_t *safe,
-                          fw_period_t *p) {
+static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p) {
   const bool running = c->phase == FW_START_RUN;
   const bool scale_full = c->bemf.inj_scale >= 1.0f;
   const bool scale_steady = scale_full || c->bemf.inj_scale <= c->bemf.inj_share;
@@ -649,9 +651,9 @@ static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, const fw_inputs
    * so that its fields stay in registers (every field written, no memset) */
   fw_mon_in_t m;
   fw_mon_in_t *const mi = &m;
-  mi->i_abc_A[0] = safe->i_abc_A[0]; /* after the offset compensation */
-  mi->i_abc_A[1] = safe->i_abc_A[1];
-  mi->i_abc_A[2] = safe->i_abc_A[2];
+  mi->i_abc_A[0] = p->i_abc[0]; /* after the offset compensation */
+  mi->i_abc_A[1] = p->i_abc[1];
+  mi->i_abc_A[2] = p->i_abc[2];
   mi->e_hf_dq_A[0] = hf->e_raw_dq_A.x * inv_scale;
   mi->e_hf_dq_A[1] = hf->e_raw_dq_A.y * inv_scale;
   mi->u_dq_V[0] = u_applied[0];
@@ -728,13 +730,12 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   c->snap.step_count = c->step_count; /* while it is in a register */
   c->theta_k = c->obs.pll.theta_rad; /* the estimate belonging to this sample */
   fw_period_t p;
-  fw_inputs_t safe;
-  stage_inputs(c, in, &safe, &p);
+  stage_inputs(c, in, &p);
   if (FW_UNLIKELY(!stage_power(c, &p))) {
-    stage_off(c, &safe);
+    stage_off(c, &p);
     outputs_off(out);
     snapshot_duties(c, out);
-    fill_snapshot_common(c, &safe, p.i_ab);
+    fill_snapshot_common(c, &p);
     return;
   }
   c->phase_time_s += c->dt_s;
@@ -749,7 +750,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
                   !stage_references(c, &p))) { /* quick stop / braking done */
     outputs_off(out);
     snapshot_duties(c, out);
-    fill_snapshot_common(c, &safe, p.i_ab);
+    fill_snapshot_common(c, &p);
     return;
   }
   /* current loop in the estimated frame, or the polarity pulses */
@@ -764,16 +765,16 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
      * real thrust, and the motion check then refuses the mover it pushed. A
      * moving mover's back-EMF is held by the PI's integrator instead. */
     const float w_ff = FW_LIKELY(c->phase == FW_START_RUN) ? c->obs.omega_f : 0.0f;
-    p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, safe.u_dc_V);
+    p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, p.u_dc_V);
   }
-  if (FW_UNLIKELY(!stage_monitor(c, &hf, &safe, &p))) { /* hard fault: switch off now */
+  if (FW_UNLIKELY(!stage_monitor(c, &hf, &p))) { /* hard fault: switch off now */
     outputs_off(out);
     snapshot_duties(c, out);
-    fill_snapshot_common(c, &safe, p.i_ab);
+    fill_snapshot_common(c, &p);
     return;
   }
   fw_foc_commit(&c->foc, p.u_dq);
-  stage_output(c, &p, safe.u_dc_V, out);
+  stage_output(c, &p, p.u_dc_V, out);
   if (c->phase == FW_START_SALIENCY && fw_start_saliency_advance(&c->start, c->inj.n_inj)) {
     saliency_done(c);
     if (c->fault.hard) {
@@ -781,7 +782,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
       snapshot_duties(c, out);
     }
   }
-  fill_snapshot_common(c, &safe, p.i_ab);
+  fill_snapshot_common(c, &p);
 }
 
 void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
