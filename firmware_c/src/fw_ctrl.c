@@ -81,8 +81,12 @@ static void foc_param(const fw_config_t *cfg, float dt_s, fw_foc_param_t *p) {
 
 /** Reset everything that carries history across an enable (the observer's
  *  position aside: see fw_obs_keep_position). */
+/** A field of fw_snapshot_capture_slow may change (fw_ctrl_t.snap_slow_gen). */
+static void snap_slow_changed(fw_ctrl_t *c) { c->snap_slow_gen++; }
+
 static void reset_dynamics(fw_ctrl_t *c) {
   const fw_config_t *cfg = &c->cfg;
+  snap_slow_changed(c); /* the flying-start flag */
   fw_foc_param_t fp;
   foc_param(cfg, c->dt_s, &fp);
   fw_foc_reset(&c->foc, &fp);
@@ -98,6 +102,7 @@ static void reset_dynamics(fw_ctrl_t *c) {
 }
 
 static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
+  snap_slow_changed(c); /* extractor, speed reference */
   c->cfg = *cfg;
   c->cfg_ok = (uint8_t)(st == FW_OK || st == FW_ERR_SALIENCY);
   c->saliency_ok = (uint8_t)(st == FW_OK);
@@ -123,7 +128,12 @@ fw_status_t fw_init(fw_ctrl_t *ctrl, const fw_config_t *cfg) {
   if (ctrl == NULL) {
     return FW_ERR_NULL;
   }
+  /* the generation goes on across a restart: a snapshot copied before it
+   * must not look current (its value is unspecified only on a first init of
+   * uninitialised storage, when no snapshot exists yet) */
+  const uint32_t gen = ctrl->snap_slow_gen;
   memset(ctrl, 0, sizeof(*ctrl));
+  ctrl->snap_slow_gen = gen + 1u;
   fw_cia402_init(&ctrl->sm);
   fw_fault_latch_init(&ctrl->fault);
   fw_config_issue_t issue;
@@ -143,6 +153,7 @@ fw_status_t fw_init(fw_ctrl_t *ctrl, const fw_config_t *cfg) {
     ctrl->cfg_ok = 0u; /* enabling must fail: the requested config was bad */
   }
   ctrl->mode = FW_MODE_SPEED;
+  snap_slow_changed(ctrl);
   fw_cia402_init_done(&ctrl->sm);
   return st;
 }
@@ -192,6 +203,7 @@ uint16_t fw_statusword(const fw_ctrl_t *ctrl) {
 }
 
 uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
+  snap_slow_changed(ctrl); /* commands are rare: no need to be precise */
   fw_cia402_state_t before = ctrl->sm.state;
   fw_cia402_state_t after = fw_cia402_controlword(&ctrl->sm, cw);
   if (before == FW_CIA402_FAULT && after != FW_CIA402_FAULT) {
@@ -237,6 +249,7 @@ fw_status_t fw_set_mode(fw_ctrl_t *ctrl, fw_mode_t mode) {
     fw_foc_speed_bumpless(&ctrl->foc);
   }
   ctrl->mode = mode;
+  snap_slow_changed(ctrl);
   return FW_OK;
 }
 
@@ -249,8 +262,11 @@ static fw_status_t set_clamped(float *dst, float v, float lim) {
 }
 
 fw_status_t fw_set_speed_ref(fw_ctrl_t *ctrl, float w) {
-  return ctrl ? set_clamped(&ctrl->speed_ref_radps_e, w, ctrl->cfg.loops.speed_max_radps_e)
-              : FW_ERR_NULL;
+  if (ctrl == NULL) {
+    return FW_ERR_NULL;
+  }
+  snap_slow_changed(ctrl);
+  return set_clamped(&ctrl->speed_ref_radps_e, w, ctrl->cfg.loops.speed_max_radps_e);
 }
 
 fw_status_t fw_set_iq_ref(fw_ctrl_t *ctrl, float i) {
@@ -276,6 +292,7 @@ fw_status_t fw_set_extractor(fw_ctrl_t *ctrl, fw_extractor_t ex) {
     return FW_ERR_RANGE;
   }
   ctrl->cfg.estimator.extractor = (uint32_t)ex;
+  snap_slow_changed(ctrl);
   /* demodulated history belongs to the old path: restart the averages, and
    * hold the PLL and the adaptation until the new path has settled (a change
    * of k moves the SOGI output for a while) */
@@ -738,6 +755,11 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     fill_snapshot_common(c, &p);
     return;
   }
+  if (FW_UNLIKELY(c->phase != FW_START_RUN)) {
+    /* start-up: its results and flags (polarity, saliency, flying start) may
+     * change in any of its periods */
+    snap_slow_changed(c);
+  }
   c->phase_time_s += c->dt_s;
   p.quick_stop = c->sm.state == FW_CIA402_QUICK_STOP_ACTIVE || p.braking;
   p.pulses = c->phase == FW_START_POLARITY;
@@ -825,9 +847,11 @@ static FW_ALWAYS_INLINE void copy_f32(float *dst, const float *src) {
   memcpy(dst, &w, sizeof w);
 }
 
-void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
+void fw_snapshot_capture_fast(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
+                              fw_snapshot_raw_t *raw) {
   const fw_snapshot_t *s = &ctrl->snap;
-  /* what fw_step wrote (every field of ctrl->snap that it writes) */
+  /* what fw_step wrote (every field of ctrl->snap that it writes; the start-up
+   * results are in the slow part) */
   snap->step_count = s->step_count;
   snap->cia402_state = s->cia402_state;
   snap->start_phase = s->start_phase;
@@ -835,8 +859,6 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
   snap->pll_err_rad = s->pll_err_rad;
   snap->hf_amp_A = s->hf_amp_A;
   snap->hf_q_A = s->hf_q_A;
-  snap->pol_dI_pos_A = s->pol_dI_pos_A;
-  snap->pol_dI_neg_A = s->pol_dI_neg_A;
   snap->i_dq_A[0] = s->i_dq_A[0];
   snap->i_dq_A[1] = s->i_dq_A[1];
   snap->i_dq_ref_A[0] = s->i_dq_ref_A[0];
@@ -852,9 +874,6 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
   snap->duty_abc[0] = s->duty_abc[0];
   snap->duty_abc[1] = s->duty_abc[1];
   snap->duty_abc[2] = s->duty_abc[2];
-  snap->sal_meas = s->sal_meas;
-  snap->L_small_meas_H = s->L_small_meas_H;
-  snap->L_large_meas_H = s->L_large_meas_H;
   /* the blocks' present states */
   snap->theta_hat_rad = ctrl->theta_k;
   snap->omega_hat_radps = ctrl->obs.pll.w_i_radps;
@@ -867,12 +886,7 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
   copy_f32(&snap->mon_i_sum_A, &ctrl->mon.isum_f);
   copy_f32(&snap->inj_scale, &ctrl->bemf.inj_scale);
   snap->bemf_active = ctrl->bemf.active;
-  snap->flying_start = ctrl->start.flying;
-  snap->extractor = (uint8_t)ctrl->cfg.estimator.extractor;
-  snap->mode = (uint8_t)ctrl->mode;
-  snap->polarity_flipped = ctrl->polarity_flipped;
   copy_f32(&snap->sogi_k_eff, &ctrl->inj.sogi_a.k); /* fw_inj_k */
-  snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
   raw->pos_turns = ctrl->obs.pos_turns; /* two words: the sum is the background's */
   raw->pos_unwrapped_e = ctrl->obs.pos_unwrapped_e;
   copy_f32(&raw->bemf_e_dq_V[0], &ctrl->bemf.e_d_f);
@@ -880,6 +894,25 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
   copy_f32(&raw->bemf_err_rad, &ctrl->bemf.err_rad);
   raw->bemf_fresh = ctrl->bemf.err_fresh;
   raw->bemf_w_neg = ctrl->bemf.w_neg;
+}
+
+void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
+  const fw_snapshot_t *s = &ctrl->snap;
+  snap->pol_dI_pos_A = s->pol_dI_pos_A;
+  snap->pol_dI_neg_A = s->pol_dI_neg_A;
+  snap->sal_meas = s->sal_meas;
+  snap->L_small_meas_H = s->L_small_meas_H;
+  snap->L_large_meas_H = s->L_large_meas_H;
+  snap->flying_start = ctrl->start.flying;
+  snap->extractor = (uint8_t)ctrl->cfg.estimator.extractor;
+  snap->mode = (uint8_t)ctrl->mode;
+  snap->polarity_flipped = ctrl->polarity_flipped;
+  snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
+}
+
+void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
+  fw_snapshot_capture_fast(ctrl, snap, raw);
+  fw_snapshot_capture_slow(ctrl, snap);
 }
 
 void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
