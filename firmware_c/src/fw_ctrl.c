@@ -81,8 +81,12 @@ static void foc_param(const fw_config_t *cfg, float dt_s, fw_foc_param_t *p) {
 
 /** Reset everything that carries history across an enable (the observer's
  *  position aside: see fw_obs_keep_position). */
+/** A field of fw_snapshot_capture_slow may change (fw_ctrl_t.snap_slow_gen). */
+static void snap_slow_changed(fw_ctrl_t *c) { c->snap_slow_gen++; }
+
 static void reset_dynamics(fw_ctrl_t *c) {
   const fw_config_t *cfg = &c->cfg;
+  snap_slow_changed(c); /* the flying-start flag */
   fw_foc_param_t fp;
   foc_param(cfg, c->dt_s, &fp);
   fw_foc_reset(&c->foc, &fp);
@@ -98,6 +102,7 @@ static void reset_dynamics(fw_ctrl_t *c) {
 }
 
 static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
+  snap_slow_changed(c); /* extractor, speed reference */
   c->cfg = *cfg;
   c->cfg_ok = (uint8_t)(st == FW_OK || st == FW_ERR_SALIENCY);
   c->saliency_ok = (uint8_t)(st == FW_OK);
@@ -123,7 +128,12 @@ fw_status_t fw_init(fw_ctrl_t *ctrl, const fw_config_t *cfg) {
   if (ctrl == NULL) {
     return FW_ERR_NULL;
   }
+  /* the generation goes on across a restart: a snapshot copied before it
+   * must not look current (its value is unspecified only on a first init of
+   * uninitialised storage, when no snapshot exists yet) */
+  const uint32_t gen = ctrl->snap_slow_gen;
   memset(ctrl, 0, sizeof(*ctrl));
+  ctrl->snap_slow_gen = gen + 1u;
   fw_cia402_init(&ctrl->sm);
   fw_fault_latch_init(&ctrl->fault);
   fw_config_issue_t issue;
@@ -143,6 +153,7 @@ fw_status_t fw_init(fw_ctrl_t *ctrl, const fw_config_t *cfg) {
     ctrl->cfg_ok = 0u; /* enabling must fail: the requested config was bad */
   }
   ctrl->mode = FW_MODE_SPEED;
+  snap_slow_changed(ctrl);
   fw_cia402_init_done(&ctrl->sm);
   return st;
 }
@@ -192,6 +203,7 @@ uint16_t fw_statusword(const fw_ctrl_t *ctrl) {
 }
 
 uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
+  snap_slow_changed(ctrl); /* commands are rare: no need to be precise */
   fw_cia402_state_t before = ctrl->sm.state;
   fw_cia402_state_t after = fw_cia402_controlword(&ctrl->sm, cw);
   if (before == FW_CIA402_FAULT && after != FW_CIA402_FAULT) {
@@ -237,6 +249,7 @@ fw_status_t fw_set_mode(fw_ctrl_t *ctrl, fw_mode_t mode) {
     fw_foc_speed_bumpless(&ctrl->foc);
   }
   ctrl->mode = mode;
+  snap_slow_changed(ctrl);
   return FW_OK;
 }
 
@@ -249,8 +262,11 @@ static fw_status_t set_clamped(float *dst, float v, float lim) {
 }
 
 fw_status_t fw_set_speed_ref(fw_ctrl_t *ctrl, float w) {
-  return ctrl ? set_clamped(&ctrl->speed_ref_radps_e, w, ctrl->cfg.loops.speed_max_radps_e)
-              : FW_ERR_NULL;
+  if (ctrl == NULL) {
+    return FW_ERR_NULL;
+  }
+  snap_slow_changed(ctrl);
+  return set_clamped(&ctrl->speed_ref_radps_e, w, ctrl->cfg.loops.speed_max_radps_e);
 }
 
 fw_status_t fw_set_iq_ref(fw_ctrl_t *ctrl, float i) {
@@ -276,6 +292,7 @@ fw_status_t fw_set_extractor(fw_ctrl_t *ctrl, fw_extractor_t ex) {
     return FW_ERR_RANGE;
   }
   ctrl->cfg.estimator.extractor = (uint32_t)ex;
+  snap_slow_changed(ctrl);
   /* demodulated history belongs to the old path: restart the averages, and
    * hold the PLL and the adaptation until the new path has settled (a change
    * of k moves the SOGI output for a while) */
@@ -405,24 +422,12 @@ static void outputs_off(fw_outputs_t *out) {
   out->pwm_enable = 0u;
 }
 
-/** Raw signals of this step into the snapshot; unit conversions, the
- *  statusword and the blocks' states (the estimator's angle, speeds, error and
- *  disturbance, the monitor's outputs, the injection scale and the back-EMF
- *  flags: only fw_step and the commands that restart the blocks change them)
- *  are read in fw_get_snapshot (off the hot path). */
-static void fill_snapshot_common(fw_ctrl_t *c, const fw_inputs_t *in, fw_vec2_f32_t i_ab,
-                                 const fw_outputs_t *out) {
-  fw_snapshot_t *s = &c->snap;
-  s->step_count = c->step_count;
-  s->cia402_state = (uint8_t)c->sm.state;
-  s->start_phase = (uint8_t)c->phase;
-  s->fault_code = (uint16_t)c->fault.code;
-  s->i_ab_A[0] = i_ab.x;
-  s->i_ab_A[1] = i_ab.y;
-  s->u_dc_V = in->u_dc_V;
-  s->duty_abc[0] = out->duty_abc[0];
-  s->duty_abc[1] = out->duty_abc[1];
-  s->duty_abc[2] = out->duty_abc[2];
+/** The duties into the snapshot (stage_output copies them right after the
+ *  modulation, while they are still in registers). */
+static void snapshot_duties(fw_ctrl_t *c, const fw_outputs_t *out) {
+  c->snap.duty_abc[0] = out->duty_abc[0];
+  c->snap.duty_abc[1] = out->duty_abc[1];
+  c->snap.duty_abc[2] = out->duty_abc[2];
 }
 
 /** Signals of one period, passed between the stages of fw_step (each stage
@@ -430,6 +435,8 @@ static void fill_snapshot_common(fw_ctrl_t *c, const fw_inputs_t *in, fw_vec2_f3
  *  pointer (inputs, monitor inputs, extraction results) lives in separate
  *  locals, so this one stays in registers. */
 typedef struct {
+  float i_abc[3];          /**< phase currents, checked and offset-compensated */
+  float u_dc_V;            /**< DC link, checked */
   fw_vec2_f32_t i_ab;      /**< measured alpha/beta current */
   bool braking;            /**< controlled braking after a fault */
   bool quick_stop;         /**< quick stop or fault braking */
@@ -441,29 +448,50 @@ typedef struct {
   fw_vec2_f32_t u_dq;      /**< fundamental voltage command */
 } fw_period_t;
 
+/** Raw signals of this step into the snapshot; unit conversions, the
+ *  statusword and the blocks' states (the estimator's angle, speeds, error and
+ *  disturbance, the monitor's outputs, the injection scale and the back-EMF
+ *  flags: only fw_step and the commands that restart the blocks change them)
+ *  are read in fw_get_snapshot (off the hot path). */
+static void fill_snapshot_common(fw_ctrl_t *c, const fw_period_t *p) {
+  fw_snapshot_t *s = &c->snap;
+  s->cia402_state = (uint8_t)c->sm.state;
+  s->start_phase = (uint8_t)c->phase;
+  s->fault_code = (uint16_t)c->fault.code;
+  s->i_ab_A[0] = p->i_ab.x;
+  s->i_ab_A[1] = p->i_ab.y;
+  s->u_dc_V = p->u_dc_V;
+}
+
 /** Input checks (fault on a bad sample; NaN never enters the state), offset
  *  compensation, Clarke. */
-static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_inputs_t *safe,
-                         fw_period_t *p) {
+static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_period_t *p) {
   const fw_fault_t f =
       fw_fault_check_inputs(&c->cfg.protection, in, fw_cia402_power_enabled(c->sm.state));
-  /* field by field: the copy can then stay in registers (a struct copy is an
-   * LDM/STM pair through the stack) */
-  safe->i_abc_A[0] = in->i_abc_A[0];
-  safe->i_abc_A[1] = in->i_abc_A[1];
-  safe->i_abc_A[2] = in->i_abc_A[2];
-  safe->u_dc_V = in->u_dc_V;
+  /* in scalars, into the period's values at the end: they then stay in
+   * registers (a struct copy is an LDM/STM pair through the stack, and a
+   * memset, a compensation through a pointer or a struct whose address a
+   * cold path takes keep them on the stack) */
+  float ia = in->i_abc_A[0], ib = in->i_abc_A[1], ic = in->i_abc_A[2];
+  float u_dc = in->u_dc_V;
   if (FW_UNLIKELY(f != FW_FAULT_NONE)) {
     latch_fault(c, f);
     if (f == FW_FAULT_INPUT_INVALID) {
-      memset(safe, 0, sizeof(*safe)); /* never propagate NaN into the state */
+      ia = ib = ic = u_dc = 0.0f; /* never propagate NaN into the state */
     }
   }
-  c->u_dc_V = safe->u_dc_V; /* for the statusword's warning bit */
+  c->u_dc_V = u_dc; /* for the statusword's warning bit */
   if (FW_LIKELY(c->phase != FW_START_IDLE)) {
-    fw_mon_compensate(&c->mon, safe->i_abc_A); /* offsets learnt at standstill */
+    /* offsets learnt at standstill (fw_mon_compensate, written out) */
+    ia -= c->mon.offset_A[0];
+    ib -= c->mon.offset_A[1];
+    ic -= c->mon.offset_A[2];
   }
-  p->i_ab = fw_clarke_f32(safe->i_abc_A[0], safe->i_abc_A[1], safe->i_abc_A[2]);
+  p->i_abc[0] = ia;
+  p->i_abc[1] = ib;
+  p->i_abc[2] = ic;
+  p->u_dc_V = u_dc;
+  p->i_ab = fw_clarke_f32(ia, ib, ic);
 }
 
 /** Fault reaction (brake under control first, or switch off now: latch_fault).
@@ -482,15 +510,16 @@ static bool stage_power(fw_ctrl_t *c, fw_period_t *p) {
 }
 
 /** Power stage off: current-sensor offsets and sum, i2t cools down. */
-static void stage_off(fw_ctrl_t *c, const fw_inputs_t *safe) {
+static void stage_off(fw_ctrl_t *c, const fw_period_t *p) {
   c->phase = FW_START_IDLE;
-  fw_mon_learn_offsets(&c->mon, safe->i_abc_A);
+  const float i_abc[3] = {p->i_abc[0], p->i_abc[1], p->i_abc[2]};
+  fw_mon_learn_offsets(&c->mon, i_abc);
   fw_protect_cool(&c->prot, &c->cfg);
   fw_mon_in_t mi;
   memset(&mi, 0, sizeof mi);
-  mi.i_abc_A[0] = safe->i_abc_A[0];
-  mi.i_abc_A[1] = safe->i_abc_A[1];
-  mi.i_abc_A[2] = safe->i_abc_A[2];
+  mi.i_abc_A[0] = p->i_abc[0];
+  mi.i_abc_A[1] = p->i_abc[1];
+  mi.i_abc_A[2] = p->i_abc[2];
   const fw_fault_t mf = fw_mon_update(&c->mon, &mi); /* current sum with PWM off */
   if (mf != FW_FAULT_NONE) {
     latch_fault(c, mf);
@@ -627,8 +656,7 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
 
 /** Integrity monitor and protections. Returns false when a hard fault
  *  switches the power stage off now (braking faults go on braking). */
-static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, const fw_inputs_t *safe,
-                          fw_period_t *p) {
+static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p) {
   const bool running = c->phase == FW_START_RUN;
   const bool scale_full = c->bemf.inj_scale >= 1.0f;
   const bool scale_steady = scale_full || c->bemf.inj_scale <= c->bemf.inj_share;
@@ -640,9 +668,9 @@ static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, const fw_inputs
    * so that its fields stay in registers (every field written, no memset) */
   fw_mon_in_t m;
   fw_mon_in_t *const mi = &m;
-  mi->i_abc_A[0] = safe->i_abc_A[0]; /* after the offset compensation */
-  mi->i_abc_A[1] = safe->i_abc_A[1];
-  mi->i_abc_A[2] = safe->i_abc_A[2];
+  mi->i_abc_A[0] = p->i_abc[0]; /* after the offset compensation */
+  mi->i_abc_A[1] = p->i_abc[1];
+  mi->i_abc_A[2] = p->i_abc[2];
   mi->e_hf_dq_A[0] = hf->e_raw_dq_A.x * inv_scale;
   mi->e_hf_dq_A[1] = hf->e_raw_dq_A.y * inv_scale;
   mi->u_dq_V[0] = u_applied[0];
@@ -687,6 +715,7 @@ static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_ou
   const fw_sincos_f32_t sc_out =
       fw_foc_output(u_cmd, p->sc, c->theta_k, c->obs.pll.w_hat_radps, c->dt_s, u_dc_V,
                     out->duty_abc);
+  snapshot_duties(c, out);
   if (c->phase == FW_START_ALIGN) { /* fundamental only, for the flying-start observer */
     fw_start_fly_set_u(&c->start, fw_inv_park_f32(u_dq, sc_out));
   }
@@ -707,20 +736,29 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   if (c == NULL || out == NULL) {
     return;
   }
-  outputs_off(out);
+  /* outputs_off on every path that does not reach stage_output (which writes
+   * every output): not stored twice in the usual period */
   c->step_count++;
   if (in == NULL) {
+    outputs_off(out);
     latch_fault(c, FW_FAULT_INPUT_INVALID);
     return;
   }
+  c->snap.step_count = c->step_count; /* while it is in a register */
   c->theta_k = c->obs.pll.theta_rad; /* the estimate belonging to this sample */
   fw_period_t p;
-  fw_inputs_t safe;
-  stage_inputs(c, in, &safe, &p);
+  stage_inputs(c, in, &p);
   if (FW_UNLIKELY(!stage_power(c, &p))) {
-    stage_off(c, &safe);
-    fill_snapshot_common(c, &safe, p.i_ab, out);
+    stage_off(c, &p);
+    outputs_off(out);
+    snapshot_duties(c, out);
+    fill_snapshot_common(c, &p);
     return;
+  }
+  if (FW_UNLIKELY(c->phase != FW_START_RUN)) {
+    /* start-up: its results and flags (polarity, saliency, flying start) may
+     * change in any of its periods */
+    snap_slow_changed(c);
   }
   c->phase_time_s += c->dt_s;
   p.quick_stop = c->sm.state == FW_CIA402_QUICK_STOP_ACTIVE || p.braking;
@@ -732,7 +770,9 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   p.braking = p.braking && c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE;
   if (FW_UNLIKELY(!(fw_cia402_power_enabled(c->sm.state) || p.braking) || /* a fault, above */
                   !stage_references(c, &p))) { /* quick stop / braking done */
-    fill_snapshot_common(c, &safe, p.i_ab, out);
+    outputs_off(out);
+    snapshot_duties(c, out);
+    fill_snapshot_common(c, &p);
     return;
   }
   /* current loop in the estimated frame, or the polarity pulses */
@@ -747,21 +787,24 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
      * real thrust, and the motion check then refuses the mover it pushed. A
      * moving mover's back-EMF is held by the PI's integrator instead. */
     const float w_ff = FW_LIKELY(c->phase == FW_START_RUN) ? c->obs.omega_f : 0.0f;
-    p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, safe.u_dc_V);
+    p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, p.u_dc_V);
   }
-  if (FW_UNLIKELY(!stage_monitor(c, &hf, &safe, &p))) { /* hard fault: switch off now */
-    fill_snapshot_common(c, &safe, p.i_ab, out);
+  if (FW_UNLIKELY(!stage_monitor(c, &hf, &p))) { /* hard fault: switch off now */
+    outputs_off(out);
+    snapshot_duties(c, out);
+    fill_snapshot_common(c, &p);
     return;
   }
   fw_foc_commit(&c->foc, p.u_dq);
-  stage_output(c, &p, safe.u_dc_V, out);
+  stage_output(c, &p, p.u_dc_V, out);
   if (c->phase == FW_START_SALIENCY && fw_start_saliency_advance(&c->start, c->inj.n_inj)) {
     saliency_done(c);
     if (c->fault.hard) {
       outputs_off(out);
+      snapshot_duties(c, out);
     }
   }
-  fill_snapshot_common(c, &safe, p.i_ab, out);
+  fill_snapshot_common(c, &p);
 }
 
 void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
@@ -804,9 +847,11 @@ static FW_ALWAYS_INLINE void copy_f32(float *dst, const float *src) {
   memcpy(dst, &w, sizeof w);
 }
 
-void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
+void fw_snapshot_capture_fast(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
+                              fw_snapshot_raw_t *raw) {
   const fw_snapshot_t *s = &ctrl->snap;
-  /* what fw_step wrote (every field of ctrl->snap that it writes) */
+  /* what fw_step wrote (every field of ctrl->snap that it writes; the start-up
+   * results are in the slow part) */
   snap->step_count = s->step_count;
   snap->cia402_state = s->cia402_state;
   snap->start_phase = s->start_phase;
@@ -814,8 +859,6 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
   snap->pll_err_rad = s->pll_err_rad;
   snap->hf_amp_A = s->hf_amp_A;
   snap->hf_q_A = s->hf_q_A;
-  snap->pol_dI_pos_A = s->pol_dI_pos_A;
-  snap->pol_dI_neg_A = s->pol_dI_neg_A;
   snap->i_dq_A[0] = s->i_dq_A[0];
   snap->i_dq_A[1] = s->i_dq_A[1];
   snap->i_dq_ref_A[0] = s->i_dq_ref_A[0];
@@ -831,9 +874,6 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
   snap->duty_abc[0] = s->duty_abc[0];
   snap->duty_abc[1] = s->duty_abc[1];
   snap->duty_abc[2] = s->duty_abc[2];
-  snap->sal_meas = s->sal_meas;
-  snap->L_small_meas_H = s->L_small_meas_H;
-  snap->L_large_meas_H = s->L_large_meas_H;
   /* the blocks' present states */
   snap->theta_hat_rad = ctrl->theta_k;
   snap->omega_hat_radps = ctrl->obs.pll.w_i_radps;
@@ -846,13 +886,9 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
   copy_f32(&snap->mon_i_sum_A, &ctrl->mon.isum_f);
   copy_f32(&snap->inj_scale, &ctrl->bemf.inj_scale);
   snap->bemf_active = ctrl->bemf.active;
-  snap->flying_start = ctrl->start.flying;
-  snap->extractor = (uint8_t)ctrl->cfg.estimator.extractor;
-  snap->mode = (uint8_t)ctrl->mode;
-  snap->polarity_flipped = ctrl->polarity_flipped;
   copy_f32(&snap->sogi_k_eff, &ctrl->inj.sogi_a.k); /* fw_inj_k */
-  snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
-  raw->pos_e_rad = fw_obs_pos_e(&ctrl->obs);
+  raw->pos_turns = ctrl->obs.pos_turns; /* two words: the sum is the background's */
+  raw->pos_unwrapped_e = ctrl->obs.pos_unwrapped_e;
   copy_f32(&raw->bemf_e_dq_V[0], &ctrl->bemf.e_d_f);
   copy_f32(&raw->bemf_e_dq_V[1], &ctrl->bemf.e_q_f);
   copy_f32(&raw->bemf_err_rad, &ctrl->bemf.err_rad);
@@ -860,13 +896,33 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
   raw->bemf_w_neg = ctrl->bemf.w_neg;
 }
 
+void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
+  const fw_snapshot_t *s = &ctrl->snap;
+  snap->pol_dI_pos_A = s->pol_dI_pos_A;
+  snap->pol_dI_neg_A = s->pol_dI_neg_A;
+  snap->sal_meas = s->sal_meas;
+  snap->L_small_meas_H = s->L_small_meas_H;
+  snap->L_large_meas_H = s->L_large_meas_H;
+  snap->flying_start = ctrl->start.flying;
+  snap->extractor = (uint8_t)ctrl->cfg.estimator.extractor;
+  snap->mode = (uint8_t)ctrl->mode;
+  snap->polarity_flipped = ctrl->polarity_flipped;
+  snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
+}
+
+void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
+  fw_snapshot_capture_fast(ctrl, snap, raw);
+  fw_snapshot_capture_slow(ctrl, snap);
+}
+
 void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
                           const fw_snapshot_raw_t *raw) {
   const fw_config_t *cfg = &ctrl->cfg;
   const float w = snap->omega_hat_radps;
-  snap->pos_hat_m = pos_m_of(cfg, raw->pos_e_rad);
+  const float pos_e_rad = fw_obs_pos_e_of(raw->pos_turns, raw->pos_unwrapped_e);
+  snap->pos_hat_m = pos_m_of(cfg, pos_e_rad);
   snap->speed_hat_mps = fw_units_radps_e_to_mps(cfg, w);
-  snap->pos_hat_mech_rad = raw->pos_e_rad / cfg->machine.pole_pairs;
+  snap->pos_hat_mech_rad = pos_e_rad / cfg->machine.pole_pairs;
   snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, w);
   snap->force_hat_N = fw_units_force_per_A(cfg) * snap->i_dq_A[1];
   snap->torque_hat_Nm = 1.5f * cfg->machine.pole_pairs * cfg->machine.psi_f_Wb * snap->i_dq_A[1];

@@ -780,6 +780,13 @@ static int snap_fields_same(const fw_snapshot_t *a, const fw_snapshot_t *b, size
   return same;
 }
 
+/* Ring slots as fw_app keeps them: the fast part every period, the slow part
+ * only when fw_snapshot_slow_gen changed since the slot's last copy. */
+#define TEST_SLOTS 3u
+static fw_snapshot_t g_slot[TEST_SLOTS];
+static uint32_t g_slot_gen[TEST_SLOTS];
+static uint32_t g_slot_next;
+
 static int halves_match(const fw_ctrl_t *c) {
   fw_snapshot_t ref, s;
   fw_snapshot_raw_t raw;
@@ -790,6 +797,19 @@ static int halves_match(const fw_ctrl_t *c) {
   fw_snapshot_complete(c, &s, &raw);
   size_t listed;
   int same = snap_fields_same(&s, &ref, &listed);
+  /* the slot path: fast part, slow part on a new generation */
+  fw_snapshot_t *slot = &g_slot[g_slot_next % TEST_SLOTS];
+  uint32_t *gen = &g_slot_gen[g_slot_next % TEST_SLOTS];
+  g_slot_next++;
+  memset(&raw, 0x5A, sizeof raw);
+  fw_snapshot_capture_fast(c, slot, &raw);
+  if (*gen != fw_snapshot_slow_gen(c)) {
+    fw_snapshot_capture_slow(c, slot);
+    *gen = fw_snapshot_slow_gen(c);
+  }
+  fw_snapshot_complete(c, slot, &raw);
+  size_t listed2;
+  same = same && snap_fields_same(slot, &ref, &listed2);
   /* every field is listed: only the 5 padding bytes are not (a new field fails here) */
   return same && sizeof(fw_snapshot_t) - listed == 5u;
 }
@@ -803,6 +823,13 @@ static void test_snapshot_halves_equal_get_snapshot(void) {
   fw_init(&c, &cfg);
   plant_init(&p, 0.4, 0.1 * 0.012);
   int good = 1, steps = 0;
+  /* slots that look current to a core that forgot its generation: a restart
+   * (fw_init) must make them stale */
+  memset(g_slot, 0x3C, sizeof g_slot);
+  for (uint32_t i = 0u; i < TEST_SLOTS; i++) {
+    g_slot_gen[i] = fw_snapshot_slow_gen(&c) - 1u;
+  }
+  g_slot_next = 0u;
   /* power off with the DC link under the trip level (statusword warning bit) */
   p.udc = 100.0;
   for (int k = 0; k < 50; k++, steps++) {
@@ -829,6 +856,13 @@ static void test_snapshot_halves_equal_get_snapshot(void) {
   for (int k = 0; k < 2400; k++, steps++) {
     loop_step(&c, &p, &out);
     good = good && halves_match(&c);
+    if (k == 1200) {
+      fw_set_extractor(&c, FW_EXTRACTOR_SOGI); /* commands between periods */
+      fw_set_speed_ref(&c, 25.0f);
+    }
+    if (k == 1800) {
+      fw_set_speed_ref(&c, 22.0f); /* alone */
+    }
   }
   fw_get_snapshot(&c, &s);
   TT_CHECK(s.pos_hat_m != 0.0f && s.speed_hat_mps != 0.0f && s.force_hat_N != 0.0f);
@@ -839,6 +873,22 @@ static void test_snapshot_halves_equal_get_snapshot(void) {
     good = good && halves_match(&c);
   }
   TT_CHECK(fw_state(&c) == FW_CIA402_FAULT);
+  /* a restart: the start-up results and the flags go back to their defaults.
+   * Slots with stale contents under the generation a core started from zeroed
+   * memory has: they must not look current after the restart (fw_init keeps
+   * counting) */
+  static fw_ctrl_t fresh;
+  memset(&fresh, 0, sizeof fresh);
+  fw_init(&fresh, &cfg);
+  memset(g_slot, 0x3C, sizeof g_slot);
+  for (uint32_t i = 0u; i < TEST_SLOTS; i++) {
+    g_slot_gen[i] = fw_snapshot_slow_gen(&fresh);
+  }
+  fw_init(&c, &cfg);
+  for (int k = 0; k < 20; k++, steps++) {
+    loop_step(&c, &p, &out);
+    good = good && halves_match(&c);
+  }
   TT_CHECK(good && steps > 7000);
   /* the back-EMF angle error on demand (an atan2f of the filters), both signs */
   c.bemf.err_fresh = 0u;

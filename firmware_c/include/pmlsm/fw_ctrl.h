@@ -200,6 +200,10 @@ typedef struct {
   fw_cia402_t sm;
   fw_mode_t mode;
   uint32_t step_count;
+  /** Changes (+1) whenever a field fw_snapshot_capture_slow copies may have
+   *  changed: start-up results, mode, speed reference, extractor, flags. Kept
+   *  across fw_init. */
+  uint32_t snap_slow_gen;
   float dt_s;
   /* references */
   float speed_ref_radps_e;
@@ -346,7 +350,8 @@ void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap);
 
 /** What fw_snapshot_complete needs besides the captured snapshot fields. */
 typedef struct {
-  float pos_e_rad;     /**< unwrapped electrical position estimate */
+  int32_t pos_turns;      /**< the observer's position (fw_obs_pos_e_of: whole turns ... */
+  float pos_unwrapped_e;  /**< ... and the remainder), summed in fw_snapshot_complete */
   float bemf_e_dq_V[2]; /**< the back-EMF observer's filtered back-EMF */
   float bemf_err_rad;  /**< its angle error, when bemf_fresh */
   uint8_t bemf_fresh;  /**< bemf_err_rad is computed (fw_bemf_t.err_fresh) */
@@ -364,6 +369,17 @@ typedef struct {
  * inputs), capture + complete give exactly fw_get_snapshot.
  */
 void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw);
+/**
+ * fw_snapshot_capture in two parts: _fast copies what may change in any
+ * period, _slow the fields that change only at start-up events and on
+ * commands (polarity and saliency results, polarity flag, flying start,
+ * extractor, mode, speed reference). A caller that keeps snapshots (fw_app's
+ * ring slots) copies the slow part only when fw_snapshot_slow_gen differs
+ * from the value it had at its last copy into that snapshot.
+ */
+void fw_snapshot_capture_fast(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw);
+void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap);
+static inline uint32_t fw_snapshot_slow_gen(const fw_ctrl_t *ctrl) { return ctrl->snap_slow_gen; }
 void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
                           const fw_snapshot_raw_t *raw);
 

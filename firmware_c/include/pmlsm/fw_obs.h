@@ -105,9 +105,14 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r);
 fw_fault_t fw_obs_supervise(fw_obs_t *o, const fw_config_t *cfg, float hf_amp_A,
                             float inj_scale, bool running);
 
+/** Unwrapped electrical position, rad, from the observer's two parts. */
+static inline float fw_obs_pos_e_of(int32_t pos_turns, float pos_unwrapped_e) {
+  return (float)pos_turns * FW_TWO_PI_F32 + pos_unwrapped_e;
+}
+
 /** Unwrapped electrical position, rad. */
 static inline float fw_obs_pos_e(const fw_obs_t *o) {
-  return (float)o->pos_turns * FW_TWO_PI_F32 + o->pos_unwrapped_e;
+  return fw_obs_pos_e_of(o->pos_turns, o->pos_unwrapped_e);
 }
 
 #ifdef __cplusplus

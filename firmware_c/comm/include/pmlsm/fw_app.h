@@ -142,6 +142,7 @@ typedef struct {
   fw_snapshot_t snap;
   fw_snapshot_raw_t raw;
   uint32_t step; /**< the application's period index */
+  uint32_t slow_gen; /**< fw_snapshot_slow_gen at the last copy of the slow part into snap */
   uint8_t done;  /**< snap completed (background) */
 } fw_app_period_t;
 
