@@ -142,6 +142,7 @@ class FwSnapshot(C.Structure):
         ("mon_angle_hf_rad", _f), ("mon_angle_bemf_rad", _f), ("mon_e_bemf_V", _f),
         ("mon_i_sum_A", _f), ("sal_meas", _f), ("L_small_meas_H", _f), ("L_large_meas_H", _f),
         ("bemf_err_rad", _f), ("inj_scale", _f), ("bemf_active", _u8), ("flying_start", _u8),
+        ("ref_limited", _u8),
     ]
 
     def as_dict(self) -> dict:

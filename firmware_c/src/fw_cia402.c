@@ -24,6 +24,7 @@
 #define FW_SW_WARNING 0x0080u
 #define FW_SW_REMOTE 0x0200u
 #define FW_SW_TARGET_REACHED 0x0400u
+#define FW_SW_INTERNAL_LIMIT 0x0800u
 
 static bool fw_cw_is(uint16_t cw, unsigned mask, unsigned value) {
   return ((unsigned)cw & mask) == value;
@@ -126,7 +127,7 @@ void fw_cia402_quick_stop_done(fw_cia402_t *sm) { /* 12 */
 }
 
 uint16_t fw_cia402_statusword(const fw_cia402_t *sm, bool warning, bool remote,
-                              bool target_reached) {
+                              bool target_reached, bool internal_limit) {
   /* Bit 4 (voltage enabled): set in the states in which the power stage may
    * be energised: SWITCHED ON, OPERATION ENABLED, QUICK STOP ACTIVE and
    * FAULT REACTION ACTIVE (PWM is being switched off). Bit 5 (quick stop,
@@ -173,6 +174,9 @@ uint16_t fw_cia402_statusword(const fw_cia402_t *sm, bool warning, bool remote,
   }
   if (target_reached) {
     sw |= FW_SW_TARGET_REACHED;
+  }
+  if (internal_limit) {
+    sw |= FW_SW_INTERNAL_LIMIT;
   }
   return (uint16_t)sw;
 }

@@ -101,6 +101,25 @@ static void reset_dynamics(fw_ctrl_t *c) {
   fw_start_reset(&c->start);
 }
 
+/** Set a reference clamped to +-lim: FW_ERR_RANGE and its FW_REF_LIMITED_ bit when
+ *  it was beyond, FW_ERR_NOT_FINITE (nothing changed) for NaN/inf. The background
+ *  gives the references every pass: the snapshot's slow part changes only when
+ *  the value or the bit does. */
+static fw_status_t limit_ref(fw_ctrl_t *c, float *dst, float v, float lim, uint8_t bit) {
+  if (!fw_isfinite_f32(v)) {
+    return FW_ERR_NOT_FINITE;
+  }
+  const bool beyond = v > lim || v < -lim;
+  const float y = fw_clampf(v, -lim, lim);
+  const uint8_t flags = (uint8_t)(beyond ? (c->ref_limited | bit) : (c->ref_limited & ~bit));
+  if (y != *dst || flags != c->ref_limited) {
+    snap_slow_changed(c);
+  }
+  *dst = y;
+  c->ref_limited = flags;
+  return beyond ? FW_ERR_RANGE : FW_OK;
+}
+
 static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   snap_slow_changed(c); /* extractor, speed reference */
   c->cfg = *cfg;
@@ -113,10 +132,14 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   c->e_start_max_V = fw_units_bemf_V(cfg, cfg->protection.start_speed_max_mps);
   fw_mon_init(&c->mon, cfg, c->dt_s);
   fw_bemf_init(&c->bemf, cfg, c->dt_s);
-  /* references set under the old limits must obey the new ones */
-  c->speed_ref_radps_e =
-      fw_clampf(c->speed_ref_radps_e, -cfg->loops.speed_max_radps_e, cfg->loops.speed_max_radps_e);
-  c->i_q_ref_force_A = fw_clampf(c->i_q_ref_force_A, -cfg->loops.i_max_A, cfg->loops.i_max_A);
+  /* references set under the old limits must obey the new ones (a reference clamped
+     before stays marked: the background gives the raw one again at its next pass) */
+  const uint8_t was_limited = c->ref_limited;
+  (void)limit_ref(c, &c->speed_ref_radps_e, c->speed_ref_radps_e, cfg->loops.speed_max_radps_e,
+                  FW_REF_LIMITED_SPEED);
+  (void)limit_ref(c, &c->i_q_ref_force_A, c->i_q_ref_force_A, cfg->loops.i_max_A,
+                  FW_REF_LIMITED_FORCE);
+  c->ref_limited |= was_limited;
   c->i_d_ref_A = fw_clampf(c->i_d_ref_A, -cfg->loops.i_max_A, cfg->loops.i_max_A);
   fw_obs_keep_position(&c->obs); /* the estimate restarts from 0 */
   reset_dynamics(c);
@@ -181,25 +204,34 @@ fw_cia402_state_t fw_state(const fw_ctrl_t *ctrl) { return ctrl->sm.state; }
 /** The statusword from the signals it depends on (fw_statusword, fw_snapshot_complete). */
 static uint16_t statusword_of(const fw_config_t *cfg, fw_cia402_state_t state, float u_dc_V,
                               fw_start_phase_t phase, fw_mode_t mode, float speed_ref,
-                              float omega_f) {
+                              float omega_f, uint8_t ref_limited, float i_q_ref) {
   bool warning = u_dc_V < cfg->protection.u_dc_min_V;
   bool reached = false;
-  if (state == FW_CIA402_OPERATION_ENABLED && phase == FW_START_RUN) {
-    if (mode == FW_MODE_SPEED) {
-      float e = speed_ref - omega_f;
-      float tol = 0.02f * fabsf(speed_ref) + 1.0f;
-      reached = fabsf(e) < tol;
-    } else {
-      reached = true;
+  bool limit = false;
+  if (state == FW_CIA402_OPERATION_ENABLED) {
+    /* bit 11, internal limit active: the target of the mode in use is clamped, or
+       (closed loop, speed mode) the speed loop asks for the current limit */
+    limit = (ref_limited & (mode == FW_MODE_SPEED ? FW_REF_LIMITED_SPEED
+                                                  : FW_REF_LIMITED_FORCE)) != 0u;
+    if (phase == FW_START_RUN) {
+      if (mode == FW_MODE_SPEED) {
+        float e = speed_ref - omega_f;
+        float tol = 0.02f * fabsf(speed_ref) + 1.0f;
+        reached = fabsf(e) < tol;
+        limit = limit || fabsf(i_q_ref) >= cfg->loops.i_max_A;
+      } else {
+        reached = true;
+      }
     }
   }
   const fw_cia402_t sm = {.state = state};
-  return fw_cia402_statusword(&sm, warning, true, reached);
+  return fw_cia402_statusword(&sm, warning, true, reached, limit);
 }
 
 uint16_t fw_statusword(const fw_ctrl_t *ctrl) {
   return statusword_of(&ctrl->cfg, ctrl->sm.state, ctrl->u_dc_V, ctrl->phase, ctrl->mode,
-                       ctrl->speed_ref_radps_e, ctrl->obs.omega_f);
+                       ctrl->speed_ref_radps_e, ctrl->obs.omega_f, ctrl->ref_limited,
+                       ctrl->snap.i_dq_ref_A[1]);
 }
 
 uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
@@ -262,15 +294,15 @@ static fw_status_t set_clamped(float *dst, float v, float lim) {
 }
 
 fw_status_t fw_set_speed_ref(fw_ctrl_t *ctrl, float w) {
-  if (ctrl == NULL) {
-    return FW_ERR_NULL;
-  }
-  snap_slow_changed(ctrl);
-  return set_clamped(&ctrl->speed_ref_radps_e, w, ctrl->cfg.loops.speed_max_radps_e);
+  return ctrl ? limit_ref(ctrl, &ctrl->speed_ref_radps_e, w, ctrl->cfg.loops.speed_max_radps_e,
+                          FW_REF_LIMITED_SPEED)
+              : FW_ERR_NULL;
 }
 
 fw_status_t fw_set_iq_ref(fw_ctrl_t *ctrl, float i) {
-  return ctrl ? set_clamped(&ctrl->i_q_ref_force_A, i, ctrl->cfg.loops.i_max_A) : FW_ERR_NULL;
+  return ctrl ? limit_ref(ctrl, &ctrl->i_q_ref_force_A, i, ctrl->cfg.loops.i_max_A,
+                          FW_REF_LIMITED_FORCE)
+              : FW_ERR_NULL;
 }
 
 fw_status_t fw_set_force_ref(fw_ctrl_t *ctrl, float force_N) {
@@ -908,6 +940,7 @@ void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
   snap->mode = (uint8_t)ctrl->mode;
   snap->polarity_flipped = ctrl->polarity_flipped;
   snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
+  snap->ref_limited = ctrl->ref_limited;
 }
 
 void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
@@ -933,7 +966,8 @@ void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
   snap->statusword =
       statusword_of(cfg, (fw_cia402_state_t)snap->cia402_state, snap->u_dc_V,
                     (fw_start_phase_t)snap->start_phase, (fw_mode_t)snap->mode,
-                    snap->speed_ref_radps_e, snap->omega_f_radps);
+                    snap->speed_ref_radps_e, snap->omega_f_radps, snap->ref_limited,
+                    snap->i_dq_ref_A[1]);
 }
 
 void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {

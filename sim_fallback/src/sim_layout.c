@@ -142,6 +142,7 @@ static const layout_row_t k_rows[] = {
     ROW(fw_snapshot_t, inj_scale),
     ROW(fw_snapshot_t, bemf_active),
     ROW(fw_snapshot_t, flying_start),
+    ROW(fw_snapshot_t, ref_limited),
     ROW(sim_plant_params_t, R_ohm),
     ROW(sim_plant_params_t, L_d0_H),
     ROW(sim_plant_params_t, L_q_H),

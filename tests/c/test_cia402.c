@@ -111,20 +111,21 @@ static void test_statusword(void) {
   fw_cia402_t sm;
   for (int s = 0; s < N_STATES; s++) {
     goto_state(&sm, s);
-    const uint16_t sw = fw_cia402_statusword(&sm, false, false, false);
+    const uint16_t sw = fw_cia402_statusword(&sm, false, false, false, false);
     TT_CHECK((sw & mask[s]) == val[s]);
     TT_CHECK(((sw >> 4) & 1u) == (unsigned)bit4[s]);
     TT_CHECK(((sw >> 5) & 1u) == (unsigned)bit5[s]);
-    TT_CHECK((sw & 0x0780u) == 0u); /* no flag bits unless asked */
+    TT_CHECK((sw & 0x0F80u) == 0u); /* no flag bits unless asked */
     TT_CHECK(fw_cia402_power_enabled(ST[s]) == (power[s] != 0));
     /* flags */
-    TT_CHECK(fw_cia402_statusword(&sm, true, false, false) == (uint16_t)(sw | 0x0080u));
-    TT_CHECK(fw_cia402_statusword(&sm, false, true, false) == (uint16_t)(sw | 0x0200u));
-    TT_CHECK(fw_cia402_statusword(&sm, false, false, true) == (uint16_t)(sw | 0x0400u));
-    TT_CHECK(fw_cia402_statusword(&sm, true, true, true) == (uint16_t)(sw | 0x0680u));
+    TT_CHECK(fw_cia402_statusword(&sm, true, false, false, false) == (uint16_t)(sw | 0x0080u));
+    TT_CHECK(fw_cia402_statusword(&sm, false, true, false, false) == (uint16_t)(sw | 0x0200u));
+    TT_CHECK(fw_cia402_statusword(&sm, false, false, true, false) == (uint16_t)(sw | 0x0400u));
+    TT_CHECK(fw_cia402_statusword(&sm, true, true, true, false) == (uint16_t)(sw | 0x0680u));
+    TT_CHECK(fw_cia402_statusword(&sm, false, false, false, true) == (uint16_t)(sw | 0x0800u));
   }
   goto_state(&sm, OE);
-  TT_CHECK(fw_cia402_statusword(&sm, false, true, false) == 0x0237u);
+  TT_CHECK(fw_cia402_statusword(&sm, false, true, false, false) == 0x0237u);
 }
 
 /* 13, 14, 15: fault from every state, reaction done, fault reset only on a
@@ -174,9 +175,9 @@ static void test_fault_and_reset_edge(void) {
 static void test_quick_stop(void) {
   fw_cia402_t sm;
   goto_state(&sm, OE);
-  TT_CHECK((fw_cia402_statusword(&sm, false, false, false) & 0x20u) != 0u);
+  TT_CHECK((fw_cia402_statusword(&sm, false, false, false, false) & 0x20u) != 0u);
   TT_CHECK(fw_cia402_controlword(&sm, FW_CW_QUICK_STOP) == FW_CIA402_QUICK_STOP_ACTIVE);
-  TT_CHECK((fw_cia402_statusword(&sm, false, false, false) & 0x6Fu) == 0x07u);
+  TT_CHECK((fw_cia402_statusword(&sm, false, false, false, false) & 0x6Fu) == 0x07u);
   TT_CHECK(fw_cia402_power_enabled(sm.state)); /* still ramping down */
   /* holding the quick-stop command keeps it active until the drive stops */
   TT_CHECK(fw_cia402_controlword(&sm, FW_CW_QUICK_STOP) == FW_CIA402_QUICK_STOP_ACTIVE);

@@ -723,6 +723,49 @@ static void test_refs_clamped_on_config_change(void) {
   TT_CHECK(fabsf(c.snap.i_dq_ref_A[0]) <= 5.0f && fabsf(c.snap.i_dq_ref_A[1]) <= 5.0f);
 }
 
+/* Statusword bit 11 (internal limit active): set while the reference of the mode
+ * in use is clamped to its limit, in OPERATION ENABLED only; a reference within
+ * the limit clears it, a NaN (refused) leaves it; the snapshot's statusword (the
+ * one the object dictionary shows) agrees with fw_statusword. */
+static void test_internal_limit_statusword(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  fw_ctrl_t c;
+  fw_init(&c, &cfg);
+  TT_CHECK(fw_set_iq_ref(&c, 2.0f * cfg.loops.i_max_A) == FW_ERR_RANGE);
+  TT_CHECK((fw_statusword(&c) & 0x0800u) == 0u); /* not enabled: no limit to report */
+  TT_CHECK(fw_set_iq_ref(&c, 0.0f) == FW_OK);
+  plant_t p;
+  fw_outputs_t out;
+  run_to_operation(&c, &p, &out); /* FORCE mode, closed loop */
+  TT_CHECK(c.phase == FW_START_RUN && fw_state(&c) == FW_CIA402_OPERATION_ENABLED);
+  TT_CHECK((fw_statusword(&c) & 0x0800u) == 0u);
+  TT_CHECK(fw_set_iq_ref(&c, 1.5f * cfg.loops.i_max_A) == FW_ERR_RANGE);
+  TT_CHECK((fw_statusword(&c) & 0x0800u) != 0u);
+  loop_step(&c, &p, &out);
+  fw_snapshot_t s;
+  fw_get_snapshot(&c, &s);
+  TT_CHECK((s.statusword & 0x0800u) != 0u && s.ref_limited == FW_REF_LIMITED_FORCE);
+  TT_CHECK(fw_set_iq_ref(&c, NAN) == FW_ERR_NOT_FINITE);
+  TT_CHECK((fw_statusword(&c) & 0x0800u) != 0u); /* refused: still clamped */
+  /* the speed reference is not the one in use in FORCE mode */
+  TT_CHECK(fw_set_iq_ref(&c, -1.0f) == FW_OK);
+  TT_CHECK(fw_set_speed_ref(&c, -2.0f * cfg.loops.speed_max_radps_e) == FW_ERR_RANGE);
+  TT_CHECK((fw_statusword(&c) & 0x0800u) == 0u && c.ref_limited == FW_REF_LIMITED_SPEED);
+  loop_step(&c, &p, &out);
+  fw_get_snapshot(&c, &s);
+  TT_CHECK((s.statusword & 0x0800u) == 0u);
+  TT_CHECK(fw_set_speed_ref(&c, 0.0f) == FW_OK && c.ref_limited == 0u);
+  /* a configuration change (while disabled) that clamps a reference marks it */
+  fw_init(&c, &cfg);
+  TT_CHECK(fw_set_iq_ref(&c, 0.9f * cfg.loops.i_max_A) == FW_OK && c.ref_limited == 0u);
+  fw_config_t small = cfg;
+  small.loops.i_max_A = 0.5f * cfg.loops.i_max_A;
+  fw_config_issue_t iss;
+  TT_CHECK(fw_set_config(&c, &small, &iss) == FW_OK);
+  TT_CHECK(c.ref_limited == FW_REF_LIMITED_FORCE && c.i_q_ref_force_A == small.loops.i_max_A);
+}
+
 /* Review: switching the extractor in RUN changes the SOGI gain (here 0.5 ->
  * 0.8), whose output needs about a millisecond to settle; the PLL must hold
  * meanwhile, as after a start, instead of integrating the transient (eps
@@ -775,7 +818,7 @@ static int snap_fields_same(const fw_snapshot_t *a, const fw_snapshot_t *b, size
   SAME(force_hat_N); SAME(torque_hat_Nm); SAME(u_dc_V); SAME(duty_abc);
   SAME(mon_angle_hf_rad); SAME(mon_angle_bemf_rad); SAME(mon_e_bemf_V); SAME(mon_i_sum_A);
   SAME(sal_meas); SAME(L_small_meas_H); SAME(L_large_meas_H); SAME(bemf_err_rad);
-  SAME(inj_scale); SAME(bemf_active); SAME(flying_start);
+  SAME(inj_scale); SAME(bemf_active); SAME(flying_start); SAME(ref_limited);
 #undef SAME
   return same;
 }
@@ -810,8 +853,8 @@ static int halves_match(const fw_ctrl_t *c) {
   fw_snapshot_complete(c, slot, &raw);
   size_t listed2;
   same = same && snap_fields_same(slot, &ref, &listed2);
-  /* every field is listed: only the 5 padding bytes are not (a new field fails here) */
-  return same && sizeof(fw_snapshot_t) - listed == 5u;
+  /* every field is listed: only the 4 padding bytes are not (a new field fails here) */
+  return same && sizeof(fw_snapshot_t) - listed == 4u;
 }
 
 static void test_snapshot_halves_equal_get_snapshot(void) {
@@ -931,6 +974,7 @@ int main(void) {
   TT_RUN(test_zero_saliency_refused);
   TT_RUN(test_refs_clamped_on_config_change);
   TT_RUN(test_extractor_switch_in_run);
+  TT_RUN(test_internal_limit_statusword);
   TT_RUN(test_snapshot_halves_equal_get_snapshot);
   return TT_SUMMARY();
 }

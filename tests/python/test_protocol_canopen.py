@@ -182,6 +182,41 @@ def test_walk_to_operation_enabled_and_follow_target_velocity(rig):
     assert node.sdo[0x603F].raw == 0
 
 
+def test_target_beyond_the_speed_limit_sets_internal_limit_active(rig):
+    """CiA 402 statusword bit 11: a target velocity beyond the drive's speed limit is
+    clamped and says so, a target within it clears the bit; the mover follows the
+    clamped target (the simulator's truth)."""
+    net, node, bridge, _ = rig
+    if bridge.sim is None:
+        pytest.skip("sim_fallback library not available: no plant to follow")
+    tau = bridge.sim.cfg.pole_pitch_m
+    assert node.state == "OPERATION ENABLED"
+    assert node.sdo[0x6041].raw & 0x0800 == 0  # 0.2 m/s, within every limit
+    limit_old = node.sdo[0x2050][11].raw
+    node.state = "SWITCHED ON"  # the configuration is written with the power stage off
+    limit = 0.15 * math.pi / tau  # 0.15 m/s in electrical rad/s
+    node.sdo[0x2050][11].raw = limit
+    time.sleep(0.5)  # the mover coasts to a stop: enabling on a moving mover is refused
+    try:
+        node.state = "OPERATION ENABLED"
+        node.sdo[0x60FF].raw = 200_000  # 0.2 m/s: beyond the limit
+        time.sleep(1.0)
+        assert node.sdo[0x6041].raw & 0x0800, hex(node.sdo[0x6041].raw)
+        assert abs(bridge.state()["v_mps"] - 0.15) < 0.03, bridge.state()
+        node.sdo[0x60FF].raw = 100_000  # within
+        time.sleep(0.05)
+        assert node.sdo[0x6041].raw & 0x0800 == 0
+    finally:  # leave the rig as the other tests expect it: enabled at 0.2 m/s
+        node.state = "SWITCHED ON"
+        node.sdo[0x2050][11].raw = limit_old
+        time.sleep(0.5)
+        node.state = "OPERATION ENABLED"
+        node.sdo[0x60FF].raw = 200_000
+    time.sleep(1.0)
+    assert node.sdo[0x6041].raw & 0x0800 == 0
+    assert abs(bridge.state()["v_mps"] - 0.2) < 0.04, bridge.state()
+
+
 def test_remap_tpdo_and_receive_it(rig):
     net, node, bridge, _ = rig
     node.tpdo.read()

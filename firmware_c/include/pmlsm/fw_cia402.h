@@ -66,9 +66,10 @@ void fw_cia402_fault_reaction_done(fw_cia402_t *sm);
 /** Quick stop finished (drive stopped): QUICK STOP ACTIVE -> SWITCH ON DISABLED. */
 void fw_cia402_quick_stop_done(fw_cia402_t *sm);
 
-/** Statusword for the current state plus the given flags. */
+/** Statusword for the current state plus the given flags (bit 7 warning, bit 9
+ *  remote, bit 10 target reached, bit 11 internal limit active). */
 uint16_t fw_cia402_statusword(const fw_cia402_t *sm, bool warning, bool remote,
-                              bool target_reached);
+                              bool target_reached, bool internal_limit);
 
 /** True in the states in which the power stage switches. */
 bool fw_cia402_power_enabled(fw_cia402_state_t st);

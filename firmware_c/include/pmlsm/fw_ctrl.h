@@ -175,6 +175,7 @@ typedef struct {
   float inj_scale;          /**< injection amplitude in use, share of u_inj_V */
   uint8_t bemf_active;      /**< 1: the PLL tracks the back-EMF, 0: the HF response */
   uint8_t flying_start;     /**< 1: closed loop was entered on a moving mover */
+  uint8_t ref_limited;      /**< FW_REF_LIMITED_* of the references in use */
 } fw_snapshot_t;
 
 /**
@@ -209,6 +210,7 @@ typedef struct {
   float speed_ref_radps_e;
   float i_d_ref_A;
   float i_q_ref_force_A;
+  uint8_t ref_limited; /**< FW_REF_LIMITED_*: a reference was clamped to its limit */
   /* drive state machine inside OPERATION ENABLED */
   fw_start_phase_t phase;
   float phase_time_s;
@@ -308,9 +310,18 @@ uint16_t fw_statusword(const fw_ctrl_t *ctrl);
 fw_cia402_state_t fw_state(const fw_ctrl_t *ctrl);
 
 fw_status_t fw_set_mode(fw_ctrl_t *ctrl, fw_mode_t mode);
-/** Speed reference, electrical rad/s (clamped to speed_max_radps_e). */
+/** fw_ctrl_t.ref_limited / fw_snapshot_t.ref_limited: the last speed or force
+ *  reference given was beyond its limit and is clamped. In the mode that uses it,
+ *  the statusword shows it as bit 11 (internal limit active), as it does the
+ *  speed loop's current demand at i_max_A. */
+#define FW_REF_LIMITED_SPEED 0x01u
+#define FW_REF_LIMITED_FORCE 0x02u
+
+/** Speed reference, electrical rad/s (clamped to speed_max_radps_e: FW_ERR_RANGE,
+ *  and statusword bit 11 in SPEED mode until a reference within the limit). */
 fw_status_t fw_set_speed_ref(fw_ctrl_t *ctrl, float omega_ref_radps_e);
-/** q-axis current reference for FORCE mode (clamped to i_max_A). */
+/** q-axis current reference for FORCE mode (clamped to i_max_A: FW_ERR_RANGE, and
+ *  statusword bit 11 in FORCE mode until a reference within the limit). */
 fw_status_t fw_set_iq_ref(fw_ctrl_t *ctrl, float i_q_ref_A);
 /** Force mode: thrust reference in N, converted with fw_units_force_per_A and
  *  clamped like fw_set_iq_ref; FW_ERR_NOT_FINITE for NaN/inf or K_F <= 0. */
