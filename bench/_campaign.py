@@ -23,6 +23,7 @@ run that raises is recorded with its error, never dropped.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import itertools
 import json
@@ -909,19 +910,26 @@ def run_campaigns(cs: list[Campaign], out: Path, scheduler: Any = None,
                                   [batch] * len(owner), pure=False)
                 index = {f.key: (i, len(ch)) for f, i, ch in zip(futs, owner, chunks,
                                                                  strict=True)}
-                if local:  # the workers write the parts; a task's result is a count
-                    for fut in as_completed(futs):
-                        if fut.status == "error":
-                            fut.result()  # raises the task's exception
-                        finished += index[fut.key][1]
-                        fut.release()
-                        if progress:
-                            progress(finished, total, time.perf_counter() - t0)
-                else:  # the rows come back here
-                    for fut, rows in as_completed(futs, with_results=True):
-                        for row in rows:
-                            emit(index[fut.key][0], row)
-                        fut.release()
+                try:
+                    if local:  # the workers write the parts; a task's result is a count
+                        for fut in as_completed(futs):
+                            if fut.status == "error":
+                                fut.result()  # raises the task's exception
+                            finished += index[fut.key][1]
+                            fut.release()
+                            if progress:
+                                progress(finished, total, time.perf_counter() - t0)
+                    else:  # the rows come back here
+                        for fut, rows in as_completed(futs, with_results=True):
+                            for row in rows:
+                                emit(index[fut.key][0], row)
+                            fut.release()
+                except BaseException:
+                    # interrupted or failed: tasks not yet started do not start (a
+                    # cluster kept open would go on writing the results folder)
+                    with contextlib.suppress(Exception):
+                        client.cancel([f for f in futs if not f.done()])
+                    raise
             finally:
                 if own:
                     client.close()
