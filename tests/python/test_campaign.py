@@ -135,12 +135,13 @@ def test_dask_local_cluster_matches_serial(tmp_path):
         with Client(cl.scheduler_address) as remote:  # as --scheduler ADDRESS
             assert not _shares_our_files(remote)
             run_campaign(c, tmp_path / "r", scheduler=remote, batch=4)
+        run_campaign(c, tmp_path / "a", scheduler=cl.scheduler_address, batch=4)
     finally:
         client.close()
         cl.close()
     s = load_results(tmp_path / "s" / "tiny")
     assert list(s["run"]) == list(range(6)) and sum(e is not None for e in s["error"]) == 3
-    for other in ("d", "r"):
+    for other in ("d", "r", "a"):
         rdir = tmp_path / other / "tiny"
         assert len(list(rdir.glob("part-*.parquet"))) >= 2  # batches of 4 and the rest
         _same_rows(s, load_results(rdir))
