@@ -23,6 +23,7 @@ run that raises is recorded with its error, never dropped.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import itertools
 import json
@@ -599,11 +600,24 @@ def run_one(base: dict[str, Any], params: dict[str, Any],
     return row
 
 
-def run_chunk(base: dict[str, Any], chunk: list[dict[str, Any]],
-              metrics: list[str]) -> list[dict[str, Any]]:
+def run_chunk(base: dict[str, Any], chunk: list[dict[str, Any]], metrics: list[str],
+              out: str | None = None, batch: int = 64) -> list[dict[str, Any]] | int:
     """Several runs in one task: a run costs milliseconds, a task's round trip
-    through the scheduler about as much, so tasks carry chunks of runs (_chunks)."""
-    return [run_one(base, p, metrics) for p in chunk]
+    through the scheduler about as much, so tasks carry chunks of runs (_chunks).
+    ``out``: a results folder this worker can write (a local cluster's): the rows go
+    there in parts of ``batch`` as they finish (:func:`_write_part`) and the task
+    returns only how many runs it wrote, instead of the rows."""
+    if out is None:
+        return [run_one(base, p, metrics) for p in chunk]
+    rdir, buf = Path(out), []
+    for p in chunk:
+        buf.append(run_one(base, p, metrics))
+        if len(buf) >= batch:
+            _write_part(rdir, buf)
+            buf = []
+    if buf:
+        _write_part(rdir, buf)
+    return len(chunk)
 
 
 def _split(params: dict[str, Any]) -> tuple[dict[str, float], dict[str, float], dict[str, Any]]:
@@ -708,6 +722,7 @@ def warm_worker(motors: tuple[str, ...] = ("paper_salient",),
     motor files), paid when the cluster starts rather than by its first runs."""
     from sim_fallback import _lib
     _lib.lib()
+    warm_writer()  # a local cluster's workers write the Parquet parts
     for m in motors:
         for e in extractors:
             _motor_and_config(m, e)
@@ -767,19 +782,22 @@ def peak_rss_mb() -> float:
     return rss / 2**20 if sys.platform == "darwin" else rss / 1024
 
 
-def _chunks(todos: list[list[dict[str, Any]]], n_workers: int
+def _chunks(todos: list[list[dict[str, Any]]], n_workers: int, largest: int = 128
             ) -> list[tuple[int, list[dict[str, Any]]]]:
     """(campaign index, runs) per task, guided: a task holds about 1/(2 workers) of the
-    runs still to hand out, at most 128 (~0.5 s of 0.5 s runs: what an interruption
-    loses per worker) and at least 8. Each task costs the client and scheduler ~3 ms
-    of CPU, taken from the workers on a small machine, so tasks are few while the work
-    lasts and short at the end, where a long one would leave the other workers idle."""
+    runs still to hand out, at most ``largest`` and at least 8. Each task costs the
+    client, scheduler and worker a few ms of CPU, taken from the runs on a small
+    machine, so tasks are few while the work lasts and short at the end, where a long
+    one would leave the other workers idle. An interruption loses the runs a worker
+    has not yet written: with the rows sent back to the client (a remote cluster), its
+    whole task, hence ``largest`` 128 there (~0.4 s of 0.5 s runs); a local cluster's
+    workers write every ``batch`` runs (64) themselves, so their tasks can be larger."""
     left = sum(len(t) for t in todos)
     out = []
     for i, todo in enumerate(todos):
         k = 0
         while k < len(todo):
-            size = max(8, min(128, -(-left // (2 * n_workers))))
+            size = max(8, min(largest, -(-left // (2 * n_workers))))
             out.append((i, todo[k:k + size]))
             k += size
             left -= len(out[-1][1])
@@ -793,6 +811,8 @@ def results_dir(c: Campaign, out: Path) -> Path:
 def done_runs(rdir: Path) -> set[int]:
     """Run numbers already in the Parquet dataset (resume)."""
     import pyarrow.parquet as pq
+    for f in rdir.glob(".part-*.tmp"):  # a writer killed before its rename
+        f.unlink(missing_ok=True)
     done: set[int] = set()
     for f in sorted(rdir.glob("part-*.parquet")):
         try:
@@ -803,14 +823,26 @@ def done_runs(rdir: Path) -> set[int]:
 
 
 def _write_part(rdir: Path, rows: list[dict[str, Any]]) -> None:
+    """One Parquet part, named after its first run: a run is written once, so the names
+    of the client's and of several workers' parts never collide, and a chunk run again
+    (its worker died) writes the same parts again under the same names."""
+    import os
+
     import pyarrow as pa
     import pyarrow.parquet as pq
-    k = len(list(rdir.glob("part-*.parquet")))
-    tmp = rdir / f".part-{k:06d}.tmp"
+    name = f"part-r{int(rows[0]['run']):08d}"
+    tmp = rdir / f".{name}-{os.getpid()}.tmp"
     keys = list(dict.fromkeys(key for r in rows for key in r))  # a failed run has fewer
     pq.write_table(pa.Table.from_pylist([{key: r.get(key) for key in keys} for r in rows]),
                    tmp)
-    tmp.replace(rdir / f"part-{k:06d}.parquet")  # atomic: a kill leaves no torn file
+    tmp.replace(rdir / f"{name}.parquet")  # atomic: a kill leaves no torn file
+
+
+def _shares_our_files(client: Any) -> bool:
+    """Whether the client's workers run on this machine (a LocalCluster's: the one
+    ``bench campaign`` starts), so that they can write the results folder themselves."""
+    from dask.distributed import LocalCluster
+    return isinstance(getattr(client, "cluster", None), LocalCluster)
 
 
 def run_campaign(c: Campaign, out: Path, scheduler: Any = None,
@@ -869,14 +901,35 @@ def run_campaigns(cs: list[Campaign], out: Path, scheduler: Any = None,
                 cluster, client = start_local_cluster(workers)
             try:
                 n_workers = max(1, len(client.scheduler_info().get("workers", {})) or 1)
-                owner, chunks = zip(*_chunks(todos, n_workers), strict=True)
+                local = _shares_our_files(client)
+                owner, chunks = zip(*_chunks(todos, n_workers, 1024 if local else 128),
+                                    strict=True)
+                outs = [str(rdirs[i]) if local else None for i in owner]
                 futs = client.map(run_chunk, [bases[i] for i in owner], chunks,
-                                  [cs[i].metrics for i in owner], pure=False)
-                index = {f.key: i for f, i in zip(futs, owner, strict=True)}
-                for fut, rows in as_completed(futs, with_results=True):
-                    for row in rows:
-                        emit(index[fut.key], row)
-                    fut.release()
+                                  [cs[i].metrics for i in owner], outs,
+                                  [batch] * len(owner), pure=False)
+                index = {f.key: (i, len(ch)) for f, i, ch in zip(futs, owner, chunks,
+                                                                 strict=True)}
+                try:
+                    if local:  # the workers write the parts; a task's result is a count
+                        for fut in as_completed(futs):
+                            if fut.status == "error":
+                                fut.result()  # raises the task's exception
+                            finished += index[fut.key][1]
+                            fut.release()
+                            if progress:
+                                progress(finished, total, time.perf_counter() - t0)
+                    else:  # the rows come back here
+                        for fut, rows in as_completed(futs, with_results=True):
+                            for row in rows:
+                                emit(index[fut.key][0], row)
+                            fut.release()
+                except BaseException:
+                    # interrupted or failed: tasks not yet started do not start (a
+                    # cluster kept open would go on writing the results folder)
+                    with contextlib.suppress(Exception):
+                        client.cancel([f for f in futs if not f.done()])
+                    raise
             finally:
                 if own:
                     client.close()
@@ -897,6 +950,11 @@ def load_results(rdir: Path) -> Any:
     if not parts:
         return {}
     t = pa.concat_tables(parts, promote_options="default")
+    # in run order, whatever order the parts were written in; a run written twice (a
+    # chunk run again after its worker died) counts once
+    _, first = np.unique(np.asarray(t.column("run").to_numpy(), dtype=np.int64),
+                         return_index=True)
+    t = t.take(pa.array(first))
     out = {}
     for name in t.column_names:
         vals = t.column(name).to_pylist()

@@ -56,6 +56,28 @@ def _busy_s() -> float | None:
     return (sum(v[:8]) - v[3] - v[4]) / os.sysconf("SC_CLK_TCK")  # all but idle, iowait
 
 
+def _threads_cpu() -> tuple[float, float]:
+    """(this process's main thread, its other threads): CPU seconds so far (Linux /proc;
+    NaN elsewhere). In a worker the main thread runs dask's event loop and the runs go
+    to its executor thread; in the client process the main thread runs the campaign
+    loop and the other thread the event loop of the local scheduler, nannies and client."""
+    import threading
+    tick, mine, rest = os.sysconf("SC_CLK_TCK"), float("nan"), 0.0
+    main_tid = threading.main_thread().native_id
+    try:
+        for tid in os.listdir("/proc/self/task"):
+            with open(f"/proc/self/task/{tid}/stat") as f:
+                v = f.read().rsplit(")", 1)[1].split()
+            t = (int(v[11]) + int(v[12])) / tick  # utime, stime
+            if int(tid) == main_tid:
+                mine = t
+            else:
+                rest += t
+    except OSError:
+        return float("nan"), float("nan")
+    return mine, rest
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", type=int, default=1000)
@@ -76,6 +98,9 @@ def main() -> None:
     t_start = time.perf_counter() - t0
     # per pair: wall (s), our CPU (cores), other processes' CPU (cores)
     ts, td, cs, cd, cm, os_, od = [], [], [], [], [], [], []
+    # per pair, CPU seconds of the cluster's threads: client process (main thread, event
+    # loop), workers (event loops, runs)
+    split: list[tuple[float, float, float, float]] = []
 
     def others(b0: float | None, ours: float, wall: float) -> float:
         b1 = _busy_s()
@@ -90,11 +115,16 @@ def main() -> None:
                 ours = time.process_time() - p0
                 cs.append(ours / ts[-1])
                 os_.append(others(b0, ours, ts[-1]))
-                w0 = client.run(time.process_time)
+                w0, th0 = client.run(time.process_time), client.run(_threads_cpu)
+                m0 = _threads_cpu()
                 t0, p0, b0 = time.perf_counter(), time.process_time(), _busy_s()
                 run_campaign(c, Path(tmp) / "dask", scheduler=client)
                 td.append(time.perf_counter() - t0)
-                w1 = client.run(time.process_time)
+                m1 = _threads_cpu()
+                w1, th1 = client.run(time.process_time), client.run(_threads_cpu)
+                split.append((m1[0] - m0[0], m1[1] - m0[1],
+                              sum(th1[k][0] - th0[k][0] for k in th0),
+                              sum(th1[k][1] - th0[k][1] for k in th0)))
                 work = sum(w1[k] - w0[k] for k in w0)
                 cd.append(work / (len(w0) * td[-1]))
                 cm.append((time.process_time() - p0) / td[-1])
@@ -113,6 +143,10 @@ def main() -> None:
     print(f"dask local cluster: {d:7.2f} s wall, {sim_s / d:7.1f} simulated s per wall s "
           f"(workers {100 * med(cd):.0f} % of a core each, client + scheduler "
           f"{100 * med(cm):.0f} %; other processes {med(od):.2f} cores)")
+    sp = [med(x) for x in zip(*split, strict=True)]
+    print(f"cluster CPU (s):    client process: main thread {sp[0]:.2f}, event loop "
+          f"(scheduler, nannies, client) {sp[1]:.2f}; workers (sum): event loops {sp[2]:.2f}, "
+          f"runs {sp[3]:.2f}")
     print(f"ratio dask/serial:  {s / d:.2f}x")
     print(f"cluster start-up:   {t_start:7.2f} s (with it: {sim_s / (d + t_start):.1f} "
           f"simulated s per wall s, {s / (d + t_start):.2f}x)")

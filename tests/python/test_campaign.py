@@ -104,15 +104,85 @@ def test_serial_run_resumes_and_records_failures(tmp_path):
     assert statistic(rb["position_error_rms_rad"], "fail_fraction") == 0.5
 
 
+def _same_rows(a: dict, b: dict) -> None:
+    """Two results hold the same runs with the same values (every column but wall_s)."""
+    assert list(a["run"]) == sorted(a["run"]) and list(b["run"]) == sorted(b["run"])
+    assert set(a) == set(b)
+    for k in a:
+        if k == "wall_s":
+            continue
+        if a[k].dtype == object and any(isinstance(v, str) or v is None for v in a[k]):
+            assert list(a[k]) == list(b[k]), k
+        else:
+            np.testing.assert_array_equal(a[k].astype(float), b[k].astype(float), err_msg=k)
+
+
 def test_dask_local_cluster_matches_serial(tmp_path):
+    """The local cluster's workers write the parts themselves; a remote scheduler's
+    send the rows back to the client, which writes them: both give the serial rows."""
     pytest.importorskip("dask.distributed")
-    c = _parse(TINY)
+    from dask.distributed import Client
+
+    from bench._campaign import _shares_our_files, start_local_cluster
+    text = TINY.replace("seed: {values: [1, 2, 3]}", "seed: {values: [1, 2, 3]}\n"
+                        "  plant.R_ohm: {values: [1.2, -1.0]}")  # half the runs fail
+    c = _parse(text)
     run_campaign(c, tmp_path / "s", serial=True)
-    run_campaign(c, tmp_path / "d", workers=2)
-    s, d = load_results(tmp_path / "s" / "tiny"), load_results(tmp_path / "d" / "tiny")
-    order_s, order_d = np.argsort(s["run"].astype(int)), np.argsort(d["run"].astype(int))
-    np.testing.assert_array_equal(s["position_error_rms_rad"][order_s].astype(float),
-                                  d["position_error_rms_rad"][order_d].astype(float))
+    cl, client = start_local_cluster(2)
+    try:
+        assert _shares_our_files(client)
+        run_campaign(c, tmp_path / "d", scheduler=client, batch=4)
+        with Client(cl.scheduler_address) as remote:  # as --scheduler ADDRESS
+            assert not _shares_our_files(remote)
+            run_campaign(c, tmp_path / "r", scheduler=remote, batch=4)
+        run_campaign(c, tmp_path / "a", scheduler=cl.scheduler_address, batch=4)
+    finally:
+        client.close()
+        cl.close()
+    s = load_results(tmp_path / "s" / "tiny")
+    assert list(s["run"]) == list(range(6)) and sum(e is not None for e in s["error"]) == 3
+    for other in ("d", "r", "a"):
+        rdir = tmp_path / other / "tiny"
+        assert len(list(rdir.glob("part-*.parquet"))) >= 2  # batches of 4 and the rest
+        _same_rows(s, load_results(rdir))
+
+
+def test_dask_campaign_resumes_after_interruption(tmp_path):
+    """Interrupted after its first task, a local-cluster campaign keeps every run its
+    workers wrote (whole parts only) and the next call adds exactly the missing ones."""
+    pytest.importorskip("dask.distributed")
+    c = _parse(TINY.replace("sampling: {method: grid}", "sampling: {method: random, n: 40, "
+                            "seed: 5}").replace("t_end: 0.3", "t_end: 0.05").replace(
+        "seed: {values: [1, 2, 3]}", "seed: {range: [0, 1000]}"))
+    reported = []
+
+    def stop(done, total, elapsed):
+        reported.append(done)
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(c, tmp_path / "d", workers=2, batch=3, progress=stop)
+    rdir = tmp_path / "d" / c.name
+    (rdir / ".part-r00000000-1.tmp").write_bytes(b"torn")  # a writer killed mid-write
+    kept = load_results(rdir)["run"]
+    assert len(kept) >= reported[0] > 0 and len(set(kept)) == len(kept)
+    run_campaign(c, tmp_path / "d", workers=2, batch=3)
+    assert not list(rdir.glob(".part-*"))
+    run_campaign(c, tmp_path / "s", serial=True)
+    _same_rows(load_results(tmp_path / "s" / c.name), load_results(rdir))
+
+
+def test_results_count_each_run_once_in_run_order(tmp_path):
+    """A chunk run again (its worker died) writes its parts again: same names, and a
+    run found in two parts still counts once; rows come back in run order."""
+    from bench._campaign import _write_part
+    rows = [{"run": k, "error": None, "x": float(k)} for k in (5, 3, 4)]
+    _write_part(tmp_path, rows)
+    _write_part(tmp_path, rows)  # same first run: replaces the part
+    _write_part(tmp_path, [{"run": 9, "error": None, "x": 9.0}, rows[1]])
+    assert len(list(tmp_path.glob("part-*.parquet"))) == 2
+    res = load_results(tmp_path)
+    assert list(res["run"]) == [3, 4, 5, 9] and list(res["x"]) == [3.0, 4.0, 5.0, 9.0]
 
 
 @pytest.mark.parametrize("scenario,extractor,seed,plant,fw,kw,valid", [
@@ -154,12 +224,14 @@ def test_campaign_runs_give_paper_scenario_numbers(scenario, extractor, seed, pl
 def test_tasks_cover_every_run_once_large_first():
     from bench._campaign import _chunks
     todos = [[{"run": k} for k in range(1000)], [], [{"run": k} for k in range(37)]]
-    tasks = _chunks(todos, 2)
-    for i, todo in enumerate(todos):
-        assert [r for j, rs in tasks if j == i for r in rs] == todo
-    sizes = [len(rs) for _, rs in tasks]
-    assert max(sizes) <= 128 and sizes[0] == 128 and len(tasks) < 30
-    assert sizes[-2] <= 8  # short tasks at the end: no worker waits on a long one
+    for largest in (128, 1024):
+        tasks = _chunks(todos, 2, largest)
+        for i, todo in enumerate(todos):
+            assert [r for j, rs in tasks if j == i for r in rs] == todo
+        sizes = [len(rs) for _, rs in tasks]
+        assert max(sizes) <= largest and sizes[0] == min(largest, 260) and len(tasks) < 30
+        assert sizes[-2] <= 8  # short tasks at the end: no worker waits on a long one
+    assert len(_chunks(todos, 2, 1024)) < len(_chunks(todos, 2, 128))
 
 
 def test_statistics_against_numpy():
