@@ -756,6 +756,12 @@ static void test_internal_limit_statusword(void) {
   fw_get_snapshot(&c, &s);
   TT_CHECK((s.statusword & 0x0800u) == 0u);
   TT_CHECK(fw_set_speed_ref(&c, 0.0f) == FW_OK && c.ref_limited == 0u);
+  /* the background gives the references every pass: the snapshot's slow part (speed
+     reference, limit mark) is marked changed only when one of them changes */
+  const uint32_t gen = fw_snapshot_slow_gen(&c);
+  TT_CHECK(fw_set_speed_ref(&c, 0.0f) == FW_OK && fw_set_iq_ref(&c, -1.0f) == FW_OK);
+  TT_CHECK(fw_snapshot_slow_gen(&c) == gen);
+  TT_CHECK(fw_set_speed_ref(&c, 1.0f) == FW_OK && fw_snapshot_slow_gen(&c) != gen);
   /* a configuration change (while disabled) that clamps a reference marks it */
   fw_init(&c, &cfg);
   TT_CHECK(fw_set_iq_ref(&c, 0.9f * cfg.loops.i_max_A) == FW_OK && c.ref_limited == 0u);
