@@ -749,6 +749,12 @@ def start_local_cluster(n_workers: int | None = None) -> tuple[Any, Any]:
 
     import dask
     from dask.distributed import Client, LocalCluster
+    # importing distributed sets its loggers to INFO: the in-process scheduler and
+    # nannies then printed ~30 lines per campaign (start, ports, every worker, close)
+    # between the progress bar's updates; warnings and errors still show, and -v
+    # (the root logger at INFO or below) keeps them all
+    if logging.getLogger().getEffectiveLevel() > logging.INFO:
+        logging.getLogger("distributed").setLevel(logging.WARNING)
     with dask.config.set(LOCAL_CLUSTER_CONFIG):
         cluster = LocalCluster(n_workers=n_workers or os.cpu_count() or 1,
                                threads_per_worker=1, processes=True, dashboard_address=None,

@@ -147,6 +147,28 @@ def test_dask_local_cluster_matches_serial(tmp_path):
         _same_rows(s, load_results(rdir))
 
 
+def test_cli_on_the_local_cluster_prints_no_dask_chatter(tmp_path):
+    """`bench campaign` on its local cluster: the verdict lines and the progress bar, not
+    the ~30 INFO lines per campaign that importing distributed enables (scheduler ports,
+    every worker, the close); `-v` keeps them."""
+    pytest.importorskip("dask.distributed")
+    import os
+    import subprocess
+    import sys
+    f = tmp_path / "tiny.yaml"
+    f.write_text(TINY)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    for verbose in ((), ("-v",)):
+        p = subprocess.run([sys.executable, "-m", "bench", *verbose, "campaign", str(f),
+                            "--workers", "1", "--out", str(tmp_path / f"out{len(verbose)}")],
+                           capture_output=True, text=True, env=env, timeout=300)
+        assert p.returncode == 0, p.stderr[-2000:]
+        assert "3 runs in" in p.stdout + p.stderr
+        chatter = [ln for ln in p.stderr.replace("\r", "\n").splitlines()
+                   if ln.startswith("INFO distributed")]
+        assert bool(chatter) == bool(verbose), chatter[:3]
+
+
 def test_dask_campaign_resumes_after_interruption(tmp_path):
     """Interrupted after its first task, a local-cluster campaign keeps every run its
     workers wrote (whole parts only) and the next call adds exactly the missing ones."""
