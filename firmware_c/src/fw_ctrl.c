@@ -101,23 +101,32 @@ static void reset_dynamics(fw_ctrl_t *c) {
   fw_start_reset(&c->start);
 }
 
-/** Set a reference clamped to +-lim: FW_ERR_RANGE and its FW_REF_LIMITED_ bit when
- *  it was beyond, FW_ERR_NOT_FINITE (nothing changed) for NaN/inf. The background
- *  gives the references every pass: the snapshot's slow part changes only when
- *  the value or the bit does. */
-static fw_status_t limit_ref(fw_ctrl_t *c, float *dst, float v, float lim, uint8_t bit) {
+/** *dst = v clamped to +-lim: FW_ERR_RANGE when it was beyond, FW_ERR_NOT_FINITE
+ *  (nothing changed) for NaN/inf. */
+static fw_status_t set_clamped(float *dst, float v, float lim) {
   if (!fw_isfinite_f32(v)) {
     return FW_ERR_NOT_FINITE;
   }
-  const bool beyond = v > lim || v < -lim;
-  const float y = fw_clampf(v, -lim, lim);
-  const uint8_t flags = (uint8_t)(beyond ? (c->ref_limited | bit) : (c->ref_limited & ~bit));
-  if (y != *dst || flags != c->ref_limited) {
+  *dst = fw_clampf(v, -lim, lim);
+  return (v > lim || v < -lim) ? FW_ERR_RANGE : FW_OK;
+}
+
+/** set_clamped for a target: also sets or clears its FW_REF_LIMITED_ bit. The
+ *  background gives the references every pass: the snapshot's slow part changes
+ *  only when the value or the bit does. */
+static fw_status_t limit_ref(fw_ctrl_t *c, float *dst, float v, float lim, uint8_t bit) {
+  const float before = *dst;
+  const fw_status_t st = set_clamped(dst, v, lim);
+  if (st == FW_ERR_NOT_FINITE) {
+    return st;
+  }
+  const uint8_t flags =
+      (uint8_t)(st == FW_ERR_RANGE ? (c->ref_limited | bit) : (c->ref_limited & ~bit));
+  if (*dst != before || flags != c->ref_limited) {
     snap_slow_changed(c);
   }
-  *dst = y;
   c->ref_limited = flags;
-  return beyond ? FW_ERR_RANGE : FW_OK;
+  return st;
 }
 
 static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
@@ -283,14 +292,6 @@ fw_status_t fw_set_mode(fw_ctrl_t *ctrl, fw_mode_t mode) {
   ctrl->mode = mode;
   snap_slow_changed(ctrl);
   return FW_OK;
-}
-
-static fw_status_t set_clamped(float *dst, float v, float lim) {
-  if (!fw_isfinite_f32(v)) {
-    return FW_ERR_NOT_FINITE;
-  }
-  *dst = fw_clampf(v, -lim, lim);
-  return (v > lim || v < -lim) ? FW_ERR_RANGE : FW_OK;
 }
 
 fw_status_t fw_set_speed_ref(fw_ctrl_t *ctrl, float w) {
