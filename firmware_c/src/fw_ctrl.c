@@ -496,6 +496,14 @@ static void fill_snapshot_common(fw_ctrl_t *c, const fw_period_t *p) {
   s->u_dc_V = p->u_dc_V;
 }
 
+/** End of a period that does not reach stage_output: outputs off, in the snapshot
+ *  too. */
+static void end_off(fw_ctrl_t *c, const fw_period_t *p, fw_outputs_t *out) {
+  outputs_off(out);
+  snapshot_duties(c, out);
+  fill_snapshot_common(c, p);
+}
+
 /** Input checks (fault on a bad sample; NaN never enters the state), offset
  *  compensation, Clarke. */
 static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_period_t *p) {
@@ -515,10 +523,10 @@ static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_period_t *p) {
   }
   c->u_dc_V = u_dc; /* for the statusword's warning bit */
   if (FW_LIKELY(c->phase != FW_START_IDLE)) {
-    /* offsets learnt at standstill (fw_mon_compensate, written out) */
-    ia -= c->mon.offset_A[0];
-    ib -= c->mon.offset_A[1];
-    ic -= c->mon.offset_A[2];
+    /* offsets learnt at standstill */
+    ia = fw_mon_compensated(&c->mon, 0u, ia);
+    ib = fw_mon_compensated(&c->mon, 1u, ib);
+    ic = fw_mon_compensated(&c->mon, 2u, ic);
   }
   p->i_abc[0] = ia;
   p->i_abc[1] = ib;
@@ -783,9 +791,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   stage_inputs(c, in, &p);
   if (FW_UNLIKELY(!stage_power(c, &p))) {
     stage_off(c, &p);
-    outputs_off(out);
-    snapshot_duties(c, out);
-    fill_snapshot_common(c, &p);
+    end_off(c, &p, out);
     return;
   }
   if (FW_UNLIKELY(c->phase != FW_START_RUN)) {
@@ -803,9 +809,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   p.braking = p.braking && c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE;
   if (FW_UNLIKELY(!(fw_cia402_power_enabled(c->sm.state) || p.braking) || /* a fault, above */
                   !stage_references(c, &p))) { /* quick stop / braking done */
-    outputs_off(out);
-    snapshot_duties(c, out);
-    fill_snapshot_common(c, &p);
+    end_off(c, &p, out);
     return;
   }
   /* current loop in the estimated frame, or the polarity pulses */
@@ -823,9 +827,7 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, p.u_dc_V);
   }
   if (FW_UNLIKELY(!stage_monitor(c, &hf, &p))) { /* hard fault: switch off now */
-    outputs_off(out);
-    snapshot_duties(c, out);
-    fill_snapshot_common(c, &p);
+    end_off(c, &p, out);
     return;
   }
   fw_foc_commit(&c->foc, p.u_dq);

@@ -109,12 +109,6 @@ fw_fault_t fw_mon_enable(fw_mon_t *m) {
   return FW_FAULT_NONE;
 }
 
-void fw_mon_compensate(const fw_mon_t *m, float i_abc_A[3]) {
-  for (int k = 0; k < 3; k++) {
-    i_abc_A[k] -= m->offset_A[k];
-  }
-}
-
 /** x reduced modulo pi into [-pi/2, pi/2). */
 static float wrap_half_pi(float x) { return 0.5f * fw_wrap_pi_f32(2.0f * x); }
 

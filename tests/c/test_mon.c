@@ -185,7 +185,9 @@ static void test_offsets_and_current_sum(void) {
   }
   TT_CHECK(fw_mon_enable(&m) == FW_FAULT_NONE);
   float i[3] = {1.3f, -1.2f, 0.0f}; /* true (1, -1, 0) plus the offsets */
-  fw_mon_compensate(&m, i);
+  for (unsigned k = 0u; k < 3u; k++) {
+    i[k] = fw_mon_compensated(&m, k, i[k]);
+  }
   TT_CHECK_NEAR(i[0], 1.0, 1e-3);
   TT_CHECK_NEAR(i[1], -1.0, 1e-3);
   /* an offset above the limit refuses the enable */

@@ -120,8 +120,12 @@ void fw_mon_learn_offsets(fw_mon_t *m, const float i_abc_A[3]);
  *  else latch the offsets for compensation and return FW_FAULT_NONE. */
 fw_fault_t fw_mon_enable(fw_mon_t *m);
 
-/** Subtract the latched offsets from the measured phase currents. */
-void fw_mon_compensate(const fw_mon_t *m, float i_abc_A[3]);
+/** Phase current k (0..2) with its latched offset subtracted. Per value, inline:
+ *  the step keeps its currents in registers (through an array pointer they went
+ *  to the stack). */
+static inline float fw_mon_compensated(const fw_mon_t *m, unsigned k, float i_A) {
+  return i_A - m->offset_A[k];
+}
 
 /**
  * Standstill saliency check. y_dd, y_qd: mean raw HF response (A per sample,
