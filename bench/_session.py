@@ -703,7 +703,7 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
     if conn.sim is not None:
         conn.sim.wait_idle()
     logger = RunLogger(run_dir, conn.network, trace_format=trace_format)
-    sent0 = (conn.sim.frames_to_bus + conn.sim.syncs_sent) if conn.sim is not None else 0
+    sent0 = conn.sim.frames_sent if conn.sim is not None else 0
     live = open_live(rerun, conn, run_dir, seq.name) if rerun is not None else None
     feed = live.feed if live is not None else None
     sinks: list[Callable[..., None]] = [
@@ -776,7 +776,7 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
         if conn.sim is not None:
             conn.sim.sink = None
         if conn.sim is not None and conn.sim.wait_idle():
-            _settle_count(logger, expect=conn.sim.frames_to_bus + conn.sim.syncs_sent - sent0)
+            _settle_count(logger, expect=conn.sim.frames_sent - sent0)
         pdo.drain()
         if tel is not None:
             tel.stop()
@@ -792,7 +792,7 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
             if tel.error:
                 logstats["receive_errors"].append("telemetry: " + tel.error)
         if conn.sim is not None:
-            sent = conn.sim.frames_to_bus + conn.sim.syncs_sent - sent0
+            sent = conn.sim.frames_sent - sent0
             logstats["lost_frames"]["can"] = max(0, sent - logstats["frames_logged"])
             logstats["sim_frames_to_bus"] = sent
         if logstats["receive_errors"]:

@@ -181,8 +181,7 @@ class SimDrive(DriveBridge):
         self.serial = SimSerial()
         self.epoch = time.time()
         self.peer_bus: Any = None  # the bench's bus on the virtual channel (attach_peer)
-        self._sent = 0  # frames this drive put on the bus (TPDOs, answers, SYNC, ...)
-        self._peer_base = 0  # ... of them before the bench's bus was attached
+        self._peer_base = 0  # frames_sent before the bench's bus was attached
         self._peer_seen = 0  # ... of them the bench's receive thread has dispatched
         self._peer_cond = threading.Condition()
         self._t_lock = threading.Lock()  # a chunk's frames out + its time published
@@ -281,7 +280,7 @@ class SimDrive(DriveBridge):
             self.peer_bus = bus
             # sent before (boot-up): the bench never receives them. The drive must be
             # idle here (not paced), or frames in flight would be miscounted
-            self._peer_base = self._sent
+            self._peer_base = self.frames_sent
             self._peer_seen = 0
         notifier.add_listener(self._peer_dispatched)
 
@@ -290,10 +289,11 @@ class SimDrive(DriveBridge):
             self._peer_seen += 1
             self._peer_cond.notify_all()
 
-    def _send(self, msg: can.Message) -> None:
-        with self._peer_cond:
-            self._sent += 1
-        self.bus.send(msg)
+    @property
+    def frames_sent(self) -> int:
+        """Frames this drive has put on the bus: its own (TPDOs, answers, EMCY, ...)
+        and the SYNC it produces."""
+        return self.frames_to_bus + self.syncs_sent
 
     def _drain_peer(self, timeout_s: float = 5.0) -> None:
         """Wait until the bench has dispatched every frame sent so far (attach_peer);
@@ -302,11 +302,11 @@ class SimDrive(DriveBridge):
             return
         with self._peer_cond:
             ok = self._peer_cond.wait_for(
-                lambda: self._peer_seen >= self._sent - self._peer_base, timeout_s)
+                lambda: self._peer_seen >= self.frames_sent - self._peer_base, timeout_s)
             if not ok:
                 # a stalled or closed bench: not fatal for the drive; the run may differ
                 log.warning("the bench dispatched %d of %d frames within %.1f s",
-                            self._peer_seen, self._sent - self._peer_base, timeout_s)
+                            self._peer_seen, self.frames_sent - self._peer_base, timeout_s)
 
     def set_realtime(self, on: bool) -> None:
         """Switch pacing; wall-clock pacing resumes from the present simulated time."""
@@ -365,9 +365,9 @@ class SimDrive(DriveBridge):
         f = FwCanFrame()
         ts = self.epoch + (self._t if t_s is None else t_s)
         while self._can_pop(f):
-            self._send(can.Message(arbitration_id=f.id, data=bytes(f.data[: f.dlc]),
-                                   is_extended_id=False, is_remote_frame=bool(f.rtr),
-                                   timestamp=ts))
+            self.bus.send(can.Message(arbitration_id=f.id, data=bytes(f.data[: f.dlc]),
+                                      is_extended_id=False, is_remote_frame=bool(f.rtr),
+                                      timestamp=ts))
             self.frames_to_bus += 1
             self.sent_by_id[f.id] = self.sent_by_id.get(f.id, 0) + 1
         n = self._uart_read(self._uart_buf, len(self._uart_buf))
@@ -401,8 +401,8 @@ class SimDrive(DriveBridge):
         self._flush_rx(None if self.paced else 1)
         self._apply_pending()
         self._can_rx(self._sync)  # we are the SYNC producer
-        self._send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False,
-                               timestamp=self.epoch + self._t))
+        self.bus.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False,
+                                  timestamp=self.epoch + self._t))
         self.syncs_sent += 1
         rec = self.sim.advance(self.n_chunk, self.record_decimation,
                                ["t_s", *SIM_CHANNELS] if self.sink else [])

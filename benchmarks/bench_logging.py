@@ -68,7 +68,7 @@ def run_sim(duration_s: float, out: Path) -> dict[str, float]:
         conn.sim.wait_idle()
         time.sleep(0.2)
         logger = RunLogger(out, conn.network)
-        sent0 = conn.sim.frames_to_bus + conn.sim.syncs_sent
+        sent0 = conn.sim.frames_sent
         by_id0 = {**conn.sim.sent_by_id, 0x080: conn.sim.syncs_sent}
         pdo = PdoRecorder(conn, logger)
         tel = TelemetryReader(conn.serial, logger, float(conn.sim.sim.cfg.f_pwm_Hz))
@@ -94,7 +94,7 @@ def run_sim(duration_s: float, out: Path) -> dict[str, float]:
         pdo.drain()
         tel.stop()
         stats = logger.close(join_mf4=False)
-        sent = conn.sim.frames_to_bus + conn.sim.syncs_sent - sent0
+        sent = conn.sim.frames_sent - sent0
         by_id = {k: v - by_id0.get(k, 0) for k, v in
                  {**conn.sim.sent_by_id, 0x080: conn.sim.syncs_sent}.items()}
         diff = {hex(k): (by_id.get(k, 0), stats["frames_by_id"].get(k, 0))

@@ -252,12 +252,12 @@ def test_runs_do_not_depend_on_thread_timing(tmp_path: Path,
             seen[0] += 1
         notifier.add_listener(slow)  # type: ignore[attr-defined]
         attach(self, bus, notifier)
-        base = self._sent
+        base = self.frames_sent
         run_until = self.run_until
 
         def checked(t_s: float, timeout_s: float | None = None) -> None:
             run_until(t_s, timeout_s)
-            lag.append(self._sent - base - seen[0])  # frames sent, not yet dispatched
+            lag.append(self.frames_sent - base - seen[0])  # sent, not yet dispatched
         self.run_until = checked  # type: ignore[method-assign]
 
     flush = SimDrive._flush_tx
