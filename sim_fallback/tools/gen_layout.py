@@ -17,12 +17,17 @@ TYPES = [("fw", "fw_config_t"), ("fw", "fw_inputs_t"), ("fw", "fw_adc_inputs_t")
          ("sim", "sim_record_t"), ("sim", "sim_ctrl_const_t")]
 
 
-def fields(src: str, name: str) -> list[str]:
+def _decls(src: str, name: str) -> list[str]:
+    """The member declarations of ``typedef struct {...} name;``, comments removed."""
     end = src.index("} " + name + ";")
     start = src.rindex("typedef struct", 0, end)
     body = re.sub(r"/\*.*?\*/", "", src[src.index("{", start) + 1:end], flags=re.S)
+    return body.split(";")
+
+
+def fields(src: str, name: str) -> list[str]:
     out = []
-    for decl in body.split(";"):
+    for decl in _decls(src, name):
         decl = " ".join(decl.split())
         if not decl:
             continue
@@ -36,11 +41,8 @@ def fields(src: str, name: str) -> list[str]:
 
 def members(src: str, name: str) -> list[tuple[str, str]]:
     """(member, its type's first word) per member of struct ``name``."""
-    end = src.index("} " + name + ";")
-    start = src.rindex("typedef struct", 0, end)
-    body = re.sub(r"/\*.*?\*/", "", src[src.index("{", start) + 1:end], flags=re.S)
     out = []
-    for decl in body.split(";"):
+    for decl in _decls(src, name):
         decl = " ".join(decl.split())
         if decl:
             typ = decl.removeprefix("const ").split(" ")[0]
