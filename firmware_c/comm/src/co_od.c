@@ -97,9 +97,7 @@ co_abort_t co_od_check(uint16_t pos, const uint8_t *data, size_t len) {
     return CO_ABORT_TYPE_LEN;
   }
   if (e->type == CO_TYPE_REAL32) {
-    float f;
-    uint32_t raw = co_le_get(data, 4u);
-    memcpy(&f, &raw, sizeof f);
+    const float f = co_le_load_f32(data); /* len == 4 here: data is not NULL */
     if (!isfinite(f)) {
       return CO_ABORT_VALUE_RANGE;
     }
@@ -185,9 +183,7 @@ void co_od_reset(uint8_t *ram, size_t ram_size, uint8_t node_id) {
       size_t n = e->def_s != NULL ? strlen(e->def_s) : 0u;
       co_od_store(ram, ram_size, pos, (const uint8_t *)e->def_s, n);
     } else if (e->type == CO_TYPE_REAL32) {
-      uint32_t raw;
-      memcpy(&raw, &e->def_f, sizeof raw);
-      co_le_put(buf, 4u, raw);
+      co_le_store_f32(buf, e->def_f);
       co_od_store(ram, ram_size, pos, buf, 4u);
     } else {
       int64_t v = e->def_i;
@@ -220,13 +216,10 @@ int32_t co_od_get_i32(const uint8_t *ram, size_t ram_size, uint16_t pos) {
 
 float co_od_get_f32(const uint8_t *ram, size_t ram_size, uint16_t pos) {
   const co_od_entry_t *e = co_od_entry(pos);
-  float f = 0.0f;
   if (ram == NULL || e == NULL || e->type != CO_TYPE_REAL32 || !co_od_in_ram(e, ram_size)) {
     return 0.0f;
   }
-  uint32_t raw = co_le_load(&ram[e->offset], 4u);
-  memcpy(&f, &raw, sizeof f);
-  return f;
+  return co_le_load_f32(&ram[e->offset]);
 }
 
 void co_od_set_u32(uint8_t *ram, size_t ram_size, uint16_t pos, uint32_t v) {
@@ -244,10 +237,8 @@ void co_od_set_i32(uint8_t *ram, size_t ram_size, uint16_t pos, int32_t v) {
 
 void co_od_set_f32(uint8_t *ram, size_t ram_size, uint16_t pos, float v) {
   const co_od_entry_t *e = co_od_entry(pos);
-  uint32_t raw;
   if (ram == NULL || e == NULL || e->type != CO_TYPE_REAL32 || !co_od_in_ram(e, ram_size)) {
     return;
   }
-  memcpy(&raw, &v, sizeof raw);
-  co_le_store(&ram[e->offset], 4u, raw);
+  co_le_store_f32(&ram[e->offset], v);
 }

@@ -26,7 +26,6 @@
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
-#include <string.h>
 
 #include "co_od_table.h"
 #include "pmlsm/co_od.h"
@@ -242,15 +241,10 @@ static inline int32_t co_node_get_i_at(const co_node_t *node, uint16_t off, uint
   return (int32_t)(raw ^ m) - (int32_t)m;
 }
 static inline void co_node_put_f32_at(co_node_t *node, uint16_t off, float v) {
-  uint32_t raw;
-  memcpy(&raw, &v, sizeof raw);
-  co_le_store(&node->od[off], 4u, raw);
+  co_le_store_f32(&node->od[off], v);
 }
 static inline float co_node_get_f32_at(const co_node_t *node, uint16_t off) {
-  uint32_t raw = co_le_load(&node->od[off], 4u);
-  float f;
-  memcpy(&f, &raw, sizeof f);
-  return f;
+  return co_le_load_f32(&node->od[off]);
 }
 /* 0 when the entry is 4 bytes long; else a compile error (negative array size) */
 #define CO_NODE_LEN4_(ii_ss) ((void)sizeof(char[CO_OD_LEN_##ii_ss == 4u ? 1 : -1]))

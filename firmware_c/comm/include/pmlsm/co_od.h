@@ -198,6 +198,20 @@ static inline void co_le_store(uint8_t *p, size_t n, uint32_t v) {
   }
 }
 
+/** A REAL32 as its 4 little-endian bytes (IEEE 754 bits, as on the wire). */
+static inline float co_le_load_f32(const uint8_t *p) {
+  const uint32_t raw = co_le_load(p, 4u);
+  float f;
+  memcpy(&f, &raw, sizeof f);
+  return f;
+}
+
+static inline void co_le_store_f32(uint8_t *p, float v) {
+  uint32_t raw;
+  memcpy(&raw, &v, sizeof raw);
+  co_le_store(p, 4u, raw);
+}
+
 #ifdef __cplusplus
 }
 #endif
