@@ -266,9 +266,15 @@ CASES: list[FaultCase] = [
     *[FaultCase(f"mass_x{m:g}", f"mover {m:g} x heavier than the observer assumes",
                 plant_scale={"mass_kg": m}, load_N=[(0.0, 0.0), (0.5, 65.0)])
       for m in (0.3, 3.0)],
-    FaultCase("speed_2mps_overspeed", "speed reference 2.5 m/s with v_max_mps = 2.0",
+    FaultCase("speed_2p5mps_limited", "speed target 2.5 m/s with v_max_mps = 2.0 (0x6080): "
+              "runs at 2.0 m/s, statusword bit 11, no trip",
               motor="iron_core_linear", speed=[(0.0, 0.2), (0.3, 2.5)],
-              fw={"v_max_mps": 2.0}),
+              fw={"v_max_mps": 2.0}, expect="track"),
+    FaultCase("overhauling_load_overspeed", "a -1500 N load (beyond the 1200 N peak thrust) "
+              "pushes the mover on at 1 m/s, v_max_mps = 1.2: OVERSPEED above 1.44 m/s",
+              motor="iron_core_linear", speed=[(0.0, 0.2), (0.2, 1.0)],
+              load_N=[(0.0, 0.0), (0.6, -1500.0)], fw={"v_max_mps": 1.2},
+              expect="fault", fault=0x8400),
     FaultCase("position_limit", "software limits +-0.2 m, 0.5 m/s towards +",
               speed=0.5, fw={"pos_limit_min_m": -0.2, "pos_limit_max_m": 0.2},
               expect="fault", fault=0x8612),

@@ -144,7 +144,8 @@ class Firmware:
 
     def set_speed_ref_radps_e(self, w: float) -> int:
         """Speed mode: electrical rad/s. Returns 0, or 2 (FW_ERR_RANGE) when the
-        firmware clamped it to +-speed_max_radps_e; raises :class:`RefError`
+        firmware clamped it to the smaller of +-speed_max_radps_e and
+        +-v_max_mps (0x6080); raises :class:`RefError`
         for NaN/inf (nothing applied)."""
         return self._ref(int(self._L.fw_set_speed_ref(self.handle, w)), "speed reference", w,
                          "rad/s el.")

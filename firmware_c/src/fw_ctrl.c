@@ -129,6 +129,13 @@ static fw_status_t limit_ref(fw_ctrl_t *c, float *dst, float v, float lim, uint8
   return st;
 }
 
+/** The speed target's limit: speed_max_radps_e, or v_max_mps (CiA 402 0x6080, "Max
+ *  motor speed") when smaller; OVERSPEED trips only above v_max_mps x overspeed_margin. */
+static float speed_ref_max(const fw_config_t *cfg) {
+  return fminf(cfg->loops.speed_max_radps_e,
+               fw_units_mps_to_radps_e(cfg, cfg->protection.v_max_mps));
+}
+
 static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   snap_slow_changed(c); /* extractor, speed reference */
   c->cfg = *cfg;
@@ -144,7 +151,7 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   /* references set under the old limits must obey the new ones (a reference clamped
      before stays marked: the background gives the raw one again at its next pass) */
   const uint8_t was_limited = c->ref_limited;
-  (void)limit_ref(c, &c->speed_ref_radps_e, c->speed_ref_radps_e, cfg->loops.speed_max_radps_e,
+  (void)limit_ref(c, &c->speed_ref_radps_e, c->speed_ref_radps_e, speed_ref_max(cfg),
                   FW_REF_LIMITED_SPEED);
   (void)limit_ref(c, &c->i_q_ref_force_A, c->i_q_ref_force_A, cfg->loops.i_max_A,
                   FW_REF_LIMITED_FORCE);
@@ -295,7 +302,7 @@ fw_status_t fw_set_mode(fw_ctrl_t *ctrl, fw_mode_t mode) {
 }
 
 fw_status_t fw_set_speed_ref(fw_ctrl_t *ctrl, float w) {
-  return ctrl ? limit_ref(ctrl, &ctrl->speed_ref_radps_e, w, ctrl->cfg.loops.speed_max_radps_e,
+  return ctrl ? limit_ref(ctrl, &ctrl->speed_ref_radps_e, w, speed_ref_max(&ctrl->cfg),
                           FW_REF_LIMITED_SPEED)
               : FW_ERR_NULL;
 }

@@ -62,7 +62,10 @@ uint32_t fw_fault_latch_history(const fw_fault_latch_t *f, uint16_t *codes, uint
 
 void fw_protect_config(fw_protect_t *p, const fw_config_t *cfg, float dt_s) {
   p->dt_s = dt_s;
-  p->w_vmax_radps = fw_units_mps_to_radps_e(cfg, cfg->protection.v_max_mps);
+  /* the target is limited to v_max_mps (fw_set_speed_ref); the trip leaves room
+     above it for the speed loop's overshoot and the estimate's ripple */
+  p->w_trip_radps = fw_units_mps_to_radps_e(
+      cfg, cfg->protection.v_max_mps * cfg->protection.overspeed_margin);
   p->w_follow_radps = fw_units_mps_to_radps_e(cfg, cfg->protection.follow_err_mps);
   /* the step's products of configuration values, once */
   p->ir2_A2 = cfg->protection.i_rated_A * cfg->protection.i_rated_A;
@@ -94,7 +97,7 @@ fw_fault_t fw_protect_update(fw_protect_t *p, const fw_config_t *cfg, const fw_p
   if (p->i2t_on && i2t > p->i2t_max_A2s) {
     return FW_FAULT_I2T;
   }
-  if (FW_UNLIKELY(fabsf(in->omega_hat_radps) > p->w_vmax_radps)) {
+  if (FW_UNLIKELY(fabsf(in->omega_hat_radps) > p->w_trip_radps)) {
     return FW_FAULT_OVERSPEED;
   }
   if (FW_UNLIKELY(p->pos_on)) { /* software limits: off by default */

@@ -28,7 +28,7 @@ FAULTS: dict[int, tuple[str, str]] = {
     0x6320: ('CONFIG_INVALID', 'enable requested with a configuration the core refused'),
     0x8130: ('HEARTBEAT_LOST', 'supervisor heartbeat (0x1016) not heard within its consumer time'),
     0x8250: ('RPDO_TIMEOUT', 'RPDO data not applied within its event timer (0x1400+n:5) while enabled (raised by fw_app)'),
-    0x8400: ('OVERSPEED', '|velocity estimate| above v_max_mps (0x6080)'),
+    0x8400: ('OVERSPEED', '|velocity estimate| above v_max_mps (0x6080) x overspeed_margin (0x2051:11)'),
     0x8611: ('FOLLOWING_ERROR', '|speed reference - estimate| outside 0x6065 for longer than 0x6066'),
     0x8612: ('POSITION_LIMIT', 'estimated position outside the software limits (0x607D)'),
     0xFF01: ('EST_HF_LOW', 'HF response too small: loss of lock'),
@@ -181,6 +181,7 @@ FW_CONFIG_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ('adc_V_per_count', 'sensing', False),
     ('adc_max_count', 'sensing', True),
     ('v_max_mps', 'protection', False),
+    ('overspeed_margin', 'protection', False),
     ('pos_limit_min_m', 'protection', False),
     ('pos_limit_max_m', 'protection', False),
     ('follow_err_mps', 'protection', False),
@@ -475,6 +476,7 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2051, 8): 'Quick stop option',
     (0x2051, 9): 'Fault reaction option',
     (0x2051, 10): 'Fault braking time',
+    (0x2051, 11): 'Overspeed margin',
     (0x2052, 0): 'Highest sub-index supported',
     (0x2052, 1): 'HF angle limit',
     (0x2052, 2): 'Detection time',
@@ -752,6 +754,7 @@ PROTECTIONS__I2T_TIME_S = Entry(0x2051, 7, unit='s')
 PROTECTIONS__QUICK_STOP_OPTION = Entry(0x2051, 8)
 PROTECTIONS__FAULT_REACTION_OPTION = Entry(0x2051, 9)
 PROTECTIONS__FAULT_BRAKE_TIME_S = Entry(0x2051, 10, unit='s')
+PROTECTIONS__OVERSPEED_MARGIN = Entry(0x2051, 11)
 INTEGRITY_MONITOR__MON_ANGLE_MAX_RAD = Entry(0x2052, 1, unit='rad')
 INTEGRITY_MONITOR__MON_DETECT_TIME_S = Entry(0x2052, 2, unit='s')
 INTEGRITY_MONITOR__MON_SAL_TOL = Entry(0x2052, 3)

@@ -73,6 +73,7 @@ static const layout_row_t k_rows[] = {
     ROW(fw_config_t, protection.pll_err_time_s),
     ROW(fw_config_t, protection.quick_stop_time_s),
     ROW(fw_config_t, protection.v_max_mps),
+    ROW(fw_config_t, protection.overspeed_margin),
     ROW(fw_config_t, protection.pos_limit_min_m),
     ROW(fw_config_t, protection.pos_limit_max_m),
     ROW(fw_config_t, protection.follow_err_mps),

@@ -587,10 +587,24 @@ static void test_units_and_refs(void) {
   TT_CHECK_NEAR(fw_units_radps_e_to_mps(&cfg, (float)(M_PI / 0.024)), 1.0, 1e-5);
   fw_ctrl_t c;
   fw_init(&c, &cfg);
+  /* the target's limit: v_max_mps (3 m/s = pi 3 / tau, CiA 402 0x6080) when below
+     speed_max_radps_e (1500), as by default ... */
+  const double w_vmax = M_PI * 3.0 / 0.024;
+  TT_CHECK(w_vmax < cfg.loops.speed_max_radps_e);
+  TT_CHECK(fw_set_speed_ref(&c, 1e6f) == FW_ERR_RANGE);
+  TT_CHECK_NEAR(c.speed_ref_radps_e, w_vmax, 1e-3);
+  TT_CHECK(fw_set_speed_ref(&c, NAN) == FW_ERR_NOT_FINITE);
+  TT_CHECK_NEAR(c.speed_ref_radps_e, w_vmax, 1e-3);
+  TT_CHECK(fw_set_speed_ref(&c, (float)(-1.01 * w_vmax)) == FW_ERR_RANGE);
+  TT_CHECK_NEAR(c.speed_ref_radps_e, -w_vmax, 1e-3);
+  TT_CHECK(fw_set_speed_ref(&c, (float)(0.99 * w_vmax)) == FW_OK);
+  /* ... speed_max_radps_e when that is the smaller */
+  fw_config_t fast = cfg;
+  fast.protection.v_max_mps = 20.0f; /* 2618 rad/s */
+  TT_CHECK(fw_init(&c, &fast) == FW_OK);
   TT_CHECK(fw_set_speed_ref(&c, 1e6f) == FW_ERR_RANGE);
   TT_CHECK_NEAR(c.speed_ref_radps_e, cfg.loops.speed_max_radps_e, 1e-3);
-  TT_CHECK(fw_set_speed_ref(&c, NAN) == FW_ERR_NOT_FINITE);
-  TT_CHECK_NEAR(c.speed_ref_radps_e, cfg.loops.speed_max_radps_e, 1e-3);
+  TT_CHECK(fw_set_speed_ref(&c, 1499.0f) == FW_OK);
   TT_CHECK(fw_set_extractor(&c, (fw_extractor_t)7) == FW_ERR_RANGE);
   TT_CHECK(fw_set_extractor(&c, FW_EXTRACTOR_PSEUDO) == FW_OK);
   TT_CHECK(c.cfg.estimator.extractor == 0u);
@@ -702,14 +716,19 @@ static void test_refs_clamped_on_config_change(void) {
   fw_init(&c, &cfg);
   TT_CHECK(fw_set_iq_ref(&c, 15.0f) == FW_OK);
   TT_CHECK(fw_set_id_ref(&c, -15.0f) == FW_OK);
-  TT_CHECK(fw_set_speed_ref(&c, 1400.0f) == FW_OK);
+  TT_CHECK(fw_set_speed_ref(&c, 380.0f) == FW_OK);
   fw_config_t small = cfg;
   small.loops.i_max_A = 5.0f;
-  small.loops.speed_max_radps_e = 1000.0f;
+  small.loops.speed_max_radps_e = 300.0f;
   fw_config_issue_t iss;
   TT_CHECK(fw_set_config(&c, &small, &iss) == FW_OK);
   TT_CHECK(c.i_q_ref_force_A <= 5.0f && c.i_d_ref_A >= -5.0f);
-  TT_CHECK(c.speed_ref_radps_e <= 1000.0f);
+  TT_CHECK(c.speed_ref_radps_e == 300.0f && (c.ref_limited & FW_REF_LIMITED_SPEED) != 0u);
+  /* a smaller v_max_mps (0x6080) clamps it too: 2 m/s = pi 2 / tau = 261.8 rad/s */
+  fw_config_t slow = small;
+  slow.protection.v_max_mps = 2.0f;
+  TT_CHECK(fw_set_config(&c, &slow, &iss) == FW_OK);
+  TT_CHECK_NEAR(c.speed_ref_radps_e, M_PI * 2.0 / 0.024, 1e-3);
   /* in the loop: FORCE mode at a known angle */
   fw_set_mode(&c, FW_MODE_FORCE);
   plant_t p;

@@ -127,13 +127,26 @@ static void test_speed_position_follow(void) {
   const float dt = 1.0f / 24000.0f;
   fw_protect_t p;
   fw_protect_init(&p, &cfg, dt);
-  const float w_vmax = (float)(M_PI * 3.0 / 0.024); /* pi v / tau */
-  TT_CHECK_NEAR(p.w_vmax_radps, w_vmax, 1e-3);
+  /* OVERSPEED at v_max_mps x overspeed_margin (1.2): pi 3.6 / tau */
+  const float w_trip = (float)(M_PI * 3.0 * 1.2 / 0.024);
+  TT_CHECK_NEAR(p.w_trip_radps, w_trip, 1e-3);
   fw_protect_in_t in = quiet_in();
-  in.omega_hat_radps = 1.001f * w_vmax;
+  in.omega_hat_radps = 1.001f * w_trip;
   TT_CHECK(fw_protect_update(&p, &cfg, &in) == FW_FAULT_OVERSPEED);
-  in.omega_hat_radps = -0.999f * w_vmax;
+  in.omega_hat_radps = -1.001f * w_trip;
+  TT_CHECK(fw_protect_update(&p, &cfg, &in) == FW_FAULT_OVERSPEED);
+  in.omega_hat_radps = -0.999f * w_trip; /* above v_max_mps itself: the margin */
   TT_CHECK(fw_protect_update(&p, &cfg, &in) == FW_FAULT_NONE);
+  /* margin 1.0: at v_max_mps itself */
+  fw_config_t tight = cfg;
+  tight.protection.overspeed_margin = 1.0f;
+  fw_protect_t pt;
+  fw_protect_init(&pt, &tight, dt);
+  const float w_vmax = (float)(M_PI * 3.0 / 0.024);
+  in.omega_hat_radps = 1.001f * w_vmax;
+  TT_CHECK(fw_protect_update(&pt, &tight, &in) == FW_FAULT_OVERSPEED);
+  in.omega_hat_radps = 0.999f * w_vmax;
+  TT_CHECK(fw_protect_update(&pt, &tight, &in) == FW_FAULT_NONE);
   /* beyond the upper limit: trips while the command points out or is zero */
   in.pos_m = 0.51f;
   in.cmd = 1.0f;

@@ -182,25 +182,30 @@ def test_walk_to_operation_enabled_and_follow_target_velocity(rig):
     assert node.sdo[0x603F].raw == 0
 
 
-def test_target_beyond_the_speed_limit_sets_internal_limit_active(rig):
+@pytest.mark.parametrize("limit_object", ["speed limit 0x2050:11", "max motor speed 0x6080"])
+def test_target_beyond_the_speed_limit_sets_internal_limit_active(rig, limit_object):
     """CiA 402 statusword bit 11: a target velocity beyond the drive's speed limit is
     clamped and says so, a target within it clears the bit; the mover follows the
-    clamped target (the simulator's truth)."""
+    clamped target (the simulator's truth). Both limits clamp: the loops' speed limit
+    (electrical rad/s) and 0x6080, which CiA 402 has limit the target. 0x6080 does
+    not trip OVERSPEED for a target beyond it (the trip is overspeed_margin above)."""
     net, node, bridge, _ = rig
     if bridge.sim is None:
         pytest.skip("sim_fallback library not available: no plant to follow")
     tau = bridge.sim.cfg.pole_pitch_m
     assert node.state == "OPERATION ENABLED"
     assert node.sdo[0x6041].raw & 0x0800 == 0  # 0.2 m/s, within every limit
-    limit_old = node.sdo[0x2050][11].raw
+    obj = node.sdo[0x2050][11] if "0x2050" in limit_object else node.sdo[0x6080]
+    limit_old = obj.raw
     node.state = "SWITCHED ON"  # the configuration is written with the power stage off
-    limit = 0.15 * math.pi / tau  # 0.15 m/s in electrical rad/s
-    node.sdo[0x2050][11].raw = limit
+    # 0.15 m/s, in electrical rad/s or um/s
+    obj.raw = 0.15 * math.pi / tau if "0x2050" in limit_object else 150_000
     time.sleep(0.5)  # the mover coasts to a stop: enabling on a moving mover is refused
     try:
         node.state = "OPERATION ENABLED"
         node.sdo[0x60FF].raw = 200_000  # 0.2 m/s: beyond the limit
         time.sleep(1.0)
+        assert node.sdo[0x603F].raw == 0, hex(node.sdo[0x603F].raw)
         assert node.sdo[0x6041].raw & 0x0800, hex(node.sdo[0x6041].raw)
         assert abs(bridge.state()["v_mps"] - 0.15) < 0.03, bridge.state()
         node.sdo[0x60FF].raw = 100_000  # within
@@ -208,7 +213,7 @@ def test_target_beyond_the_speed_limit_sets_internal_limit_active(rig):
         assert node.sdo[0x6041].raw & 0x0800 == 0
     finally:  # leave the rig as the other tests expect it: enabled at 0.2 m/s
         node.state = "SWITCHED ON"
-        node.sdo[0x2050][11].raw = limit_old
+        obj.raw = limit_old
         time.sleep(0.5)
         node.state = "OPERATION ENABLED"
         node.sdo[0x60FF].raw = 200_000

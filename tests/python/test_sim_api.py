@@ -72,7 +72,15 @@ def test_speed_setters_match_the_analytic_conversions():
     assert fw.set_speed_ref_rpm(30.0) == 0
     assert fw.snapshot()["speed_ref_radps_e"] == pytest.approx(30.0 * 2 * math.pi * p / 60,
                                                                rel=1e-6)
-    # beyond the firmware's limit: clamped (status 2), not silently different
+    # beyond the firmware's limit: clamped (status 2), not silently different. The
+    # limit is v_max_mps (CiA 402 0x6080) where that is below speed_max_radps_e ...
+    v_max = float(fw.cfg.v_max_mps)
+    assert math.pi * v_max / tau < fw.cfg.speed_max_radps_e
+    assert fw.set_speed_ref_mps(1.01 * v_max) == 2
+    assert fw.snapshot()["speed_ref_radps_e"] == pytest.approx(math.pi * v_max / tau, rel=1e-6)
+    assert fw.set_speed_ref_mps(0.99 * v_max) == 0
+    # ... and speed_max_radps_e where v_max_mps is above it
+    fw = sf.Firmware(mot, v_max_mps=2.0 * fw.cfg.speed_max_radps_e * tau / math.pi)
     v_big = 1.01 * fw.cfg.speed_max_radps_e * tau / math.pi
     assert fw.set_speed_ref_mps(v_big) == 2
     assert fw.snapshot()["speed_ref_radps_e"] == pytest.approx(fw.cfg.speed_max_radps_e)

@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 283u
-#define CO_OD_RAM_SIZE 938u
+#define CO_OD_COUNT 284u
+#define CO_OD_RAM_SIZE 942u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -206,93 +206,94 @@
 #define CO_OD_2051_08 193u /* Protections: Quick stop option */
 #define CO_OD_2051_09 194u /* Protections: Fault reaction option */
 #define CO_OD_2051_0A 195u /* Protections: Fault braking time */
-#define CO_OD_2052_00 196u /* Integrity monitor: Highest sub-index supported */
-#define CO_OD_2052_01 197u /* Integrity monitor: HF angle limit */
-#define CO_OD_2052_02 198u /* Integrity monitor: Detection time */
-#define CO_OD_2052_03 199u /* Integrity monitor: Saliency tolerance */
-#define CO_OD_2052_04 200u /* Integrity monitor: Back-EMF angle limit */
-#define CO_OD_2052_05 201u /* Integrity monitor: Back-EMF minimum speed */
-#define CO_OD_2052_06 202u /* Integrity monitor: Current sum limit */
-#define CO_OD_2052_07 203u /* Integrity monitor: Current offset limit */
-#define CO_OD_2052_08 204u /* Integrity monitor: Start speed limit */
-#define CO_OD_2052_09 205u /* Integrity monitor: Back-EMF minimum */
-#define CO_OD_2053_00 206u /* Back-EMF observer: Highest sub-index supported */
-#define CO_OD_2053_01 207u /* Back-EMF observer: Handover up speed */
-#define CO_OD_2053_02 208u /* Back-EMF observer: Handover down speed */
-#define CO_OD_2053_03 209u /* Back-EMF observer: Injection share */
-#define CO_OD_2053_04 210u /* Back-EMF observer: Handover up */
-#define CO_OD_2053_05 211u /* Back-EMF observer: Handover down */
-#define CO_OD_2054_00 212u /* Machine and loop bandwidths: Highest sub-index supported */
-#define CO_OD_2054_01 213u /* Machine and loop bandwidths: Mover mass */
-#define CO_OD_2054_02 214u /* Machine and loop bandwidths: Viscous friction */
-#define CO_OD_2054_03 215u /* Machine and loop bandwidths: Coulomb friction */
-#define CO_OD_2054_04 216u /* Machine and loop bandwidths: Current loop bandwidth */
-#define CO_OD_2054_05 217u /* Machine and loop bandwidths: Speed loop bandwidth */
-#define CO_OD_2054_06 218u /* Machine and loop bandwidths: Gains automatic */
-#define CO_OD_2055_00 219u /* Start-up and estimate supervision: Highest sub-index supported */
-#define CO_OD_2055_01 220u /* Start-up and estimate supervision: Alignment time */
-#define CO_OD_2055_02 221u /* Start-up and estimate supervision: Polarity pulse voltage */
-#define CO_OD_2055_03 222u /* Start-up and estimate supervision: Polarity pulse samples */
-#define CO_OD_2055_04 223u /* Start-up and estimate supervision: Polarity pulse pairs */
-#define CO_OD_2055_05 224u /* Start-up and estimate supervision: Polarity margin */
-#define CO_OD_2055_06 225u /* Start-up and estimate supervision: HF amplitude minimum ratio */
-#define CO_OD_2055_07 226u /* Start-up and estimate supervision: PLL error limit */
-#define CO_OD_2055_08 227u /* Start-up and estimate supervision: PLL error time */
-#define CO_OD_2056_00 228u /* Board sensing: Highest sub-index supported */
-#define CO_OD_2056_01 229u /* Board sensing: Current per count */
-#define CO_OD_2056_02 230u /* Board sensing: Current zero */
-#define CO_OD_2056_03 231u /* Board sensing: DC link volts per count */
-#define CO_OD_2056_04 232u /* Board sensing: Full-scale count */
-#define CO_OD_2060_00 233u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 234u /* Telemetry: Decimation */
-#define CO_OD_2060_02 235u /* Telemetry: Signal count */
-#define CO_OD_2060_03 236u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 237u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 238u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 239u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 240u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 241u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 242u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 243u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 244u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 245u /* Trace: Command */
-#define CO_OD_2070_02 246u /* Trace: State */
-#define CO_OD_2070_03 247u /* Trace: Trigger signal */
-#define CO_OD_2070_04 248u /* Trace: Trigger level */
-#define CO_OD_2070_05 249u /* Trace: Trigger edge */
-#define CO_OD_2070_06 250u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 251u /* Trace: Signal count */
-#define CO_OD_2070_08 252u /* Trace: Signal 1 */
-#define CO_OD_2070_09 253u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 254u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 255u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 256u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 257u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 258u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 259u /* Trace: Signal 8 */
-#define CO_OD_2080_00 260u /* Identification: Highest sub-index supported */
-#define CO_OD_2080_01 261u /* Identification: d-axis current reference */
-#define CO_OD_2080_02 262u /* Identification: Measured smaller inductance */
-#define CO_OD_2080_03 263u /* Identification: Measured larger inductance */
-#define CO_OD_603F_00 264u /* Error code: Error code */
-#define CO_OD_6040_00 265u /* Controlword: Controlword */
-#define CO_OD_6041_00 266u /* Statusword: Statusword */
-#define CO_OD_605A_00 267u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 268u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 269u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 270u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 271u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 272u /* Following error window: Following error window */
-#define CO_OD_6066_00 273u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 274u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 275u /* Target torque: Target torque */
-#define CO_OD_6077_00 276u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 277u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 278u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 279u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 280u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 281u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 282u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2051_0B 196u /* Protections: Overspeed margin */
+#define CO_OD_2052_00 197u /* Integrity monitor: Highest sub-index supported */
+#define CO_OD_2052_01 198u /* Integrity monitor: HF angle limit */
+#define CO_OD_2052_02 199u /* Integrity monitor: Detection time */
+#define CO_OD_2052_03 200u /* Integrity monitor: Saliency tolerance */
+#define CO_OD_2052_04 201u /* Integrity monitor: Back-EMF angle limit */
+#define CO_OD_2052_05 202u /* Integrity monitor: Back-EMF minimum speed */
+#define CO_OD_2052_06 203u /* Integrity monitor: Current sum limit */
+#define CO_OD_2052_07 204u /* Integrity monitor: Current offset limit */
+#define CO_OD_2052_08 205u /* Integrity monitor: Start speed limit */
+#define CO_OD_2052_09 206u /* Integrity monitor: Back-EMF minimum */
+#define CO_OD_2053_00 207u /* Back-EMF observer: Highest sub-index supported */
+#define CO_OD_2053_01 208u /* Back-EMF observer: Handover up speed */
+#define CO_OD_2053_02 209u /* Back-EMF observer: Handover down speed */
+#define CO_OD_2053_03 210u /* Back-EMF observer: Injection share */
+#define CO_OD_2053_04 211u /* Back-EMF observer: Handover up */
+#define CO_OD_2053_05 212u /* Back-EMF observer: Handover down */
+#define CO_OD_2054_00 213u /* Machine and loop bandwidths: Highest sub-index supported */
+#define CO_OD_2054_01 214u /* Machine and loop bandwidths: Mover mass */
+#define CO_OD_2054_02 215u /* Machine and loop bandwidths: Viscous friction */
+#define CO_OD_2054_03 216u /* Machine and loop bandwidths: Coulomb friction */
+#define CO_OD_2054_04 217u /* Machine and loop bandwidths: Current loop bandwidth */
+#define CO_OD_2054_05 218u /* Machine and loop bandwidths: Speed loop bandwidth */
+#define CO_OD_2054_06 219u /* Machine and loop bandwidths: Gains automatic */
+#define CO_OD_2055_00 220u /* Start-up and estimate supervision: Highest sub-index supported */
+#define CO_OD_2055_01 221u /* Start-up and estimate supervision: Alignment time */
+#define CO_OD_2055_02 222u /* Start-up and estimate supervision: Polarity pulse voltage */
+#define CO_OD_2055_03 223u /* Start-up and estimate supervision: Polarity pulse samples */
+#define CO_OD_2055_04 224u /* Start-up and estimate supervision: Polarity pulse pairs */
+#define CO_OD_2055_05 225u /* Start-up and estimate supervision: Polarity margin */
+#define CO_OD_2055_06 226u /* Start-up and estimate supervision: HF amplitude minimum ratio */
+#define CO_OD_2055_07 227u /* Start-up and estimate supervision: PLL error limit */
+#define CO_OD_2055_08 228u /* Start-up and estimate supervision: PLL error time */
+#define CO_OD_2056_00 229u /* Board sensing: Highest sub-index supported */
+#define CO_OD_2056_01 230u /* Board sensing: Current per count */
+#define CO_OD_2056_02 231u /* Board sensing: Current zero */
+#define CO_OD_2056_03 232u /* Board sensing: DC link volts per count */
+#define CO_OD_2056_04 233u /* Board sensing: Full-scale count */
+#define CO_OD_2060_00 234u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 235u /* Telemetry: Decimation */
+#define CO_OD_2060_02 236u /* Telemetry: Signal count */
+#define CO_OD_2060_03 237u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 238u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 239u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 240u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 241u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 242u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 243u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 244u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 245u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 246u /* Trace: Command */
+#define CO_OD_2070_02 247u /* Trace: State */
+#define CO_OD_2070_03 248u /* Trace: Trigger signal */
+#define CO_OD_2070_04 249u /* Trace: Trigger level */
+#define CO_OD_2070_05 250u /* Trace: Trigger edge */
+#define CO_OD_2070_06 251u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 252u /* Trace: Signal count */
+#define CO_OD_2070_08 253u /* Trace: Signal 1 */
+#define CO_OD_2070_09 254u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 255u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 256u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 257u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 258u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 259u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 260u /* Trace: Signal 8 */
+#define CO_OD_2080_00 261u /* Identification: Highest sub-index supported */
+#define CO_OD_2080_01 262u /* Identification: d-axis current reference */
+#define CO_OD_2080_02 263u /* Identification: Measured smaller inductance */
+#define CO_OD_2080_03 264u /* Identification: Measured larger inductance */
+#define CO_OD_603F_00 265u /* Error code: Error code */
+#define CO_OD_6040_00 266u /* Controlword: Controlword */
+#define CO_OD_6041_00 267u /* Statusword: Statusword */
+#define CO_OD_605A_00 268u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 269u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 270u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 271u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 272u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 273u /* Following error window: Following error window */
+#define CO_OD_6066_00 274u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 275u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 276u /* Target torque: Target torque */
+#define CO_OD_6077_00 277u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 278u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 279u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 280u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 281u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 282u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 283u /* Supported drive modes: Supported drive modes */
 
 /** Where each entry's value lives in the OD RAM (compile-time handles for the
  *  application's per-period access, co_node.h CO_NODE_PUT/CO_NODE_GET):
@@ -691,179 +692,181 @@
 #define CO_OD_LEN_2051_09 4u
 #define CO_OD_OFF_2051_0A 705u
 #define CO_OD_LEN_2051_0A 4u
-#define CO_OD_OFF_2052_00 709u
+#define CO_OD_OFF_2051_0B 709u
+#define CO_OD_LEN_2051_0B 4u
+#define CO_OD_OFF_2052_00 713u
 #define CO_OD_LEN_2052_00 1u
-#define CO_OD_OFF_2052_01 710u
+#define CO_OD_OFF_2052_01 714u
 #define CO_OD_LEN_2052_01 4u
-#define CO_OD_OFF_2052_02 714u
+#define CO_OD_OFF_2052_02 718u
 #define CO_OD_LEN_2052_02 4u
-#define CO_OD_OFF_2052_03 718u
+#define CO_OD_OFF_2052_03 722u
 #define CO_OD_LEN_2052_03 4u
-#define CO_OD_OFF_2052_04 722u
+#define CO_OD_OFF_2052_04 726u
 #define CO_OD_LEN_2052_04 4u
-#define CO_OD_OFF_2052_05 726u
+#define CO_OD_OFF_2052_05 730u
 #define CO_OD_LEN_2052_05 4u
-#define CO_OD_OFF_2052_06 730u
+#define CO_OD_OFF_2052_06 734u
 #define CO_OD_LEN_2052_06 4u
-#define CO_OD_OFF_2052_07 734u
+#define CO_OD_OFF_2052_07 738u
 #define CO_OD_LEN_2052_07 4u
-#define CO_OD_OFF_2052_08 738u
+#define CO_OD_OFF_2052_08 742u
 #define CO_OD_LEN_2052_08 4u
-#define CO_OD_OFF_2052_09 742u
+#define CO_OD_OFF_2052_09 746u
 #define CO_OD_LEN_2052_09 4u
-#define CO_OD_OFF_2053_00 746u
+#define CO_OD_OFF_2053_00 750u
 #define CO_OD_LEN_2053_00 1u
-#define CO_OD_OFF_2053_01 747u
+#define CO_OD_OFF_2053_01 751u
 #define CO_OD_LEN_2053_01 4u
-#define CO_OD_OFF_2053_02 751u
+#define CO_OD_OFF_2053_02 755u
 #define CO_OD_LEN_2053_02 4u
-#define CO_OD_OFF_2053_03 755u
+#define CO_OD_OFF_2053_03 759u
 #define CO_OD_LEN_2053_03 4u
-#define CO_OD_OFF_2053_04 759u
+#define CO_OD_OFF_2053_04 763u
 #define CO_OD_LEN_2053_04 4u
-#define CO_OD_OFF_2053_05 763u
+#define CO_OD_OFF_2053_05 767u
 #define CO_OD_LEN_2053_05 4u
-#define CO_OD_OFF_2054_00 767u
+#define CO_OD_OFF_2054_00 771u
 #define CO_OD_LEN_2054_00 1u
-#define CO_OD_OFF_2054_01 768u
+#define CO_OD_OFF_2054_01 772u
 #define CO_OD_LEN_2054_01 4u
-#define CO_OD_OFF_2054_02 772u
+#define CO_OD_OFF_2054_02 776u
 #define CO_OD_LEN_2054_02 4u
-#define CO_OD_OFF_2054_03 776u
+#define CO_OD_OFF_2054_03 780u
 #define CO_OD_LEN_2054_03 4u
-#define CO_OD_OFF_2054_04 780u
+#define CO_OD_OFF_2054_04 784u
 #define CO_OD_LEN_2054_04 4u
-#define CO_OD_OFF_2054_05 784u
+#define CO_OD_OFF_2054_05 788u
 #define CO_OD_LEN_2054_05 4u
-#define CO_OD_OFF_2054_06 788u
+#define CO_OD_OFF_2054_06 792u
 #define CO_OD_LEN_2054_06 4u
-#define CO_OD_OFF_2055_00 792u
+#define CO_OD_OFF_2055_00 796u
 #define CO_OD_LEN_2055_00 1u
-#define CO_OD_OFF_2055_01 793u
+#define CO_OD_OFF_2055_01 797u
 #define CO_OD_LEN_2055_01 4u
-#define CO_OD_OFF_2055_02 797u
+#define CO_OD_OFF_2055_02 801u
 #define CO_OD_LEN_2055_02 4u
-#define CO_OD_OFF_2055_03 801u
+#define CO_OD_OFF_2055_03 805u
 #define CO_OD_LEN_2055_03 4u
-#define CO_OD_OFF_2055_04 805u
+#define CO_OD_OFF_2055_04 809u
 #define CO_OD_LEN_2055_04 4u
-#define CO_OD_OFF_2055_05 809u
+#define CO_OD_OFF_2055_05 813u
 #define CO_OD_LEN_2055_05 4u
-#define CO_OD_OFF_2055_06 813u
+#define CO_OD_OFF_2055_06 817u
 #define CO_OD_LEN_2055_06 4u
-#define CO_OD_OFF_2055_07 817u
+#define CO_OD_OFF_2055_07 821u
 #define CO_OD_LEN_2055_07 4u
-#define CO_OD_OFF_2055_08 821u
+#define CO_OD_OFF_2055_08 825u
 #define CO_OD_LEN_2055_08 4u
-#define CO_OD_OFF_2056_00 825u
+#define CO_OD_OFF_2056_00 829u
 #define CO_OD_LEN_2056_00 1u
-#define CO_OD_OFF_2056_01 826u
+#define CO_OD_OFF_2056_01 830u
 #define CO_OD_LEN_2056_01 4u
-#define CO_OD_OFF_2056_02 830u
+#define CO_OD_OFF_2056_02 834u
 #define CO_OD_LEN_2056_02 4u
-#define CO_OD_OFF_2056_03 834u
+#define CO_OD_OFF_2056_03 838u
 #define CO_OD_LEN_2056_03 4u
-#define CO_OD_OFF_2056_04 838u
+#define CO_OD_OFF_2056_04 842u
 #define CO_OD_LEN_2056_04 4u
-#define CO_OD_OFF_2060_00 842u
+#define CO_OD_OFF_2060_00 846u
 #define CO_OD_LEN_2060_00 1u
-#define CO_OD_OFF_2060_01 843u
+#define CO_OD_OFF_2060_01 847u
 #define CO_OD_LEN_2060_01 2u
-#define CO_OD_OFF_2060_02 845u
+#define CO_OD_OFF_2060_02 849u
 #define CO_OD_LEN_2060_02 1u
-#define CO_OD_OFF_2060_03 846u
+#define CO_OD_OFF_2060_03 850u
 #define CO_OD_LEN_2060_03 1u
-#define CO_OD_OFF_2060_04 847u
+#define CO_OD_OFF_2060_04 851u
 #define CO_OD_LEN_2060_04 1u
-#define CO_OD_OFF_2060_05 848u
+#define CO_OD_OFF_2060_05 852u
 #define CO_OD_LEN_2060_05 1u
-#define CO_OD_OFF_2060_06 849u
+#define CO_OD_OFF_2060_06 853u
 #define CO_OD_LEN_2060_06 1u
-#define CO_OD_OFF_2060_07 850u
+#define CO_OD_OFF_2060_07 854u
 #define CO_OD_LEN_2060_07 1u
-#define CO_OD_OFF_2060_08 851u
+#define CO_OD_OFF_2060_08 855u
 #define CO_OD_LEN_2060_08 1u
-#define CO_OD_OFF_2060_09 852u
+#define CO_OD_OFF_2060_09 856u
 #define CO_OD_LEN_2060_09 1u
-#define CO_OD_OFF_2060_0A 853u
+#define CO_OD_OFF_2060_0A 857u
 #define CO_OD_LEN_2060_0A 1u
-#define CO_OD_OFF_2070_00 854u
+#define CO_OD_OFF_2070_00 858u
 #define CO_OD_LEN_2070_00 1u
-#define CO_OD_OFF_2070_01 855u
+#define CO_OD_OFF_2070_01 859u
 #define CO_OD_LEN_2070_01 1u
-#define CO_OD_OFF_2070_02 856u
+#define CO_OD_OFF_2070_02 860u
 #define CO_OD_LEN_2070_02 1u
-#define CO_OD_OFF_2070_03 857u
+#define CO_OD_OFF_2070_03 861u
 #define CO_OD_LEN_2070_03 1u
-#define CO_OD_OFF_2070_04 858u
+#define CO_OD_OFF_2070_04 862u
 #define CO_OD_LEN_2070_04 4u
-#define CO_OD_OFF_2070_05 862u
+#define CO_OD_OFF_2070_05 866u
 #define CO_OD_LEN_2070_05 1u
-#define CO_OD_OFF_2070_06 863u
+#define CO_OD_OFF_2070_06 867u
 #define CO_OD_LEN_2070_06 2u
-#define CO_OD_OFF_2070_07 865u
+#define CO_OD_OFF_2070_07 869u
 #define CO_OD_LEN_2070_07 1u
-#define CO_OD_OFF_2070_08 866u
+#define CO_OD_OFF_2070_08 870u
 #define CO_OD_LEN_2070_08 1u
-#define CO_OD_OFF_2070_09 867u
+#define CO_OD_OFF_2070_09 871u
 #define CO_OD_LEN_2070_09 1u
-#define CO_OD_OFF_2070_0A 868u
+#define CO_OD_OFF_2070_0A 872u
 #define CO_OD_LEN_2070_0A 1u
-#define CO_OD_OFF_2070_0B 869u
+#define CO_OD_OFF_2070_0B 873u
 #define CO_OD_LEN_2070_0B 1u
-#define CO_OD_OFF_2070_0C 870u
+#define CO_OD_OFF_2070_0C 874u
 #define CO_OD_LEN_2070_0C 1u
-#define CO_OD_OFF_2070_0D 871u
+#define CO_OD_OFF_2070_0D 875u
 #define CO_OD_LEN_2070_0D 1u
-#define CO_OD_OFF_2070_0E 872u
+#define CO_OD_OFF_2070_0E 876u
 #define CO_OD_LEN_2070_0E 1u
-#define CO_OD_OFF_2070_0F 873u
+#define CO_OD_OFF_2070_0F 877u
 #define CO_OD_LEN_2070_0F 1u
-#define CO_OD_OFF_2080_00 874u
+#define CO_OD_OFF_2080_00 878u
 #define CO_OD_LEN_2080_00 1u
-#define CO_OD_OFF_2080_01 875u
+#define CO_OD_OFF_2080_01 879u
 #define CO_OD_LEN_2080_01 4u
-#define CO_OD_OFF_2080_02 879u
+#define CO_OD_OFF_2080_02 883u
 #define CO_OD_LEN_2080_02 4u
-#define CO_OD_OFF_2080_03 883u
+#define CO_OD_OFF_2080_03 887u
 #define CO_OD_LEN_2080_03 4u
-#define CO_OD_OFF_603F_00 887u
+#define CO_OD_OFF_603F_00 891u
 #define CO_OD_LEN_603F_00 2u
-#define CO_OD_OFF_6040_00 889u
+#define CO_OD_OFF_6040_00 893u
 #define CO_OD_LEN_6040_00 2u
-#define CO_OD_OFF_6041_00 891u
+#define CO_OD_OFF_6041_00 895u
 #define CO_OD_LEN_6041_00 2u
-#define CO_OD_OFF_605A_00 893u
+#define CO_OD_OFF_605A_00 897u
 #define CO_OD_LEN_605A_00 2u
-#define CO_OD_OFF_605E_00 895u
+#define CO_OD_OFF_605E_00 899u
 #define CO_OD_LEN_605E_00 2u
-#define CO_OD_OFF_6060_00 897u
+#define CO_OD_OFF_6060_00 901u
 #define CO_OD_LEN_6060_00 1u
-#define CO_OD_OFF_6061_00 898u
+#define CO_OD_OFF_6061_00 902u
 #define CO_OD_LEN_6061_00 1u
-#define CO_OD_OFF_6064_00 899u
+#define CO_OD_OFF_6064_00 903u
 #define CO_OD_LEN_6064_00 4u
-#define CO_OD_OFF_6065_00 903u
+#define CO_OD_OFF_6065_00 907u
 #define CO_OD_LEN_6065_00 4u
-#define CO_OD_OFF_6066_00 907u
+#define CO_OD_OFF_6066_00 911u
 #define CO_OD_LEN_6066_00 2u
-#define CO_OD_OFF_606C_00 909u
+#define CO_OD_OFF_606C_00 913u
 #define CO_OD_LEN_606C_00 4u
-#define CO_OD_OFF_6071_00 913u
+#define CO_OD_OFF_6071_00 917u
 #define CO_OD_LEN_6071_00 2u
-#define CO_OD_OFF_6077_00 915u
+#define CO_OD_OFF_6077_00 919u
 #define CO_OD_LEN_6077_00 2u
-#define CO_OD_OFF_607D_00 917u
+#define CO_OD_OFF_607D_00 921u
 #define CO_OD_LEN_607D_00 1u
-#define CO_OD_OFF_607D_01 918u
+#define CO_OD_OFF_607D_01 922u
 #define CO_OD_LEN_607D_01 4u
-#define CO_OD_OFF_607D_02 922u
+#define CO_OD_OFF_607D_02 926u
 #define CO_OD_LEN_607D_02 4u
-#define CO_OD_OFF_6080_00 926u
+#define CO_OD_OFF_6080_00 930u
 #define CO_OD_LEN_6080_00 4u
-#define CO_OD_OFF_60FF_00 930u
+#define CO_OD_OFF_60FF_00 934u
 #define CO_OD_LEN_60FF_00 4u
-#define CO_OD_OFF_6502_00 934u
+#define CO_OD_OFF_6502_00 938u
 #define CO_OD_LEN_6502_00 4u
 
 /** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */
@@ -1064,6 +1067,7 @@
   X(2051_08) \
   X(2051_09) \
   X(2051_0A) \
+  X(2051_0B) \
   X(2052_00) \
   X(2052_01) \
   X(2052_02) \
@@ -1155,7 +1159,7 @@
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 80u
+#define CO_OD_CFG_COUNT 81u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 

@@ -10,7 +10,7 @@
  *   - sensing (fw_cfg_sensing_t, 5 fields): sampling rate and ADC scaling (fw_step_adc)
  *   - loops (fw_cfg_loops_t, 10 fields): current and speed loops: limits, PI gains, bandwidths for the derived gains
  *   - estimator (fw_cfg_estimator_t, 22 fields): injection, HF extraction, PLL observer, start-up (align, polarity), back-EMF observer and handover
- *   - protection (fw_cfg_protection_t, 27 fields): trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h)
+ *   - protection (fw_cfg_protection_t, 28 fields): trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h)
  *
  * Field names are unique across the parts: the object dictionary, the field
  * table and the Python side use the flat name ("R_ohm"), C code the path
@@ -96,7 +96,8 @@ typedef struct {
   float pll_err_max_rad;          /**< |filtered PLL error| limit [rad] */
   float pll_err_time_s;           /**< ... for longer than this -> fault [s] */
   float quick_stop_time_s;        /**< max time in QUICK STOP ACTIVE before PWM off [s] */
-  float v_max_mps;                /**< |estimated speed| above -> FW_FAULT_OVERSPEED [m/s] */
+  float v_max_mps;                /**< limit of the speed target (CiA 402 0x6080); OVERSPEED trips at v_max_mps x overspeed_margin [m/s] */
+  float overspeed_margin;         /**< FW_FAULT_OVERSPEED when |estimated speed| > v_max_mps x this: room for the speed loop's overshoot and the estimate's ripple at a target on the limit (1.0: trip at the limit itself) */
   float pos_limit_min_m;          /**< software limit on the estimated position (min >= max: off) [m] */
   float pos_limit_max_m;          /**< upper software limit [m] */
   float follow_err_mps;           /**< speed following-error window [m/s] */
@@ -176,6 +177,7 @@ typedef struct {
   F32(sensing, adc_V_per_count, "V", 1.0e-06f, 100.0f, 0.12207031f) \
   U32(sensing, adc_max_count, "", 255.0f, 65535.0f, 4095u) \
   F32(protection, v_max_mps, "m/s", 0.001f, 100.0f, 3.0f) \
+  F32(protection, overspeed_margin, "", 1.0f, 4.0f, 1.2f) \
   F32(protection, pos_limit_min_m, "m", -10000.0f, 10000.0f, 0.0f) \
   F32(protection, pos_limit_max_m, "m", -10000.0f, 10000.0f, 0.0f) \
   F32(protection, follow_err_mps, "m/s", 0.001f, 100.0f, 0.5f) \
@@ -207,6 +209,6 @@ typedef struct {
   F32(protection, mon_bemf_min_V, "V", 0.0f, 1000000000.0f, 5.022228f)
 /* clang-format on */
 
-#define FW_CONFIG_FIELD_COUNT 73u
+#define FW_CONFIG_FIELD_COUNT 74u
 
 #endif /* PMLSM_FW_CONFIG_FIELDS_H */

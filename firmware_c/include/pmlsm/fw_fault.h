@@ -98,7 +98,7 @@ static inline fw_fault_t fw_fault_check_inputs(const fw_cfg_protection_t *prot,
 typedef struct {
   float i2t_A2s;         /**< integral of i^2 above i_rated_A^2 */
   float follow_time_s;   /**< time outside the following-error window */
-  float w_vmax_radps;    /**< v_max_mps in electrical rad/s */
+  float w_trip_radps;    /**< OVERSPEED above: v_max_mps x overspeed_margin, electrical rad/s */
   float w_follow_radps;  /**< follow_err_mps in electrical rad/s */
   float dt_s;
   float ir2_A2;          /**< i_rated_A^2 */

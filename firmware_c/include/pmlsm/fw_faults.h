@@ -19,7 +19,7 @@ typedef enum {
   FW_FAULT_CONFIG_INVALID = 0x6320, /**< enable requested with a configuration the core refused */
   FW_FAULT_HEARTBEAT_LOST = 0x8130, /**< supervisor heartbeat (0x1016) not heard within its consumer time */
   FW_FAULT_RPDO_TIMEOUT = 0x8250, /**< RPDO data not applied within its event timer (0x1400+n:5) while enabled (raised by fw_app) */
-  FW_FAULT_OVERSPEED = 0x8400, /**< |velocity estimate| above v_max_mps (0x6080) */
+  FW_FAULT_OVERSPEED = 0x8400, /**< |velocity estimate| above v_max_mps (0x6080) x overspeed_margin (0x2051:11) */
   FW_FAULT_FOLLOWING_ERROR = 0x8611, /**< |speed reference - estimate| outside 0x6065 for longer than 0x6066 */
   FW_FAULT_POSITION_LIMIT = 0x8612, /**< estimated position outside the software limits (0x607D) */
   FW_FAULT_EST_HF_LOW = 0xFF01, /**< HF response too small: loss of lock */
