@@ -275,6 +275,9 @@ CASES: list[FaultCase] = [
               motor="iron_core_linear", speed=[(0.0, 0.2), (0.2, 1.0)],
               load_N=[(0.0, 0.0), (0.6, -1500.0)], fw={"v_max_mps": 1.2},
               expect="fault", fault=0x8400),
+    FaultCase("mover_blocked", "the mover hits a hard stop at 0.5 s while running at "
+              "0.3 m/s (held there): the estimate cannot follow the sudden stop",
+              events=[(0.5, {"locked": 1})], t_end=1.5, expect="fault"),
     FaultCase("position_limit", "software limits +-0.2 m, 0.5 m/s towards +",
               speed=0.5, fw={"pos_limit_min_m": -0.2, "pos_limit_max_m": 0.2},
               expect="fault", fault=0x8612),
