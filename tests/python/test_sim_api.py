@@ -201,3 +201,22 @@ def test_python_units_are_the_firmwares(motor):
     assert mu.speed_to_mps(100.0, "r/min") == U.rpm_to_mps(100.0, p, tau)
     assert mu.force_to_N(2.0, "N*m") == 2.0 / U.radius_m(p, tau)
     assert mu.theta_e_rad(tau) == pytest.approx(math.pi, rel=1e-15)
+
+
+def test_target_beyond_v_max_runs_at_v_max_without_a_trip():
+    """0x6080 (v_max_mps) limits the speed target: a 2.5 m/s target with v_max 2.0
+    m/s runs the simulated mover at 2.0 m/s (truth), with statusword bit 11 and no
+    fault; the speed loop's overshoot stays inside the trip's margin (x 1.2)."""
+    mot = sf.load_motor("iron_core_linear")
+    k = math.pi / mot.tau_m  # m/s -> el. rad/s
+    with sf.Sim(mot, "sogi_adaptive", seed=0, fw={"v_max_mps": 2.0}) as s:
+        s.set_schedule(sf.SIM_REF_SPEED, [(0.0, 0.2 * k), (0.3, 2.5 * k)])
+        s.enable()
+        d = s.advance(int(round(1.0 / s.dt_s)), 24, ["v_mps", "fault_code", "t_s"])
+        sw = int(s.snapshot()["statusword"])
+        margin = float(s.cfg.overspeed_margin)
+    assert int(d["fault_code"].max()) == 0
+    late = d["v_mps"][d["t_s"] > 0.6]
+    assert late == pytest.approx(2.0, rel=0.01), (late.min(), late.max())
+    assert d["v_mps"].max() < 2.0 * margin
+    assert sw & 0x0800, hex(sw)
