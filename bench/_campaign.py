@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import jsonschema
 import numpy as np
 import yaml
 
@@ -90,6 +91,12 @@ class Axis:
         if self.cases is not None:
             return list(dict.fromkeys(t for c in self.cases.values() for t in c))
         return [self.target]
+
+    def grid_size(self) -> int:
+        """len(self.grid()), without building it (a seed range may be huge)."""
+        if self.kind in ("values", "cases"):
+            return len(self.spec)
+        return max(0, int(self.spec[1]) - int(self.spec[0])) if self.target == "seed" else 5
 
     def grid(self) -> list[Any]:
         if self.kind in ("values", "cases"):
@@ -219,6 +226,38 @@ def _field_error(t: str, plant: dict[str, Any] | None) -> str | None:
         from sim_fallback import FwConfig
         if f not in FwConfig.field_names():
             return f"no drive configuration field {f!r} (fw_config_t; docs/firmware.md)"
+    return None
+
+
+def _value_error(t: str, kind: str, vals: list[float], motor: Any, extractor: Any
+                 ) -> str | None:
+    """Why an axis's values leave what its target accepts (None: they do not): noise
+    is a scale >= 0, fw.<field> the firmware's own range (fw_config_field(); a scale
+    times the motor's nominal configuration)."""
+    lo_hi = [min(vals), max(vals)]
+    if t == "noise" and lo_hi[0] < 0:
+        return f"{lo_hi[0]:g}: noise scales the sensor noise; allowed >= 0"
+    if not t.startswith("fw."):
+        return None
+    from sim_fallback import firmware_field_ranges
+    f = t[3:]
+    rng = firmware_field_ranges().get(f)
+    if rng is None:
+        return None
+    lo, hi, unit = rng
+    if kind == "scale":
+        if _motor_plant(motor) is None or not _valid_extractor(extractor):
+            return None  # reported on base
+        nominal = float(getattr(_motor_and_config(motor, extractor)[1], f))
+        if nominal == 0:
+            return None
+        lo_hi = sorted(x * nominal for x in lo_hi)
+        what = f"x {nominal:g} (nominal) gives [{lo_hi[0]:g}, {lo_hi[1]:g}]"
+    else:
+        what = f"[{lo_hi[0]:g}, {lo_hi[1]:g}]"
+    # the firmware's limits are float32: a bound written as such passes
+    if lo_hi[0] < lo * (1 - 1e-6) or lo_hi[1] > hi * (1 + 1e-6):
+        return f"{what}; the firmware allows [{lo:g}, {hi:g}]" + (f" {unit}" if unit else "")
     return None
 
 
@@ -399,18 +438,83 @@ def _check_base(base: dict[str, Any], bnode: yaml.Node | None, sc: str,
 
 
 def load_campaign(path: str | Path, metric_names: Iterable[str] | None = None) -> Campaign:
-    """Read and validate a campaign file. Raises CampaignError naming file:line: field."""
+    """Read and validate a campaign file. Raises CampaignError naming file:line: field.
+    Read as sequence files are (bench._sequence: YAML errors and duplicate keys with
+    their line, no aliases, YAML 1.2 numbers such as 1e-3)."""
+    from bench._sequence import SequenceError, SequenceLoader, _compose
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
         raise CampaignError(f"{p}: cannot read campaign file: {e}") from None
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        raise CampaignError(f"{p}: not valid YAML: {str(e).splitlines()[0]}") from None
+        data, _ = _compose(text, str(p))
+        root = yaml.compose(text, Loader=SequenceLoader)
+    except SequenceError as e:
+        raise CampaignError("\n".join(str(i) for i in e.issues)) from None
     return parse_campaign(data, root, p, metric_names)
+
+
+#: At most this many runs in a campaign (a grid's product or sampling.n): the run list
+#: is built in memory (~0.5 kB a run) before anything starts.
+MAX_RUNS = 1_000_000
+_NUMBER = {"type": "number"}
+#: The campaign file's shape (jsonschema); the values are checked in parse_campaign.
+SHAPE_SCHEMA: dict[str, Any] = {
+    "type": "object", "additionalProperties": False,
+    "required": ["name", "base", "axes", "metrics"],
+    "properties": {
+        "name": {"type": "string", "pattern": r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,99}$"},
+        "title": {"type": "string"},
+        "base": {"type": "object"},
+        "sampling": {"type": "object", "additionalProperties": False, "properties": {
+            "method": {"enum": list(METHODS)},
+            "n": {"type": "integer", "minimum": 1, "maximum": MAX_RUNS},
+            "seed": {"type": "integer", "minimum": 0, "maximum": 2**63 - 1}}},
+        "axes": {"type": "object", "minProperties": 1,
+                 "additionalProperties": {"type": "object", "minProperties": 1}},
+        "metrics": {"type": "array", "minItems": 1, "uniqueItems": True,
+                    "items": {"type": "string"}},
+        "limits": {"type": "array", "items": {
+            "type": "object", "additionalProperties": False, "required": ["metric", "stat"],
+            "properties": {"metric": {"type": "string"}, "stat": {"enum": list(STATS)},
+                           "min": _NUMBER, "max": _NUMBER}}},
+    }}
+_SHAPE = jsonschema.Draft202012Validator(SHAPE_SCHEMA)
+#: Clearer words than jsonschema's for a wrong field (by its path).
+_SHAPE_HINTS = {
+    ("name",): "need a name of letters, digits, '_', '.' and '-' (the results folder "
+               "runs/campaigns/<name>/), not starting with '.' or '-', at most 100 characters",
+    ("sampling", "n"): f"need an integer in [1, {MAX_RUNS}]",
+    ("sampling", "seed"): "need an integer >= 0",
+    ("axes",): "need a non-empty mapping of parameter: {values|range|scale}",
+    ("metrics",): "need a non-empty list of distinct metric names",
+    ("limits",): "need a list of {metric, stat, min and/or max}",
+}
+
+
+def _node_path(root: yaml.Node | None, path: list[Any]) -> yaml.Node | None:
+    """The YAML node at a path of mapping keys and list indexes (the deepest found)."""
+    node = root
+    for key in path:
+        if isinstance(node, yaml.MappingNode):
+            nxt = _find(node, str(key))
+        elif isinstance(node, yaml.SequenceNode) and isinstance(key, int) \
+                and key < len(node.value):
+            nxt = node.value[key]
+        else:
+            nxt = None
+        if nxt is None:
+            break
+        node = nxt
+    return node
+
+
+def _dotted(path: list[Any]) -> str:
+    out = ""
+    for k in path:
+        out += f"[{k}]" if isinstance(k, int) else (f".{k}" if out else str(k))
+    return out
 
 
 def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
@@ -423,9 +527,19 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
 
     if not isinstance(data, dict) or not isinstance(root, yaml.MappingNode):
         raise CampaignError(f"{where}:1: (top level): must be a mapping with name, base, axes")
-    for key in ("name", "base", "axes", "metrics"):
-        if key not in data:
-            err(root, key, "missing")
+    # the file's shape first (keys, types, counts): the checks below assume it
+    for e in sorted(_SHAPE.iter_errors(data), key=lambda e: [str(x) for x in e.path]):
+        path = list(e.absolute_path)
+        if e.validator == "additionalProperties":
+            extra = sorted(set(e.instance) - set(e.schema.get("properties", {})))
+            for k in extra:
+                err(_node_path(root, path + [k]), _dotted(path + [k]),
+                    f"unknown key; known: {', '.join(e.schema['properties'])}")
+            continue
+        err(_node_path(root, path), _dotted(path) or "(top level)",
+            _SHAPE_HINTS.get(tuple(path), e.message))
+    if errs:
+        raise CampaignError("\n".join(errs))
     base = data.get("base", {})
     bnode = _find(root, "base")
     if not isinstance(base, dict):
@@ -448,11 +562,10 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
     if method not in METHODS:
         err(snode, "sampling.method", f"{method!r} not one of {', '.join(METHODS)}")
     n = samp.get("n", 0) if isinstance(samp, dict) else 0
-    if method in ("random", "lhs") and not (isinstance(n, int) and 1 <= n <= 10_000_000):
-        err(snode, "sampling.n", f"{n!r}: need an integer in [1, 10000000]")
+    if method in ("random", "lhs") and "n" not in samp:
+        err(snode, "sampling.n", f"missing: {method} sampling needs n, an integer in "
+            f"[1, {MAX_RUNS}]")
     sseed = samp.get("seed", 0) if isinstance(samp, dict) else 0
-    if not isinstance(sseed, int) or sseed < 0:
-        err(snode, "sampling.seed", f"{sseed!r}: need an integer >= 0")
     axes: list[Axis] = []
     anode = _find(root, "axes")
     raw_axes = data.get("axes", {})
@@ -518,7 +631,9 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
         if kind == "scale" and vals[0] <= 0:
             err(node, fld, "scale factors must be > 0")
             continue
-        why = _field_error(str(tgt), motor_plant)
+        why = _field_error(str(tgt), motor_plant) or _value_error(
+            str(tgt), kind, vals, base.get("motor", "paper_salient"),
+            base.get("extractor", "sogi_adaptive"))
         if why:
             err(node, fld, why)
             continue
@@ -551,11 +666,13 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
         err(mnode, "metrics", f"unknown metric {m!r}; known: {', '.join(sorted(known))}"
             + hint)
     limits: list[Limit] = []
-    lnode = _find(root, "limits")
     for i, lim in enumerate(data.get("limits", []) or []):
         fld = f"limits[{i}]"
-        if not isinstance(lim, dict) or lim.get("metric") not in metrics:
-            err(lnode, fld, "metric must be one of the campaign's metrics")
+        lnode = _node_path(root, ["limits", i])
+        if lim["metric"] not in metrics:
+            err(_node_path(root, ["limits", i, "metric"]), f"{fld}.metric",
+                f"{lim['metric']!r} is not one of the campaign's metrics "
+                f"({', '.join(map(str, metrics))})")
             continue
         if lim.get("stat") not in STATS:
             err(lnode, fld, f"stat {lim.get('stat')!r} not one of {', '.join(STATS)}")
@@ -567,9 +684,10 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             continue
         limits.append(Limit(lim["metric"], lim["stat"], hi, lo))
     if method == "grid" and axes:
-        total = int(np.prod([len(a.grid()) for a in axes]))
-        if total > 10_000_000:
-            err(anode, "axes", f"grid of {total} runs; use sampling random or lhs")
+        total = math.prod(a.grid_size() for a in axes)
+        if not 1 <= total <= MAX_RUNS:
+            err(anode, "axes", f"a grid of {total} runs; allowed 1..{MAX_RUNS} (fewer values, "
+                "a shorter seed range, or sampling random or lhs)")
     title = data.get("title", "")
     if not isinstance(title, str):
         err(_find(root, "title"), "title", "must be text")
