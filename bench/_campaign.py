@@ -61,6 +61,15 @@ class CampaignError(ValueError):
     """A campaign file is wrong; ``str()`` is one line per problem, file:line: field: what."""
 
 
+class ResultsError(OSError):
+    """A results folder cannot be used (another campaign's results, an unreadable part);
+    ``str()`` is one line naming the folder or file."""
+
+
+class SchedulerError(ValueError):
+    """The Dask scheduler given cannot be reached; ``str()`` is one line."""
+
+
 @dataclass
 class Axis:
     """One varied parameter: ``target`` is 'seed', 'noise', 'x0_m', 'plant.<field>' or
@@ -710,11 +719,21 @@ def run_one(base: dict[str, Any], params: dict[str, Any],
     try:
         row.update(_simulate(base, params, metrics))
     except Exception as e:  # noqa: BLE001 - recorded, never dropped
-        row["error"] = f"{type(e).__name__}: {e}"
-        row["traceback"] = traceback.format_exc(limit=5)
-        for m in metrics:
-            row[m] = float("nan")
+        row = failed_row(params, metrics, f"{type(e).__name__}: {e}",
+                         traceback.format_exc(limit=5))
     row["wall_s"] = time.perf_counter() - t0
+    return row
+
+
+def failed_row(params: dict[str, Any], metrics: list[str], error: str,
+               tb: str | None = None) -> dict[str, Any]:
+    """The row of a run that did not finish: its error, every metric NaN."""
+    row: dict[str, Any] = {"run": int(params["run"]), "params": json.dumps(params),
+                           "error": error, "fault": 0}
+    if tb is not None:
+        row["traceback"] = tb
+    row.update({m: float("nan") for m in metrics})
+    row["wall_s"] = float("nan")
     return row
 
 
@@ -932,17 +951,70 @@ def results_dir(c: Campaign, out: Path) -> Path:
     return out / c.name
 
 
-def done_runs(rdir: Path) -> set[int]:
-    """Run numbers already in the Parquet dataset (resume)."""
+def _definition(c: Campaign) -> dict[str, Any]:
+    """What decides a campaign's runs and columns (campaign.json beside its results)."""
+    return json.loads(json.dumps(
+        {"name": c.name, "title": c.title, "file": str(c.path), "base": c.base,
+         "method": c.method, "n": c.n, "sampling_seed": c.sampling_seed,
+         "metrics": c.metrics, "axes": [[a.target, a.kind, a.spec] for a in c.axes]}))
+
+
+def check_results_dir(c: Campaign, rdir: Path) -> None:
+    """Refuse to resume into a folder that holds another campaign's runs (the file was
+    changed, or another file has the same name): its run k is not this campaign's run k.
+    The source file's path and the title may differ."""
+    parts = any(rdir.glob("part-*.parquet"))
+    meta = rdir / "campaign.json"
+    if not meta.exists():
+        if parts:
+            raise ResultsError(f"{rdir}: holds results without campaign.json; not resuming "
+                               "into it (choose another --out or remove the folder)")
+        return
+    try:
+        old = json.loads(meta.read_text(encoding="utf-8"))
+        if not isinstance(old, dict):
+            raise ValueError("not a JSON object")
+    except (OSError, ValueError) as e:
+        raise ResultsError(f"{meta}: unreadable ({e}); not resuming into {rdir} (choose "
+                           "another --out or remove the folder)") from None
+    new = _definition(c)
+    diff = [k for k in new if k not in ("file", "title") and old.get(k) != new[k]]
+    if diff and parts:
+        raise ResultsError(
+            f"{rdir}: holds results of a different campaign ({', '.join(diff)} differ from "
+            f"{c.path or 'this campaign'}); not mixing them: choose another --out or name, "
+            "or remove the folder")
+
+
+def _runs_in(rdir: Path) -> dict[Path, list[int] | Exception]:
+    """Each part's run numbers, or why it cannot be read; reads only."""
     import pyarrow.parquet as pq
+    out: dict[Path, list[int] | Exception] = {}
+    for f in sorted(rdir.glob("part-*.parquet")):
+        try:
+            out[f] = [int(x) for x in pq.read_table(f, columns=["run"]).column(0).to_pylist()]
+        except Exception as e:  # noqa: BLE001 - any unreadable file (pyarrow's many errors)
+            out[f] = e
+    return out
+
+
+def done_runs(rdir: Path) -> set[int]:
+    """Run numbers already in the Parquet dataset (resume). A part that cannot be read
+    (damaged after it was written: parts are renamed into place whole) is moved aside
+    to ``<part>.corrupt``, said in one line, and its runs are run again."""
+    import logging
     for f in rdir.glob(".part-*.tmp"):  # a writer killed before its rename
         f.unlink(missing_ok=True)
     done: set[int] = set()
-    for f in sorted(rdir.glob("part-*.parquet")):
-        try:
-            done.update(int(x) for x in pq.read_table(f, columns=["run"]).column(0).to_pylist())
-        except Exception:  # noqa: BLE001 - a torn last file (killed mid-write) is redone
-            f.unlink()
+    for f, runs in _runs_in(rdir).items():
+        if isinstance(runs, Exception):
+            bad = f.with_name(f.name + ".corrupt")
+            f.replace(bad)
+            logging.getLogger("bench.campaign").warning(
+                "%s: unreadable Parquet (%s); moved to %s, its runs are run again",
+                f, str(runs).splitlines()[0] if str(runs) else type(runs).__name__, bad.name)
+        else:
+            done.update(runs)
     return done
 
 
@@ -960,6 +1032,22 @@ def _write_part(rdir: Path, rows: list[dict[str, Any]]) -> None:
     pq.write_table(pa.Table.from_pylist([{key: r.get(key) for key in keys} for r in rows]),
                    tmp)
     tmp.replace(rdir / f"{name}.parquet")  # atomic: a kill leaves no torn file
+
+
+def _dead_worker(fut: Any, chunk: list[dict[str, Any]], rdir: Path | None
+                 ) -> list[dict[str, Any]] | None:
+    """For a task whose workers died (dask gave up on it: KilledWorker), the runs of its
+    chunk not yet written (``rdir``: the folder its workers write; None: nothing was);
+    None for any other error."""
+    from distributed import KilledWorker
+    if not isinstance(fut.exception(), KilledWorker):
+        return None
+    written: set[int] = set()
+    if rdir is not None:
+        for runs in _runs_in(rdir).values():
+            if not isinstance(runs, Exception):
+                written.update(runs)
+    return [p for p in chunk if int(p["run"]) not in written]
 
 
 def _shares_our_files(client: Any) -> bool:
@@ -984,14 +1072,13 @@ def run_campaigns(cs: list[Campaign], out: Path, scheduler: Any = None,
     """Several campaigns through one cluster at once (their chunks share the workers, so
     short campaigns do not each pay a start and a tail); results as for run_campaign."""
     rdirs, bases, todos = [], [], []
+    for c in cs:  # every folder checked before any is written
+        check_results_dir(c, results_dir(c, out))
     for c in cs:
         rdir = results_dir(c, out)
         rdir.mkdir(parents=True, exist_ok=True)
-        (rdir / "campaign.json").write_text(json.dumps(
-            {"name": c.name, "title": c.title, "file": str(c.path), "base": c.base,
-             "method": c.method, "n": c.n, "sampling_seed": c.sampling_seed,
-             "metrics": c.metrics, "axes": [[a.target, a.kind, a.spec] for a in c.axes]},
-            indent=1, ensure_ascii=False), encoding="utf-8")
+        (rdir / "campaign.json").write_text(json.dumps(_definition(c), indent=1,
+                                                       ensure_ascii=False), encoding="utf-8")
         rdirs.append(rdir)
         bases.append(c.run_base())
         done = done_runs(rdir)
@@ -1020,7 +1107,12 @@ def run_campaigns(cs: list[Campaign], out: Path, scheduler: Any = None,
             if not own:
                 client = scheduler
             elif scheduler:
-                client = Client(scheduler)
+                try:
+                    client = Client(scheduler)
+                except (OSError, ValueError, TypeError) as e:
+                    raise SchedulerError(f"--scheduler {scheduler}: cannot connect: "
+                                         f"{str(e).splitlines()[0] if str(e) else e!r}"
+                                         ) from None
             else:
                 cluster, client = start_local_cluster(workers)
             try:
@@ -1028,26 +1120,52 @@ def run_campaigns(cs: list[Campaign], out: Path, scheduler: Any = None,
                 local = _shares_our_files(client)
                 owner, chunks = zip(*_chunks(todos, n_workers, 1024 if local else 128),
                                     strict=True)
-                outs = [str(rdirs[i]) if local else None for i in owner]
-                futs = client.map(run_chunk, [bases[i] for i in owner], chunks,
-                                  [cs[i].metrics for i in owner], outs,
-                                  [batch] * len(owner), pure=False)
-                index = {f.key: (i, len(ch)) for f, i, ch in zip(futs, owner, chunks,
-                                                                 strict=True)}
+                futs: list[Any] = []
+                index: dict[str, tuple[int, list[dict[str, Any]]]] = {}
+
+                def submit(owner: Iterable[int], chunks: Iterable[list[dict[str, Any]]]
+                           ) -> list[Any]:
+                    owner, chunks = list(owner), list(chunks)
+                    new = client.map(run_chunk, [bases[i] for i in owner], chunks,
+                                     [cs[i].metrics for i in owner],
+                                     [str(rdirs[i]) if local else None for i in owner],
+                                     [batch] * len(owner), pure=False)
+                    index.update({f.key: (i, ch) for f, i, ch in zip(new, owner, chunks,
+                                                                     strict=True)})
+                    futs.extend(new)
+                    return new
+
+                ac = as_completed(submit(owner, chunks))
                 try:
-                    if local:  # the workers write the parts; a task's result is a count
-                        for fut in as_completed(futs):
-                            if fut.status == "error":
-                                fut.result()  # raises the task's exception
-                            finished += index[fut.key][1]
-                            fut.release()
+                    for fut in ac:
+                        i, chunk = index.pop(fut.key)
+                        if fut.status == "error":
+                            # a run that kills its worker (a crash in the simulator) is
+                            # isolated by halving its chunk and recorded with its error
+                            isolated = _dead_worker(fut, chunk, rdirs[i] if local else None)
+                            if isolated is None:
+                                fut.result()  # another error: raises it
+                            elif len(isolated) == 1:
+                                emit(i, failed_row(isolated[0], cs[i].metrics,
+                                                   f"the worker died running this run "
+                                                   f"({type(fut.exception()).__name__}: "
+                                                   f"{fut.exception()})"))
+                            else:
+                                finished += len(chunk) - len(isolated)
+                                half = (len(isolated) + 1) // 2
+                                for f in (submit([i, i], [isolated[:half], isolated[half:]])
+                                          if isolated else []):
+                                    ac.add(f)
+                                if progress:
+                                    progress(finished, total, time.perf_counter() - t0)
+                        elif local:  # the workers write the parts; a result is a count
+                            finished += len(chunk)
                             if progress:
                                 progress(finished, total, time.perf_counter() - t0)
-                    else:  # the rows come back here
-                        for fut, rows in as_completed(futs, with_results=True):
-                            for row in rows:
-                                emit(index[fut.key][0], row)
-                            fut.release()
+                        else:  # the rows come back here
+                            for row in fut.result():
+                                emit(i, row)
+                        fut.release()
                 except BaseException:
                     # interrupted or failed: tasks not yet started do not start (a
                     # cluster kept open would go on writing the results folder)
@@ -1070,10 +1188,23 @@ def load_results(rdir: Path) -> Any:
     """All runs of a campaign as a pandas-free dict of numpy columns."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-    parts = [pq.read_table(f) for f in sorted(rdir.glob("part-*.parquet"))]
+    parts = []
+    for f in sorted(rdir.glob("part-*.parquet")):
+        try:
+            parts.append(pq.read_table(f))
+        except Exception as e:  # noqa: BLE001 - pyarrow's many errors: one line
+            raise ResultsError(f"{f}: unreadable Parquet ({str(e).splitlines()[0]}); "
+                               "`bench campaign` on its file moves it aside and runs its "
+                               "runs again") from None
     if not parts:
         return {}
-    t = pa.concat_tables(parts, promote_options="default")
+    try:
+        t = pa.concat_tables(parts, promote_options="default")
+    except (pa.ArrowInvalid, pa.ArrowTypeError) as e:
+        raise ResultsError(f"{rdir}: parts that do not fit together ({e}); results of "
+                           "different campaigns?") from None
+    if "run" not in t.column_names:
+        raise ResultsError(f"{rdir}: parts without a 'run' column: not campaign results")
     # in run order, whatever order the parts were written in; a run written twice (a
     # chunk run again after its worker died) counts once
     _, first = np.unique(np.asarray(t.column("run").to_numpy(), dtype=np.int64),
@@ -1133,7 +1264,8 @@ def add_parser(sub: Any) -> None:
                     "on a local Dask cluster of all cores, an existing scheduler "
                     "(--scheduler) or serially; then write report.html beside the Parquet "
                     "results. Exit 0 when every limit holds, 1 when one fails, 2 for a bad "
-                    "file or argument, 130 when interrupted (finished runs are kept).")
+                    "file or argument, 3 when the results folder cannot be used, 130 when "
+                    "interrupted (finished runs are kept).")
     p.add_argument("file", help="campaign YAML (see campaigns/)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler, e.g. tcp://host:8786")
     p.add_argument("--workers", type=int, metavar="N", help="local cluster size (default: cores)")
@@ -1167,18 +1299,31 @@ def cmd(args: Any) -> int:
         print(json.dumps({k: v for k, v in row.items() if k != "traceback"}, indent=1))
         return 0 if row["error"] is None else 1
     other = Path(args.compare) if args.compare else None
-    if other is not None and not any(other.glob("part-*.parquet")):
-        print(f"bench: --compare {other}: no campaign results (part-*.parquet) there",
-              file=sys.stderr)
-        return 2
+    if other is not None:
+        try:
+            found = bool(load_results(other)) if other.is_dir() else False
+        except ResultsError as e:
+            print(f"bench: --compare {other}: {e}", file=sys.stderr)
+            return 2
+        if not found:
+            print(f"bench: --compare {other}: no campaign results (part-*.parquet) there",
+                  file=sys.stderr)
+            return 2
     from tqdm import tqdm
-    bar = tqdm(total=len(runs), unit="run", desc=c.name, file=sys.stderr)
-    last = [0]
+
+    class _Bar:  # shown from the first finished run: the folder's checks print first
+        bar: Any = None
+
+        def close(self) -> None:
+            if self.bar is not None:
+                self.bar.close()
+
+    bar, last = _Bar(), [0]
 
     def progress(done: int, total: int, elapsed: float) -> None:
-        if bar.total != total:
-            bar.reset(total=total)
-        bar.update(done - last[0])
+        if bar.bar is None:
+            bar.bar = tqdm(total=total, unit="run", desc=c.name, file=sys.stderr)
+        bar.bar.update(done - last[0])
         last[0] = done
 
     interrupted = False
@@ -1188,14 +1333,28 @@ def cmd(args: Any) -> int:
     except KeyboardInterrupt:
         interrupted = True
         rdir = results_dir(c, Path(args.out))
+    except SchedulerError as e:
+        bar.close()  # its line ends before the message
+        print(f"bench: {e}", file=sys.stderr)
+        return 2
+    except ResultsError as e:
+        bar.close()
+        print(f"bench: {e}", file=sys.stderr)
+        return 3
     except OSError as e:
-        print(f"bench: campaign {c.name}: {e}", file=sys.stderr)
+        bar.close()
+        print(f"bench: campaign {c.name}: results folder {results_dir(c, Path(args.out))}: "
+              f"{e}", file=sys.stderr)
         return 3
     finally:
         bar.close()
     from bench._campaign_report import write_report
-    res = load_results(rdir)
-    report = write_report(c, rdir, other)
+    try:
+        res = load_results(rdir)
+        report = write_report(c, rdir, other)
+    except OSError as e:  # ResultsError included
+        print(f"bench: {e}", file=sys.stderr)
+        return 3
     verdicts = judge(c, res)
     for v in verdicts:
         print(f"{'pass' if v['ok'] else 'FAIL'}  {v['stat']}({v['metric']}) = {v['value']:.4g}"

@@ -4,6 +4,7 @@ runs, crashed runs recorded, the comparison and the replay command."""
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bench._campaign import CampaignError, load_campaign
@@ -98,3 +99,141 @@ def test_exponent_numbers_are_numbers(tmp_path):
     c = _load(tmp_path, OK.replace("seed: {values: [1, 2, 3]}",
                                    "plant.R_ohm: {values: [1e0, 2e0]}"))
     assert [r["plant.R_ohm"] for r in c.runs()] == [1.0, 2.0]
+
+
+@pytest.mark.parametrize("local", [True, False])
+def test_a_run_that_kills_its_worker_is_recorded(tmp_path, local):
+    """Such a run used to make dask give up on its whole chunk (KilledWorker), which
+    ended the campaign with an internal error: the run was not recorded and the runs of
+    its chunk were lost. Now the chunk is halved until the run is alone, and recorded
+    with its error; every other run has the serial loop's numbers."""
+    pytest.importorskip("dask.distributed")
+    import dask
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    from bench._campaign import load_results, run_campaign, start_local_cluster
+
+    class CrashRun(WorkerPlugin):
+        """Installed again on every restarted worker: run ``run`` kills its worker
+        process, as a crash in the simulator library would."""
+
+        name = "crash-one-run"
+
+        def __init__(self, run: int) -> None:
+            self.run = run
+
+        def setup(self, worker) -> None:
+            import os
+
+            import bench._campaign as m
+            real, crash_at = m._simulate, self.run
+
+            def simulate(base, params, metrics):
+                if int(params["run"]) == crash_at:
+                    os._exit(139)
+                return real(base, params, metrics)
+            m._simulate = simulate
+
+    c = _load(tmp_path, OK.replace("t_end: 0.3", "t_end: 0.05").replace(
+        "{values: [1, 2, 3]}", "{range: [0, 10]}"))
+    run_campaign(c, tmp_path / "s", serial=True)
+    # dask gives up on a task at once (it retries 3 times by default), and a worker
+    # holds only the task it runs (1.1 by default: a second one, queued, which its
+    # death would count against too)
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0,
+                          "distributed.scheduler.worker-saturation": 1.0}):
+        cl, client = start_local_cluster(2)
+    try:
+        client.register_plugin(CrashRun(6))
+        sched = client if local else cl.scheduler_address
+        run_campaign(c, tmp_path / "d", scheduler=sched, batch=2)
+    finally:
+        client.close()
+        cl.close()
+    s, d = load_results(tmp_path / "s" / "t"), load_results(tmp_path / "d" / "t")
+    assert list(d["run"]) == list(range(10))
+    assert [k for k, e in enumerate(d["error"]) if e] == [6]
+    assert "the worker died running this run (KilledWorker" in d["error"][6]
+    rms_s = s["position_error_rms_rad"].astype(float)
+    rms_d = d["position_error_rms_rad"].astype(float)
+    assert np.isnan(rms_d[6])
+    keep = np.arange(10) != 6
+    np.testing.assert_array_equal(rms_d[keep], rms_s[keep])
+
+
+def test_results_of_another_campaign_are_not_mixed(tmp_path):
+    """A changed file (same name) resumed into the old folder: its run k is not the old
+    run k, yet the old runs were kept and only the 'missing' ones added (3 runs reported
+    for a 2-run campaign). Now it is refused and the folder left as it was."""
+    from bench._campaign import ResultsError, load_results, run_campaign
+    a = _load(tmp_path, OK)
+    run_campaign(a, tmp_path / "out", serial=True)
+    before = load_results(tmp_path / "out" / "t")
+    b = _load(tmp_path, OK.replace("[1, 2, 3]", "[1, 2, 3, 4]"))
+    with pytest.raises(ResultsError, match="holds results of a different campaign "
+                                           r"\(axes differ"):
+        run_campaign(b, tmp_path / "out", serial=True)
+    c = _load(tmp_path, OK.replace("t_end: 0.3", "t_end: 0.2"))
+    with pytest.raises(ResultsError, match=r"\(base differ"):
+        run_campaign(c, tmp_path / "out", serial=True)
+    after = load_results(tmp_path / "out" / "t")
+    np.testing.assert_array_equal(after["position_error_rms_rad"].astype(float),
+                                  before["position_error_rms_rad"].astype(float))
+    import json
+    assert json.loads((tmp_path / "out/t/campaign.json").read_text())["axes"] == [
+        ["seed", "values", [1.0, 2.0, 3.0]]]  # not overwritten by the refused campaigns
+    # a title or the file's place may change: same runs
+    d = _load(tmp_path, OK + "title: the same runs\n")
+    run_campaign(d, tmp_path / "out", serial=True)
+    assert list(load_results(tmp_path / "out" / "t")["run"]) == [0, 1, 2]
+
+
+def test_a_damaged_part_is_moved_aside_and_its_runs_run_again(tmp_path):
+    """A part damaged after it was written was deleted without a word on resume; now it
+    is kept as part-*.parquet.corrupt, said, and the results equal a clean run's."""
+    from bench._campaign import ResultsError, load_results, run_campaign
+    c = _load(tmp_path, OK)
+    run_campaign(c, tmp_path / "clean", serial=True)
+    run_campaign(c, tmp_path / "out", serial=True, batch=2)
+    part = tmp_path / "out/t/part-r00000000.parquet"
+    part.write_bytes(part.read_bytes()[:100])
+    with pytest.raises(ResultsError, match=r"part-r00000000.parquet: unreadable Parquet"):
+        load_results(tmp_path / "out" / "t")  # was pyarrow's ArrowInvalid traceback
+    run_campaign(c, tmp_path / "out", serial=True, batch=2)
+    assert (tmp_path / "out/t/part-r00000000.parquet.corrupt").stat().st_size == 100
+    a, b = load_results(tmp_path / "out" / "t"), load_results(tmp_path / "clean" / "t")
+    assert list(a["run"]) == [0, 1, 2]
+    np.testing.assert_array_equal(a["position_error_rms_rad"].astype(float),
+                                  b["position_error_rms_rad"].astype(float))
+
+
+def _cli(*args, cwd=None):
+    import os
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[2]
+    p = subprocess.run([sys.executable, "-m", "bench", "campaign", *map(str, args)],
+                       capture_output=True, text=True, timeout=120, cwd=cwd,
+                       env={**os.environ, "PYTHONPATH": str(root)})
+    return p.returncode, p.stdout, p.stderr
+
+
+def test_cli_folder_compare_and_scheduler_errors_are_one_line(tmp_path):
+    """Each was a traceback (ArrowInvalid, ValueError: 'internal error', exit 4) or a
+    wrong exit code (an unreachable scheduler exited 3, 'folder not writable')."""
+    f, g = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    f.write_text(OK)
+    g.write_text(OK.replace("[1, 2, 3]", "[1, 2]"))
+    assert _cli(f, "--serial", "--out", tmp_path / "out")[0] == 0
+    rc, out, err = _cli(g, "--serial", "--out", tmp_path / "out")
+    assert (rc, err.strip().count("\n")) == (3, 0), err
+    assert "holds results of a different campaign (axes differ" in err
+    part = tmp_path / "out/t/part-r00000000.parquet"
+    part.write_bytes(b"PAR1 not really")
+    rc, out, err = _cli(g, "--serial", "--out", tmp_path / "o2", "--compare",
+                        tmp_path / "out/t")
+    assert (rc, err.strip().count("\n")) == (2, 0), err
+    assert "--compare" in err and "part-r00000000.parquet: unreadable Parquet" in err
+    rc, out, err = _cli(g, "--out", tmp_path / "o3", "--scheduler", "nonsense")
+    assert (rc, err.strip()) == (2, "bench: --scheduler nonsense: cannot connect: "
+                                    "\"missing port number in address 'nonsense'\""), err
