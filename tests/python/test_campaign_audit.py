@@ -237,3 +237,74 @@ def test_cli_folder_compare_and_scheduler_errors_are_one_line(tmp_path):
     rc, out, err = _cli(g, "--out", tmp_path / "o3", "--scheduler", "nonsense")
     assert (rc, err.strip()) == (2, "bench: --scheduler nonsense: cannot connect: "
                                     "\"missing port number in address 'nonsense'\""), err
+
+
+CORNERS = """name: corners
+base: {scenario: load_step, t_end: 0.3}
+sampling: {method: lhs, n: 8, seed: 4}
+axes:
+  fw.L_q_H: {scale: [0.85, 1.15]}
+  plant.adc_noise_counts: {range: [0.5, 3.0]}
+  plant.R_ohm: {values: [1.2, -1.0, 1.3, 1.4]}
+metrics: [position_error_rms_rad, position_error_max_rad]
+limits:
+  - {metric: position_error_max_rad, stat: max, max: 0.05}
+  - {metric: position_error_rms_rad, stat: fail_fraction, max: 0.0}
+"""
+
+
+def test_report_highlights_failing_corners_with_replay_commands(tmp_path):
+    """The report showed the failed limits and the worst runs per metric, but not which
+    runs break them: no highlight, a fault without its code. Now a 'Failing corners'
+    table lists exactly the runs beyond a limit (value above a max, or no value for a
+    fail_fraction limit), each with its replay command, and the plots mark them; a
+    comparison says which metrics the other campaign lacks."""
+    pytest.importorskip("plotly")
+    import re
+
+    from bench._campaign import load_results, run_campaign
+    from bench._campaign_report import write_report
+    c = _load(tmp_path, CORNERS)
+    run_campaign(c, tmp_path / "out", serial=True)
+    res = load_results(tmp_path / "out" / "corners")
+    mx = res["position_error_max_rad"].astype(float)
+    rms = res["position_error_rms_rad"].astype(float)
+    expect = sorted(int(r) for r, a, b in zip(res["run"], mx, rms, strict=True)
+                    if a > 0.05 or not np.isfinite(b))
+    assert expect and len(expect) < 8  # some runs pass, some fail
+    other = _load(tmp_path, OK)
+    run_campaign(other, tmp_path / "other", serial=True)
+    text = write_report(c, tmp_path / "out" / "corners", tmp_path / "other" / "t").read_text()
+    corners = text.split("Failing corners:")[1].split("</table>")[0]
+    assert f"{len(expect)} of 8 runs beyond a limit" in corners
+    listed = [int(x) for x in re.findall(r"--replay (\d+)", corners)]
+    assert listed == expect
+    assert corners.count("<tr class='beyond'>") == len(expect)
+    for k in expect:
+        if np.isfinite(mx[k]) and mx[k] > 0.05:
+            assert f"position_error_max_rad {mx[k]:.4g} &gt; 0.05" in corners
+    assert "has no position_error_max_rad: compared on the other metrics only" in text
+    # a drive fault shows its code where a run error would be
+    for k in np.flatnonzero(res["fault"].astype(int)):
+        assert f"drive fault 0x{int(res['fault'][k]):04X}" in text
+
+
+def test_replay_command_reproduces_the_recorded_run(tmp_path):
+    """The command printed for a failing corner gives that run's recorded numbers."""
+    import json
+    import re
+
+    from bench._campaign import load_results, replay_command, run_campaign
+    f = tmp_path / "c.yaml"
+    f.write_text(CORNERS)
+    c = load_campaign(f, METRICS)
+    run_campaign(c, tmp_path / "out", serial=True)
+    res = load_results(tmp_path / "out" / "corners")
+    k = int(np.nanargmax(res["position_error_max_rad"].astype(float)))
+    cmd = replay_command(c, k)
+    assert re.fullmatch(r"bench campaign \S+ --replay \d+", cmd)
+    rc, out, err = _cli(*cmd.split()[2:])
+    row = json.loads(out)
+    assert (rc, row["run"], row["error"]) == (0, k, None), err
+    for m in METRICS:
+        assert row[m] == float(res[m][k])
