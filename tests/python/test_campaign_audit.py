@@ -308,3 +308,38 @@ def test_replay_command_reproduces_the_recorded_run(tmp_path):
     assert (rc, row["run"], row["error"]) == (0, k, None), err
     for m in METRICS:
         assert row[m] == float(res[m][k])
+
+
+def test_reproduction_renderer_reads_results_as_campaigns_do(tmp_path, capsys):
+    """tools/reproduce_paper.py --render-only over a damaged part ended in pyarrow's
+    ArrowInvalid traceback (its renderer read the Parquet parts itself); it now reads
+    them through load_results (each run once, in run order) and exits 3 with one line."""
+    import importlib.util
+
+    from bench._campaign import ResultsError, load_results, run_campaign
+    from bench._reproduction import read_results
+    c = _load(tmp_path, OK)
+    run_campaign(c, tmp_path / "out", serial=True, batch=2)
+    meta, rows = read_results(tmp_path / "out" / "t")
+    res = load_results(tmp_path / "out" / "t")
+    assert meta["name"] == "t" and [r["run"] for r in rows] == [0, 1, 2]
+    assert [r["position_error_rms_rad"] for r in rows] == list(res["position_error_rms_rad"])
+    assert rows[1]["p"]["seed"] == 2.0
+    root = Path(__file__).resolve().parents[2]
+    spec = importlib.util.spec_from_file_location("reproduce_paper",
+                                                  root / "tools/reproduce_paper.py")
+    rp = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rp)
+    results = tmp_path / "results"
+    for f in sorted((root / "campaigns/reproduction").glob("*.yaml")):
+        d = results / load_campaign(f).name
+        d.mkdir(parents=True)
+        (d / "campaign.json").write_text("{}")
+        (d / "part-r00000000.parquet").write_bytes(b"PAR1 torn")
+    with pytest.raises(ResultsError, match="unreadable Parquet"):
+        read_results(d)
+    assert rp.main(["--render-only", "--results", str(results), "--out",
+                    str(tmp_path / "doc")]) == 3
+    err = capsys.readouterr().err
+    assert err.startswith("reproduce_paper: ") and err.count("\n") == 1
+    assert "part-r00000000.parquet: unreadable Parquet" in err
