@@ -1071,12 +1071,36 @@ def run_campaigns(cs: list[Campaign], out: Path, scheduler: Any = None,
                   progress: Callable[[int, int, float], None] | None = None) -> list[Path]:
     """Several campaigns through one cluster at once (their chunks share the workers, so
     short campaigns do not each pay a start and a tail); results as for run_campaign."""
+    with contextlib.ExitStack() as locks:
+        return _run_campaigns(cs, out, scheduler, workers, serial, batch, progress, locks)
+
+
+@contextlib.contextmanager
+def _locked(rdir: Path) -> Any:
+    """This process writes ``rdir`` alone while it runs (an advisory lock on
+    ``rdir/.lock``, which the system drops when the process ends, killed or not)."""
+    import fcntl
+    with open(rdir / ".lock", "a") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ResultsError(f"{rdir}: another campaign process is writing these results "
+                               "(it holds .lock there); wait for it or stop it") from None
+        yield
+
+
+def _run_campaigns(cs: list[Campaign], out: Path, scheduler: Any, workers: int | None,
+                   serial: bool, batch: int,
+                   progress: Callable[[int, int, float], None] | None,
+                   locks: contextlib.ExitStack) -> list[Path]:
     rdirs, bases, todos = [], [], []
     for c in cs:  # every folder checked before any is written
         check_results_dir(c, results_dir(c, out))
     for c in cs:
         rdir = results_dir(c, out)
         rdir.mkdir(parents=True, exist_ok=True)
+        locks.enter_context(_locked(rdir))
+        check_results_dir(c, rdir)  # again, now that no other process writes it
         (rdir / "campaign.json").write_text(json.dumps(_definition(c), indent=1,
                                                        ensure_ascii=False), encoding="utf-8")
         rdirs.append(rdir)
@@ -1296,7 +1320,10 @@ def cmd(args: Any) -> int:
                   f"{len(runs) - 1}", file=sys.stderr)
             return 2
         row = run_one(c.run_base(), runs[args.replay], c.metrics)
-        print(json.dumps({k: v for k, v in row.items() if k != "traceback"}, indent=1))
+        # strict JSON (jq and others refuse NaN): a metric the run has not is null
+        print(json.dumps({k: None if isinstance(v, float) and not math.isfinite(v) else v
+                          for k, v in row.items() if k != "traceback"}, indent=1,
+                         allow_nan=False))
         return 0 if row["error"] is None else 1
     other = Path(args.compare) if args.compare else None
     if other is not None:

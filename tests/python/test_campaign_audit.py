@@ -343,3 +343,80 @@ def test_reproduction_renderer_reads_results_as_campaigns_do(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("reproduce_paper: ") and err.count("\n") == 1
     assert "part-r00000000.parquet: unreadable Parquet" in err
+
+
+def test_one_process_writes_a_results_folder(tmp_path):
+    """Two campaign processes on the same folder each deleted the other's temporary
+    parts (a resume cleans up after a killed writer) and ran the same runs; now the
+    second is refused while the first holds the folder's lock, which a kill releases."""
+    from bench._campaign import ResultsError, _locked, load_results, run_campaign
+    c = _load(tmp_path, OK)
+    rdir = tmp_path / "out" / "t"
+    rdir.mkdir(parents=True)
+    with _locked(rdir):
+        with pytest.raises(ResultsError, match="another campaign process is writing"):
+            run_campaign(c, tmp_path / "out", serial=True)
+    assert not list(rdir.glob("part-*"))
+    run_campaign(c, tmp_path / "out", serial=True)  # the lock is gone with its holder
+    assert list(load_results(rdir)["run"]) == [0, 1, 2]
+
+
+def test_replay_prints_strict_json(tmp_path):
+    """A metric a run does not have was printed as NaN, which is not JSON (jq refuses)."""
+    import json
+    f = tmp_path / "c.yaml"
+    f.write_text(OK.replace("t_end: 0.3", "t_end: 0.1"))  # too short: no position error
+    rc, out, err = _cli(f, "--replay", "1")
+
+    def refuse(x):
+        raise ValueError(x)
+    row = json.loads(out, parse_constant=refuse)
+    assert (rc, row["run"], row["position_error_rms_rad"]) == (0, 1, None), err
+
+
+def test_kill_9_mid_campaign_then_resume_equals_an_uninterrupted_run(tmp_path):
+    """`bench campaign` on its local cluster killed with SIGKILL mid-run (its workers
+    with it: they notice their parent is gone), then run again: every run once, the
+    numbers of an uninterrupted serial run."""
+    pytest.importorskip("dask.distributed")
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    import pyarrow.parquet as pq
+
+    from bench._campaign import load_results, run_campaign
+    text = OK.replace("{method: grid}", "{method: random, n: 240, seed: 2}").replace(
+        "{values: [1, 2, 3]}", "{range: [0, 100000]}").replace("t_end: 0.3", "t_end: 1.0")
+    f = tmp_path / "c.yaml"
+    f.write_text(text)
+    root = Path(__file__).resolve().parents[2]
+    p = subprocess.Popen([sys.executable, "-m", "bench", "campaign", str(f), "--workers", "2",
+                          "--out", str(tmp_path / "out")], env={**os.environ,
+                                                                "PYTHONPATH": str(root)},
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    rdir = tmp_path / "out" / "t"
+    deadline = time.monotonic() + 120
+    while not list(rdir.glob("part-*.parquet")) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    children = [int(x) for x in subprocess.run(["pgrep", "-P", str(p.pid)],
+                                               capture_output=True, text=True).stdout.split()]
+    os.kill(p.pid, signal.SIGKILL)
+    p.wait()
+    for pid in children:  # the workers end by themselves
+        while time.monotonic() < deadline and Path(f"/proc/{pid}").exists() and \
+                "Z" not in Path(f"/proc/{pid}/stat").read_text().split()[2]:
+            time.sleep(0.05)
+    kept = load_results(rdir)["run"]
+    assert 0 < len(kept) < 240, len(kept)  # killed mid-run, finished runs kept
+    c = load_campaign(f, METRICS)
+    run_campaign(c, tmp_path / "out", serial=True)
+    run_campaign(c, tmp_path / "clean", serial=True)
+    rows = sum(pq.read_metadata(x).num_rows for x in rdir.glob("part-*.parquet"))
+    a, b = load_results(rdir), load_results(tmp_path / "clean" / "t")
+    assert rows == 240 and list(a["run"]) == list(range(240))  # each run exactly once
+    for k in ("position_error_rms_rad", "fault"):
+        np.testing.assert_array_equal(a[k].astype(float), b[k].astype(float))
+    assert list(a["params"]) == list(b["params"])
