@@ -1353,7 +1353,13 @@ def cmd(args: Any) -> int:
         bar.bar.update(done - last[0])
         last[0] = done
 
+    import signal
+
+    def terminate(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt  # `kill PID` as Ctrl-C: the finished runs are written
+
     interrupted = False
+    old_term = signal.signal(signal.SIGTERM, terminate)
     try:
         rdir = run_campaign(c, Path(args.out), scheduler=args.scheduler, workers=args.workers,
                             serial=args.serial, progress=progress)
@@ -1374,6 +1380,7 @@ def cmd(args: Any) -> int:
               f"{e}", file=sys.stderr)
         return 3
     finally:
+        signal.signal(signal.SIGTERM, old_term)
         bar.close()
     from bench._campaign_report import write_report
     try:

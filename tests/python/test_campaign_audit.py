@@ -420,3 +420,43 @@ def test_kill_9_mid_campaign_then_resume_equals_an_uninterrupted_run(tmp_path):
     for k in ("position_error_rms_rad", "fault"):
         np.testing.assert_array_equal(a[k].astype(float), b[k].astype(float))
     assert list(a["params"]) == list(b["params"])
+
+
+def test_sigterm_keeps_the_finished_runs(tmp_path):
+    """`kill PID` (SIGTERM) ended a serial campaign at once: the finished runs not yet
+    in a part (up to 63) were lost. Now it is handled as Ctrl-C: they are written, exit
+    130, and the same command resumes to the numbers of an uninterrupted run."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from bench._campaign import load_results, run_campaign
+    text = OK.replace("{method: grid}", "{method: random, n: 200, seed: 2}").replace(
+        "{values: [1, 2, 3]}", "{range: [0, 100000]}").replace("t_end: 0.3", "t_end: 1.0")
+    f = tmp_path / "c.yaml"
+    f.write_text(text)
+    root = Path(__file__).resolve().parents[2]
+    p = subprocess.Popen([sys.executable, "-m", "bench", "campaign", str(f), "--serial",
+                          "--out", str(tmp_path / "out")], stderr=subprocess.PIPE,
+                         stdout=subprocess.DEVNULL, env={**os.environ,
+                                                         "PYTHONPATH": str(root)})
+    seen = b""
+    while b"/200" not in seen:  # the progress bar: runs are finishing
+        ch = p.stderr.read(1)
+        assert ch, seen
+        seen += ch
+    os.kill(p.pid, signal.SIGTERM)
+    err = seen + p.stderr.read()
+    assert p.wait(timeout=60) == 130, err[-500:]
+    assert b"interrupted; run the same command again to resume" in err
+    rdir = tmp_path / "out" / "t"
+    kept = load_results(rdir)["run"]
+    assert 0 < len(kept) < 200
+    c = load_campaign(f, METRICS)
+    run_campaign(c, tmp_path / "out", serial=True)
+    run_campaign(c, tmp_path / "clean", serial=True)
+    a, b = load_results(rdir), load_results(tmp_path / "clean" / "t")
+    assert list(a["run"]) == list(range(200))
+    np.testing.assert_array_equal(a["position_error_rms_rad"].astype(float),
+                                  b["position_error_rms_rad"].astype(float))
