@@ -199,17 +199,28 @@ def _valid_extractor(v: Any) -> bool:
 
 
 @functools.lru_cache(maxsize=32)
-def _motor_plant_cached(name: str) -> dict[str, Any] | None:
+def _motor_loaded(name: str) -> tuple[dict[str, Any] | None, str]:
+    """(plant parameters, "") or (None, why the motor file cannot be loaded; "" when
+    there is no such motor)."""
     from sim_fallback import load_motor
     try:
-        return dict(load_motor(name).plant)
-    except Exception:  # noqa: BLE001 - any unreadable motor is "not a motor"
-        return None
+        return dict(load_motor(name).plant), ""
+    except FileNotFoundError:
+        return None, ""
+    except Exception as e:  # noqa: BLE001 - MotorFileError, TOML errors: said, one line
+        return None, (str(e).splitlines() or [type(e).__name__])[0]
 
 
 def _motor_plant(name: Any) -> dict[str, Any] | None:
     """The motor file's plant parameters (nominal), or None if it is not a motor."""
-    return _motor_plant_cached(name) if isinstance(name, str) and _NAME.match(name) else None
+    return _motor_loaded(name)[0] if isinstance(name, str) and _NAME.match(name) else None
+
+
+def _motor_why(name: Any) -> str:
+    """Why ``name`` is not a usable motor, in words."""
+    broken = _motor_loaded(name)[1] if isinstance(name, str) and _NAME.match(name) else ""
+    return (f"{name!r}: its motor file cannot be loaded: {broken}" if broken else
+            f"{name!r}: need one of {_choices('motor')}")
 
 
 def _choices(what: str) -> str:
@@ -396,7 +407,7 @@ def _check_base(base: dict[str, Any], bnode: yaml.Node | None, sc: str,
         mot = base.get("motor", "paper_salient")
         plant = _motor_plant(mot)
         if plant is None:
-            err(node("motor"), "base.motor", f"{mot!r}: need one of {_choices('motor')}")
+            err(node("motor"), "base.motor", _motor_why(mot))
         if "extractor" in base and not _valid_extractor(base["extractor"]):
             err(node("extractor"), "base.extractor",
                 f"{base['extractor']!r} not one of {_choices('extractor')}")
@@ -601,7 +612,9 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             bad = (None if not isinstance(vals, list) or not vals else
                    [v for v in vals if not (_valid_extractor(v) if tgt == "extractor"
                                             else _motor_plant(v) is not None)])
-            if bad is None or bad:
+            if bad and tgt == "motor":
+                err(node, fld, "values: " + _motor_why(bad[0]))
+            elif bad is None or bad:
                 err(node, fld, f"need values: [...] of {_choices(tgt)}"
                     + (f"; {bad[0]!r} is not one" if bad else ""))
             else:

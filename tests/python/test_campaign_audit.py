@@ -460,3 +460,25 @@ def test_sigterm_keeps_the_finished_runs(tmp_path):
     assert list(a["run"]) == list(range(200))
     np.testing.assert_array_equal(a["position_error_rms_rad"].astype(float),
                                   b["position_error_rms_rad"].astype(float))
+
+
+def test_a_broken_motor_file_is_named_with_its_error(tmp_path, monkeypatch):
+    """A motor file that exists but does not load was reported as 'need one of motor
+    names (..., the same name, ...)', hiding the file's own error."""
+    import sim_fallback._motors as motors
+    from bench import _campaign
+    motor_dir = tmp_path / "motors"
+    motor_dir.mkdir()
+    for f in Path(motors.MOTOR_DIR).glob("*.toml"):
+        (motor_dir / f.name).write_text(f.read_text())
+    good = (motor_dir / "paper_salient.toml").read_text()
+    (motor_dir / "broken.toml").write_text(good.replace("R_ohm", "R_ohm = -5\n#", 1))
+    monkeypatch.setattr(motors, "MOTOR_DIR", motor_dir)
+    monkeypatch.setattr(_campaign, "_motor_loaded", _campaign._motor_loaded.__wrapped__)
+    with pytest.raises(CampaignError) as ei:
+        _load(tmp_path, OK.replace("t_end: 0.3", "t_end: 0.3, motor: broken"))
+    msg = str(ei.value)
+    assert "c.yaml:2: base.motor: 'broken': its motor file cannot be loaded: " in msg, msg
+    assert "R_ohm" in msg and len(msg.splitlines()) == 1
+    with pytest.raises(CampaignError, match="base.motor: 'nonesuch': need one of motor"):
+        _load(tmp_path, OK.replace("t_end: 0.3", "t_end: 0.3, motor: nonesuch"))
