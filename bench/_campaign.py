@@ -612,7 +612,7 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             bad = (None if not isinstance(vals, list) or not vals else
                    [v for v in vals if not (_valid_extractor(v) if tgt == "extractor"
                                             else _motor_plant(v) is not None)])
-            if bad and tgt == "motor":
+            if bad and tgt == "motor" and "cannot be loaded" in _motor_why(bad[0]):
                 err(node, fld, "values: " + _motor_why(bad[0]))
             elif bad is None or bad:
                 err(node, fld, f"need values: [...] of {_choices(tgt)}"
