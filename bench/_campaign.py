@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import jsonschema
 import numpy as np
 import yaml
 
@@ -58,6 +59,15 @@ STATS = ("mean", "max", "min", "p50", "p90", "p95", "p99", "fail_fraction")
 
 class CampaignError(ValueError):
     """A campaign file is wrong; ``str()`` is one line per problem, file:line: field: what."""
+
+
+class ResultsError(OSError):
+    """A results folder cannot be used (another campaign's results, an unreadable part);
+    ``str()`` is one line naming the folder or file."""
+
+
+class SchedulerError(ValueError):
+    """The Dask scheduler given cannot be reached; ``str()`` is one line."""
 
 
 @dataclass
@@ -90,6 +100,12 @@ class Axis:
         if self.cases is not None:
             return list(dict.fromkeys(t for c in self.cases.values() for t in c))
         return [self.target]
+
+    def grid_size(self) -> int:
+        """len(self.grid()), without building it (a seed range may be huge)."""
+        if self.kind in ("values", "cases"):
+            return len(self.spec)
+        return max(0, int(self.spec[1]) - int(self.spec[0])) if self.target == "seed" else 5
 
     def grid(self) -> list[Any]:
         if self.kind in ("values", "cases"):
@@ -183,17 +199,28 @@ def _valid_extractor(v: Any) -> bool:
 
 
 @functools.lru_cache(maxsize=32)
-def _motor_plant_cached(name: str) -> dict[str, Any] | None:
+def _motor_loaded(name: str) -> tuple[dict[str, Any] | None, str]:
+    """(plant parameters, "") or (None, why the motor file cannot be loaded; "" when
+    there is no such motor)."""
     from sim_fallback import load_motor
     try:
-        return dict(load_motor(name).plant)
-    except Exception:  # noqa: BLE001 - any unreadable motor is "not a motor"
-        return None
+        return dict(load_motor(name).plant), ""
+    except FileNotFoundError:
+        return None, ""
+    except Exception as e:  # noqa: BLE001 - MotorFileError, TOML errors: said, one line
+        return None, (str(e).splitlines() or [type(e).__name__])[0]
 
 
 def _motor_plant(name: Any) -> dict[str, Any] | None:
     """The motor file's plant parameters (nominal), or None if it is not a motor."""
-    return _motor_plant_cached(name) if isinstance(name, str) and _NAME.match(name) else None
+    return _motor_loaded(name)[0] if isinstance(name, str) and _NAME.match(name) else None
+
+
+def _motor_why(name: Any) -> str:
+    """Why ``name`` is not a usable motor, in words."""
+    broken = _motor_loaded(name)[1] if isinstance(name, str) and _NAME.match(name) else ""
+    return (f"{name!r}: its motor file cannot be loaded: {broken}" if broken else
+            f"{name!r}: need one of {_choices('motor')}")
 
 
 def _choices(what: str) -> str:
@@ -219,6 +246,38 @@ def _field_error(t: str, plant: dict[str, Any] | None) -> str | None:
         from sim_fallback import FwConfig
         if f not in FwConfig.field_names():
             return f"no drive configuration field {f!r} (fw_config_t; docs/firmware.md)"
+    return None
+
+
+def _value_error(t: str, kind: str, vals: list[float], motor: Any, extractor: Any
+                 ) -> str | None:
+    """Why an axis's values leave what its target accepts (None: they do not): noise
+    is a scale >= 0, fw.<field> the firmware's own range (fw_config_field(); a scale
+    times the motor's nominal configuration)."""
+    lo_hi = [min(vals), max(vals)]
+    if t == "noise" and lo_hi[0] < 0:
+        return f"{lo_hi[0]:g}: noise scales the sensor noise; allowed >= 0"
+    if not t.startswith("fw."):
+        return None
+    from sim_fallback import firmware_field_ranges
+    f = t[3:]
+    rng = firmware_field_ranges().get(f)
+    if rng is None:
+        return None
+    lo, hi, unit = rng
+    if kind == "scale":
+        if _motor_plant(motor) is None or not _valid_extractor(extractor):
+            return None  # reported on base
+        nominal = float(getattr(_motor_and_config(motor, extractor)[1], f))
+        if nominal == 0:
+            return None
+        lo_hi = sorted(x * nominal for x in lo_hi)
+        what = f"x {nominal:g} (nominal) gives [{lo_hi[0]:g}, {lo_hi[1]:g}]"
+    else:
+        what = f"[{lo_hi[0]:g}, {lo_hi[1]:g}]"
+    # the firmware's limits are float32: a bound written as such passes
+    if lo_hi[0] < lo * (1 - 1e-6) or lo_hi[1] > hi * (1 + 1e-6):
+        return f"{what}; the firmware allows [{lo:g}, {hi:g}]" + (f" {unit}" if unit else "")
     return None
 
 
@@ -348,7 +407,7 @@ def _check_base(base: dict[str, Any], bnode: yaml.Node | None, sc: str,
         mot = base.get("motor", "paper_salient")
         plant = _motor_plant(mot)
         if plant is None:
-            err(node("motor"), "base.motor", f"{mot!r}: need one of {_choices('motor')}")
+            err(node("motor"), "base.motor", _motor_why(mot))
         if "extractor" in base and not _valid_extractor(base["extractor"]):
             err(node("extractor"), "base.extractor",
                 f"{base['extractor']!r} not one of {_choices('extractor')}")
@@ -399,18 +458,83 @@ def _check_base(base: dict[str, Any], bnode: yaml.Node | None, sc: str,
 
 
 def load_campaign(path: str | Path, metric_names: Iterable[str] | None = None) -> Campaign:
-    """Read and validate a campaign file. Raises CampaignError naming file:line: field."""
+    """Read and validate a campaign file. Raises CampaignError naming file:line: field.
+    Read as sequence files are (bench._sequence: YAML errors and duplicate keys with
+    their line, no aliases, YAML 1.2 numbers such as 1e-3)."""
+    from bench._sequence import SequenceError, SequenceLoader, _compose
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
         raise CampaignError(f"{p}: cannot read campaign file: {e}") from None
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        raise CampaignError(f"{p}: not valid YAML: {str(e).splitlines()[0]}") from None
+        data, _ = _compose(text, str(p))
+        root = yaml.compose(text, Loader=SequenceLoader)
+    except SequenceError as e:
+        raise CampaignError("\n".join(str(i) for i in e.issues)) from None
     return parse_campaign(data, root, p, metric_names)
+
+
+#: At most this many runs in a campaign (a grid's product or sampling.n): the run list
+#: is built in memory (~0.5 kB a run) before anything starts.
+MAX_RUNS = 1_000_000
+_NUMBER = {"type": "number"}
+#: The campaign file's shape (jsonschema); the values are checked in parse_campaign.
+SHAPE_SCHEMA: dict[str, Any] = {
+    "type": "object", "additionalProperties": False,
+    "required": ["name", "base", "axes", "metrics"],
+    "properties": {
+        "name": {"type": "string", "pattern": r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,99}$"},
+        "title": {"type": "string"},
+        "base": {"type": "object"},
+        "sampling": {"type": "object", "additionalProperties": False, "properties": {
+            "method": {"enum": list(METHODS)},
+            "n": {"type": "integer", "minimum": 1, "maximum": MAX_RUNS},
+            "seed": {"type": "integer", "minimum": 0, "maximum": 2**63 - 1}}},
+        "axes": {"type": "object", "minProperties": 1,
+                 "additionalProperties": {"type": "object", "minProperties": 1}},
+        "metrics": {"type": "array", "minItems": 1, "uniqueItems": True,
+                    "items": {"type": "string"}},
+        "limits": {"type": "array", "items": {
+            "type": "object", "additionalProperties": False, "required": ["metric", "stat"],
+            "properties": {"metric": {"type": "string"}, "stat": {"enum": list(STATS)},
+                           "min": _NUMBER, "max": _NUMBER}}},
+    }}
+_SHAPE = jsonschema.Draft202012Validator(SHAPE_SCHEMA)
+#: Clearer words than jsonschema's for a wrong field (by its path).
+_SHAPE_HINTS = {
+    ("name",): "need a name of letters, digits, '_', '.' and '-' (the results folder "
+               "runs/campaigns/<name>/), not starting with '.' or '-', at most 100 characters",
+    ("sampling", "n"): f"need an integer in [1, {MAX_RUNS}]",
+    ("sampling", "seed"): "need an integer >= 0",
+    ("axes",): "need a non-empty mapping of parameter: {values|range|scale}",
+    ("metrics",): "need a non-empty list of distinct metric names",
+    ("limits",): "need a list of {metric, stat, min and/or max}",
+}
+
+
+def _node_path(root: yaml.Node | None, path: list[Any]) -> yaml.Node | None:
+    """The YAML node at a path of mapping keys and list indexes (the deepest found)."""
+    node = root
+    for key in path:
+        if isinstance(node, yaml.MappingNode):
+            nxt = _find(node, str(key))
+        elif isinstance(node, yaml.SequenceNode) and isinstance(key, int) \
+                and key < len(node.value):
+            nxt = node.value[key]
+        else:
+            nxt = None
+        if nxt is None:
+            break
+        node = nxt
+    return node
+
+
+def _dotted(path: list[Any]) -> str:
+    out = ""
+    for k in path:
+        out += f"[{k}]" if isinstance(k, int) else (f".{k}" if out else str(k))
+    return out
 
 
 def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
@@ -423,9 +547,19 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
 
     if not isinstance(data, dict) or not isinstance(root, yaml.MappingNode):
         raise CampaignError(f"{where}:1: (top level): must be a mapping with name, base, axes")
-    for key in ("name", "base", "axes", "metrics"):
-        if key not in data:
-            err(root, key, "missing")
+    # the file's shape first (keys, types, counts): the checks below assume it
+    for e in sorted(_SHAPE.iter_errors(data), key=lambda e: [str(x) for x in e.path]):
+        path = list(e.absolute_path)
+        if e.validator == "additionalProperties":
+            extra = sorted(set(e.instance) - set(e.schema.get("properties", {})))
+            for k in extra:
+                err(_node_path(root, path + [k]), _dotted(path + [k]),
+                    f"unknown key; known: {', '.join(e.schema['properties'])}")
+            continue
+        err(_node_path(root, path), _dotted(path) or "(top level)",
+            _SHAPE_HINTS.get(tuple(path), e.message))
+    if errs:
+        raise CampaignError("\n".join(errs))
     base = data.get("base", {})
     bnode = _find(root, "base")
     if not isinstance(base, dict):
@@ -448,11 +582,10 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
     if method not in METHODS:
         err(snode, "sampling.method", f"{method!r} not one of {', '.join(METHODS)}")
     n = samp.get("n", 0) if isinstance(samp, dict) else 0
-    if method in ("random", "lhs") and not (isinstance(n, int) and 1 <= n <= 10_000_000):
-        err(snode, "sampling.n", f"{n!r}: need an integer in [1, 10000000]")
+    if method in ("random", "lhs") and "n" not in samp:
+        err(snode, "sampling.n", f"missing: {method} sampling needs n, an integer in "
+            f"[1, {MAX_RUNS}]")
     sseed = samp.get("seed", 0) if isinstance(samp, dict) else 0
-    if not isinstance(sseed, int) or sseed < 0:
-        err(snode, "sampling.seed", f"{sseed!r}: need an integer >= 0")
     axes: list[Axis] = []
     anode = _find(root, "axes")
     raw_axes = data.get("axes", {})
@@ -479,7 +612,9 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             bad = (None if not isinstance(vals, list) or not vals else
                    [v for v in vals if not (_valid_extractor(v) if tgt == "extractor"
                                             else _motor_plant(v) is not None)])
-            if bad is None or bad:
+            if bad and tgt == "motor" and "cannot be loaded" in _motor_why(bad[0]):
+                err(node, fld, "values: " + _motor_why(bad[0]))
+            elif bad is None or bad:
                 err(node, fld, f"need values: [...] of {_choices(tgt)}"
                     + (f"; {bad[0]!r} is not one" if bad else ""))
             else:
@@ -518,7 +653,9 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
         if kind == "scale" and vals[0] <= 0:
             err(node, fld, "scale factors must be > 0")
             continue
-        why = _field_error(str(tgt), motor_plant)
+        why = _field_error(str(tgt), motor_plant) or _value_error(
+            str(tgt), kind, vals, base.get("motor", "paper_salient"),
+            base.get("extractor", "sogi_adaptive"))
         if why:
             err(node, fld, why)
             continue
@@ -551,11 +688,13 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
         err(mnode, "metrics", f"unknown metric {m!r}; known: {', '.join(sorted(known))}"
             + hint)
     limits: list[Limit] = []
-    lnode = _find(root, "limits")
     for i, lim in enumerate(data.get("limits", []) or []):
         fld = f"limits[{i}]"
-        if not isinstance(lim, dict) or lim.get("metric") not in metrics:
-            err(lnode, fld, "metric must be one of the campaign's metrics")
+        lnode = _node_path(root, ["limits", i])
+        if lim["metric"] not in metrics:
+            err(_node_path(root, ["limits", i, "metric"]), f"{fld}.metric",
+                f"{lim['metric']!r} is not one of the campaign's metrics "
+                f"({', '.join(map(str, metrics))})")
             continue
         if lim.get("stat") not in STATS:
             err(lnode, fld, f"stat {lim.get('stat')!r} not one of {', '.join(STATS)}")
@@ -567,9 +706,10 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             continue
         limits.append(Limit(lim["metric"], lim["stat"], hi, lo))
     if method == "grid" and axes:
-        total = int(np.prod([len(a.grid()) for a in axes]))
-        if total > 10_000_000:
-            err(anode, "axes", f"grid of {total} runs; use sampling random or lhs")
+        total = math.prod(a.grid_size() for a in axes)
+        if not 1 <= total <= MAX_RUNS:
+            err(anode, "axes", f"a grid of {total} runs; allowed 1..{MAX_RUNS} (fewer values, "
+                "a shorter seed range, or sampling random or lhs)")
     title = data.get("title", "")
     if not isinstance(title, str):
         err(_find(root, "title"), "title", "must be text")
@@ -592,11 +732,21 @@ def run_one(base: dict[str, Any], params: dict[str, Any],
     try:
         row.update(_simulate(base, params, metrics))
     except Exception as e:  # noqa: BLE001 - recorded, never dropped
-        row["error"] = f"{type(e).__name__}: {e}"
-        row["traceback"] = traceback.format_exc(limit=5)
-        for m in metrics:
-            row[m] = float("nan")
+        row = failed_row(params, metrics, f"{type(e).__name__}: {e}",
+                         traceback.format_exc(limit=5))
     row["wall_s"] = time.perf_counter() - t0
+    return row
+
+
+def failed_row(params: dict[str, Any], metrics: list[str], error: str,
+               tb: str | None = None) -> dict[str, Any]:
+    """The row of a run that did not finish: its error, every metric NaN."""
+    row: dict[str, Any] = {"run": int(params["run"]), "params": json.dumps(params),
+                           "error": error, "fault": 0}
+    if tb is not None:
+        row["traceback"] = tb
+    row.update({m: float("nan") for m in metrics})
+    row["wall_s"] = float("nan")
     return row
 
 
@@ -814,17 +964,70 @@ def results_dir(c: Campaign, out: Path) -> Path:
     return out / c.name
 
 
-def done_runs(rdir: Path) -> set[int]:
-    """Run numbers already in the Parquet dataset (resume)."""
+def _definition(c: Campaign) -> dict[str, Any]:
+    """What decides a campaign's runs and columns (campaign.json beside its results)."""
+    return json.loads(json.dumps(
+        {"name": c.name, "title": c.title, "file": str(c.path), "base": c.base,
+         "method": c.method, "n": c.n, "sampling_seed": c.sampling_seed,
+         "metrics": c.metrics, "axes": [[a.target, a.kind, a.spec] for a in c.axes]}))
+
+
+def check_results_dir(c: Campaign, rdir: Path) -> None:
+    """Refuse to resume into a folder that holds another campaign's runs (the file was
+    changed, or another file has the same name): its run k is not this campaign's run k.
+    The source file's path and the title may differ."""
+    parts = any(rdir.glob("part-*.parquet"))
+    meta = rdir / "campaign.json"
+    if not meta.exists():
+        if parts:
+            raise ResultsError(f"{rdir}: holds results without campaign.json; not resuming "
+                               "into it (choose another --out or remove the folder)")
+        return
+    try:
+        old = json.loads(meta.read_text(encoding="utf-8"))
+        if not isinstance(old, dict):
+            raise ValueError("not a JSON object")
+    except (OSError, ValueError) as e:
+        raise ResultsError(f"{meta}: unreadable ({e}); not resuming into {rdir} (choose "
+                           "another --out or remove the folder)") from None
+    new = _definition(c)
+    diff = [k for k in new if k not in ("file", "title") and old.get(k) != new[k]]
+    if diff and parts:
+        raise ResultsError(
+            f"{rdir}: holds results of a different campaign ({', '.join(diff)} differ from "
+            f"{c.path or 'this campaign'}); not mixing them: choose another --out or name, "
+            "or remove the folder")
+
+
+def _runs_in(rdir: Path) -> dict[Path, list[int] | Exception]:
+    """Each part's run numbers, or why it cannot be read; reads only."""
     import pyarrow.parquet as pq
+    out: dict[Path, list[int] | Exception] = {}
+    for f in sorted(rdir.glob("part-*.parquet")):
+        try:
+            out[f] = [int(x) for x in pq.read_table(f, columns=["run"]).column(0).to_pylist()]
+        except Exception as e:  # noqa: BLE001 - any unreadable file (pyarrow's many errors)
+            out[f] = e
+    return out
+
+
+def done_runs(rdir: Path) -> set[int]:
+    """Run numbers already in the Parquet dataset (resume). A part that cannot be read
+    (damaged after it was written: parts are renamed into place whole) is moved aside
+    to ``<part>.corrupt``, said in one line, and its runs are run again."""
+    import logging
     for f in rdir.glob(".part-*.tmp"):  # a writer killed before its rename
         f.unlink(missing_ok=True)
     done: set[int] = set()
-    for f in sorted(rdir.glob("part-*.parquet")):
-        try:
-            done.update(int(x) for x in pq.read_table(f, columns=["run"]).column(0).to_pylist())
-        except Exception:  # noqa: BLE001 - a torn last file (killed mid-write) is redone
-            f.unlink()
+    for f, runs in _runs_in(rdir).items():
+        if isinstance(runs, Exception):
+            bad = f.with_name(f.name + ".corrupt")
+            f.replace(bad)
+            logging.getLogger("bench.campaign").warning(
+                "%s: unreadable Parquet (%s); moved to %s, its runs are run again",
+                f, str(runs).splitlines()[0] if str(runs) else type(runs).__name__, bad.name)
+        else:
+            done.update(runs)
     return done
 
 
@@ -842,6 +1045,22 @@ def _write_part(rdir: Path, rows: list[dict[str, Any]]) -> None:
     pq.write_table(pa.Table.from_pylist([{key: r.get(key) for key in keys} for r in rows]),
                    tmp)
     tmp.replace(rdir / f"{name}.parquet")  # atomic: a kill leaves no torn file
+
+
+def _dead_worker(fut: Any, chunk: list[dict[str, Any]], rdir: Path | None
+                 ) -> list[dict[str, Any]] | None:
+    """For a task whose workers died (dask gave up on it: KilledWorker), the runs of its
+    chunk not yet written (``rdir``: the folder its workers write; None: nothing was);
+    None for any other error."""
+    from distributed import KilledWorker
+    if not isinstance(fut.exception(), KilledWorker):
+        return None
+    written: set[int] = set()
+    if rdir is not None:
+        for runs in _runs_in(rdir).values():
+            if not isinstance(runs, Exception):
+                written.update(runs)
+    return [p for p in chunk if int(p["run"]) not in written]
 
 
 def _shares_our_files(client: Any) -> bool:
@@ -865,15 +1084,38 @@ def run_campaigns(cs: list[Campaign], out: Path, scheduler: Any = None,
                   progress: Callable[[int, int, float], None] | None = None) -> list[Path]:
     """Several campaigns through one cluster at once (their chunks share the workers, so
     short campaigns do not each pay a start and a tail); results as for run_campaign."""
+    with contextlib.ExitStack() as locks:
+        return _run_campaigns(cs, out, scheduler, workers, serial, batch, progress, locks)
+
+
+@contextlib.contextmanager
+def _locked(rdir: Path) -> Any:
+    """This process writes ``rdir`` alone while it runs (an advisory lock on
+    ``rdir/.lock``, which the system drops when the process ends, killed or not)."""
+    import fcntl
+    with open(rdir / ".lock", "a") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ResultsError(f"{rdir}: another campaign process is writing these results "
+                               "(it holds .lock there); wait for it or stop it") from None
+        yield
+
+
+def _run_campaigns(cs: list[Campaign], out: Path, scheduler: Any, workers: int | None,
+                   serial: bool, batch: int,
+                   progress: Callable[[int, int, float], None] | None,
+                   locks: contextlib.ExitStack) -> list[Path]:
     rdirs, bases, todos = [], [], []
+    for c in cs:  # every folder checked before any is written
+        check_results_dir(c, results_dir(c, out))
     for c in cs:
         rdir = results_dir(c, out)
         rdir.mkdir(parents=True, exist_ok=True)
-        (rdir / "campaign.json").write_text(json.dumps(
-            {"name": c.name, "title": c.title, "file": str(c.path), "base": c.base,
-             "method": c.method, "n": c.n, "sampling_seed": c.sampling_seed,
-             "metrics": c.metrics, "axes": [[a.target, a.kind, a.spec] for a in c.axes]},
-            indent=1, ensure_ascii=False), encoding="utf-8")
+        locks.enter_context(_locked(rdir))
+        check_results_dir(c, rdir)  # again, now that no other process writes it
+        (rdir / "campaign.json").write_text(json.dumps(_definition(c), indent=1,
+                                                       ensure_ascii=False), encoding="utf-8")
         rdirs.append(rdir)
         bases.append(c.run_base())
         done = done_runs(rdir)
@@ -902,7 +1144,12 @@ def run_campaigns(cs: list[Campaign], out: Path, scheduler: Any = None,
             if not own:
                 client = scheduler
             elif scheduler:
-                client = Client(scheduler)
+                try:
+                    client = Client(scheduler)
+                except (OSError, ValueError, TypeError) as e:
+                    raise SchedulerError(f"--scheduler {scheduler}: cannot connect: "
+                                         f"{str(e).splitlines()[0] if str(e) else e!r}"
+                                         ) from None
             else:
                 cluster, client = start_local_cluster(workers)
             try:
@@ -910,26 +1157,52 @@ def run_campaigns(cs: list[Campaign], out: Path, scheduler: Any = None,
                 local = _shares_our_files(client)
                 owner, chunks = zip(*_chunks(todos, n_workers, 1024 if local else 128),
                                     strict=True)
-                outs = [str(rdirs[i]) if local else None for i in owner]
-                futs = client.map(run_chunk, [bases[i] for i in owner], chunks,
-                                  [cs[i].metrics for i in owner], outs,
-                                  [batch] * len(owner), pure=False)
-                index = {f.key: (i, len(ch)) for f, i, ch in zip(futs, owner, chunks,
-                                                                 strict=True)}
+                futs: list[Any] = []
+                index: dict[str, tuple[int, list[dict[str, Any]]]] = {}
+
+                def submit(owner: Iterable[int], chunks: Iterable[list[dict[str, Any]]]
+                           ) -> list[Any]:
+                    owner, chunks = list(owner), list(chunks)
+                    new = client.map(run_chunk, [bases[i] for i in owner], chunks,
+                                     [cs[i].metrics for i in owner],
+                                     [str(rdirs[i]) if local else None for i in owner],
+                                     [batch] * len(owner), pure=False)
+                    index.update({f.key: (i, ch) for f, i, ch in zip(new, owner, chunks,
+                                                                     strict=True)})
+                    futs.extend(new)
+                    return new
+
+                ac = as_completed(submit(owner, chunks))
                 try:
-                    if local:  # the workers write the parts; a task's result is a count
-                        for fut in as_completed(futs):
-                            if fut.status == "error":
-                                fut.result()  # raises the task's exception
-                            finished += index[fut.key][1]
-                            fut.release()
+                    for fut in ac:
+                        i, chunk = index.pop(fut.key)
+                        if fut.status == "error":
+                            # a run that kills its worker (a crash in the simulator) is
+                            # isolated by halving its chunk and recorded with its error
+                            isolated = _dead_worker(fut, chunk, rdirs[i] if local else None)
+                            if isolated is None:
+                                fut.result()  # another error: raises it
+                            elif len(isolated) == 1:
+                                emit(i, failed_row(isolated[0], cs[i].metrics,
+                                                   f"the worker died running this run "
+                                                   f"({type(fut.exception()).__name__}: "
+                                                   f"{fut.exception()})"))
+                            else:
+                                finished += len(chunk) - len(isolated)
+                                half = (len(isolated) + 1) // 2
+                                for f in (submit([i, i], [isolated[:half], isolated[half:]])
+                                          if isolated else []):
+                                    ac.add(f)
+                                if progress:
+                                    progress(finished, total, time.perf_counter() - t0)
+                        elif local:  # the workers write the parts; a result is a count
+                            finished += len(chunk)
                             if progress:
                                 progress(finished, total, time.perf_counter() - t0)
-                    else:  # the rows come back here
-                        for fut, rows in as_completed(futs, with_results=True):
-                            for row in rows:
-                                emit(index[fut.key][0], row)
-                            fut.release()
+                        else:  # the rows come back here
+                            for row in fut.result():
+                                emit(i, row)
+                        fut.release()
                 except BaseException:
                     # interrupted or failed: tasks not yet started do not start (a
                     # cluster kept open would go on writing the results folder)
@@ -952,10 +1225,23 @@ def load_results(rdir: Path) -> Any:
     """All runs of a campaign as a pandas-free dict of numpy columns."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-    parts = [pq.read_table(f) for f in sorted(rdir.glob("part-*.parquet"))]
+    parts = []
+    for f in sorted(rdir.glob("part-*.parquet")):
+        try:
+            parts.append(pq.read_table(f))
+        except Exception as e:  # noqa: BLE001 - pyarrow's many errors: one line
+            raise ResultsError(f"{f}: unreadable Parquet ({str(e).splitlines()[0]}); "
+                               "`bench campaign` on its file moves it aside and runs its "
+                               "runs again") from None
     if not parts:
         return {}
-    t = pa.concat_tables(parts, promote_options="default")
+    try:
+        t = pa.concat_tables(parts, promote_options="default")
+    except (pa.ArrowInvalid, pa.ArrowTypeError) as e:
+        raise ResultsError(f"{rdir}: parts that do not fit together ({e}); results of "
+                           "different campaigns?") from None
+    if "run" not in t.column_names:
+        raise ResultsError(f"{rdir}: parts without a 'run' column: not campaign results")
     # in run order, whatever order the parts were written in; a run written twice (a
     # chunk run again after its worker died) counts once
     _, first = np.unique(np.asarray(t.column("run").to_numpy(), dtype=np.int64),
@@ -1015,7 +1301,8 @@ def add_parser(sub: Any) -> None:
                     "on a local Dask cluster of all cores, an existing scheduler "
                     "(--scheduler) or serially; then write report.html beside the Parquet "
                     "results. Exit 0 when every limit holds, 1 when one fails, 2 for a bad "
-                    "file or argument, 130 when interrupted (finished runs are kept).")
+                    "file or argument, 3 when the results folder cannot be used, 130 when "
+                    "interrupted (finished runs are kept).")
     p.add_argument("file", help="campaign YAML (see campaigns/)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler, e.g. tcp://host:8786")
     p.add_argument("--workers", type=int, metavar="N", help="local cluster size (default: cores)")
@@ -1046,38 +1333,75 @@ def cmd(args: Any) -> int:
                   f"{len(runs) - 1}", file=sys.stderr)
             return 2
         row = run_one(c.run_base(), runs[args.replay], c.metrics)
-        print(json.dumps({k: v for k, v in row.items() if k != "traceback"}, indent=1))
+        # strict JSON (jq and others refuse NaN): a metric the run has not is null
+        print(json.dumps({k: None if isinstance(v, float) and not math.isfinite(v) else v
+                          for k, v in row.items() if k != "traceback"}, indent=1,
+                         allow_nan=False))
         return 0 if row["error"] is None else 1
     other = Path(args.compare) if args.compare else None
-    if other is not None and not any(other.glob("part-*.parquet")):
-        print(f"bench: --compare {other}: no campaign results (part-*.parquet) there",
-              file=sys.stderr)
-        return 2
+    if other is not None:
+        try:
+            found = bool(load_results(other)) if other.is_dir() else False
+        except ResultsError as e:
+            print(f"bench: --compare {other}: {e}", file=sys.stderr)
+            return 2
+        if not found:
+            print(f"bench: --compare {other}: no campaign results (part-*.parquet) there",
+                  file=sys.stderr)
+            return 2
     from tqdm import tqdm
-    bar = tqdm(total=len(runs), unit="run", desc=c.name, file=sys.stderr)
-    last = [0]
+
+    class _Bar:  # shown from the first finished run: the folder's checks print first
+        bar: Any = None
+
+        def close(self) -> None:
+            if self.bar is not None:
+                self.bar.close()
+
+    bar, last = _Bar(), [0]
 
     def progress(done: int, total: int, elapsed: float) -> None:
-        if bar.total != total:
-            bar.reset(total=total)
-        bar.update(done - last[0])
+        if bar.bar is None:
+            bar.bar = tqdm(total=total, unit="run", desc=c.name, file=sys.stderr)
+        bar.bar.update(done - last[0])
         last[0] = done
 
+    import signal
+
+    def terminate(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt  # `kill PID` as Ctrl-C: the finished runs are written
+
     interrupted = False
+    old_term = signal.signal(signal.SIGTERM, terminate)
     try:
         rdir = run_campaign(c, Path(args.out), scheduler=args.scheduler, workers=args.workers,
                             serial=args.serial, progress=progress)
     except KeyboardInterrupt:
         interrupted = True
         rdir = results_dir(c, Path(args.out))
+    except SchedulerError as e:
+        bar.close()  # its line ends before the message
+        print(f"bench: {e}", file=sys.stderr)
+        return 2
+    except ResultsError as e:
+        bar.close()
+        print(f"bench: {e}", file=sys.stderr)
+        return 3
     except OSError as e:
-        print(f"bench: campaign {c.name}: {e}", file=sys.stderr)
+        bar.close()
+        print(f"bench: campaign {c.name}: results folder {results_dir(c, Path(args.out))}: "
+              f"{e}", file=sys.stderr)
         return 3
     finally:
+        signal.signal(signal.SIGTERM, old_term)
         bar.close()
     from bench._campaign_report import write_report
-    res = load_results(rdir)
-    report = write_report(c, rdir, other)
+    try:
+        res = load_results(rdir)
+        report = write_report(c, rdir, other)
+    except OSError as e:  # ResultsError included
+        print(f"bench: {e}", file=sys.stderr)
+        return 3
     verdicts = judge(c, res)
     for v in verdicts:
         print(f"{'pass' if v['ok'] else 'FAIL'}  {v['stat']}({v['metric']}) = {v['value']:.4g}"

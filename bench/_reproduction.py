@@ -126,14 +126,19 @@ class Reproduction:
 def read_results(rdir: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """A campaign's description (campaign.json) and its runs (Parquet), in run order,
     each with its parameters parsed (``p``)."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    from bench._campaign import ResultsError, load_results
 
-    meta = json.loads((rdir / "campaign.json").read_text(encoding="utf-8"))
-    parts = [pq.read_table(f) for f in sorted(rdir.glob("part-*.parquet"))]
-    if not parts:
+    try:
+        meta = json.loads((rdir / "campaign.json").read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{rdir}: no campaign results (campaign.json); run "
+                                "without --render-only first") from None
+    except ValueError as e:
+        raise ResultsError(f"{rdir / 'campaign.json'}: unreadable ({e})") from None
+    res = load_results(rdir)  # each run once, in run order; a damaged part: ResultsError
+    if not res:
         raise FileNotFoundError(f"{rdir}: no campaign results (part-*.parquet)")
-    rows = pa.concat_tables(parts, promote_options="default").to_pylist()
+    rows = [{k: col[i] for k, col in res.items()} for i in range(len(res["run"]))]
     for r in rows:
         if r.get("error"):
             raise RuntimeError(f"{meta['name']} run {r['run']} failed: {r['error']}")

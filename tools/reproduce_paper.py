@@ -18,7 +18,9 @@ by the campaign runner (bench/_campaign.py) into fresh Parquet results
     <out>/figures/*.png       figures analogous to the paper's Figs. 6-11, and the sweeps
 
 Exit codes: 0 done and every campaign limit holds; 1 a limit fails or a run failed
-(the report is still written when possible); 2 a bad campaign file or argument.
+(the report is still written when possible; no results for --render-only); 2 a bad
+campaign file or argument; 3 a results folder that cannot be used (a damaged Parquet part,
+results of another campaign).
 """
 
 from __future__ import annotations
@@ -137,6 +139,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (FileNotFoundError, RuntimeError) as e:
         print(f"reproduce_paper: {e}", file=sys.stderr)
         return 1
+    except OSError as e:  # ResultsError: a damaged part, results of another campaign
+        print(f"reproduce_paper: {e}", file=sys.stderr)
+        return 3
     for f in failed:
         print(f"FAIL {f}")
     print(f"wrote {path}, reproduction.json and figures/ ({time.perf_counter() - t0:.1f} s)")
