@@ -506,15 +506,15 @@ static void end_off(const fw_ctrl_t *c, const fw_period_t *p, fw_outputs_t *out,
 
 /** Input checks (fault on a bad sample; NaN never enters the state), offset
  *  compensation, Clarke. */
-static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_period_t *p) {
+static void stage_inputs(fw_ctrl_t *c, float ia, float ib, float ic, float u_dc,
+                         fw_period_t *p) {
+  const fw_inputs_t in = {{ia, ib, ic}, u_dc};
   const fw_fault_t f =
-      fw_fault_check_inputs(&c->cfg.protection, in, fw_cia402_power_enabled(c->sm.state));
+      fw_fault_check_inputs(&c->cfg.protection, &in, fw_cia402_power_enabled(c->sm.state));
   /* in scalars, into the period's values at the end: they then stay in
    * registers (a struct copy is an LDM/STM pair through the stack, and a
    * memset, a compensation through a pointer or a struct whose address a
    * cold path takes keep them on the stack) */
-  float ia = in->i_abc_A[0], ib = in->i_abc_A[1], ic = in->i_abc_A[2];
-  float u_dc = in->u_dc_V;
   if (FW_UNLIKELY(f != FW_FAULT_NONE)) {
     latch_fault(c, f);
     if (f == FW_FAULT_INPUT_INVALID) {
@@ -773,15 +773,33 @@ static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_ou
   snap->u_inj_V = s * u_inj;
 }
 
-unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out,
-                      fw_snapshot_t *snap) {
+unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t *adc,
+                      fw_outputs_t *out, fw_snapshot_t *snap) {
   if (c == NULL || out == NULL || snap == NULL) {
     return 0u;
+  }
+  /* the inputs in scalars: the ADC's converted in registers, not through
+     a struct on the stack */
+  float ia = 0.0f, ib = 0.0f, ic = 0.0f, u_dc = 0.0f;
+  if (adc != NULL) {
+    fw_inputs_t x;
+    if (!fw_adc_convert(&c->cfg, adc, &x)) {
+      latch_fault(c, FW_FAULT_ADC_RANGE);
+    }
+    ia = x.i_abc_A[0];
+    ib = x.i_abc_A[1];
+    ic = x.i_abc_A[2];
+    u_dc = x.u_dc_V;
+  } else if (in != NULL) {
+    ia = in->i_abc_A[0];
+    ib = in->i_abc_A[1];
+    ic = in->i_abc_A[2];
+    u_dc = in->u_dc_V;
   }
   /* outputs_off on every path that does not reach stage_output (which writes
    * every output): not stored twice in the usual period */
   c->step_count++;
-  if (in == NULL) {
+  if (adc == NULL && in == NULL) {
     outputs_off(out);
     latch_fault(c, FW_FAULT_INPUT_INVALID);
     return 0u;
@@ -789,7 +807,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out,
   snap->step_count = c->step_count; /* while it is in a register */
   c->theta_k = c->obs.pll.theta_rad; /* the estimate belonging to this sample */
   fw_period_t p;
-  stage_inputs(c, in, &p);
+  stage_inputs(c, ia, ib, ic, u_dc, &p);
   if (FW_UNLIKELY(!stage_power(c, &p))) {
     stage_off(c, &p, snap);
     end_off(c, &p, out, snap);
@@ -848,28 +866,13 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out,
 
 void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   if (c != NULL) {
-    (void)fw_step_into(c, in, out, &c->snap);
+    (void)fw_step_into(c, in, NULL, out, &c->snap);
   }
-}
-
-unsigned fw_step_adc_into(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out,
-                          fw_snapshot_t *snap) {
-  if (c == NULL || out == NULL) {
-    return 0u;
-  }
-  if (in == NULL) {
-    return fw_step_into(c, NULL, out, snap);
-  }
-  fw_inputs_t x;
-  if (!fw_adc_convert(&c->cfg, in, &x)) {
-    latch_fault(c, FW_FAULT_ADC_RANGE);
-  }
-  return fw_step_into(c, &x, out, snap);
 }
 
 void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
   if (c != NULL) {
-    (void)fw_step_adc_into(c, in, out, &c->snap);
+    (void)fw_step_into(c, NULL, in, out, &c->snap);
   }
 }
 

@@ -1014,7 +1014,7 @@ FW_ISR_OPT void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *
   fw_app_period_t *p = fw_app_slot(app);
   fw_snapshot_t *dst = FW_LIKELY(p != NULL) ? &p->snap : &app->ctrl.snap;
   /* the core's one ADC conversion and range check */
-  const unsigned written = fw_step_adc_into(&app->ctrl, adc, out, dst);
+  const unsigned written = fw_step_into(&app->ctrl, NULL, adc, out, dst);
   fw_app_publish(app, p, dst, written);
 }
 
@@ -1067,7 +1067,7 @@ void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
   fw_app_bg_input(app, now);
   fw_app_period_t *p = fw_app_slot(app);
   fw_snapshot_t *dst = p != NULL ? &p->snap : &app->ctrl.snap;
-  const unsigned written = fw_step_into(&app->ctrl, in, out, dst);
+  const unsigned written = fw_step_into(&app->ctrl, in, NULL, out, dst);
   fw_app_publish(app, p, dst, written);
   fw_app_bg_output(app, now);
 }

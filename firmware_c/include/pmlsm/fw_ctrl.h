@@ -359,22 +359,21 @@ void fw_step(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out);
 #define FW_SNAP_W_ALL 15u
 
 /**
- * fw_step with the period's snapshot fields written into snap instead of the
- * core's own (ctrl->snap; fw_step is fw_step_into(ctrl, in, out, &ctrl->snap)):
+ * fw_step (adc NULL) or fw_step_adc (adc not NULL: the inputs converted from it;
+ * in is then not read) with the period's snapshot fields written into snap
+ * instead of the core's own (ctrl->snap; fw_step is
+ * fw_step_into(ctrl, in, NULL, out, &ctrl->snap)):
  * a caller that keeps snapshots (fw_app's ring) has the step write into the
  * one it hands to its consumer, instead of copying them after the step. The
  * core never reads snap. Returns the FW_SNAP_W_* groups written: the others
  * are the previous period's (fw_snapshot_carry copies them from where that one
  * was written).
  */
-unsigned fw_step_into(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out,
-                      fw_snapshot_t *snap);
+unsigned fw_step_into(fw_ctrl_t *ctrl, const fw_inputs_t *in, const fw_adc_inputs_t *adc,
+                      fw_outputs_t *out, fw_snapshot_t *snap);
 
 /** Same, from raw ADC counts scaled by the adc_* configuration. */
 void fw_step_adc(fw_ctrl_t *ctrl, const fw_adc_inputs_t *in, fw_outputs_t *out);
-/** fw_step_adc into snap (fw_step_into). */
-unsigned fw_step_adc_into(fw_ctrl_t *ctrl, const fw_adc_inputs_t *in, fw_outputs_t *out,
-                          fw_snapshot_t *snap);
 
 /** The one ADC scaling: counts -> A and V with cfg->adc_* (also for callers that
  *  step through another layer, e.g. fw_app_step). Returns false when a count is
