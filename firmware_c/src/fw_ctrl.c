@@ -481,6 +481,12 @@ typedef struct {
   fw_vec2_f32_t u_dq;      /**< fundamental voltage command */
 } fw_period_t;
 
+/** The snapshot groups written (fw_step_into's result): w, and the
+ *  extraction's when it ran (not during the polarity pulses). */
+static unsigned snap_written_est(const fw_period_t *p, unsigned w) {
+  return FW_UNLIKELY(p->pulses) ? w : w | FW_SNAP_W_EST;
+}
+
 /** Raw signals of this step into the snapshot; unit conversions, the
  *  statusword and the blocks' states (the estimator's angle, speeds, error and
  *  disturbance, the monitor's outputs, the injection scale and the back-EMF
@@ -821,8 +827,6 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   c->phase_time_s += c->dt_s;
   p.quick_stop = c->sm.state == FW_CIA402_QUICK_STOP_ACTIVE || p.braking;
   p.pulses = c->phase == FW_START_POLARITY;
-  /* the snapshot's estimator fields are written when the extraction runs */
-  const unsigned w_est = p.pulses ? 0u : FW_SNAP_W_EST;
 
   fw_inj_meas_t hf;
   stage_estimate(c, &hf, &p, snap);
@@ -831,7 +835,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   if (FW_UNLIKELY(!(fw_cia402_power_enabled(c->sm.state) || p.braking) || /* a fault, above */
                   !stage_references(c, &p))) { /* quick stop / braking done */
     end_off(c, &p, out, snap);
-    return FW_SNAP_W_COMMON | w_est;
+    return snap_written_est(&p, FW_SNAP_W_COMMON);
   }
   /* current loop in the estimated frame, or the polarity pulses */
   if (FW_UNLIKELY(p.pulses)) {
@@ -849,7 +853,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   }
   if (FW_UNLIKELY(!stage_monitor(c, &hf, &p))) { /* hard fault: switch off now */
     end_off(c, &p, out, snap);
-    return FW_SNAP_W_COMMON | w_est;
+    return snap_written_est(&p, FW_SNAP_W_COMMON);
   }
   fw_foc_commit(&c->foc, p.u_dq);
   stage_output(c, &p, p.u_dc_V, out, snap);
@@ -861,7 +865,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
     }
   }
   fill_snapshot_common(c, &p, snap);
-  return FW_SNAP_W_COMMON | FW_SNAP_W_OUT | FW_SNAP_W_REF | w_est;
+  return snap_written_est(&p, FW_SNAP_W_COMMON | FW_SNAP_W_OUT | FW_SNAP_W_REF);
 }
 
 void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
