@@ -99,9 +99,9 @@ static uint32_t fw_app_time(fw_app_t *app, uint32_t step) {
 
 /* Complete the snapshot of a published period (once). */
 static void fw_app_complete(fw_app_t *app, fw_app_period_t *p) {
-  if (!p->done) {
+  if (p->done != p->step + 1u) {
     fw_snapshot_complete(&app->ctrl, &p->snap, &p->raw);
-    p->done = 1u;
+    p->done = p->step + 1u;
   }
 }
 
@@ -991,8 +991,7 @@ FW_ISR_OPT static void fw_app_publish(fw_app_t *app, fw_app_period_t *p, fw_snap
       fw_snapshot_capture_slow(&app->ctrl, &p->snap);
       p->slow_gen = gen;
     }
-    p->step = step;
-    p->done = 0u;
+    p->step = step; /* p->done is then not step + 1: not completed */
     head++;
   } else {
     app->count.snap_overruns++; /* the background is behind: it never sees this period */

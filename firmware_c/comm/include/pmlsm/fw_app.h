@@ -143,7 +143,8 @@ typedef struct {
   fw_snapshot_raw_t raw;
   uint32_t step; /**< the application's period index */
   uint32_t slow_gen; /**< fw_snapshot_slow_gen at the last copy of the slow part into snap */
-  uint8_t done;  /**< snap completed (background) */
+  uint32_t done; /**< step + 1 when snap is completed (background; a slot's new period
+                      makes it stale without a store by the interrupt) */
 } fw_app_period_t;
 
 /** Application counters (diagnostics, tests). */
