@@ -811,7 +811,9 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
     return 0u;
   }
   snap->step_count = c->step_count; /* while it is in a register */
-  c->theta_k = c->obs.pll.theta_rad; /* the estimate belonging to this sample */
+  const float theta_k = c->obs.pll.theta_rad; /* the estimate belonging to this sample */
+  c->theta_k = theta_k;
+  snap->theta_hat_rad = theta_k;
   fw_period_t p;
   stage_inputs(c, ia, ib, ic, u_dc, &p);
   if (FW_UNLIKELY(!stage_power(c, &p))) {
@@ -908,6 +910,7 @@ static FW_ALWAYS_INLINE void copy_f32(float *dst, const float *src) {
 void fw_snapshot_carry(fw_snapshot_t *snap, const fw_snapshot_t *prev, unsigned written) {
   if (!(written & FW_SNAP_W_COMMON)) {
     snap->step_count = prev->step_count;
+    snap->theta_hat_rad = prev->theta_hat_rad;
     snap->cia402_state = prev->cia402_state;
     snap->start_phase = prev->start_phase;
     snap->fault_code = prev->fault_code;
@@ -941,7 +944,6 @@ void fw_snapshot_carry(fw_snapshot_t *snap, const fw_snapshot_t *prev, unsigned 
 void fw_snapshot_capture_state(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
                                fw_snapshot_raw_t *raw) {
   /* the blocks' present states */
-  snap->theta_hat_rad = ctrl->theta_k;
   snap->omega_hat_radps = ctrl->obs.pll.w_i_radps;
   snap->omega_f_radps = ctrl->obs.omega_f;
   snap->pll_err_f_rad = ctrl->obs.err_f;

@@ -348,7 +348,8 @@ uint32_t fw_fault_history(const fw_ctrl_t *ctrl, uint16_t *codes, uint32_t n);
 void fw_step(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out);
 
 /** Groups of the snapshot fields fw_step writes (fw_step_into's result): the
- *  period's common signals (step count, states, fault code, alpha/beta current,
+ *  period's common signals (step count, the angle estimate at the sample
+ *  (theta_hat_rad), states, fault code, alpha/beta current,
  *  DC link, duties), the extraction's (PLL error, HF amplitudes, HF current),
  *  the current loop's (i_dq, u_dq, u_inj) and the current references. A field
  *  of a group not written keeps its value of the period before. */
