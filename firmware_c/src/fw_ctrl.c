@@ -464,10 +464,10 @@ static void outputs_off(fw_outputs_t *out) {
 
 /** The duties into the snapshot (stage_output copies them right after the
  *  modulation, while they are still in registers). */
-static void snapshot_duties(fw_ctrl_t *c, const fw_outputs_t *out) {
-  c->snap.duty_abc[0] = out->duty_abc[0];
-  c->snap.duty_abc[1] = out->duty_abc[1];
-  c->snap.duty_abc[2] = out->duty_abc[2];
+static void snapshot_duties(fw_snapshot_t *snap, const fw_outputs_t *out) {
+  snap->duty_abc[0] = out->duty_abc[0];
+  snap->duty_abc[1] = out->duty_abc[1];
+  snap->duty_abc[2] = out->duty_abc[2];
 }
 
 /** Signals of one period, passed between the stages of fw_step (each stage
@@ -488,13 +488,18 @@ typedef struct {
   fw_vec2_f32_t u_dq;      /**< fundamental voltage command */
 } fw_period_t;
 
+/** The snapshot groups written (fw_step_into's result): w, and the
+ *  extraction's when it ran (not during the polarity pulses). */
+static unsigned snap_written_est(const fw_period_t *p, unsigned w) {
+  return FW_UNLIKELY(p->pulses) ? w : w | FW_SNAP_W_EST;
+}
+
 /** Raw signals of this step into the snapshot; unit conversions, the
  *  statusword and the blocks' states (the estimator's angle, speeds, error and
  *  disturbance, the monitor's outputs, the injection scale and the back-EMF
  *  flags: only fw_step and the commands that restart the blocks change them)
  *  are read in fw_get_snapshot (off the hot path). */
-static void fill_snapshot_common(fw_ctrl_t *c, const fw_period_t *p) {
-  fw_snapshot_t *s = &c->snap;
+static void fill_snapshot_common(const fw_ctrl_t *c, const fw_period_t *p, fw_snapshot_t *s) {
   s->cia402_state = (uint8_t)c->sm.state;
   s->start_phase = (uint8_t)c->phase;
   s->fault_code = (uint16_t)c->fault.code;
@@ -505,23 +510,24 @@ static void fill_snapshot_common(fw_ctrl_t *c, const fw_period_t *p) {
 
 /** End of a period that does not reach stage_output: outputs off, in the snapshot
  *  too. */
-static void end_off(fw_ctrl_t *c, const fw_period_t *p, fw_outputs_t *out) {
+static void end_off(const fw_ctrl_t *c, const fw_period_t *p, fw_outputs_t *out,
+                    fw_snapshot_t *snap) {
   outputs_off(out);
-  snapshot_duties(c, out);
-  fill_snapshot_common(c, p);
+  snapshot_duties(snap, out);
+  fill_snapshot_common(c, p, snap);
 }
 
 /** Input checks (fault on a bad sample; NaN never enters the state), offset
  *  compensation, Clarke. */
-static void stage_inputs(fw_ctrl_t *c, const fw_inputs_t *in, fw_period_t *p) {
+static void stage_inputs(fw_ctrl_t *c, float ia, float ib, float ic, float u_dc,
+                         fw_period_t *p) {
+  const fw_inputs_t in = {{ia, ib, ic}, u_dc};
   const fw_fault_t f =
-      fw_fault_check_inputs(&c->cfg.protection, in, fw_cia402_power_enabled(c->sm.state));
+      fw_fault_check_inputs(&c->cfg.protection, &in, fw_cia402_power_enabled(c->sm.state));
   /* in scalars, into the period's values at the end: they then stay in
    * registers (a struct copy is an LDM/STM pair through the stack, and a
    * memset, a compensation through a pointer or a struct whose address a
    * cold path takes keep them on the stack) */
-  float ia = in->i_abc_A[0], ib = in->i_abc_A[1], ic = in->i_abc_A[2];
-  float u_dc = in->u_dc_V;
   if (FW_UNLIKELY(f != FW_FAULT_NONE)) {
     latch_fault(c, f);
     if (f == FW_FAULT_INPUT_INVALID) {
@@ -558,7 +564,7 @@ static bool stage_power(fw_ctrl_t *c, fw_period_t *p) {
 }
 
 /** Power stage off: current-sensor offsets and sum, i2t cools down. */
-static void stage_off(fw_ctrl_t *c, const fw_period_t *p) {
+static void stage_off(fw_ctrl_t *c, const fw_period_t *p, fw_snapshot_t *snap) {
   c->phase = FW_START_IDLE;
   const float i_abc[3] = {p->i_abc[0], p->i_abc[1], p->i_abc[2]};
   fw_mon_learn_offsets(&c->mon, i_abc);
@@ -573,15 +579,15 @@ static void stage_off(fw_ctrl_t *c, const fw_period_t *p) {
     latch_fault(c, mf);
   }
   fw_obs_set_iq(&c->obs, 0.0f);
-  memset(c->snap.i_dq_A, 0, sizeof(c->snap.i_dq_A));
-  memset(c->snap.u_dq_V, 0, sizeof(c->snap.u_dq_V));
-  c->snap.u_inj_V = 0.0f;
+  memset(snap->i_dq_A, 0, sizeof(snap->i_dq_A));
+  memset(snap->u_dq_V, 0, sizeof(snap->u_dq_V));
+  snap->u_inj_V = 0.0f;
 }
 
 /** Extraction and observer (not during the polarity pulses), Park of the
  *  fundamental, back-EMF observer in closed loop. */
-static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p) {
-  fw_snapshot_t *const snap = &c->snap; /* one base address for the stores */
+static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p,
+                           fw_snapshot_t *snap) {
   const fw_config_t *cfg = &c->cfg;
   /* theta_hat at the sampling instant: for the current Park and (advanced)
    * the output transform; the demodulation uses its own delayed frame */
@@ -750,8 +756,8 @@ static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p)
 
 /** Square-wave injection on the estimated d axis (on q^ in the second half of
  *  the saliency check) and the modulation. */
-static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_outputs_t *out) {
-  fw_snapshot_t *const snap = &c->snap; /* one base address for the stores */
+static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_outputs_t *out,
+                         fw_snapshot_t *snap) {
   const fw_config_t *cfg = &c->cfg;
   const float s = fw_inj_output(&c->inj, !p->pulses && cfg->estimator.u_inj_V > 0.0f);
   const bool inj_q =
@@ -763,7 +769,7 @@ static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_ou
   const fw_sincos_f32_t sc_out =
       fw_foc_output(u_cmd, p->sc, c->theta_k, c->obs.pll.w_hat_radps, c->dt_s, u_dc_V,
                     out->duty_abc);
-  snapshot_duties(c, out);
+  snapshot_duties(snap, out);
   if (c->phase == FW_START_ALIGN) { /* fundamental only, for the flying-start observer */
     fw_start_fly_set_u(&c->start, fw_inv_park_f32(u_dq, sc_out));
   }
@@ -780,26 +786,47 @@ static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_ou
   snap->u_inj_V = s * u_inj;
 }
 
-void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
-  if (c == NULL || out == NULL) {
-    return;
+unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t *adc,
+                      fw_outputs_t *out, fw_snapshot_t *snap) {
+  if (c == NULL || out == NULL || snap == NULL) {
+    return 0u;
+  }
+  /* the inputs in scalars: the ADC's converted in registers, not through
+     a struct on the stack */
+  float ia = 0.0f, ib = 0.0f, ic = 0.0f, u_dc = 0.0f;
+  if (adc != NULL) {
+    fw_inputs_t x;
+    if (!fw_adc_convert(&c->cfg, adc, &x)) {
+      latch_fault(c, FW_FAULT_ADC_RANGE);
+    }
+    ia = x.i_abc_A[0];
+    ib = x.i_abc_A[1];
+    ic = x.i_abc_A[2];
+    u_dc = x.u_dc_V;
+  } else if (in != NULL) {
+    ia = in->i_abc_A[0];
+    ib = in->i_abc_A[1];
+    ic = in->i_abc_A[2];
+    u_dc = in->u_dc_V;
   }
   /* outputs_off on every path that does not reach stage_output (which writes
    * every output): not stored twice in the usual period */
   c->step_count++;
-  if (in == NULL) {
+  if (adc == NULL && in == NULL) {
     outputs_off(out);
     latch_fault(c, FW_FAULT_INPUT_INVALID);
-    return;
+    return 0u;
   }
-  c->snap.step_count = c->step_count; /* while it is in a register */
-  c->theta_k = c->obs.pll.theta_rad; /* the estimate belonging to this sample */
+  snap->step_count = c->step_count; /* while it is in a register */
+  const float theta_k = c->obs.pll.theta_rad; /* the estimate belonging to this sample */
+  c->theta_k = theta_k;
+  snap->theta_hat_rad = theta_k;
   fw_period_t p;
-  stage_inputs(c, in, &p);
+  stage_inputs(c, ia, ib, ic, u_dc, &p);
   if (FW_UNLIKELY(!stage_power(c, &p))) {
-    stage_off(c, &p);
-    end_off(c, &p, out);
-    return;
+    stage_off(c, &p, snap);
+    end_off(c, &p, out, snap);
+    return FW_SNAP_W_COMMON | FW_SNAP_W_OUT;
   }
   if (FW_UNLIKELY(c->phase != FW_START_RUN)) {
     /* start-up: its results and flags (polarity, saliency, flying start) may
@@ -811,13 +838,13 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   p.pulses = c->phase == FW_START_POLARITY;
 
   fw_inj_meas_t hf;
-  stage_estimate(c, &hf, &p);
+  stage_estimate(c, &hf, &p, snap);
   stage_startup(c, &hf, &p);
   p.braking = p.braking && c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE;
   if (FW_UNLIKELY(!(fw_cia402_power_enabled(c->sm.state) || p.braking) || /* a fault, above */
                   !stage_references(c, &p))) { /* quick stop / braking done */
-    end_off(c, &p, out);
-    return;
+    end_off(c, &p, out, snap);
+    return snap_written_est(&p, FW_SNAP_W_COMMON);
   }
   /* current loop in the estimated frame, or the polarity pulses */
   if (FW_UNLIKELY(p.pulses)) {
@@ -834,34 +861,32 @@ void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
     p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, p.u_dc_V);
   }
   if (FW_UNLIKELY(!stage_monitor(c, &hf, &p))) { /* hard fault: switch off now */
-    end_off(c, &p, out);
-    return;
+    end_off(c, &p, out, snap);
+    return snap_written_est(&p, FW_SNAP_W_COMMON);
   }
   fw_foc_commit(&c->foc, p.u_dq);
-  stage_output(c, &p, p.u_dc_V, out);
+  stage_output(c, &p, p.u_dc_V, out, snap);
   if (c->phase == FW_START_SALIENCY && fw_start_saliency_advance(&c->start, c->inj.n_inj)) {
     saliency_done(c);
     if (c->fault.hard) {
       outputs_off(out);
-      snapshot_duties(c, out);
+      snapshot_duties(snap, out);
     }
   }
-  fill_snapshot_common(c, &p);
+  fill_snapshot_common(c, &p, snap);
+  return snap_written_est(&p, FW_SNAP_W_COMMON | FW_SNAP_W_OUT | FW_SNAP_W_REF);
+}
+
+void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
+  if (c != NULL) {
+    (void)fw_step_into(c, in, NULL, out, &c->snap);
+  }
 }
 
 void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
-  if (c == NULL || out == NULL) {
-    return;
+  if (c != NULL) {
+    (void)fw_step_into(c, NULL, in, out, &c->snap);
   }
-  if (in == NULL) {
-    fw_step(c, NULL, out);
-    return;
-  }
-  fw_inputs_t x;
-  if (!fw_adc_convert(&c->cfg, in, &x)) {
-    latch_fault(c, FW_FAULT_ADC_RANGE);
-  }
-  fw_step(c, &x, out);
 }
 
 bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_inputs_t *in) {
@@ -889,35 +914,43 @@ static FW_ALWAYS_INLINE void copy_f32(float *dst, const float *src) {
   memcpy(dst, &w, sizeof w);
 }
 
-void fw_snapshot_capture_fast(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
-                              fw_snapshot_raw_t *raw) {
-  const fw_snapshot_t *s = &ctrl->snap;
-  /* what fw_step wrote (every field of ctrl->snap that it writes; the start-up
-   * results are in the slow part) */
-  snap->step_count = s->step_count;
-  snap->cia402_state = s->cia402_state;
-  snap->start_phase = s->start_phase;
-  snap->fault_code = s->fault_code;
-  snap->pll_err_rad = s->pll_err_rad;
-  snap->hf_amp_A = s->hf_amp_A;
-  snap->hf_q_A = s->hf_q_A;
-  snap->i_dq_A[0] = s->i_dq_A[0];
-  snap->i_dq_A[1] = s->i_dq_A[1];
-  snap->i_dq_ref_A[0] = s->i_dq_ref_A[0];
-  snap->i_dq_ref_A[1] = s->i_dq_ref_A[1];
-  snap->u_dq_V[0] = s->u_dq_V[0];
-  snap->u_dq_V[1] = s->u_dq_V[1];
-  snap->u_inj_V = s->u_inj_V;
-  snap->i_ab_A[0] = s->i_ab_A[0];
-  snap->i_ab_A[1] = s->i_ab_A[1];
-  snap->i_h_ab_A[0] = s->i_h_ab_A[0];
-  snap->i_h_ab_A[1] = s->i_h_ab_A[1];
-  snap->u_dc_V = s->u_dc_V;
-  snap->duty_abc[0] = s->duty_abc[0];
-  snap->duty_abc[1] = s->duty_abc[1];
-  snap->duty_abc[2] = s->duty_abc[2];
+void fw_snapshot_carry(fw_snapshot_t *snap, const fw_snapshot_t *prev, unsigned written) {
+  if (!(written & FW_SNAP_W_COMMON)) {
+    snap->step_count = prev->step_count;
+    snap->theta_hat_rad = prev->theta_hat_rad;
+    snap->cia402_state = prev->cia402_state;
+    snap->start_phase = prev->start_phase;
+    snap->fault_code = prev->fault_code;
+    snap->i_ab_A[0] = prev->i_ab_A[0];
+    snap->i_ab_A[1] = prev->i_ab_A[1];
+    snap->u_dc_V = prev->u_dc_V;
+    snap->duty_abc[0] = prev->duty_abc[0];
+    snap->duty_abc[1] = prev->duty_abc[1];
+    snap->duty_abc[2] = prev->duty_abc[2];
+  }
+  if (!(written & FW_SNAP_W_EST)) {
+    snap->pll_err_rad = prev->pll_err_rad;
+    snap->hf_amp_A = prev->hf_amp_A;
+    snap->hf_q_A = prev->hf_q_A;
+    snap->i_h_ab_A[0] = prev->i_h_ab_A[0];
+    snap->i_h_ab_A[1] = prev->i_h_ab_A[1];
+  }
+  if (!(written & FW_SNAP_W_OUT)) {
+    snap->i_dq_A[0] = prev->i_dq_A[0];
+    snap->i_dq_A[1] = prev->i_dq_A[1];
+    snap->u_dq_V[0] = prev->u_dq_V[0];
+    snap->u_dq_V[1] = prev->u_dq_V[1];
+    snap->u_inj_V = prev->u_inj_V;
+  }
+  if (!(written & FW_SNAP_W_REF)) {
+    snap->i_dq_ref_A[0] = prev->i_dq_ref_A[0];
+    snap->i_dq_ref_A[1] = prev->i_dq_ref_A[1];
+  }
+}
+
+void fw_snapshot_capture_state(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
+                               fw_snapshot_raw_t *raw) {
   /* the blocks' present states */
-  snap->theta_hat_rad = ctrl->theta_k;
   snap->omega_hat_radps = ctrl->obs.pll.w_i_radps;
   snap->omega_f_radps = ctrl->obs.omega_f;
   snap->pll_err_f_rad = ctrl->obs.err_f;
@@ -936,6 +969,14 @@ void fw_snapshot_capture_fast(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
   copy_f32(&raw->bemf_err_rad, &ctrl->bemf.err_rad);
   raw->bemf_fresh = ctrl->bemf.err_fresh;
   raw->bemf_w_neg = ctrl->bemf.w_neg;
+}
+
+void fw_snapshot_capture_fast(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
+                              fw_snapshot_raw_t *raw) {
+  /* what fw_step wrote (every field of ctrl->snap that it writes; the start-up
+   * results are in the slow part), then the blocks' present states */
+  fw_snapshot_carry(snap, &ctrl->snap, 0u);
+  fw_snapshot_capture_state(ctrl, snap, raw);
 }
 
 void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
@@ -980,15 +1021,28 @@ void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
                     snap->i_dq_ref_A[1]);
 }
 
-void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
-  if (ctrl == NULL || snap == NULL) {
+void fw_get_snapshot_of(const fw_ctrl_t *ctrl, const fw_snapshot_t *period,
+                        fw_snapshot_t *snap) {
+  if (ctrl == NULL || period == NULL || snap == NULL) {
     return;
   }
   fw_snapshot_raw_t raw;
   *snap = ctrl->snap; /* padding as before */
-  fw_snapshot_capture(ctrl, snap, &raw);
+  fw_snapshot_carry(snap, period, 0u);
+  fw_snapshot_capture_state(ctrl, snap, &raw);
+  fw_snapshot_capture_slow(ctrl, snap);
   fw_snapshot_complete(ctrl, snap, &raw);
-  snap->statusword = fw_statusword(ctrl); /* the present state (a command may follow the step) */
+  snap->statusword = statusword_of(&ctrl->cfg, ctrl->sm.state, ctrl->u_dc_V, ctrl->phase,
+                                   ctrl->mode, ctrl->speed_ref_radps_e, ctrl->obs.omega_f,
+                                   ctrl->ref_limited, period->i_dq_ref_A[1]);
+  /* the present state (a command may follow the step) */
+}
+
+void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
+  if (ctrl == NULL) {
+    return;
+  }
+  fw_get_snapshot_of(ctrl, &ctrl->snap, snap);
 }
 
 /* ---- units ---------------------------------------------------------------- */

@@ -971,8 +971,104 @@ static void test_snapshot_halves_equal_get_snapshot(void) {
   }
 }
 
+/* fw_step_into as fw_app uses it: a twin core steps into ring slots (old
+ * contents in them), every 5th period into its own snapshot (a full ring),
+ * the groups a path does not write carried from the period before's
+ * destination; each slot completed as the background does, and
+ * fw_get_snapshot_of, equal to the reference core's fw_get_snapshot after
+ * every step (power off, start-up, RUN, a fault with braking). */
+static fw_snapshot_t g_ring[TEST_SLOTS];
+static uint32_t g_ring_gen[TEST_SLOTS];
+
+static int into_matches(fw_ctrl_t *ref, fw_ctrl_t *c2, plant_t *p, uint32_t k,
+                        fw_snapshot_t **last) {
+  fw_inputs_t in;
+  fw_outputs_t out, out2;
+  plant_sample(p, &in);
+  fw_step(ref, &in, &out);
+  const int full = k % 5u == 4u;
+  fw_snapshot_t *dst = full ? &c2->snap : &g_ring[k % TEST_SLOTS];
+  uint32_t *gen = &g_ring_gen[k % TEST_SLOTS];
+  const unsigned w = fw_step_into(c2, &in, NULL, &out2, dst);
+  if (w != FW_SNAP_W_ALL) {
+    fw_snapshot_carry(dst, *last, w);
+  }
+  *last = dst;
+  plant_period(p, 1.0 / 24000.0);
+  for (int i = 0; i < 3; i++) {
+    p->duty[i] = out.duty_abc[i];
+  }
+  p->enabled = out.pwm_enable;
+  fw_snapshot_t a, b;
+  fw_get_snapshot(ref, &a);
+  fw_get_snapshot_of(c2, *last, &b);
+  size_t listed;
+  int same = memcmp(out.duty_abc, out2.duty_abc, sizeof out.duty_abc) == 0 &&
+             out.pwm_enable == out2.pwm_enable && snap_fields_same(&a, &b, &listed);
+  if (!full) { /* the slot as the background sees it */
+    fw_snapshot_raw_t raw;
+    memset(&raw, 0x5A, sizeof raw);
+    fw_snapshot_capture_state(c2, dst, &raw);
+    if (*gen != fw_snapshot_slow_gen(c2)) {
+      fw_snapshot_capture_slow(c2, dst);
+      *gen = fw_snapshot_slow_gen(c2);
+    }
+    fw_snapshot_complete(c2, dst, &raw);
+    same = same && snap_fields_same(&a, dst, &listed);
+  }
+  return same;
+}
+
+static void test_step_into_slots_equals_step(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  static fw_ctrl_t ref, c2;
+  plant_t p;
+  fw_init(&ref, &cfg);
+  fw_init(&c2, &cfg);
+  plant_init(&p, 0.4, 0.1 * 0.012);
+  memset(g_ring, 0x3C, sizeof g_ring);
+  for (uint32_t i = 0u; i < TEST_SLOTS; i++) {
+    g_ring_gen[i] = fw_snapshot_slow_gen(&c2) - 1u;
+  }
+  fw_snapshot_t *last = &c2.snap; /* fw_init cleared it */
+  int good = 1;
+  uint32_t k = 0u, partial = 0u;
+  for (int n = 0; n < 50; n++, k++) { /* power off: the estimator's fields carried */
+    good = into_matches(&ref, &c2, &p, k, &last) && good;
+  }
+  fw_set_mode(&ref, FW_MODE_FORCE);
+  fw_set_mode(&c2, FW_MODE_FORCE);
+  enable(&ref);
+  enable(&c2);
+  for (int n = 0; n < (int)(0.2 * 24000); n++, k++) {
+    const uint8_t phase = (uint8_t)c2.phase;
+    good = into_matches(&ref, &c2, &p, k, &last) && good;
+    partial += phase == FW_START_POLARITY;
+  }
+  TT_CHECK(c2.phase == FW_START_RUN && partial > 0u);
+  fw_set_mode(&ref, FW_MODE_SPEED);
+  fw_set_mode(&c2, FW_MODE_SPEED);
+  fw_set_speed_ref(&ref, 20.0f);
+  fw_set_speed_ref(&c2, 20.0f);
+  for (int n = 0; n < 1200; n++, k++) {
+    good = into_matches(&ref, &c2, &p, k, &last) && good;
+  }
+  fw_raise_fault(&ref, FW_FAULT_HEARTBEAT_LOST);
+  fw_raise_fault(&c2, FW_FAULT_HEARTBEAT_LOST);
+  for (int n = 0; n < 24000 && fw_state(&c2) != FW_CIA402_FAULT; n++, k++) {
+    good = into_matches(&ref, &c2, &p, k, &last) && good;
+  }
+  for (int n = 0; n < 20; n++, k++) { /* FAULT: power off again */
+    good = into_matches(&ref, &c2, &p, k, &last) && good;
+  }
+  TT_CHECK(fw_state(&c2) == FW_CIA402_FAULT);
+  TT_CHECK(good && k > 6000u);
+}
+
 int main(void) {
   TT_RUN(test_demod_pseudo);
+  TT_RUN(test_step_into_slots_equals_step);
   TT_RUN(test_demod_sogi);
   TT_RUN(test_demod_sogi_adaptive);
   TT_RUN(test_demod_pi_ambiguity);

@@ -99,9 +99,9 @@ static uint32_t fw_app_time(fw_app_t *app, uint32_t step) {
 
 /* Complete the snapshot of a published period (once). */
 static void fw_app_complete(fw_app_t *app, fw_app_period_t *p) {
-  if (!p->done) {
+  if (p->done != p->step + 1u) {
     fw_snapshot_complete(&app->ctrl, &p->snap, &p->raw);
-    p->done = 1u;
+    p->done = p->step + 1u;
   }
 }
 
@@ -455,6 +455,7 @@ static fw_status_t fw_app_start_core(fw_app_t *app, const fw_config_t *cfg) {
   fw_app_complete_pending(app);
   (void)fw_app_time(app, app->step); /* the periods so far at the old rate */
   fw_status_t st = fw_init(&app->ctrl, cfg);
+  app->last = &app->ctrl.snap; /* fw_init cleared it: the periods so far are gone */
   const fw_config_t *used = fw_get_config(&app->ctrl);
   float f = used != NULL ? used->sensing.f_pwm_Hz : 0.0f;
   app->f_pwm_Hz = (f > 0.0f && f < 4.0e9f) ? (uint32_t)lrintf(f) : 1u;
@@ -807,7 +808,7 @@ void fw_app_snapshot(const void *app, fw_snapshot_t *snap) {
   if (a == NULL || snap == NULL) {
     return;
   }
-  fw_get_snapshot(&a->ctrl, snap);
+  fw_get_snapshot_of(&a->ctrl, a->last, snap);
 }
 
 size_t fw_app_sizeof(void) { return sizeof(fw_app_t); }
@@ -958,20 +959,31 @@ static void fw_app_serial(fw_app_t *app, const fw_snapshot_t *s, uint32_t step) 
 
 /* ---- the control interrupt ----------------------------------------------------- */
 
-/* After the step: publish the period to the background (the snapshot's raw
- * half; the background completes it), count the period. One release fence
- * for the slot and both counters. */
-FW_ISR_OPT static void fw_app_publish(fw_app_t *app) {
+/* Before the step: the slot of this period (NULL when the ring is full: the
+ * background is behind), into whose snapshot the core writes the period's
+ * fields (fw_step_into); the acquire orders the background's last reads of
+ * that slot before these writes. */
+FW_ISR_OPT static inline fw_app_period_t *fw_app_slot(fw_app_t *app) {
   uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
   uint32_t tail = atomic_load_explicit(&app->ring_tail, memory_order_acquire);
+  return FW_LIKELY(head - tail < FW_APP_SNAP_RING) ? &app->ring[head % FW_APP_SNAP_RING] : NULL;
+}
+
+/* After the step: complete the period's raw half in its slot p (the blocks'
+ * states; the background completes the rest), publish it to the background,
+ * count the period. dst is where the step wrote (p's snapshot, or ctrl.snap
+ * when the ring is full); the groups it did not write are the period
+ * before's. One release fence for the slot and both counters. */
+FW_ISR_OPT static void fw_app_publish(fw_app_t *app, fw_app_period_t *p, fw_snapshot_t *dst,
+                                      unsigned written) {
+  if (FW_UNLIKELY(written != FW_SNAP_W_ALL)) {
+    fw_snapshot_carry(dst, app->last, written);
+  }
+  app->last = dst;
+  uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
   const uint32_t step = app->step;
-  if (FW_LIKELY(head - tail < FW_APP_SNAP_RING)) {
-    /* through a volatile: the compiler keeps the slot's address in one
-       register instead of rebuilding it for every field (GCC 12, -Os and the
-       -O2 of FW_ISR_OPT: 1564 against 1494 cycles, SPEED) */
-    fw_app_period_t *volatile slot = &app->ring[head % FW_APP_SNAP_RING];
-    fw_app_period_t *p = slot;
-    fw_snapshot_capture_fast(&app->ctrl, &p->snap, &p->raw);
+  if (FW_LIKELY(p != NULL)) {
+    fw_snapshot_capture_state(&app->ctrl, &p->snap, &p->raw);
     /* the fields that change only at start-up events and on commands: when
        they changed since this slot last had them (the slot keeps its copy) */
     const uint32_t gen = fw_snapshot_slow_gen(&app->ctrl);
@@ -979,8 +991,7 @@ FW_ISR_OPT static void fw_app_publish(fw_app_t *app) {
       fw_snapshot_capture_slow(&app->ctrl, &p->snap);
       p->slow_gen = gen;
     }
-    p->step = step;
-    p->done = 0u;
+    p->step = step; /* p->done is then not step + 1: not completed */
     head++;
   } else {
     app->count.snap_overruns++; /* the background is behind: it never sees this period */
@@ -999,8 +1010,11 @@ FW_ISR_OPT void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *
     }
     return;
   }
-  fw_step_adc(&app->ctrl, adc, out); /* the core's one ADC conversion and range check */
-  fw_app_publish(app);
+  fw_app_period_t *p = fw_app_slot(app);
+  fw_snapshot_t *dst = FW_LIKELY(p != NULL) ? &p->snap : &app->ctrl.snap;
+  /* the core's one ADC conversion and range check */
+  const unsigned written = fw_step_into(&app->ctrl, NULL, adc, out, dst);
+  fw_app_publish(app, p, dst, written);
 }
 
 /* ---- the background loop ------------------------------------------------------- */
@@ -1050,7 +1064,9 @@ void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
   }
   uint32_t now = fw_app_time(app, app->step);
   fw_app_bg_input(app, now);
-  fw_step(&app->ctrl, in, out);
-  fw_app_publish(app);
+  fw_app_period_t *p = fw_app_slot(app);
+  fw_snapshot_t *dst = p != NULL ? &p->snap : &app->ctrl.snap;
+  const unsigned written = fw_step_into(&app->ctrl, in, NULL, out, dst);
+  fw_app_publish(app, p, dst, written);
   fw_app_bg_output(app, now);
 }

@@ -347,6 +347,32 @@ uint32_t fw_fault_history(const fw_ctrl_t *ctrl, uint16_t *codes, uint32_t n);
  */
 void fw_step(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out);
 
+/** Groups of the snapshot fields fw_step writes (fw_step_into's result): the
+ *  period's common signals (step count, the angle estimate at the sample
+ *  (theta_hat_rad), states, fault code, alpha/beta current,
+ *  DC link, duties), the extraction's (PLL error, HF amplitudes, HF current),
+ *  the current loop's (i_dq, u_dq, u_inj) and the current references. A field
+ *  of a group not written keeps its value of the period before. */
+#define FW_SNAP_W_COMMON 1u
+#define FW_SNAP_W_EST 2u
+#define FW_SNAP_W_OUT 4u
+#define FW_SNAP_W_REF 8u
+#define FW_SNAP_W_ALL 15u
+
+/**
+ * fw_step (adc NULL) or fw_step_adc (adc not NULL: the inputs converted from it;
+ * in is then not read) with the period's snapshot fields written into snap
+ * instead of the core's own (ctrl->snap; fw_step is
+ * fw_step_into(ctrl, in, NULL, out, &ctrl->snap)):
+ * a caller that keeps snapshots (fw_app's ring) has the step write into the
+ * one it hands to its consumer, instead of copying them after the step. The
+ * core never reads snap. Returns the FW_SNAP_W_* groups written: the others
+ * are the previous period's (fw_snapshot_carry copies them from where that one
+ * was written).
+ */
+unsigned fw_step_into(fw_ctrl_t *ctrl, const fw_inputs_t *in, const fw_adc_inputs_t *adc,
+                      fw_outputs_t *out, fw_snapshot_t *snap);
+
 /** Same, from raw ADC counts scaled by the adc_* configuration. */
 void fw_step_adc(fw_ctrl_t *ctrl, const fw_adc_inputs_t *in, fw_outputs_t *out);
 
@@ -358,6 +384,10 @@ bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_input
 /** Copy of the internal signals after the last step (fw_snapshot_capture +
  *  fw_snapshot_complete, with the statusword of the core's present state). */
 void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap);
+/** fw_get_snapshot when the last period's snapshot fields were written into
+ *  period (fw_step_into) rather than into ctrl->snap. */
+void fw_get_snapshot_of(const fw_ctrl_t *ctrl, const fw_snapshot_t *period,
+                        fw_snapshot_t *snap);
 
 /** What fw_snapshot_complete needs besides the captured snapshot fields. */
 typedef struct {
@@ -390,6 +420,12 @@ void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot
  */
 void fw_snapshot_capture_fast(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw);
 void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap);
+/** The parts of fw_snapshot_capture_fast: the period's fields fw_step wrote
+ *  (fw_snapshot_carry(snap, &ctrl->snap, 0)), and the blocks' present states
+ *  (_state; a caller of fw_step_into captures only these). fw_snapshot_carry
+ *  copies the groups of fields not in written (FW_SNAP_W_*) from prev. */
+void fw_snapshot_carry(fw_snapshot_t *snap, const fw_snapshot_t *prev, unsigned written);
+void fw_snapshot_capture_state(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw);
 static inline uint32_t fw_snapshot_slow_gen(const fw_ctrl_t *ctrl) { return ctrl->snap_slow_gen; }
 void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
                           const fw_snapshot_raw_t *raw);

@@ -244,10 +244,11 @@ static FW_ALWAYS_INLINE fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, f
 }
 
 /** Wrap an angle into [-pi, pi). Non-finite input returns 0. Inline: the
- *  usual angle is already in range (one compare pair, no call). */
+ *  usual angle is already in range (one compare, no call). */
 static FW_ALWAYS_INLINE float fw_wrap_pi_f32(float theta_rad) {
-  return FW_LIKELY(theta_rad >= -FW_PI_F32 && theta_rad < FW_PI_F32) ? theta_rad
-                                                            : fw_wrap_pi_slow_f32(theta_rad);
+  /* |theta| < pi: one constant and one compare; -pi (in range) and the rest
+   * go to fw_wrap_pi_slow_f32, which returns -pi as it is */
+  return FW_LIKELY(fabsf(theta_rad) < FW_PI_F32) ? theta_rad : fw_wrap_pi_slow_f32(theta_rad);
 }
 
 /** True for a finite float (not NaN, not inf), without libm: x - x is 0 for

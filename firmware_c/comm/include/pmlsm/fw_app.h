@@ -143,7 +143,8 @@ typedef struct {
   fw_snapshot_raw_t raw;
   uint32_t step; /**< the application's period index */
   uint32_t slow_gen; /**< fw_snapshot_slow_gen at the last copy of the slow part into snap */
-  uint8_t done;  /**< snap completed (background) */
+  uint32_t done; /**< step + 1 when snap is completed (background; a slot's new period
+                      makes it stale without a store by the interrupt) */
 } fw_app_period_t;
 
 /** Application counters (diagnostics, tests). */
@@ -165,6 +166,8 @@ typedef struct {
   _Atomic uint32_t ring_head; /**< written by the interrupt only */
   _Atomic uint32_t ring_tail; /**< written by the background only */
   _Atomic uint32_t isr_step;  /**< step as published by the interrupt (the time base) */
+  fw_snapshot_t *last; /**< where the interrupt's last period's snapshot fields are (a
+                          slot's, or ctrl.snap when the ring was full; fw_step_into) */
   fw_app_period_t ring[FW_APP_SNAP_RING]; /**< interrupt -> background */
   fw_config_t boot_cfg; /**< configuration of fw_app_init, restored by NMT reset node */
   co_node_t node;
