@@ -151,7 +151,8 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   /* references set under the old limits must obey the new ones (a reference clamped
      before stays marked: the background gives the raw one again at its next pass) */
   const uint8_t was_limited = c->ref_limited;
-  (void)limit_ref(c, &c->speed_ref_radps_e, c->speed_ref_radps_e, speed_ref_max(cfg),
+  c->speed_ref_max_radps_e = speed_ref_max(cfg);
+  (void)limit_ref(c, &c->speed_ref_radps_e, c->speed_ref_radps_e, c->speed_ref_max_radps_e,
                   FW_REF_LIMITED_SPEED);
   (void)limit_ref(c, &c->i_q_ref_force_A, c->i_q_ref_force_A, cfg->loops.i_max_A,
                   FW_REF_LIMITED_FORCE);
@@ -302,7 +303,7 @@ fw_status_t fw_set_mode(fw_ctrl_t *ctrl, fw_mode_t mode) {
 }
 
 fw_status_t fw_set_speed_ref(fw_ctrl_t *ctrl, float w) {
-  return ctrl ? limit_ref(ctrl, &ctrl->speed_ref_radps_e, w, speed_ref_max(&ctrl->cfg),
+  return ctrl ? limit_ref(ctrl, &ctrl->speed_ref_radps_e, w, ctrl->speed_ref_max_radps_e,
                           FW_REF_LIMITED_SPEED)
               : FW_ERR_NULL;
 }

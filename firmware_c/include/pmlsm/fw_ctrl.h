@@ -242,6 +242,10 @@ typedef struct {
   fw_inj_t inj;
   /* last signals for the snapshot (written only, never read back) */
   fw_snapshot_t snap;
+  /** The speed target's limit: speed_max_radps_e, or v_max_mps (0x6080) when
+   *  smaller (set with the configuration; the background sets the target every
+   *  pass) */
+  float speed_ref_max_radps_e;
 } fw_ctrl_t;
 
 /* ---- configuration ---------------------------------------------------- */
