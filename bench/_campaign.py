@@ -28,6 +28,7 @@ import functools
 import itertools
 import json
 import math
+import os
 import re
 import time
 import traceback
@@ -473,6 +474,16 @@ def load_campaign(path: str | Path, metric_names: Iterable[str] | None = None) -
     except SequenceError as e:
         raise CampaignError("\n".join(str(i) for i in e.issues)) from None
     return parse_campaign(data, root, p, metric_names)
+
+
+#: The local cluster's largest --workers per core: a run is CPU-bound and a worker holds
+#: ~150 MiB, so more worker processes than this only compete for the cores and memory.
+WORKERS_PER_CORE = 4
+
+
+def max_local_workers() -> int:
+    """The largest --workers for a local cluster on this machine."""
+    return WORKERS_PER_CORE * (os.cpu_count() or 1)
 
 
 #: At most this many runs in a campaign (a grid's product or sampling.n): the run list
@@ -1305,7 +1316,8 @@ def add_parser(sub: Any) -> None:
                     "interrupted (finished runs are kept).")
     p.add_argument("file", help="campaign YAML (see campaigns/)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler, e.g. tcp://host:8786")
-    p.add_argument("--workers", type=int, metavar="N", help="local cluster size (default: cores)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="local cluster size (default: cores; 1 to 4 per core)")
     p.add_argument("--serial", action="store_true", help="no Dask: a plain loop in this process")
     p.add_argument("--out", default="runs/campaigns", help="results root (default %(default)s)")
     p.add_argument("--replay", type=int, metavar="RUN", help="rerun one run alone and print it")
@@ -1323,8 +1335,10 @@ def cmd(args: Any) -> int:
     except CampaignError as e:
         print(f"bench: {e}", file=sys.stderr)
         return 2
-    if args.workers is not None and not 1 <= args.workers <= 1024:
-        print(f"bench: --workers {args.workers}: allowed 1..1024", file=sys.stderr)
+    if args.workers is not None and not 1 <= args.workers <= max_local_workers():
+        print(f"bench: --workers {args.workers}: allowed 1..{max_local_workers()} "
+              f"({WORKERS_PER_CORE} per core of this machine's {os.cpu_count() or 1})",
+              file=sys.stderr)
         return 2
     runs = c.runs()
     if args.replay is not None:

@@ -482,3 +482,21 @@ def test_a_broken_motor_file_is_named_with_its_error(tmp_path, monkeypatch):
     assert "R_ohm" in msg and len(msg.splitlines()) == 1
     with pytest.raises(CampaignError, match="base.motor: 'nonesuch': need one of motor"):
         _load(tmp_path, OK.replace("t_end: 0.3", "t_end: 0.3, motor: nonesuch"))
+
+
+def test_workers_outside_what_the_machine_can_run_is_one_line(tmp_path):
+    """--workers 0, or more local worker processes than 4 per core (each a CPU-bound
+    ~150 MiB process: 1024 on 2 cores was accepted and forked), is refused before
+    anything starts: one line naming the allowed range, exit 2, no results folder."""
+    import os
+
+    from bench._campaign import WORKERS_PER_CORE
+    f = tmp_path / "a.yaml"
+    f.write_text(OK)
+    top = WORKERS_PER_CORE * (os.cpu_count() or 1)
+    for bad in (0, -3, top + 1, 1024):
+        rc, out, err = _cli(f, "--workers", bad, "--out", tmp_path / "out")
+        assert (rc, err.strip()) == (2, f"bench: --workers {bad}: allowed 1..{top} "
+                                        f"({WORKERS_PER_CORE} per core of this machine's "
+                                        f"{os.cpu_count() or 1})"), err
+    assert not (tmp_path / "out").exists()
