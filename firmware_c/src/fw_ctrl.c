@@ -246,9 +246,11 @@ static uint16_t statusword_of(const fw_config_t *cfg, fw_cia402_state_t state, f
 }
 
 uint16_t fw_statusword(const fw_ctrl_t *ctrl) {
+  /* the core's own state, not the snapshot (write-only, and in fw_app a ring slot:
+     ctrl->snap holds the last period only when the ring was full) */
   return statusword_of(&ctrl->cfg, ctrl->sm.state, ctrl->u_dc_V, ctrl->phase, ctrl->mode,
                        ctrl->speed_ref_radps_e, ctrl->obs.omega_f, ctrl->ref_limited,
-                       ctrl->snap.i_dq_ref_A[1]);
+                       fw_foc_i_q_ref(&ctrl->foc));
 }
 
 uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
@@ -1033,10 +1035,7 @@ void fw_get_snapshot_of(const fw_ctrl_t *ctrl, const fw_snapshot_t *period,
   fw_snapshot_capture_state(ctrl, snap, &raw);
   fw_snapshot_capture_slow(ctrl, snap);
   fw_snapshot_complete(ctrl, snap, &raw);
-  snap->statusword = statusword_of(&ctrl->cfg, ctrl->sm.state, ctrl->u_dc_V, ctrl->phase,
-                                   ctrl->mode, ctrl->speed_ref_radps_e, ctrl->obs.omega_f,
-                                   ctrl->ref_limited, period->i_dq_ref_A[1]);
-  /* the present state (a command may follow the step) */
+  snap->statusword = fw_statusword(ctrl); /* the present state (a command may follow the step) */
 }
 
 void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {

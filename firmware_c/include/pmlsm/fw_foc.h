@@ -87,6 +87,8 @@ static inline void fw_foc_commit(fw_foc_t *f, fw_vec2_f32_t u_dq_V) {
 }
 /** The i_q reference in use this period (kept for a bumpless SPEED switch). */
 static inline void fw_foc_commit_ref(fw_foc_t *f, float i_q_ref_A) { f->i_q_ref_A = i_q_ref_A; }
+/** The i_q reference of the last committed period. */
+static inline float fw_foc_i_q_ref(const fw_foc_t *f) { return f->i_q_ref_A; }
 /** Fundamental voltage committed last period (acts over this one). */
 static inline const float *fw_foc_u_applied(const fw_foc_t *f) { return f->u_dq_prev_V; }
 
