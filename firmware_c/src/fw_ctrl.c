@@ -974,14 +974,6 @@ void fw_snapshot_capture_state(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
   raw->bemf_w_neg = ctrl->bemf.w_neg;
 }
 
-void fw_snapshot_capture_fast(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
-                              fw_snapshot_raw_t *raw) {
-  /* what fw_step wrote (every field of ctrl->snap that it writes; the start-up
-   * results are in the slow part), then the blocks' present states */
-  fw_snapshot_carry(snap, &ctrl->snap, 0u);
-  fw_snapshot_capture_state(ctrl, snap, raw);
-}
-
 void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
   const fw_snapshot_t *s = &ctrl->snap;
   snap->pol_dI_pos_A = s->pol_dI_pos_A;
@@ -998,7 +990,10 @@ void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
 }
 
 void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
-  fw_snapshot_capture_fast(ctrl, snap, raw);
+  /* what fw_step wrote (every field of ctrl->snap that it writes; the start-up
+   * results are in the slow part), the blocks' present states, the slow part */
+  fw_snapshot_carry(snap, &ctrl->snap, 0u);
+  fw_snapshot_capture_state(ctrl, snap, raw);
   fw_snapshot_capture_slow(ctrl, snap);
 }
 

@@ -865,12 +865,14 @@ static int halves_match(const fw_ctrl_t *c) {
   fw_snapshot_complete(c, &s, &raw);
   size_t listed;
   int same = snap_fields_same(&s, &ref, &listed);
-  /* the slot path: fast part, slow part on a new generation */
+  /* the slot path: the period's fields and the blocks' states, the slow part on a
+     new generation */
   fw_snapshot_t *slot = &g_slot[g_slot_next % TEST_SLOTS];
   uint32_t *gen = &g_slot_gen[g_slot_next % TEST_SLOTS];
   g_slot_next++;
   memset(&raw, 0x5A, sizeof raw);
-  fw_snapshot_capture_fast(c, slot, &raw);
+  fw_snapshot_carry(slot, &c->snap, 0u);
+  fw_snapshot_capture_state(c, slot, &raw);
   if (*gen != fw_snapshot_slow_gen(c)) {
     fw_snapshot_capture_slow(c, slot);
     *gen = fw_snapshot_slow_gen(c);

@@ -415,21 +415,21 @@ typedef struct {
  */
 void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw);
 /**
- * fw_snapshot_capture in two parts: _fast copies what may change in any
- * period, _slow the fields that change only at start-up events and on
- * commands (polarity and saliency results, polarity flag, flying start,
- * extractor, mode, speed reference). A caller that keeps snapshots (fw_app's
- * ring slots) copies the slow part only when fw_snapshot_slow_gen differs
- * from the value it had at its last copy into that snapshot.
+ * fw_snapshot_capture in parts:
+ *  - fw_snapshot_carry copies the groups of the period's fields (what fw_step
+ *    wrote) not in written (FW_SNAP_W_*) from prev: with written 0 and prev
+ *    &ctrl->snap, all of them;
+ *  - _state the blocks' present states (a caller of fw_step_into, which wrote
+ *    the period's fields itself, captures only these and the slow part);
+ *  - _slow the fields that change only at start-up events and on commands
+ *    (polarity and saliency results, polarity flag, flying start, extractor,
+ *    mode, speed reference). A caller that keeps snapshots (fw_app's ring
+ *    slots) copies the slow part only when fw_snapshot_slow_gen differs from
+ *    the value it had at its last copy into that snapshot.
  */
-void fw_snapshot_capture_fast(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw);
-void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap);
-/** The parts of fw_snapshot_capture_fast: the period's fields fw_step wrote
- *  (fw_snapshot_carry(snap, &ctrl->snap, 0)), and the blocks' present states
- *  (_state; a caller of fw_step_into captures only these). fw_snapshot_carry
- *  copies the groups of fields not in written (FW_SNAP_W_*) from prev. */
 void fw_snapshot_carry(fw_snapshot_t *snap, const fw_snapshot_t *prev, unsigned written);
 void fw_snapshot_capture_state(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw);
+void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap);
 static inline uint32_t fw_snapshot_slow_gen(const fw_ctrl_t *ctrl) { return ctrl->snap_slow_gen; }
 void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
                           const fw_snapshot_raw_t *raw);
