@@ -906,7 +906,6 @@ def start_local_cluster(n_workers: int | None = None) -> tuple[Any, Any]:
     """(cluster, client): one single-threaded worker process per core (or
     ``n_workers``), with :data:`LOCAL_CLUSTER_CONFIG`, workers warmed up."""
     import logging
-    import os
 
     import dask
     from dask.distributed import Client, LocalCluster
@@ -1046,8 +1045,6 @@ def _write_part(rdir: Path, rows: list[dict[str, Any]]) -> None:
     """One Parquet part, named after its first run: a run is written once, so the names
     of the client's and of several workers' parts never collide, and a chunk run again
     (its worker died) writes the same parts again under the same names."""
-    import os
-
     import pyarrow as pa
     import pyarrow.parquet as pq
     name = f"part-r{int(rows[0]['run']):08d}"
