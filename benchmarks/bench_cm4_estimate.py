@@ -53,6 +53,15 @@ flash accelerator):
   - every change of flow (taken branch, BL, BX, POP {pc}, ...): + P pipeline
     refill cycles, P = 1 (low) .. 3 (high); TBB/TBH: +1 more
   - IT: 0 (low, folded) .. 1 (high)
+  A third model, 'trm', applies the TRM's own sequence rules instead of the
+  two bounds above (class TrmTiming): single integer LDR 2, or 1 when it
+  directly follows an LDR whose result is not its address; STR with an
+  immediate offset 1 (2 right after another store); literal-pool loads +1;
+  a load/store whose address the instruction before it computed +1;
+  VLDR/VSTR 2 (the TRM does not say they pipeline); P = 3, IT 1, SDIV 12. It
+  is a cross-check of the high model, which ignores both the pipelining the
+  TRM grants and the stalls it charges (in SPEED mode the two agree within
+  1 %: the control interrupt's loads and stores are mostly VLDR/VSTR).
   Not in the model: flash wait states on misses of the flash accelerator
   (reported separately as a cold-flash fetch bound: executed code bytes / 8
   plus one line per change of flow, times 1 + 4 wait states),
@@ -376,6 +385,109 @@ def classify(mn: str, ops: str) -> tuple[str, int, int, bool]:
     return "alu", 1, 1, False
 
 
+REG_RE = re.compile(r"\b(r1[0-5]|r[0-9]|sp|lr|pc|ip|fp|sl|sb)\b")
+NO_DEST = {"cmp", "cmn", "tst", "teq", "b", "bx", "cbz", "cbnz", "tbb", "tbh", "it", "nop",
+           "vcmp", "vcmpe", "vmsr"}
+
+
+def _regs(text: str) -> set[str]:
+    """Core registers named in an operand string (ip = r12, fp = r11, ...)."""
+    alias = {"ip": "r12", "fp": "r11", "sl": "r10", "sb": "r9"}
+    return {alias.get(r, r) for r in REG_RE.findall(text)}
+
+
+def address_regs(b: str, ops: str) -> set[str]:
+    """Registers a load/store's address generation reads."""
+    if b in ("push", "pop", "vpush", "vpop"):
+        return {"sp"}
+    m = re.search(r"\[([^\]]*)\]", ops)
+    if m:
+        return _regs(m.group(1))
+    return _regs(ops.split(",")[0])  # ldm/stm/vldm/vstm: the base register
+
+
+def written_regs(b: str, ops: str) -> set[str]:
+    """Core registers an instruction writes (for the address-dependency stall)."""
+    if b in NO_DEST or b in ("str", "strb", "strh", "strd", "vstr", "push", "vpush", "stm",
+                             "stmia", "stmdb", "stmea", "stmfd", "vstm", "vstmia", "vstmdb"):
+        out: set[str] = set()
+    elif b in ("pop", "ldm", "ldmia", "ldmfd", "ldmdb"):
+        m = re.search(r"\{([^}]*)\}", ops)
+        out = _regs(m.group(1)) if m else set()
+    elif b in ("ldrd", "smull", "umull", "smlal", "umlal", "strex"):
+        out = _regs(",".join(ops.split(",")[:2]))
+    elif b == "bl" or b == "blx":
+        out = {"lr", "r0", "r1", "r2", "r3", "r12"}
+    else:
+        out = _regs(ops.split(",")[0]) if ops else set()
+    if b in ("push", "pop", "vpush", "vpop"):
+        out.add("sp")
+    if "!" in ops or re.search(r"\],\s*#", ops):  # base writeback
+        out |= address_regs(b, ops)
+    return out
+
+
+INT_LOAD = {"ldr", "ldrb", "ldrh", "ldrsb", "ldrsh", "ldrex", "ldrt"}
+INT_STORE = {"str", "strb", "strh", "strex"}
+
+
+class TrmTiming:
+    """The Cortex-M4 TRM's own timing rules for a stream of instructions
+    (TRM r0p1 3.3.1-3.3.2, FPv4-SP table 7-1): the 'trm' model. Where the TRM
+    gives a range it takes the top (refill P = 3, IT not folded, SDIV 12); where
+    it is silent it assumes no gain (VLDR/VSTR never pipelined, 2 cycles each).
+      - LDR (single, integer): 2, or 1 directly after a single integer LDR whose
+        result is not used to compute this address ("LDR [any] are pipelined
+        when possible ... one cycle is removed from the cost of the next
+        instruction")
+      - STR with an immediate offset: 1 ("always one cycle"), 2 directly after
+        another store (the write buffer may still hold it); STR with a register
+        offset: 2, or 1 when pipelined after an LDR as above
+      - LDR/VLDR from the literal pool ([pc, #imm]): +1 ("might add a cycle
+        because of contention with the fetch unit")
+      - any load/store whose address uses the result of the instruction just
+        before it, other than a load: +1 ("no forwarding path")
+      - LDRD/STRD 3 (never pipelined), LDM/STM/PUSH/POP/VLDM/VSTM 1 + N
+      - the rest as the high model
+    cost() is called once per executed instruction, in order; reset() after a
+    gap in the stream."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.prev_b = ""
+        self.prev_dest: set[str] = set()
+        self.prev_store = False
+
+    def cost(self, mn: str, ops: str) -> int:
+        b = base_mnemonic(mn)
+        cls, _lo, hi, _pipe = classify(mn, ops)
+        single = b in INT_LOAD or b in INT_STORE or b in ("vldr", "vstr")
+        if cls in ("load", "store"):
+            addr = address_regs(b, ops)
+            c = hi
+            if single:
+                reg_offset = bool(re.search(r"\[[^\],]+,\s*(r\d+|ip|fp|sl|sb|lr)", ops))
+                after_ldr = self.prev_b in INT_LOAD and not (self.prev_dest & addr)
+                if b in INT_STORE and not reg_offset:
+                    c = 2 if self.prev_store else 1
+                elif b in INT_LOAD or b in INT_STORE:
+                    c = 1 if after_ldr else 2
+                else:
+                    c = 2  # vldr/vstr
+                if "pc" in addr:
+                    c += 1
+            if self.prev_dest & addr:  # loads too (the TRM is silent: assume the stall)
+                c += 1
+        else:
+            c = hi
+        self.prev_b = b
+        self.prev_dest = written_regs(b, ops)
+        self.prev_store = cls == "store"
+        return c
+
+
 # what is counted: entry symbol and the harness function it returns to
 KINDS = {
     "step": ("fw_step", "replay_batch", "count"),
@@ -400,13 +512,15 @@ def parse_trace(log: Path, insns, syms, batch: int, nb: int, kind: str = "step")
         return syms[i][2] if i >= 0 else "?"
 
     steps_n, steps_lo, steps_hi, steps_flow, steps_bytes = [], [], [], [], []
+    steps_trm: list[int] = []
+    trm = TrmTiming()
     cls_count: dict[str, int] = {}
     fn_count: dict[str, int] = {}
     pc_count: dict[int, int] = {}
-    pc_cyc: dict[int, list[int]] = {}  # pc -> [low, high] cycles, refill included
+    pc_cyc: dict[int, list[int]] = {}  # pc -> [low, high, trm] cycles, refill included
     unknown = 0
     inside = False
-    n = lo = hi = flow = nbytes = 0
+    n = lo = hi = tc = flow = nbytes = 0
     prev = None  # (pc, size, is_single_ls)
     with open(log, errors="replace") as f:
         for line in f:
@@ -420,15 +534,18 @@ def parse_trace(log: Path, insns, syms, batch: int, nb: int, kind: str = "step")
                 cyc = pc_cyc[prev[0]]
                 cyc[0] += 1
                 cyc[1] += 3
+                cyc[2] += 3
             if not inside:
                 if pc == entry:
-                    inside, n, lo, hi, flow, nbytes, prev = True, 0, 0, 0, 0, 0, None
+                    inside, n, lo, hi, tc, flow, nbytes, prev = True, 0, 0, 0, 0, 0, 0, None
+                    trm.reset()
                 else:
                     continue
             elif rb_lo <= pc < rb_hi:
                 steps_n.append(n)
                 steps_lo.append(lo + flow * 1)
                 steps_hi.append(hi + flow * 3)
+                steps_trm.append(tc + flow * 3)
                 steps_flow.append(flow)
                 steps_bytes.append(nbytes)
                 inside = False
@@ -436,21 +553,25 @@ def parse_trace(log: Path, insns, syms, batch: int, nb: int, kind: str = "step")
             ins = insns.get(pc)
             if ins is None:
                 unknown += 1
-                size, c, lc, hc, pipe = 2, "?", 1, 1, False
+                size, c, lc, hc, pipe, t = 2, "?", 1, 1, False, 1
+                trm.reset()
             else:
                 size = ins[0]
                 c, lc, hc, pipe = classify(ins[1], ins[2])
+                t = trm.cost(ins[1], ins[2])
             if pipe and prev is not None and prev[2]:
                 lc = 1
             n += 1
             nbytes += size
             lo += lc
             hi += hc
+            tc += t
             cls_count[c] = cls_count.get(c, 0) + 1
             pc_count[pc] = pc_count.get(pc, 0) + 1
-            cyc = pc_cyc.setdefault(pc, [0, 0])
+            cyc = pc_cyc.setdefault(pc, [0, 0, 0])
             cyc[0] += lc
             cyc[1] += hc
+            cyc[2] += t
             prev = (pc, size, pipe)
     for pc, k in pc_count.items():
         fn = func_of(pc)
@@ -463,6 +584,7 @@ def parse_trace(log: Path, insns, syms, batch: int, nb: int, kind: str = "step")
         steps_n,
         steps_lo,
         steps_hi,
+        steps_trm,
         steps_flow,
         steps_bytes,
         footprint,
@@ -475,10 +597,10 @@ def parse_trace(log: Path, insns, syms, batch: int, nb: int, kind: str = "step")
 
 
 def by_source(elf: Path, pc_count: dict[int, int], pc_cyc: dict[int, list[int]],
-              nsteps: int) -> list[tuple[str, float, float, float]]:
+              nsteps: int) -> list[tuple[str, float, float, float, float]]:
     """Attribute every executed instruction to the innermost (inlined) function
     of its source line (DWARF, addr2line -i): -> [(function (file), insns/step,
-    low cycles/step, high cycles/step)], most high cycles first."""
+    low cycles/step, high cycles/step, trm cycles/step)], most high cycles first."""
     pcs = sorted(pc_count)
     r = run(["arm-none-eabi-addr2line", "-a", "-f", "-i", "-e", str(elf)],
             input="\n".join(f"0x{pc:x}" for pc in pcs))
@@ -501,11 +623,13 @@ def by_source(elf: Path, pc_count: dict[int, int], pc_cyc: dict[int, list[int]],
         i += 1
     acc: dict[str, list[float]] = {}
     for pc in pcs:
-        a = acc.setdefault(owner.get(pc, "?"), [0.0, 0.0, 0.0])
+        a = acc.setdefault(owner.get(pc, "?"), [0.0, 0.0, 0.0, 0.0])
         a[0] += pc_count[pc]
         a[1] += pc_cyc[pc][0]
         a[2] += pc_cyc[pc][1]
-    out = [(k, v[0] / nsteps, v[1] / nsteps, v[2] / nsteps) for k, v in acc.items()]
+        a[3] += pc_cyc[pc][2]
+    out = [(k, v[0] / nsteps, v[1] / nsteps, v[2] / nsteps, v[3] / nsteps)
+           for k, v in acc.items()]
     return sorted(out, key=lambda t: -t[3])
 
 
@@ -535,8 +659,8 @@ def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool,
         )
     syms = symbols(elf)
     insns = disassemble(elf)
-    (steps_n, steps_lo, steps_hi, steps_flow, steps_bytes, footprint, cls, fns, unknown,
-     pc_count, pc_cyc) = parse_trace(log, insns, syms, batch, nb, kind)
+    (steps_n, steps_lo, steps_hi, steps_trm, steps_flow, steps_bytes, footprint, cls, fns,
+     unknown, pc_count, pc_cyc) = parse_trace(log, insns, syms, batch, nb, kind)
     # flash fetch bound with no accelerator hits: 64-bit lines, 1 + WS cycles each,
     # one extra line per change of flow
     fetch = [(b / 8 + f) * (1 + FLASH_WS) for b, f in zip(steps_bytes, steps_flow, strict=True)]
@@ -555,6 +679,8 @@ def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool,
         "cycles_low_median": batch_medians(steps_lo, batch),
         "cycles_high_median": batch_medians(steps_hi, batch),
         "cycles_high_max_step": max(steps_hi),
+        "cycles_trm_median": batch_medians(steps_trm, batch),
+        "cycles_trm_max_step": max(steps_trm),
         "flow_changes_per_step": batch_medians(steps_flow, batch),
         "code_bytes_executed_per_step": batch_medians(steps_bytes, batch),
         "code_footprint_bytes": footprint,
@@ -568,8 +694,8 @@ def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool,
     }
     if source:
         res["source_functions_per_step"] = [
-            {"function": k, "insns": n, "cycles_low": lo, "cycles_high": hi}
-            for k, n, lo, hi in by_source(elf, pc_count, pc_cyc, len(steps_n))
+            {"function": k, "insns": n, "cycles_low": lo, "cycles_high": hi, "cycles_trm": t}
+            for k, n, lo, hi, t in by_source(elf, pc_count, pc_cyc, len(steps_n))
         ]
     return res
 
@@ -577,11 +703,11 @@ def measure(opt: str, mode: str, elf: Path, batch: int, nb: int, keep_log: bool,
 def report_by_source(res: dict) -> None:
     if "source_functions_per_step" in res:
         print("by source function, inlined code attributed to its innermost function "
-              "(insns/call, cycles/call low..high):")
+              "(insns/call, cycles/call low..high, trm):")
         for e in res["source_functions_per_step"]:
             if e["cycles_high"] >= 1.0:
                 print(f"  {e['function']:<52} {e['insns']:7.1f} {e['cycles_low']:7.1f} .. "
-                      f"{e['cycles_high']:7.1f}")
+                      f"{e['cycles_high']:7.1f}  {e['cycles_trm']:7.1f}")
 
 
 def report(res: dict) -> None:
@@ -609,8 +735,8 @@ def report(res: dict) -> None:
     worst_step = res["cycles_high_max_step"]
     if kind == "bg":
         print(
-            f"estimated cycles per pass (zero-wait fetch): {lo:.0f} .. {hi:.0f}  "
-            f"(worst single pass, high model: {worst_step}); "
+            f"estimated cycles per pass (zero-wait fetch): {lo:.0f} .. {hi:.0f}, trm "
+            f"{res['cycles_trm_median']:.0f}  (worst single pass, high model: {worst_step}); "
             f"{100 * lo / BUDGET:.1f} % .. {100 * hi / BUDGET:.1f} % of a period "
             f"(worst pass {100 * worst_step / BUDGET:.1f} %)"
         )
@@ -623,8 +749,9 @@ def report(res: dict) -> None:
         report_by_source(res)
         return
     print(
-        f"estimated cycles/step (zero-wait fetch): {lo:.0f} .. {hi:.0f}  "
-        f"(worst single step, high model: {worst_step})"
+        f"estimated cycles/step (zero-wait fetch): {lo:.0f} .. {hi:.0f}, trm "
+        f"{res['cycles_trm_median']:.0f}  (worst single step, high model: {worst_step}, trm "
+        f"{res['cycles_trm_max_step']})"
     )
     print(
         f"share of the {BUDGET:.0f}-cycle budget (170 MHz / 24 kHz): "
@@ -743,9 +870,11 @@ def main() -> int:
         if not mode.endswith("+isr"):
             continue
         lo, hi = r["cycles_low_median"], r["cycles_high_median"]
+        tm = r["cycles_trm_median"]
         print(f"  -{opt:<3} {mode:<9} control interrupt <= {ISR_TARGET} cycles (median step): "
               f"low model {lo:.0f} -> {'meets' if lo <= ISR_TARGET else 'MISSES'}, "
-              f"high model {hi:.0f} -> {'meets' if hi <= ISR_TARGET else 'MISSES'}")
+              f"high model {hi:.0f} -> {'meets' if hi <= ISR_TARGET else 'MISSES'}, "
+              f"trm model {tm:.0f} -> {'meets' if tm <= ISR_TARGET else 'MISSES'}")
         bg = by.get((opt, mode.replace("+isr", "+bg")))
         if bg is not None:
             # the worst interrupt and the worst background pass in one period, high model
