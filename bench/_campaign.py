@@ -1294,8 +1294,11 @@ def judge(c: Campaign, res: dict[str, np.ndarray]) -> list[dict[str, Any]]:
 
 
 def replay_command(c: Campaign, run: int) -> str:
-    """The one command that reruns a single run of a campaign."""
-    return f"bench campaign {c.path} --replay {run}"
+    """The one command that reruns a single run of a campaign, from any directory: the
+    campaign file's absolute path, quoted for a POSIX shell."""
+    import shlex
+    path = Path(c.path).resolve() if c.path is not None else Path("<campaign file>")
+    return f"bench campaign {shlex.quote(str(path))} --replay {run}"
 
 
 # ---- command line ------------------------------------------------------------

@@ -274,7 +274,8 @@ def test_report_shows_limits_worst_runs_and_comparison(tmp_path):
     out = write_report(c, tmp_path / "a" / "tiny", other=tmp_path / "b" / "tiny")
     text = out.read_text()
     assert "PASSED: 1 of 1 limits hold" in text
-    assert "bench campaign c.yaml --replay 2" in text  # every worst run can be replayed
+    # every worst run can be replayed, from any directory (the file's absolute path)
+    assert f"bench campaign {Path('c.yaml').resolve()} --replay 2" in text
     assert text.count("Plotly.newPlot") == 2  # one histogram, one scatter per axis
     assert "plotly.js" in text.lower() or "plotly v" in text.lower()  # embedded: offline
     res = load_results(tmp_path / "a" / "tiny")

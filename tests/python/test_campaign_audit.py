@@ -310,6 +310,30 @@ def test_replay_command_reproduces_the_recorded_run(tmp_path):
         assert row[m] == float(res[m][k])
 
 
+def test_replay_command_works_from_another_directory(tmp_path, monkeypatch):
+    """The command named the campaign file as given: a relative path (here with a
+    space, which the shell split) that another directory does not have. Now it is the
+    absolute path, shell-quoted, and gives the recorded numbers from elsewhere."""
+    import json
+    import shlex
+
+    from bench._campaign import load_results, replay_command, run_campaign
+    (tmp_path / "my dir").mkdir()
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "my dir" / "c.yaml").write_text(OK)
+    monkeypatch.chdir(tmp_path)
+    c = load_campaign(Path("my dir") / "c.yaml", METRICS)
+    run_campaign(c, tmp_path / "out", serial=True)
+    res = load_results(tmp_path / "out" / "t")
+    args = shlex.split(replay_command(c, 1))
+    assert args[:2] == ["bench", "campaign"] and args[3:] == ["--replay", "1"]
+    assert args[2] == str(tmp_path / "my dir" / "c.yaml")
+    rc, out, err = _cli(*args[2:], cwd=tmp_path / "elsewhere")
+    row = json.loads(out)
+    assert (rc, row["run"], row["error"]) == (0, 1, None), err
+    assert row["position_error_rms_rad"] == float(res["position_error_rms_rad"][1])
+
+
 def test_reproduction_renderer_reads_results_as_campaigns_do(tmp_path, capsys):
     """tools/reproduce_paper.py --render-only over a damaged part ended in pyarrow's
     ArrowInvalid traceback (its renderer read the Parquet parts itself); it now reads
