@@ -1071,6 +1071,49 @@ def _dead_worker(fut: Any, chunk: list[dict[str, Any]], rdir: Path | None
     return [p for p in chunk if int(p["run"]) not in written]
 
 
+#: How long ``--scheduler`` may take to accept a connection and answer (s); dask's own
+#: default (``distributed.comm.timeouts.connect``) is 30 s, which an unreachable address
+#: made the user wait before any error.
+SCHEDULER_TIMEOUT_S = 5.0
+
+
+def connect_scheduler(address: str) -> Any:
+    """A Client of the Dask scheduler at ``address``; SchedulerError (one line naming
+    ``--scheduler``, the address and why) within about :data:`SCHEDULER_TIMEOUT_S` when
+    it cannot be reached. A tcp/tls address is probed first (a plain TCP connect), so a
+    refused port or an unknown host says so at once instead of dask's retries."""
+    import socket
+
+    from dask.distributed import Client
+    from distributed.comm import parse_address, parse_host_port
+
+    def fail(why: str) -> SchedulerError:
+        return SchedulerError(f"--scheduler {address}: cannot connect: {why}")
+
+    def first_line(e: BaseException) -> str:
+        return (str(e).splitlines() or [type(e).__name__])[0]
+
+    try:
+        scheme, loc = parse_address(address)
+        if scheme in ("tcp", "tls"):
+            host, port = parse_host_port(loc)
+            with socket.create_connection((host, port), timeout=SCHEDULER_TIMEOUT_S):
+                pass
+    except TimeoutError:
+        raise fail(f"no answer within {SCHEDULER_TIMEOUT_S:g} s") from None
+    except OSError as e:
+        raise fail(e.strerror or first_line(e)) from None
+    except (ValueError, TypeError) as e:
+        raise fail(first_line(e)) from None
+    try:
+        return Client(address, timeout=SCHEDULER_TIMEOUT_S)
+    except TimeoutError:
+        raise fail(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S:g} s") from None
+    except Exception as e:  # noqa: BLE001 - whatever else listens there: said, one line
+        raise fail(f"no Dask scheduler answered ({type(e).__name__}: {first_line(e)})"
+                   ) from None
+
+
 def _shares_our_files(client: Any) -> bool:
     """Whether the client's workers run on this machine (a LocalCluster's: the one
     ``bench campaign`` starts), so that they can write the results folder themselves."""
@@ -1152,12 +1195,7 @@ def _run_campaigns(cs: list[Campaign], out: Path, scheduler: Any, workers: int |
             if not own:
                 client = scheduler
             elif scheduler:
-                try:
-                    client = Client(scheduler)
-                except (OSError, ValueError, TypeError) as e:
-                    raise SchedulerError(f"--scheduler {scheduler}: cannot connect: "
-                                         f"{str(e).splitlines()[0] if str(e) else e!r}"
-                                         ) from None
+                client = connect_scheduler(str(scheduler))
             else:
                 cluster, client = start_local_cluster(workers)
             try:

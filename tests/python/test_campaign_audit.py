@@ -236,7 +236,58 @@ def test_cli_folder_compare_and_scheduler_errors_are_one_line(tmp_path):
     assert "--compare" in err and "part-r00000000.parquet: unreadable Parquet" in err
     rc, out, err = _cli(g, "--out", tmp_path / "o3", "--scheduler", "nonsense")
     assert (rc, err.strip()) == (2, "bench: --scheduler nonsense: cannot connect: "
-                                    "\"missing port number in address 'nonsense'\""), err
+                                    "missing port number in address 'nonsense'"), err
+
+
+def test_an_unreachable_scheduler_is_one_line_at_once(tmp_path):
+    """A closed port was refused only after dask's 30 s connect timeout, as 'Timed out
+    trying to connect'; now the port is probed first and the error says why at once."""
+    import socket
+    f = tmp_path / "a.yaml"
+    f.write_text(OK)
+    with socket.socket() as s:  # a port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    try:
+        socket.create_connection(("127.0.0.1", port), timeout=5).close()
+        pytest.skip("something listens on the port just freed")
+    except OSError as e:
+        why = e.strerror
+    rc, out, err = _cli(f, "--out", tmp_path / "o", "--scheduler", f"tcp://127.0.0.1:{port}")
+    assert (rc, err.strip()) == (2, f"bench: --scheduler tcp://127.0.0.1:{port}: cannot "
+                                    f"connect: {why}"), err
+
+
+def test_a_silent_scheduler_address_is_given_a_short_timeout(tmp_path, monkeypatch):
+    """A port that accepts but never answers as a scheduler: the Client is asked to give
+    up well before dask's default connect timeout (30 s), and its timeout is one line."""
+    import socket
+
+    import dask
+    import dask.distributed
+    from dask.utils import parse_timedelta
+
+    from bench._campaign import SchedulerError, run_campaign
+    seen = {}
+
+    class Client:
+        def __init__(self, address, **kw):
+            seen.update(kw, address=address)
+            raise TimeoutError(f"Timed out trying to connect to {address}")
+
+    monkeypatch.setattr(dask.distributed, "Client", Client)
+    c = _load(tmp_path, OK)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        addr = f"tcp://127.0.0.1:{s.getsockname()[1]}"
+        with pytest.raises(SchedulerError) as ei:
+            run_campaign(c, tmp_path / "o", scheduler=addr)
+    default = parse_timedelta(dask.config.get("distributed.comm.timeouts.connect"))
+    assert seen["address"] == addr
+    assert 0 < parse_timedelta(seen["timeout"]) <= 10 < default
+    assert str(ei.value) == (f"--scheduler {addr}: cannot connect: no Dask scheduler "
+                             f"answered within {parse_timedelta(seen['timeout']):g} s")
 
 
 CORNERS = """name: corners
