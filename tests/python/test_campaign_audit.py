@@ -62,6 +62,47 @@ def _load(tmp_path: Path, text: str):
      "c.yaml:5: axes.fw.R_ohm: [0, 1]; the firmware allows [0.001, 100] ohm"),
     (OK.replace("seed: {values: [1, 2, 3]}", "fw.R_ohm: {scale: [0.5, 1e9]}"),
      "the firmware allows [0.001, 100] ohm"),
+    # plant.<field> and x0_m values were not checked at load: every run failed (negative
+    # resistance, zero mass) or ran with a value no motor file may have
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.R_ohm: {values: [1.2, -1.0]}"),
+     "c.yaml:5: axes.plant.R_ohm: [-1, 1.2]; the simulator allows [0.001, 100] ohm"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.mass_kg: {range: [0, 10]}"),
+     "c.yaml:5: axes.plant.mass_kg: [0, 10]; the simulator allows [0.001, 100000] kg"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.L_q_H: {scale: [0.5, 100]}"),
+     "c.yaml:5: axes.plant.L_q_H: x 0.018 (nominal) gives [0.009, 1.8]; the simulator "
+     "allows [1e-05, 1] H"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.L_d0_H: {values: [.nan]}"),
+     "c.yaml:5: axes.plant.L_d0_H: values must be a non-empty list of finite numbers; "
+     "the simulator allows [1e-05, 1] H"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.L_d0_H: {values: [0.001]}"),
+     "c.yaml:5: axes.plant.L_d0_H: 0.001 with motor paper_salient's other plant parameters: "
+     "the simulator refuses dL_sat_H (sim_params_check: dL_sat_H < L_d0_H"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.adc_bits: {range: [8, 12]}"),
+     "c.yaml:5: axes.plant.adc_bits: [8, 12]: an integer field; need values: [...] of "
+     "integers in [8, 16] bit"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.adc_offset_counts: {values: [1]}"),
+     "c.yaml:5: axes.plant.adc_offset_counts: is one value per phase (3)"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.locked: {values: [1]}"),
+     "c.yaml:5: axes.plant.locked: has no allowed range (not a motor-file field)"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.Rohm: {values: [1]}"),
+     "c.yaml:5: axes.plant.Rohm: no plant parameter 'Rohm'"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "x0_m: {range: [0, 1e6]}"),
+     "c.yaml:5: axes.x0_m: [0, 1e+06]; the simulator allows initial positions "
+     "[-1000, 1000] m"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "x0_m: {values: [.inf]}"),
+     "c.yaml:5: axes.x0_m: values must be a non-empty list of finite numbers; the simulator "
+     "allows initial positions [-1000, 1000] m"),
+    (OK.replace("  seed: {values: [1, 2, 3]}", "  v:\n    cases:\n      a: {x0_m: -2000}\n"
+                "      b: {}"),
+     "c.yaml:7: axes.v.cases.a.x0_m: -2000; the simulator allows initial positions "
+     "[-1000, 1000] m"),
+    (OK.replace("  seed: {values: [1, 2, 3]}", "  v:\n    cases:\n      a: {}\n"
+                "      b: {plant.mass_kg: -1}"),
+     "c.yaml:8: axes.v.cases.b.plant.mass_kg: -1; the simulator allows [0.001, 100000] kg"),
+    (OK.replace("  seed: {values: [1, 2, 3]}", "  k:\n    values: [1, 1000]\n"
+                "    set: {plant.R_ohm: plant.R_ohm * x}"),
+     "c.yaml:7: axes.k.set.plant.R_ohm: 'plant.R_ohm * x' gives [0.958, 958]; the simulator "
+     "allows [0.001, 100] ohm"),
 ])
 def test_bad_files_give_one_line_per_problem(tmp_path, text, where):
     with pytest.raises(CampaignError) as ei:
@@ -69,6 +110,39 @@ def test_bad_files_give_one_line_per_problem(tmp_path, text, where):
     msg = str(ei.value)
     assert where in msg, msg
     assert "Traceback" not in msg and len(msg.splitlines()) == 1, msg
+
+
+def test_plant_ranges_are_the_motor_files(tmp_path, monkeypatch):
+    """A campaign allows a plant field what a motor file may hold, no more (one table):
+    a motor file with the campaign's refused value is refused by load_motor too, and the
+    ends of the range a campaign names load."""
+    import re
+
+    import sim_fallback
+    from sim_fallback import MotorFileError, load_motor
+    text = (tmp_path / "m.toml")
+    good = (Path(sim_fallback.__file__).parent / "motors" / "paper_salient.toml").read_text()
+    with pytest.raises(CampaignError) as ei:
+        _load(tmp_path, OK.replace("seed: {values: [1, 2, 3]}", "plant.R_ohm: {values: [200]}"))
+    lo, hi = map(float, re.search(r"allows \[([^,]+), ([^\]]+)\] ohm", str(ei.value)).groups())
+    for r, ok in ((lo, True), (hi, True), (lo / 2, False), (hi * 2, False)):
+        text.write_text(re.sub(r"R_ohm = \S+", f"R_ohm = {r!r}", good))
+        if ok:
+            assert load_motor(text).plant["R_ohm"] == r
+            _load(tmp_path, OK.replace("seed: {values: [1, 2, 3]}",
+                                       f"plant.R_ohm: {{values: [{r!r}]}}"))
+        else:
+            with pytest.raises(MotorFileError, match=r"R_ohm"):
+                load_motor(text)
+
+
+def test_a_bad_plant_value_is_one_line_exit_2(tmp_path):
+    f = tmp_path / "a.yaml"
+    f.write_text(OK.replace("seed: {values: [1, 2, 3]}", "plant.R_ohm: {values: [1.2, -1.0]}"))
+    rc, out, err = _cli(f, "--serial", "--out", tmp_path / "o")
+    assert (rc, err.strip()) == (2, f"bench: {f}:5: axes.plant.R_ohm: [-1, 1.2]; the "
+                                    "simulator allows [0.001, 100] ohm"), err
+    assert not (tmp_path / "o").exists()
 
 
 def test_a_huge_grid_is_refused_at_once(tmp_path):
@@ -296,7 +370,8 @@ sampling: {method: lhs, n: 8, seed: 4}
 axes:
   fw.L_q_H: {scale: [0.85, 1.15]}
   plant.adc_noise_counts: {range: [0.5, 3.0]}
-  plant.R_ohm: {values: [1.2, -1.0, 1.3, 1.4]}
+  plant.L_d0_H: {values: [0.012, 0.002, 0.012, 0.012]}
+  plant.dL_sat_H: {values: [0.003]}
 metrics: [position_error_rms_rad, position_error_max_rad]
 limits:
   - {metric: position_error_max_rad, stat: max, max: 0.05}
