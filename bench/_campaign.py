@@ -980,12 +980,19 @@ def warm_worker(motors: tuple[str, ...] = ("paper_salient",),
 #: profiler sampling the busy thread every 10 ms, 20 ms event-loop ticks, 100 ms memory
 #: and work-stealing polls) took ~10 % of a core on an idle 2-core cluster, ~1.5 % with
 #: these. Workers run one thread and dask's nanny sets OMP/MKL/OPENBLAS_NUM_THREADS=1.
+#: worker-saturation 1.0: a worker is sent only the task it runs (dask's default 1.1
+#: rounds up to a second one, queued on it), so when a run kills its worker the death is
+#: counted against that task alone; with 1.1 the queued task was counted too and, once
+#: isolated to one run, recorded as "the worker died running this run" though it never
+#: started (an innocent run blamed). The next task then waits for a scheduler round trip
+#: (~1 ms, against chunks of 8 to 1024 runs of milliseconds each).
 LOCAL_CLUSTER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "500ms",
     "distributed.admin.system-monitor.interval": "2s",
     "distributed.worker.memory.monitor-interval": "1s",
     "distributed.scheduler.work-stealing-interval": "500ms",
+    "distributed.scheduler.worker-saturation": 1.0,
 }
 
 
