@@ -331,6 +331,38 @@ def test_an_unreachable_scheduler_is_one_line_at_once(tmp_path):
                                     f"connect: {why}"), err
 
 
+def test_something_else_than_a_scheduler_at_the_address_is_one_line(tmp_path):
+    """A server that answers with something else (here an HTTP error, as a proxy would)
+    made dask read a huge frame length: an internal error (MemoryError, exit 4)."""
+    import socket
+    import threading
+    f = tmp_path / "a.yaml"
+    f.write_text(OK)
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen()
+    port = srv.getsockname()[1]
+
+    def answer() -> None:
+        while True:
+            try:
+                conn, _ = srv.accept()
+            except OSError:
+                return
+            with conn:
+                conn.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n" * 8)
+
+    threading.Thread(target=answer, daemon=True).start()
+    try:
+        rc, out, err = _cli(f, "--out", tmp_path / "o", "--scheduler",
+                            f"tcp://127.0.0.1:{port}")
+    finally:
+        srv.close()
+    assert (rc, err.count("\n")) == (2, 1), err
+    assert err.startswith(f"bench: --scheduler tcp://127.0.0.1:{port}: cannot connect: "
+                          "no Dask scheduler answered"), err
+
+
 def test_a_silent_scheduler_address_is_given_a_short_timeout(tmp_path, monkeypatch):
     """A port that accepts but never answers as a scheduler: the Client is asked to give
     up well before dask's default connect timeout (30 s), and its timeout is one line."""
