@@ -253,11 +253,20 @@ def _field_error(t: str, plant: dict[str, Any] | None) -> str | None:
 def _value_error(t: str, kind: str, vals: list[float], motor: Any, extractor: Any
                  ) -> str | None:
     """Why an axis's values leave what its target accepts (None: they do not): noise
-    is a scale >= 0, fw.<field> the firmware's own range (fw_config_field(); a scale
-    times the motor's nominal configuration)."""
+    is a scale >= 0, x0_m the simulator's initial positions (X0_MAX_M), plant.<field>
+    the motor files' range of that field and what the simulator then accepts
+    (_plant_value_error), fw.<field> the firmware's own range (fw_config_field(); a
+    scale times the motor's nominal configuration)."""
     lo_hi = [min(vals), max(vals)]
     if t == "noise" and lo_hi[0] < 0:
         return f"{lo_hi[0]:g}: noise scales the sensor noise; allowed >= 0"
+    if t == "x0_m":
+        from sim_fallback._sim import X0_MAX_M
+        if lo_hi[0] < -X0_MAX_M or lo_hi[1] > X0_MAX_M:
+            return f"{_span(lo_hi)}; the simulator allows {_allowed('x0_m', motor)}"
+        return None
+    if t.startswith("plant."):
+        return _plant_value_error(t[6:], kind, vals, motor)
     if not t.startswith("fw."):
         return None
     from sim_fallback import firmware_field_ranges
@@ -279,6 +288,70 @@ def _value_error(t: str, kind: str, vals: list[float], motor: Any, extractor: An
     # the firmware's limits are float32: a bound written as such passes
     if lo_hi[0] < lo * (1 - 1e-6) or lo_hi[1] > hi * (1 + 1e-6):
         return f"{what}; the firmware allows [{lo:g}, {hi:g}]" + (f" {unit}" if unit else "")
+    return None
+
+
+def _span(xs: list[float]) -> str:
+    """Sorted values as '[lo, hi]', or the one value."""
+    return f"{xs[0]:g}" if xs[0] == xs[-1] else f"[{xs[0]:g}, {xs[-1]:g}]"
+
+
+def _allowed(t: str, motor: Any) -> str | None:
+    """What the simulator allows for x0_m or plant.<field> ('[lo, hi] unit'), else None."""
+    if t == "x0_m":
+        from sim_fallback._sim import X0_MAX_M
+        return f"initial positions [{-X0_MAX_M:g}, {X0_MAX_M:g}] m"
+    if not t.startswith("plant.") or _motor_plant(motor) is None:
+        return None
+    from sim_fallback._motors import plant_field_range
+    rng = plant_field_range(t[6:])
+    return None if rng is None else f"[{rng[0]:g}, {rng[1]:g}]" + (
+        f" {rng[2]}" if rng[2] else "")
+
+
+def _plant_value_error(f: str, kind: str, vals: list[float], motor: Any) -> str | None:
+    """Why values of ``plant.<f>`` (absolute, or with kind "scale" times the motor's
+    nominal value) leave what the simulator accepts (None: they do not): the range of
+    the motor-file field it comes from (sim_fallback plant_field_range, the one table
+    load_motor checks files against), integers for integer fields, then each end with
+    the motor's other parameters through the simulator's own sim_params_check."""
+    from sim_fallback._motors import (
+        PLANT_FIELD_SOURCES,
+        plant_field_range,
+        plant_params,
+        plant_params_refused,
+    )
+    plant = _motor_plant(motor)
+    if plant is None or f not in plant:
+        return None  # reported on base / by _field_error
+    rng = plant_field_range(f)
+    if rng is None:
+        return (f"has no allowed range (not a motor-file field), so no axis sets it; "
+                f"plant fields an axis can set: {', '.join(PLANT_FIELD_SOURCES)}")
+    nominal = plant[f]
+    if isinstance(nominal, list):
+        return (f"is one value per phase ({len(nominal)}), which an axis's single number "
+                "cannot set (noise scales the offsets)")
+    lo, hi, _ = rng
+    allowed = _allowed("plant." + f, motor)
+    xs = sorted(float(v) * float(nominal) if kind == "scale" else float(v) for v in vals)
+    what = (f"x {nominal:g} (nominal) gives {_span(xs)}" if kind == "scale" else _span(xs))
+    if xs[0] < lo or xs[-1] > hi:
+        return f"{what}; the simulator allows {allowed}"
+    if isinstance(nominal, int) and (kind == "range" or not all(x.is_integer() for x in xs)):
+        return f"{what}: an integer field; need values: [...] of integers in {allowed}"
+    try:
+        mot = _motor_and_config(motor, "sogi_adaptive")[0]
+        for x in (xs[0], xs[-1]):
+            bad = plant_params_refused(plant_params(mot, **{f: int(x) if isinstance(
+                nominal, int) else x}))
+            if bad is not None:
+                return (f"{x:g} with motor {motor}'s other plant parameters: the simulator "
+                        f"refuses {bad} (sim_params_check: dL_sat_H < L_d0_H, F_coulomb_N "
+                        "<= F_static_N, udc_fullscale_V > u_dc_V, dead_time_s < 0.2 / "
+                        "f_pwm_Hz)")
+    except OSError:  # no simulator library here: the runs will say
+        pass
     return None
 
 
@@ -333,8 +406,10 @@ def _is_named_axis(tgt: Any, spec: Any) -> bool:
 
 
 def _parse_named_axis(name: str, spec: dict[str, Any], plant: dict[str, Any] | None,
-                      err: Callable[[str, str], None]) -> Axis | None:
-    """``name: {values: [...], set: {target: expr}}`` or ``name: {cases: {label: {...}}}``."""
+                      err: Callable[[str, str], None], motor: Any = "paper_salient",
+                      extractor: Any = "sogi_adaptive") -> Axis | None:
+    """``name: {values: [...], set: {target: expr}}`` or ``name: {cases: {label: {...}}}``;
+    the values a case or an expression gives are checked as an axis's (_value_error)."""
     fld = f"axes.{name}"
     if "cases" in spec:
         cases = spec["cases"]
@@ -354,8 +429,11 @@ def _parse_named_axis(name: str, spec: dict[str, Any], plant: dict[str, Any] | N
                     good = _valid_extractor(v)
                     why = None if good else f"{v!r} not one of {_choices('extractor')}"
                 elif t in CASE_TARGETS or _is_field(t):
+                    rng = _allowed(str(t), motor)
                     why = (_field_error(t, plant) if _is_field(t) else None) or (
-                        None if _finite(v) else f"{v!r}: need a finite number")
+                        None if _finite(v) else f"{v!r}: need a finite number" + (
+                            f"; the simulator allows {rng}" if rng else "")) or \
+                        _value_error(t, "values", [float(v)], motor, extractor)
                 else:
                     why = "target must be extractor, noise, x0_m, plant.<field> or fw.<field>"
                 if why:
@@ -385,6 +463,11 @@ def _parse_named_axis(name: str, spec: dict[str, Any], plant: dict[str, Any] | N
                and v not in plant]
         if why is None and bad:
             why = f"no plant parameter {bad[0]!r} in the expression"
+        if why is None and plant is not None:
+            got = [eval_expr(str(expr), float(x), plant) for x in vals]
+            verr = ("a non-finite value" if not all(map(math.isfinite, got)) else
+                    _value_error(t, "values", got, motor, extractor))
+            why = f"{expr!r} gives {verr}" if verr else None
         if why:
             err(f"{fld}.set.{t}", why)
             ok = False
@@ -634,7 +717,9 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
         if _is_named_axis(tgt, spec):
             ax = _parse_named_axis(str(tgt), spec, motor_plant,
                                    lambda f, m, n=node, t=str(tgt):
-                                   err(_node_at(n, f[len("axes." + t) + 1:]), f, m))
+                                   err(_node_at(n, f[len("axes." + t) + 1:]), f, m),
+                                   base.get("motor", "paper_salient"),
+                                   base.get("extractor", "sogi_adaptive"))
             if ax is not None:
                 axes.append(ax)
             continue
@@ -653,7 +738,9 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             err(node, fld, f"{kind!r} not one of values, range, scale")
             continue
         if not isinstance(vals, list) or not vals or not all(_finite(v) for v in vals):
-            err(node, fld, f"{kind} must be a non-empty list of finite numbers")
+            rng = _allowed(str(tgt), base.get("motor", "paper_salient"))
+            err(node, fld, f"{kind} must be a non-empty list of finite numbers"
+                + (f"; the simulator allows {rng}" if rng else ""))
             continue
         if kind in ("range", "scale") and (len(vals) != 2 or not vals[0] < vals[1]):
             err(node, fld, f"{kind} must be [lo, hi] with lo < hi")
@@ -893,12 +980,19 @@ def warm_worker(motors: tuple[str, ...] = ("paper_salient",),
 #: profiler sampling the busy thread every 10 ms, 20 ms event-loop ticks, 100 ms memory
 #: and work-stealing polls) took ~10 % of a core on an idle 2-core cluster, ~1.5 % with
 #: these. Workers run one thread and dask's nanny sets OMP/MKL/OPENBLAS_NUM_THREADS=1.
+#: worker-saturation 1.0: a worker is sent only the task it runs (dask's default 1.1
+#: rounds up to a second one, queued on it), so when a run kills its worker the death is
+#: counted against that task alone; with 1.1 the queued task was counted too and, once
+#: isolated to one run, recorded as "the worker died running this run" though it never
+#: started (an innocent run blamed). The next task then waits for a scheduler round trip
+#: (~1 ms, against chunks of 8 to 1024 runs of milliseconds each).
 LOCAL_CLUSTER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "500ms",
     "distributed.admin.system-monitor.interval": "2s",
     "distributed.worker.memory.monitor-interval": "1s",
     "distributed.scheduler.work-stealing-interval": "500ms",
+    "distributed.scheduler.worker-saturation": 1.0,
 }
 
 
@@ -1071,6 +1165,49 @@ def _dead_worker(fut: Any, chunk: list[dict[str, Any]], rdir: Path | None
     return [p for p in chunk if int(p["run"]) not in written]
 
 
+#: How long ``--scheduler`` may take to accept a connection and answer (s); dask's own
+#: default (``distributed.comm.timeouts.connect``) is 30 s, which an unreachable address
+#: made the user wait before any error.
+SCHEDULER_TIMEOUT_S = 5.0
+
+
+def connect_scheduler(address: str) -> Any:
+    """A Client of the Dask scheduler at ``address``; SchedulerError (one line naming
+    ``--scheduler``, the address and why) within about :data:`SCHEDULER_TIMEOUT_S` when
+    it cannot be reached. A tcp/tls address is probed first (a plain TCP connect), so a
+    refused port or an unknown host says so at once instead of dask's retries."""
+    import socket
+
+    from dask.distributed import Client
+    from distributed.comm import parse_address, parse_host_port
+
+    def fail(why: str) -> SchedulerError:
+        return SchedulerError(f"--scheduler {address}: cannot connect: {why}")
+
+    def first_line(e: BaseException) -> str:
+        return (str(e).splitlines() or [type(e).__name__])[0]
+
+    try:
+        scheme, loc = parse_address(address)
+        if scheme in ("tcp", "tls"):
+            host, port = parse_host_port(loc)
+            with socket.create_connection((host, port), timeout=SCHEDULER_TIMEOUT_S):
+                pass
+    except TimeoutError:
+        raise fail(f"no answer within {SCHEDULER_TIMEOUT_S:g} s") from None
+    except OSError as e:
+        raise fail(e.strerror or first_line(e)) from None
+    except (ValueError, TypeError) as e:
+        raise fail(first_line(e)) from None
+    try:
+        return Client(address, timeout=SCHEDULER_TIMEOUT_S)
+    except TimeoutError:
+        raise fail(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S:g} s") from None
+    except Exception as e:  # noqa: BLE001 - whatever else listens there: said, one line
+        raise fail(f"no Dask scheduler answered ({type(e).__name__}: {first_line(e)})"
+                   ) from None
+
+
 def _shares_our_files(client: Any) -> bool:
     """Whether the client's workers run on this machine (a LocalCluster's: the one
     ``bench campaign`` starts), so that they can write the results folder themselves."""
@@ -1152,12 +1289,7 @@ def _run_campaigns(cs: list[Campaign], out: Path, scheduler: Any, workers: int |
             if not own:
                 client = scheduler
             elif scheduler:
-                try:
-                    client = Client(scheduler)
-                except (OSError, ValueError, TypeError) as e:
-                    raise SchedulerError(f"--scheduler {scheduler}: cannot connect: "
-                                         f"{str(e).splitlines()[0] if str(e) else e!r}"
-                                         ) from None
+                client = connect_scheduler(str(scheduler))
             else:
                 cluster, client = start_local_cluster(workers)
             try:
@@ -1294,8 +1426,11 @@ def judge(c: Campaign, res: dict[str, np.ndarray]) -> list[dict[str, Any]]:
 
 
 def replay_command(c: Campaign, run: int) -> str:
-    """The one command that reruns a single run of a campaign."""
-    return f"bench campaign {c.path} --replay {run}"
+    """The one command that reruns a single run of a campaign, from any directory: the
+    campaign file's absolute path, quoted for a POSIX shell."""
+    import shlex
+    path = Path(c.path).resolve() if c.path is not None else Path("<campaign file>")
+    return f"bench campaign {shlex.quote(str(path))} --replay {run}"
 
 
 # ---- command line ------------------------------------------------------------

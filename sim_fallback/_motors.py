@@ -258,11 +258,62 @@ def _line_of(text: str, field: str) -> int:
     return 0
 
 
-def _get(path: Path, doc: dict, sec: str, key: str) -> Any:
-    req, lo, hi, unit, default = _SCHEMA[(sec, key)]
+def field_range(sec: str, key: str) -> tuple[float, float, str]:
+    """A motor-file field's allowed range ``(lo, hi, unit)``, inclusive: :data:`_SCHEMA`'s,
+    or for a field the firmware configuration shares, the firmware's own
+    (:func:`firmware_field_ranges`)."""
+    _, lo, hi, unit, _ = _SCHEMA[(sec, key)]
     if key in _FW_NAMES and key in firmware_field_ranges():
         lo, hi, fw_unit = firmware_field_ranges()[key]  # the firmware's own limits
         unit = fw_unit or unit
+    return lo, hi, unit
+
+
+#: ``sim_plant_params_t`` fields a motor file sets, by the motor-file field (linear
+#: parameterization: the same units) whose range they have (:func:`plant_field_range`).
+#: The others have no range of their own: v_stick_mps and locked are the simulator's,
+#: seed and the fault-injection masks are set by the run (``seed``, ``Sim.set_plant``).
+PLANT_FIELD_SOURCES: dict[str, tuple[str, str]] = {
+    "R_ohm": ("electrical", "R_ohm"), "L_d0_H": ("electrical", "L_d_H"),
+    "L_q_H": ("electrical", "L_q_H"), "psi_f_Wb": ("electrical", "psi_f_Wb"),
+    "dL_sat_H": ("electrical", "dL_sat_H"), "I_sat_A": ("electrical", "I_sat_A"),
+    "tau_m": ("mechanical", "pole_pitch_m"), "mass_kg": ("mechanical", "mass_kg"),
+    "b_visc_Ns_per_m": ("mechanical", "viscous_Ns_per_m"),
+    "F_coulomb_N": ("mechanical", "coulomb_friction_N"),
+    "F_static_N": ("mechanical", "static_friction_N"),
+    "cog_amp_N": ("mechanical", "cogging_N"), "cog_period_m": ("mechanical", "cogging_period_m"),
+    "cog_phase_rad": ("mechanical", "cogging_phase_rad"),
+    "u_dc_V": ("inverter", "u_dc_V"), "f_pwm_Hz": ("inverter", "f_pwm_Hz"),
+    "dead_time_s": ("inverter", "dead_time_s"), "dead_band_A": ("inverter", "dead_band_A"),
+    "n_sub": ("inverter", "n_sub"), "adc_bits": ("sensing", "adc_bits"),
+    "adc_i_fullscale_A": ("sensing", "adc_i_fullscale_A"),
+    "adc_noise_counts": ("sensing", "adc_noise_counts"),
+    "adc_offset_counts": ("sensing", "adc_offset_counts"),
+    "adc_gain_err": ("sensing", "adc_gain_err"),
+    "udc_fullscale_V": ("sensing", "udc_fullscale_V"), "udc_noise_V": ("sensing", "udc_noise_V"),
+}
+
+
+def plant_field_range(name: str) -> tuple[float, float, str] | None:
+    """A plant field's allowed range ``(lo, hi, unit)``, inclusive: its motor-file field's
+    (:data:`PLANT_FIELD_SOURCES`, :func:`field_range`); None for a field without one."""
+    src = PLANT_FIELD_SOURCES.get(name)
+    return field_range(*src) if src else None
+
+
+def plant_params_refused(p: _lib.SimPlantParams) -> str | None:
+    """The field the simulator's own check (``sim_params_check``: signs, finiteness and
+    the relations dL_sat < L_d0, F_static >= F_coulomb, udc_fullscale > u_dc, dead time
+    below 20 % of a PWM period) refuses in ``p``; None when it accepts them."""
+    bad = C.c_char_p()
+    if _lib.lib().sim_params_check(p, C.byref(bad)) != 0:
+        return bad.value.decode() if bad.value else "?"
+    return None
+
+
+def _get(path: Path, doc: dict, sec: str, key: str) -> Any:
+    req, _, _, _, default = _SCHEMA[(sec, key)]
+    lo, hi, unit = field_range(sec, key)
     name = f"{sec}.{key}"
     if key not in doc.get(sec, {}):
         if req:

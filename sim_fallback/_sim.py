@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ctypes as C
 import functools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +22,15 @@ from protocols.generated.od_names import Extractor, StartPhase
 
 from . import _lib
 from ._firmware import Firmware, config_error
-from ._motors import SENSING_SCALE_KEYS, Motor, extractor_id, fw_config, load_motor, plant_params
+from ._motors import (
+    SENSING_SCALE_KEYS,
+    Motor,
+    extractor_id,
+    fw_config,
+    load_motor,
+    plant_params,
+    plant_params_refused,
+)
 from .metrics import METRIC_DEFS, METRIC_NAMES, TRUTH_CHANNELS, run_metrics, wrap_pi
 
 SIM_REF_SPEED, SIM_REF_FORCE, SIM_REF_LOAD = 0, 1, 2
@@ -77,6 +86,12 @@ def _record_layout(want: tuple[str, ...], n_rec: int
     return out, off
 
 
+#: The largest initial position |x0| (m) the simulator takes: x is unwrapped and
+#: theta_e = pi x / tau in float64, which keeps the angle to 1e-9 rad up to ~3 km at the
+#: shortest pole pitch a motor file allows (1 mm); the firmware never sees x.
+X0_MAX_M = 1000.0
+
+
 class Sim:
     """One simulated drive: plant (truth) + firmware core, stepped in C.
 
@@ -116,9 +131,9 @@ class Sim:
         ov.setdefault("adc_offset_counts", [o * noise for o in mp["adc_offset_counts"]])
         ov.setdefault("seed", int(seed) & 0xFFFFFFFFFFFFFFFF)
         self.params = plant_params(self.motor, **ov)
-        bad = C.c_char_p()
-        if self._L.sim_params_check(self.params, C.byref(bad)) != 0:
-            raise ValueError(f"plant parameter '{bad.value.decode()}' invalid")
+        bad = plant_params_refused(self.params)
+        if bad is not None:
+            raise ValueError(f"plant parameter '{bad}' invalid")
         self._h = self._L.sim_new(self.params)
         if not self._h:
             raise MemoryError("sim_new failed")
@@ -156,7 +171,11 @@ class Sim:
     # ---- configuration ---------------------------------------------------
     def set_state(self, x0_m: float = 0.0, v0_mps: float = 0.0, i_d_A: float = 0.0,
                   i_q_A: float = 0.0) -> None:
-        """Set the true plant state (truth only: the firmware never sees it)."""
+        """Set the true plant state (truth only: the firmware never sees it). ``x0_m``
+        finite with |x0_m| <= :data:`X0_MAX_M` (else ValueError)."""
+        if not (math.isfinite(x0_m) and abs(x0_m) <= X0_MAX_M):
+            raise ValueError(f"x0_m = {x0_m!r} outside the allowed range [-{X0_MAX_M:g}, "
+                             f"{X0_MAX_M:g}] m")
         st = _lib.SimPlantState(i_d_A, i_q_A, x0_m, v0_mps, 1 if v0_mps == 0.0 else 0, 0)
         self._L.sim_set_state(self._h, C.byref(st))
 

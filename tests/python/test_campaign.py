@@ -94,13 +94,16 @@ def test_serial_run_resumes_and_records_failures(tmp_path):
     rms = np.asarray(res["position_error_rms_rad"], dtype=float)
     assert np.all(np.isfinite(rms)) and np.all(rms < 0.1)
     assert all(v["ok"] for v in judge(c, res))
-    # a run that cannot be built is recorded with its error, not dropped
-    bad = _parse(TINY.replace("seed: {values: [1, 2, 3]}", "plant.R_ohm: {values: [1.0, -1.0]}"))
+    # a run that cannot be built is recorded with its error, not dropped: each axis's
+    # values are accepted alone at load, but L_d0 = 2 mH with dL_sat = 3 mH the simulator
+    # refuses (dL_sat_H < L_d0_H)
+    bad = _parse(TINY.replace("seed: {values: [1, 2, 3]}", "plant.L_d0_H: {values: [0.012, "
+                              "0.002]}\n  plant.dL_sat_H: {values: [0.003]}"))
     run_campaign(bad, tmp_path / "bad", serial=True)
     rb = load_results(tmp_path / "bad" / "tiny")
     assert sorted(rb["run"]) == [0, 1]
     errs = [e for e in rb["error"] if e]
-    assert len(errs) == 1 and "R_ohm" in errs[0]
+    assert len(errs) == 1 and "dL_sat_H" in errs[0] and "dL_sat_H" in rb["error"][1]
     assert statistic(rb["position_error_rms_rad"], "fail_fraction") == 0.5
 
 
@@ -125,7 +128,8 @@ def test_dask_local_cluster_matches_serial(tmp_path):
 
     from bench._campaign import _shares_our_files, start_local_cluster
     text = TINY.replace("seed: {values: [1, 2, 3]}", "seed: {values: [1, 2, 3]}\n"
-                        "  plant.R_ohm: {values: [1.2, -1.0]}")  # half the runs fail
+                        "  plant.L_d0_H: {values: [0.012, 0.002]}\n"  # half the runs fail:
+                        "  plant.dL_sat_H: {values: [0.003]}")  # dL_sat_H >= L_d0_H
     c = _parse(text)
     run_campaign(c, tmp_path / "s", serial=True)
     cl, client = start_local_cluster(2)
@@ -274,7 +278,8 @@ def test_report_shows_limits_worst_runs_and_comparison(tmp_path):
     out = write_report(c, tmp_path / "a" / "tiny", other=tmp_path / "b" / "tiny")
     text = out.read_text()
     assert "PASSED: 1 of 1 limits hold" in text
-    assert "bench campaign c.yaml --replay 2" in text  # every worst run can be replayed
+    # every worst run can be replayed, from any directory (the file's absolute path)
+    assert f"bench campaign {Path('c.yaml').resolve()} --replay 2" in text
     assert text.count("Plotly.newPlot") == 2  # one histogram, one scatter per axis
     assert "plotly.js" in text.lower() or "plotly v" in text.lower()  # embedded: offline
     res = load_results(tmp_path / "a" / "tiny")

@@ -62,6 +62,47 @@ def _load(tmp_path: Path, text: str):
      "c.yaml:5: axes.fw.R_ohm: [0, 1]; the firmware allows [0.001, 100] ohm"),
     (OK.replace("seed: {values: [1, 2, 3]}", "fw.R_ohm: {scale: [0.5, 1e9]}"),
      "the firmware allows [0.001, 100] ohm"),
+    # plant.<field> and x0_m values were not checked at load: every run failed (negative
+    # resistance, zero mass) or ran with a value no motor file may have
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.R_ohm: {values: [1.2, -1.0]}"),
+     "c.yaml:5: axes.plant.R_ohm: [-1, 1.2]; the simulator allows [0.001, 100] ohm"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.mass_kg: {range: [0, 10]}"),
+     "c.yaml:5: axes.plant.mass_kg: [0, 10]; the simulator allows [0.001, 100000] kg"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.L_q_H: {scale: [0.5, 100]}"),
+     "c.yaml:5: axes.plant.L_q_H: x 0.018 (nominal) gives [0.009, 1.8]; the simulator "
+     "allows [1e-05, 1] H"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.L_d0_H: {values: [.nan]}"),
+     "c.yaml:5: axes.plant.L_d0_H: values must be a non-empty list of finite numbers; "
+     "the simulator allows [1e-05, 1] H"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.L_d0_H: {values: [0.001]}"),
+     "c.yaml:5: axes.plant.L_d0_H: 0.001 with motor paper_salient's other plant parameters: "
+     "the simulator refuses dL_sat_H (sim_params_check: dL_sat_H < L_d0_H"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.adc_bits: {range: [8, 12]}"),
+     "c.yaml:5: axes.plant.adc_bits: [8, 12]: an integer field; need values: [...] of "
+     "integers in [8, 16] bit"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.adc_offset_counts: {values: [1]}"),
+     "c.yaml:5: axes.plant.adc_offset_counts: is one value per phase (3)"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.locked: {values: [1]}"),
+     "c.yaml:5: axes.plant.locked: has no allowed range (not a motor-file field)"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "plant.Rohm: {values: [1]}"),
+     "c.yaml:5: axes.plant.Rohm: no plant parameter 'Rohm'"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "x0_m: {range: [0, 1e6]}"),
+     "c.yaml:5: axes.x0_m: [0, 1e+06]; the simulator allows initial positions "
+     "[-1000, 1000] m"),
+    (OK.replace("seed: {values: [1, 2, 3]}", "x0_m: {values: [.inf]}"),
+     "c.yaml:5: axes.x0_m: values must be a non-empty list of finite numbers; the simulator "
+     "allows initial positions [-1000, 1000] m"),
+    (OK.replace("  seed: {values: [1, 2, 3]}", "  v:\n    cases:\n      a: {x0_m: -2000}\n"
+                "      b: {}"),
+     "c.yaml:7: axes.v.cases.a.x0_m: -2000; the simulator allows initial positions "
+     "[-1000, 1000] m"),
+    (OK.replace("  seed: {values: [1, 2, 3]}", "  v:\n    cases:\n      a: {}\n"
+                "      b: {plant.mass_kg: -1}"),
+     "c.yaml:8: axes.v.cases.b.plant.mass_kg: -1; the simulator allows [0.001, 100000] kg"),
+    (OK.replace("  seed: {values: [1, 2, 3]}", "  k:\n    values: [1, 1000]\n"
+                "    set: {plant.R_ohm: plant.R_ohm * x}"),
+     "c.yaml:7: axes.k.set.plant.R_ohm: 'plant.R_ohm * x' gives [0.958, 958]; the simulator "
+     "allows [0.001, 100] ohm"),
 ])
 def test_bad_files_give_one_line_per_problem(tmp_path, text, where):
     with pytest.raises(CampaignError) as ei:
@@ -69,6 +110,39 @@ def test_bad_files_give_one_line_per_problem(tmp_path, text, where):
     msg = str(ei.value)
     assert where in msg, msg
     assert "Traceback" not in msg and len(msg.splitlines()) == 1, msg
+
+
+def test_plant_ranges_are_the_motor_files(tmp_path, monkeypatch):
+    """A campaign allows a plant field what a motor file may hold, no more (one table):
+    a motor file with the campaign's refused value is refused by load_motor too, and the
+    ends of the range a campaign names load."""
+    import re
+
+    import sim_fallback
+    from sim_fallback import MotorFileError, load_motor
+    text = (tmp_path / "m.toml")
+    good = (Path(sim_fallback.__file__).parent / "motors" / "paper_salient.toml").read_text()
+    with pytest.raises(CampaignError) as ei:
+        _load(tmp_path, OK.replace("seed: {values: [1, 2, 3]}", "plant.R_ohm: {values: [200]}"))
+    lo, hi = map(float, re.search(r"allows \[([^,]+), ([^\]]+)\] ohm", str(ei.value)).groups())
+    for r, ok in ((lo, True), (hi, True), (lo / 2, False), (hi * 2, False)):
+        text.write_text(re.sub(r"R_ohm = \S+", f"R_ohm = {r!r}", good))
+        if ok:
+            assert load_motor(text).plant["R_ohm"] == r
+            _load(tmp_path, OK.replace("seed: {values: [1, 2, 3]}",
+                                       f"plant.R_ohm: {{values: [{r!r}]}}"))
+        else:
+            with pytest.raises(MotorFileError, match=r"R_ohm"):
+                load_motor(text)
+
+
+def test_a_bad_plant_value_is_one_line_exit_2(tmp_path):
+    f = tmp_path / "a.yaml"
+    f.write_text(OK.replace("seed: {values: [1, 2, 3]}", "plant.R_ohm: {values: [1.2, -1.0]}"))
+    rc, out, err = _cli(f, "--serial", "--out", tmp_path / "o")
+    assert (rc, err.strip()) == (2, f"bench: {f}:5: axes.plant.R_ohm: [-1, 1.2]; the "
+                                    "simulator allows [0.001, 100] ohm"), err
+    assert not (tmp_path / "o").exists()
 
 
 def test_a_huge_grid_is_refused_at_once(tmp_path):
@@ -137,11 +211,10 @@ def test_a_run_that_kills_its_worker_is_recorded(tmp_path, local):
     c = _load(tmp_path, OK.replace("t_end: 0.3", "t_end: 0.05").replace(
         "{values: [1, 2, 3]}", "{range: [0, 10]}"))
     run_campaign(c, tmp_path / "s", serial=True)
-    # dask gives up on a task at once (it retries 3 times by default), and a worker
-    # holds only the task it runs (1.1 by default: a second one, queued, which its
-    # death would count against too)
-    with dask.config.set({"distributed.scheduler.allowed-failures": 0,
-                          "distributed.scheduler.worker-saturation": 1.0}):
+    # dask gives up on a task at once (it retries 3 times by default); the local
+    # cluster's own settings (LOCAL_CLUSTER_CONFIG) must keep an innocent task queued on
+    # the crashing worker from being blamed with it
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
         cl, client = start_local_cluster(2)
     try:
         client.register_plugin(CrashRun(6))
@@ -236,7 +309,90 @@ def test_cli_folder_compare_and_scheduler_errors_are_one_line(tmp_path):
     assert "--compare" in err and "part-r00000000.parquet: unreadable Parquet" in err
     rc, out, err = _cli(g, "--out", tmp_path / "o3", "--scheduler", "nonsense")
     assert (rc, err.strip()) == (2, "bench: --scheduler nonsense: cannot connect: "
-                                    "\"missing port number in address 'nonsense'\""), err
+                                    "missing port number in address 'nonsense'"), err
+
+
+def test_an_unreachable_scheduler_is_one_line_at_once(tmp_path):
+    """A closed port was refused only after dask's 30 s connect timeout, as 'Timed out
+    trying to connect'; now the port is probed first and the error says why at once."""
+    import socket
+    f = tmp_path / "a.yaml"
+    f.write_text(OK)
+    with socket.socket() as s:  # a port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    try:
+        socket.create_connection(("127.0.0.1", port), timeout=5).close()
+        pytest.skip("something listens on the port just freed")
+    except OSError as e:
+        why = e.strerror
+    rc, out, err = _cli(f, "--out", tmp_path / "o", "--scheduler", f"tcp://127.0.0.1:{port}")
+    assert (rc, err.strip()) == (2, f"bench: --scheduler tcp://127.0.0.1:{port}: cannot "
+                                    f"connect: {why}"), err
+
+
+def test_something_else_than_a_scheduler_at_the_address_is_one_line(tmp_path):
+    """A server that answers with something else (here an HTTP error, as a proxy would)
+    made dask read a huge frame length: an internal error (MemoryError, exit 4)."""
+    import socket
+    import threading
+    f = tmp_path / "a.yaml"
+    f.write_text(OK)
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen()
+    port = srv.getsockname()[1]
+
+    def answer() -> None:
+        while True:
+            try:
+                conn, _ = srv.accept()
+            except OSError:
+                return
+            with conn:
+                conn.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n" * 8)
+
+    threading.Thread(target=answer, daemon=True).start()
+    try:
+        rc, out, err = _cli(f, "--out", tmp_path / "o", "--scheduler",
+                            f"tcp://127.0.0.1:{port}")
+    finally:
+        srv.close()
+    assert (rc, err.count("\n")) == (2, 1), err
+    assert err.startswith(f"bench: --scheduler tcp://127.0.0.1:{port}: cannot connect: "
+                          "no Dask scheduler answered"), err
+
+
+def test_a_silent_scheduler_address_is_given_a_short_timeout(tmp_path, monkeypatch):
+    """A port that accepts but never answers as a scheduler: the Client is asked to give
+    up well before dask's default connect timeout (30 s), and its timeout is one line."""
+    import socket
+
+    import dask
+    import dask.distributed
+    from dask.utils import parse_timedelta
+
+    from bench._campaign import SchedulerError, run_campaign
+    seen = {}
+
+    class Client:
+        def __init__(self, address, **kw):
+            seen.update(kw, address=address)
+            raise TimeoutError(f"Timed out trying to connect to {address}")
+
+    monkeypatch.setattr(dask.distributed, "Client", Client)
+    c = _load(tmp_path, OK)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        addr = f"tcp://127.0.0.1:{s.getsockname()[1]}"
+        with pytest.raises(SchedulerError) as ei:
+            run_campaign(c, tmp_path / "o", scheduler=addr)
+    default = parse_timedelta(dask.config.get("distributed.comm.timeouts.connect"))
+    assert seen["address"] == addr
+    assert 0 < parse_timedelta(seen["timeout"]) <= 10 < default
+    assert str(ei.value) == (f"--scheduler {addr}: cannot connect: no Dask scheduler "
+                             f"answered within {parse_timedelta(seen['timeout']):g} s")
 
 
 CORNERS = """name: corners
@@ -245,7 +401,8 @@ sampling: {method: lhs, n: 8, seed: 4}
 axes:
   fw.L_q_H: {scale: [0.85, 1.15]}
   plant.adc_noise_counts: {range: [0.5, 3.0]}
-  plant.R_ohm: {values: [1.2, -1.0, 1.3, 1.4]}
+  plant.L_d0_H: {values: [0.012, 0.002, 0.012, 0.012]}
+  plant.dL_sat_H: {values: [0.003]}
 metrics: [position_error_rms_rad, position_error_max_rad]
 limits:
   - {metric: position_error_max_rad, stat: max, max: 0.05}
@@ -308,6 +465,30 @@ def test_replay_command_reproduces_the_recorded_run(tmp_path):
     assert (rc, row["run"], row["error"]) == (0, k, None), err
     for m in METRICS:
         assert row[m] == float(res[m][k])
+
+
+def test_replay_command_works_from_another_directory(tmp_path, monkeypatch):
+    """The command named the campaign file as given: a relative path (here with a
+    space, which the shell split) that another directory does not have. Now it is the
+    absolute path, shell-quoted, and gives the recorded numbers from elsewhere."""
+    import json
+    import shlex
+
+    from bench._campaign import load_results, replay_command, run_campaign
+    (tmp_path / "my dir").mkdir()
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "my dir" / "c.yaml").write_text(OK)
+    monkeypatch.chdir(tmp_path)
+    c = load_campaign(Path("my dir") / "c.yaml", METRICS)
+    run_campaign(c, tmp_path / "out", serial=True)
+    res = load_results(tmp_path / "out" / "t")
+    args = shlex.split(replay_command(c, 1))
+    assert args[:2] == ["bench", "campaign"] and args[3:] == ["--replay", "1"]
+    assert args[2] == str(tmp_path / "my dir" / "c.yaml")
+    rc, out, err = _cli(*args[2:], cwd=tmp_path / "elsewhere")
+    row = json.loads(out)
+    assert (rc, row["run"], row["error"]) == (0, 1, None), err
+    assert row["position_error_rms_rad"] == float(res["position_error_rms_rad"][1])
 
 
 def test_reproduction_renderer_reads_results_as_campaigns_do(tmp_path, capsys):
