@@ -30,6 +30,7 @@ import json
 import math
 import os
 import re
+import shlex
 import time
 import traceback
 from collections.abc import Callable, Iterable
@@ -1428,7 +1429,6 @@ def judge(c: Campaign, res: dict[str, np.ndarray]) -> list[dict[str, Any]]:
 def replay_command(c: Campaign, run: int) -> str:
     """The one command that reruns a single run of a campaign, from any directory: the
     campaign file's absolute path, quoted for a POSIX shell."""
-    import shlex
     path = Path(c.path).resolve() if c.path is not None else Path("<campaign file>")
     return f"bench campaign {shlex.quote(str(path))} --replay {run}"
 

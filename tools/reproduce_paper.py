@@ -44,6 +44,7 @@ from bench._campaign import (  # noqa: E402
     judge,
     load_campaign,
     load_results,
+    replay_command,
     run_campaigns,
 )
 from bench._reproduction import render  # noqa: E402
@@ -77,11 +78,12 @@ def run(results: Path, quick: bool = False, serial: bool = False, workers: int |
     failed = []
     for c, rdir in zip(cs, rdirs, strict=True):
         res = load_results(rdir)
-        errs = sum(1 for e in res["error"] if e)
+        err_runs = [r for r, e in zip(res["run"], res["error"], strict=True) if e]
+        errs = len(err_runs)
         bad = [f"{c.name}: {v['stat']}({v['metric']}) = {v['value']:.4g} outside "
                f"[{v['min']}, {v['max']}]" for v in judge(c, res) if not v["ok"]]
-        failed += bad + ([f"{c.name}: {errs} runs failed (bench campaign {c.path} --replay "
-                          "RUN shows one)"] if errs else [])
+        failed += bad + ([f"{c.name}: {errs} runs failed (the first: "
+                          f"{replay_command(c, int(err_runs[0]))})"] if errs else [])
         log(f"{c.name:34s} {len(res['run']):4d} runs, limits "
             + ("hold" if not bad else "FAIL") + (f", {errs} failed runs" if errs else ""))
     log(f"{sum(len(c.runs()) for c in cs)} runs in {time.perf_counter() - t0:.1f} s "

@@ -181,3 +181,21 @@ def test_compare_can_fail() -> None:
         _compare(base, {"x": [{"v": 0.01, "faults": [65287]}]})
     with pytest.raises(AssertionError):
         _compare(base, {"x": [{"v": 0.01, "faults": [0]}], "y": 1})
+
+
+def test_a_failed_run_is_named_with_its_replay_command(rp: ModuleType, tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """A campaign with a run the simulator refuses: the summary line names the first
+    failed run's replay command (bench._campaign.replay_command: absolute path)."""
+    cfile = tmp_path / "tiny.yaml"
+    cfile.write_text(
+        "name: tiny\nbase: {scenario: load_step, t_end: 0.05}\nsampling: {method: grid}\n"
+        "axes:\n  plant.L_d0_H: {values: [0.012, 0.002]}\n  plant.dL_sat_H: {values: [0.003]}\n"
+        "metrics: [position_error_rms_rad]\n")
+    from sim_fallback.metrics import METRIC_NAMES
+
+    c = rp.load_campaign(cfile, METRIC_NAMES)
+    monkeypatch.setattr(rp, "campaigns", lambda quick=False: [c])
+    failed = rp.run(tmp_path / "results", serial=True, log=lambda _m: None)
+    assert failed == [f"tiny: 1 runs failed (the first: bench campaign {cfile.resolve()} "
+                      "--replay 1)"]
