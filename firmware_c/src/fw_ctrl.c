@@ -503,9 +503,16 @@ static unsigned snap_written_est(const fw_period_t *p, unsigned w) {
  *  flags: only fw_step and the commands that restart the blocks change them)
  *  are read in fw_get_snapshot (off the hot path). */
 static void fill_snapshot_common(const fw_ctrl_t *c, const fw_period_t *p, fw_snapshot_t *s) {
+  (void)p; /* the period's signals went in at stage_inputs (snapshot_inputs) */
   s->cia402_state = (uint8_t)c->sm.state;
   s->start_phase = (uint8_t)c->phase;
   s->fault_code = (uint16_t)c->fault.code;
+}
+
+/** The sample's signals into the snapshot as soon as they are known (every
+ *  path after stage_inputs writes the common group): stored at the end of the
+ *  step they held three FP registers through it. */
+static void snapshot_inputs(const fw_period_t *p, fw_snapshot_t *s) {
   s->i_ab_A[0] = p->i_ab.x;
   s->i_ab_A[1] = p->i_ab.y;
   s->u_dc_V = p->u_dc_V;
@@ -826,6 +833,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   snap->theta_hat_rad = theta_k;
   fw_period_t p;
   stage_inputs(c, ia, ib, ic, u_dc, &p);
+  snapshot_inputs(&p, snap);
   if (FW_UNLIKELY(!stage_power(c, &p))) {
     stage_off(c, &p, snap);
     end_off(c, &p, out, snap);
