@@ -60,25 +60,32 @@ static FW_ALWAYS_INLINE void ring_push(fw_inj_t *j, float ed, float eq, float ia
   const uint32_t i = j->ring_idx;
   float *row = j->ring[i];
   const bool full = j->ring_fill == j->n_inj;
+  /* the sums in locals: the row's stores could alias them (float through a
+   * pointer), so the sums were stored, and reloaded after the row (the same
+   * operations in the same order) */
+  float sum_ed = j->sum_ed;
+  float sum_eq = j->sum_eq;
   if (FW_LIKELY(full)) {
-    j->sum_ed -= row[0];
-    j->sum_eq -= row[1];
+    sum_ed -= row[0];
+    sum_eq -= row[1];
   } else {
     j->ring_fill++;
   }
   row[0] = ed;
   row[1] = eq;
-  j->sum_ed += ed;
-  j->sum_eq += eq;
+  j->sum_ed = sum_ed + ed;
+  j->sum_eq = sum_eq + eq;
   if (currents) {
+    float sum_ia = j->sum_ia;
+    float sum_ib = j->sum_ib;
     if (full) {
-      j->sum_ia -= row[2];
-      j->sum_ib -= row[3];
+      sum_ia -= row[2];
+      sum_ib -= row[3];
     }
     row[2] = ia;
     row[3] = ib;
-    j->sum_ia += ia;
-    j->sum_ib += ib;
+    j->sum_ia = sum_ia + ia;
+    j->sum_ib = sum_ib + ib;
   }
   j->ring_idx = (i + 1u == j->n_inj) ? 0u : i + 1u;
 }
