@@ -58,32 +58,32 @@ void fw_inj_set_extractor(fw_inj_t *j, const fw_cfg_estimator_t *est, fw_extract
 static FW_ALWAYS_INLINE void ring_push(fw_inj_t *j, float ed, float eq, float ia, float ib,
                                        bool currents) {
   const uint32_t i = j->ring_idx;
-  float *row = j->ring[i];
   const bool full = j->ring_fill == j->n_inj;
-  /* the sums in locals: the row's stores could alias them (float through a
-   * pointer), so the sums were stored, and reloaded after the row (the same
-   * operations in the same order) */
+  /* the row as j->ring[i][.], not through a float pointer: a store through a
+   * pointer could alias any float of the controller, and GCC then reloaded what
+   * it held (the sums here, and fields of the stages after); the sums in
+   * locals (the same operations in the same order) */
   float sum_ed = j->sum_ed;
   float sum_eq = j->sum_eq;
   if (FW_LIKELY(full)) {
-    sum_ed -= row[0];
-    sum_eq -= row[1];
+    sum_ed -= j->ring[i][0];
+    sum_eq -= j->ring[i][1];
   } else {
     j->ring_fill++;
   }
-  row[0] = ed;
-  row[1] = eq;
+  j->ring[i][0] = ed;
+  j->ring[i][1] = eq;
   j->sum_ed = sum_ed + ed;
   j->sum_eq = sum_eq + eq;
   if (currents) {
     float sum_ia = j->sum_ia;
     float sum_ib = j->sum_ib;
     if (full) {
-      sum_ia -= row[2];
-      sum_ib -= row[3];
+      sum_ia -= j->ring[i][2];
+      sum_ib -= j->ring[i][3];
     }
-    row[2] = ia;
-    row[3] = ib;
+    j->ring[i][2] = ia;
+    j->ring[i][3] = ib;
     j->sum_ia = sum_ia + ia;
     j->sum_ib = sum_ib + ib;
   }
