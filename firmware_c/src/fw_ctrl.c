@@ -489,7 +489,20 @@ typedef struct {
   float u_d_pulse;         /**< polarity pulse voltage */
   fw_vec2_f32_t i_ref;     /**< current references */
   fw_vec2_f32_t u_dq;      /**< fundamental voltage command */
+  bool adapt;              /**< the adaptive SOGI's gain follows adapt_r (adapt_at_end) */
+  float adapt_r;           /**< the observer's adaptation signal of this period */
 } fw_period_t;
+
+/** The adaptive SOGI's gain (fw_inj_adapt) at the end of the step, on every
+ *  path that ran the extraction: nothing in the step reads the gains after the
+ *  SOGI steps of stage_estimate, and the rare call to fw_inj_set_k there (a
+ *  real call, which clobbers s0-s15 and r0-r3) made GCC keep the period's
+ *  values in callee-saved registers and spill around it. */
+static FW_ALWAYS_INLINE void adapt_at_end(fw_ctrl_t *c, const fw_period_t *p) {
+  if (FW_LIKELY(p->adapt)) {
+    fw_inj_adapt(&c->inj, &c->cfg.estimator, p->adapt_r);
+  }
+}
 
 /** The snapshot groups written (fw_step_into's result): w, and the
  *  extraction's when it ran (not during the polarity pulses). */
@@ -605,6 +618,8 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p,
   hf->i_f_ab_A = p->i_ab;
   hf->e_raw_dq_A.x = hf->e_raw_dq_A.y = 0.0f; /* raw HF difference, for the monitor */
   hf->E_d_A = 0.0f;
+  p->adapt = false;
+  p->adapt_r = 0.0f; /* not read when !adapt */
   const float w_frame = c->obs.pll.w_hat_radps; /* theta_hat turned at this from k-1 to k */
   if (FW_LIKELY(!p->pulses)) {
     const fw_extractor_t ex = (fw_extractor_t)cfg->estimator.extractor;
@@ -621,9 +636,9 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p,
     oi.running = (uint8_t)(c->phase == FW_START_RUN);
     float adapt_r;
     const float eps = fw_obs_update(&c->obs, &oi, &adapt_r);
-    if (FW_LIKELY(ex == FW_EXTRACTOR_SOGI_ADAPTIVE)) { /* the default */
-      fw_inj_adapt(&c->inj, &cfg->estimator, adapt_r);
-    }
+    /* the default extractor: the gain follows adapt_r at the end of the step */
+    p->adapt = FW_LIKELY(ex == FW_EXTRACTOR_SOGI_ADAPTIVE);
+    p->adapt_r = adapt_r;
     snap->pll_err_rad = eps;
     snap->hf_amp_A = hf->E_d_A;
     snap->hf_q_A = hf->E_q_A;
@@ -855,6 +870,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   if (FW_UNLIKELY(!(fw_cia402_power_enabled(c->sm.state) || p.braking) || /* a fault, above */
                   !stage_references(c, &p))) { /* quick stop / braking done */
     end_off(c, &p, out, snap);
+    adapt_at_end(c, &p);
     return snap_written_est(&p, FW_SNAP_W_COMMON);
   }
   /* current loop in the estimated frame, or the polarity pulses */
@@ -873,6 +889,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   }
   if (FW_UNLIKELY(!stage_monitor(c, &hf, &p))) { /* hard fault: switch off now */
     end_off(c, &p, out, snap);
+    adapt_at_end(c, &p);
     return snap_written_est(&p, FW_SNAP_W_COMMON);
   }
   fw_foc_commit(&c->foc, p.u_dq);
@@ -885,6 +902,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
     }
   }
   fill_snapshot_common(c, &p, snap);
+  adapt_at_end(c, &p);
   return snap_written_est(&p, FW_SNAP_W_COMMON | FW_SNAP_W_OUT | FW_SNAP_W_REF);
 }
 
