@@ -102,8 +102,9 @@ void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab, fw_sincos
   m->e_raw_dq_A.x *= s;
   m->e_raw_dq_A.y *= s;
 
-  const float h_a = fw_sogi_step_f32(&j->sogi_a, i_ab.x, NULL);
-  const float h_b = fw_sogi_step_f32(&j->sogi_b, i_ab.y, NULL);
+  /* sogi_b has sogi_a's gains (fw_inj_reset, fw_inj_set_k) */
+  float h_a, h_b;
+  fw_sogi_step_pair_f32(&j->sogi_a, i_ab.x, &j->sogi_b, i_ab.y, &h_a, &h_b);
   fw_vec2_f32_t dh;
   if (ex == FW_EXTRACTOR_PSEUDO) {
     dh.x = i_ab.x - j->h_prev_raw[0];
