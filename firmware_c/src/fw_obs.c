@@ -19,12 +19,16 @@ static float lp_alpha(float f_Hz, float dt_s) {
  *  increments once the position is large (ulp 0.06 rad at 1e6 rad). */
 static FW_ALWAYS_INLINE void pos_add(fw_obs_t *o, float d) {
   float x = o->pos_unwrapped_e + d;
-  if (FW_UNLIKELY(x >= FW_PI_F32)) {
-    x -= FW_TWO_PI_F32;
-    o->pos_turns++;
-  } else if (FW_UNLIKELY(x < -FW_PI_F32)) {
-    x += FW_TWO_PI_F32;
-    o->pos_turns--;
+  /* usually in range: one test against pi (the constant the wrap before has in a
+   * register); -pi and NaN take the exact tests, which leave them as they are */
+  if (FW_UNLIKELY(!(fabsf(x) < FW_PI_F32))) {
+    if (x >= FW_PI_F32) {
+      x -= FW_TWO_PI_F32;
+      o->pos_turns++;
+    } else if (x < -FW_PI_F32) {
+      x += FW_TWO_PI_F32;
+      o->pos_turns--;
+    }
   }
   o->pos_unwrapped_e = x;
 }
