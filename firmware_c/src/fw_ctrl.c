@@ -450,8 +450,11 @@ static fw_fault_t protect(fw_ctrl_t *c, fw_vec2_f32_t i_dq, bool quick_stop) {
   pi.omega_hat_radps = c->obs.pll.w_i_radps;
   pi.omega_f_radps = c->obs.omega_f;
   /* the position (a division) only when the limits are on */
-  pi.pos_m = FW_UNLIKELY(c->prot.pos_on) ? pos_hat_m(c) : 0.0f; /* off by default */
-  pi.cmd = c->mode == FW_MODE_SPEED ? c->speed_ref_radps_e : c->i_q_ref_force_A;
+  const bool pos_on = FW_UNLIKELY(c->prot.pos_on); /* off by default */
+  pi.pos_m = pos_on ? pos_hat_m(c) : 0.0f;
+  /* the command's sign matters only to the position limits (fw_protect_update
+   * reads it nowhere else): not selected per mode on the usual period */
+  pi.cmd = pos_on ? (c->mode == FW_MODE_SPEED ? c->speed_ref_radps_e : c->i_q_ref_force_A) : 0.0f;
   pi.speed_ref_radps_e = c->speed_ref_radps_e;
   pi.speed_mode = (uint8_t)(c->mode == FW_MODE_SPEED);
   pi.quick_stop = (uint8_t)quick_stop;
