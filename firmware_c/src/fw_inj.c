@@ -87,7 +87,10 @@ static FW_ALWAYS_INLINE void ring_push(fw_inj_t *j, float ed, float eq, float ia
     j->sum_ia = sum_ia + ia;
     j->sum_ib = sum_ib + ib;
   }
-  j->ring_idx = (i + 1u == j->n_inj) ? 0u : i + 1u;
+  /* next row, 0 after the last: as a product, which GCC does not turn into a
+   * branch (it laid the usual case out of line, two taken branches) */
+  const uint32_t next = i + 1u;
+  j->ring_idx = next * (uint32_t)(next != j->n_inj);
 }
 
 void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab, fw_sincos_f32_t sc_k,

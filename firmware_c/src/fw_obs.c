@@ -163,7 +163,7 @@ fw_fault_t fw_obs_supervise(fw_obs_t *o, const fw_config_t *cfg, float hf_amp_A,
   if (cfg->estimator.u_inj_V > 0.0f && hf_amp_A < o->hf_min_A * inj_scale) {
     return FW_FAULT_EST_HF_LOW;
   }
-  if (running) {
+  if (FW_LIKELY(running)) { /* closed loop */
     if (FW_UNLIKELY(fabsf(o->err_f) > cfg->protection.pll_err_max_rad)) {
       o->pll_err_time_s += o->dt_s;
       if (o->pll_err_time_s > cfg->protection.pll_err_time_s) {
