@@ -450,8 +450,11 @@ static fw_fault_t protect(fw_ctrl_t *c, fw_vec2_f32_t i_dq, bool quick_stop) {
   pi.omega_hat_radps = c->obs.pll.w_i_radps;
   pi.omega_f_radps = c->obs.omega_f;
   /* the position (a division) only when the limits are on */
-  pi.pos_m = FW_UNLIKELY(c->prot.pos_on) ? pos_hat_m(c) : 0.0f; /* off by default */
-  pi.cmd = c->mode == FW_MODE_SPEED ? c->speed_ref_radps_e : c->i_q_ref_force_A;
+  const bool pos_on = FW_UNLIKELY(c->prot.pos_on); /* off by default */
+  pi.pos_m = pos_on ? pos_hat_m(c) : 0.0f;
+  /* the command's sign matters only to the position limits (fw_protect_update
+   * reads it nowhere else): not selected per mode on the usual period */
+  pi.cmd = pos_on ? (c->mode == FW_MODE_SPEED ? c->speed_ref_radps_e : c->i_q_ref_force_A) : 0.0f;
   pi.speed_ref_radps_e = c->speed_ref_radps_e;
   pi.speed_mode = (uint8_t)(c->mode == FW_MODE_SPEED);
   pi.quick_stop = (uint8_t)quick_stop;
@@ -489,7 +492,20 @@ typedef struct {
   float u_d_pulse;         /**< polarity pulse voltage */
   fw_vec2_f32_t i_ref;     /**< current references */
   fw_vec2_f32_t u_dq;      /**< fundamental voltage command */
+  bool adapt;              /**< the adaptive SOGI's gain follows adapt_r (adapt_at_end) */
+  float adapt_r;           /**< the observer's adaptation signal of this period */
 } fw_period_t;
+
+/** The adaptive SOGI's gain (fw_inj_adapt) at the end of the step, on every
+ *  path that ran the extraction: nothing in the step reads the gains after the
+ *  SOGI steps of stage_estimate, and the rare call to fw_inj_set_k there (a
+ *  real call, which clobbers s0-s15 and r0-r3) made GCC keep the period's
+ *  values in callee-saved registers and spill around it. */
+static FW_ALWAYS_INLINE void adapt_at_end(fw_ctrl_t *c, const fw_period_t *p) {
+  if (FW_LIKELY(p->adapt)) {
+    fw_inj_adapt(&c->inj, &c->cfg.estimator, p->adapt_r);
+  }
+}
 
 /** The snapshot groups written (fw_step_into's result): w, and the
  *  extraction's when it ran (not during the polarity pulses). */
@@ -503,9 +519,16 @@ static unsigned snap_written_est(const fw_period_t *p, unsigned w) {
  *  flags: only fw_step and the commands that restart the blocks change them)
  *  are read in fw_get_snapshot (off the hot path). */
 static void fill_snapshot_common(const fw_ctrl_t *c, const fw_period_t *p, fw_snapshot_t *s) {
+  (void)p; /* the period's signals went in at stage_inputs (snapshot_inputs) */
   s->cia402_state = (uint8_t)c->sm.state;
   s->start_phase = (uint8_t)c->phase;
   s->fault_code = (uint16_t)c->fault.code;
+}
+
+/** The sample's signals into the snapshot as soon as they are known (every
+ *  path after stage_inputs writes the common group): stored at the end of the
+ *  step they held three FP registers through it. */
+static void snapshot_inputs(const fw_period_t *p, fw_snapshot_t *s) {
   s->i_ab_A[0] = p->i_ab.x;
   s->i_ab_A[1] = p->i_ab.y;
   s->u_dc_V = p->u_dc_V;
@@ -598,6 +621,8 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p,
   hf->i_f_ab_A = p->i_ab;
   hf->e_raw_dq_A.x = hf->e_raw_dq_A.y = 0.0f; /* raw HF difference, for the monitor */
   hf->E_d_A = 0.0f;
+  p->adapt = false;
+  p->adapt_r = 0.0f; /* not read when !adapt */
   const float w_frame = c->obs.pll.w_hat_radps; /* theta_hat turned at this from k-1 to k */
   if (FW_LIKELY(!p->pulses)) {
     const fw_extractor_t ex = (fw_extractor_t)cfg->estimator.extractor;
@@ -614,9 +639,9 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p,
     oi.running = (uint8_t)(c->phase == FW_START_RUN);
     float adapt_r;
     const float eps = fw_obs_update(&c->obs, &oi, &adapt_r);
-    if (FW_LIKELY(ex == FW_EXTRACTOR_SOGI_ADAPTIVE)) { /* the default */
-      fw_inj_adapt(&c->inj, &cfg->estimator, adapt_r);
-    }
+    /* the default extractor: the gain follows adapt_r at the end of the step */
+    p->adapt = FW_LIKELY(ex == FW_EXTRACTOR_SOGI_ADAPTIVE);
+    p->adapt_r = adapt_r;
     snap->pll_err_rad = eps;
     snap->hf_amp_A = hf->E_d_A;
     snap->hf_q_A = hf->E_q_A;
@@ -826,6 +851,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   snap->theta_hat_rad = theta_k;
   fw_period_t p;
   stage_inputs(c, ia, ib, ic, u_dc, &p);
+  snapshot_inputs(&p, snap);
   if (FW_UNLIKELY(!stage_power(c, &p))) {
     stage_off(c, &p, snap);
     end_off(c, &p, out, snap);
@@ -847,6 +873,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   if (FW_UNLIKELY(!(fw_cia402_power_enabled(c->sm.state) || p.braking) || /* a fault, above */
                   !stage_references(c, &p))) { /* quick stop / braking done */
     end_off(c, &p, out, snap);
+    adapt_at_end(c, &p);
     return snap_written_est(&p, FW_SNAP_W_COMMON);
   }
   /* current loop in the estimated frame, or the polarity pulses */
@@ -865,6 +892,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   }
   if (FW_UNLIKELY(!stage_monitor(c, &hf, &p))) { /* hard fault: switch off now */
     end_off(c, &p, out, snap);
+    adapt_at_end(c, &p);
     return snap_written_est(&p, FW_SNAP_W_COMMON);
   }
   fw_foc_commit(&c->foc, p.u_dq);
@@ -877,6 +905,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
     }
   }
   fill_snapshot_common(c, &p, snap);
+  adapt_at_end(c, &p);
   return snap_written_est(&p, FW_SNAP_W_COMMON | FW_SNAP_W_OUT | FW_SNAP_W_REF);
 }
 

@@ -58,29 +58,39 @@ void fw_inj_set_extractor(fw_inj_t *j, const fw_cfg_estimator_t *est, fw_extract
 static FW_ALWAYS_INLINE void ring_push(fw_inj_t *j, float ed, float eq, float ia, float ib,
                                        bool currents) {
   const uint32_t i = j->ring_idx;
-  float *row = j->ring[i];
   const bool full = j->ring_fill == j->n_inj;
+  /* the row as j->ring[i][.], not through a float pointer: a store through a
+   * pointer could alias any float of the controller, and GCC then reloaded what
+   * it held (the sums here, and fields of the stages after); the sums in
+   * locals (the same operations in the same order) */
+  float sum_ed = j->sum_ed;
+  float sum_eq = j->sum_eq;
   if (FW_LIKELY(full)) {
-    j->sum_ed -= row[0];
-    j->sum_eq -= row[1];
+    sum_ed -= j->ring[i][0];
+    sum_eq -= j->ring[i][1];
   } else {
     j->ring_fill++;
   }
-  row[0] = ed;
-  row[1] = eq;
-  j->sum_ed += ed;
-  j->sum_eq += eq;
+  j->ring[i][0] = ed;
+  j->ring[i][1] = eq;
+  j->sum_ed = sum_ed + ed;
+  j->sum_eq = sum_eq + eq;
   if (currents) {
+    float sum_ia = j->sum_ia;
+    float sum_ib = j->sum_ib;
     if (full) {
-      j->sum_ia -= row[2];
-      j->sum_ib -= row[3];
+      sum_ia -= j->ring[i][2];
+      sum_ib -= j->ring[i][3];
     }
-    row[2] = ia;
-    row[3] = ib;
-    j->sum_ia += ia;
-    j->sum_ib += ib;
+    j->ring[i][2] = ia;
+    j->ring[i][3] = ib;
+    j->sum_ia = sum_ia + ia;
+    j->sum_ib = sum_ib + ib;
   }
-  j->ring_idx = (i + 1u == j->n_inj) ? 0u : i + 1u;
+  /* next row, 0 after the last: as a product, which GCC does not turn into a
+   * branch (it laid the usual case out of line, two taken branches) */
+  const uint32_t next = i + 1u;
+  j->ring_idx = next * (uint32_t)(next != j->n_inj);
 }
 
 void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab, fw_sincos_f32_t sc_k,
@@ -95,8 +105,9 @@ void fw_inj_update(fw_inj_t *j, fw_extractor_t ex, fw_vec2_f32_t i_ab, fw_sincos
   m->e_raw_dq_A.x *= s;
   m->e_raw_dq_A.y *= s;
 
-  const float h_a = fw_sogi_step_f32(&j->sogi_a, i_ab.x, NULL);
-  const float h_b = fw_sogi_step_f32(&j->sogi_b, i_ab.y, NULL);
+  /* sogi_b has sogi_a's gains (fw_inj_reset, fw_inj_set_k) */
+  float h_a, h_b;
+  fw_sogi_step_pair_f32(&j->sogi_a, i_ab.x, &j->sogi_b, i_ab.y, &h_a, &h_b);
   fw_vec2_f32_t dh;
   if (ex == FW_EXTRACTOR_PSEUDO) {
     dh.x = i_ab.x - j->h_prev_raw[0];

@@ -166,12 +166,15 @@ bool fw_svpwm_f32(fw_vec2_f32_t u_ab_V, float u_dc_V, float duty_abc[3],
   const float ph0 = u.x;
   const float ph1 = -0.5f * u.x + h;
   const float ph2 = -0.5f * u.x - h;
-  /* largest and smallest phase in three compares: ph1 - ph2 is 2 h, and as
-   * rounding is monotonic ph1 >= ph2 exactly when h >= 0 (the duties do not
-   * depend on which of two equal phases is taken) */
-  const bool h_pos = h >= 0.0f;
-  const float hi12 = h_pos ? ph1 : ph2;
-  const float lo12 = h_pos ? ph2 : ph1;
+  /* largest and smallest phase in two compares: the larger of ph1, ph2 is
+   * -u.x/2 + |h| and the smaller -u.x/2 - |h|, the same roundings as ph1 and
+   * ph2 themselves (x - h is x + (-h)). Only the sign of a zero result can
+   * differ (h = -0), and the duties see u_hi and u_lo only through their sum
+   * and difference, where it does not show. Branch-free: selecting ph1 or ph2
+   * on h >= 0 cost a taken branch in half the periods. */
+  const float mid12 = -0.5f * u.x;
+  const float hi12 = mid12 + fabsf(h);
+  const float lo12 = mid12 - fabsf(h);
   const float u_hi = hi12 > ph0 ? hi12 : ph0;
   const float u_lo = lo12 < ph0 ? lo12 : ph0;
   const float u0_V = -0.5f * (u_hi + u_lo);

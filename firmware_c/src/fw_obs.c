@@ -19,12 +19,16 @@ static float lp_alpha(float f_Hz, float dt_s) {
  *  increments once the position is large (ulp 0.06 rad at 1e6 rad). */
 static FW_ALWAYS_INLINE void pos_add(fw_obs_t *o, float d) {
   float x = o->pos_unwrapped_e + d;
-  if (FW_UNLIKELY(x >= FW_PI_F32)) {
-    x -= FW_TWO_PI_F32;
-    o->pos_turns++;
-  } else if (FW_UNLIKELY(x < -FW_PI_F32)) {
-    x += FW_TWO_PI_F32;
-    o->pos_turns--;
+  /* usually in range: one test against pi (the constant the wrap before has in a
+   * register); -pi and NaN take the exact tests, which leave them as they are */
+  if (FW_UNLIKELY(!(fabsf(x) < FW_PI_F32))) {
+    if (x >= FW_PI_F32) {
+      x -= FW_TWO_PI_F32;
+      o->pos_turns++;
+    } else if (x < -FW_PI_F32) {
+      x += FW_TWO_PI_F32;
+      o->pos_turns--;
+    }
   }
   o->pos_unwrapped_e = x;
 }
@@ -159,7 +163,7 @@ fw_fault_t fw_obs_supervise(fw_obs_t *o, const fw_config_t *cfg, float hf_amp_A,
   if (cfg->estimator.u_inj_V > 0.0f && hf_amp_A < o->hf_min_A * inj_scale) {
     return FW_FAULT_EST_HF_LOW;
   }
-  if (running) {
+  if (FW_LIKELY(running)) { /* closed loop */
     if (FW_UNLIKELY(fabsf(o->err_f) > cfg->protection.pll_err_max_rad)) {
       o->pll_err_time_s += o->dt_s;
       if (o->pll_err_time_s > cfg->protection.pll_err_time_s) {

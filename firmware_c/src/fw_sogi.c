@@ -90,18 +90,32 @@ void fw_sogi_reset_f32(fw_sogi_f32_t *s) {
   s->v_prev = 0.0f;
 }
 
-float fw_sogi_step_f32(fw_sogi_f32_t *s, float v, float *qv) {
+/** The step of fw_sogi_step_f32 with the gains p, q, r, t given. */
+static FW_ALWAYS_INLINE float sogi_step(fw_sogi_f32_t *s, float p, float q, float r, float t,
+                                        float v) {
   if (!fw_isfinite_f32(v)) {
     v = 0.0f; /* a bad sample must not poison the state */
   }
   const float u = v + s->v_prev;
   const float x1_old = s->x1;
-  const float x1 = x1_old + (s->p * u - s->q * x1_old - s->r * s->x2);
-  s->x2 += s->t * (x1_old + x1);
+  const float x1 = x1_old + (p * u - q * x1_old - r * s->x2);
+  s->x2 += t * (x1_old + x1);
   s->x1 = x1;
   s->v_prev = v;
+  return x1;
+}
+
+float fw_sogi_step_f32(fw_sogi_f32_t *s, float v, float *qv) {
+  const float x1 = sogi_step(s, s->p, s->q, s->r, s->t, v);
   if (qv != NULL) {
     *qv = s->x2;
   }
   return x1;
+}
+
+void fw_sogi_step_pair_f32(fw_sogi_f32_t *a, float va, fw_sogi_f32_t *b, float vb, float *ya,
+                           float *yb) {
+  const float p = a->p, q = a->q, r = a->r, t = a->t;
+  *ya = sogi_step(a, p, q, r, t, va);
+  *yb = sogi_step(b, p, q, r, t, vb);
 }

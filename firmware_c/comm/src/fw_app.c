@@ -963,8 +963,7 @@ static void fw_app_serial(fw_app_t *app, const fw_snapshot_t *s, uint32_t step) 
  * background is behind), into whose snapshot the core writes the period's
  * fields (fw_step_into); the acquire orders the background's last reads of
  * that slot before these writes. */
-FW_ISR_OPT static inline fw_app_period_t *fw_app_slot(fw_app_t *app) {
-  uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
+FW_ISR_OPT static inline fw_app_period_t *fw_app_slot(fw_app_t *app, uint32_t head) {
   uint32_t tail = atomic_load_explicit(&app->ring_tail, memory_order_acquire);
   return FW_LIKELY(head - tail < FW_APP_SNAP_RING) ? &app->ring[head % FW_APP_SNAP_RING] : NULL;
 }
@@ -975,12 +974,11 @@ FW_ISR_OPT static inline fw_app_period_t *fw_app_slot(fw_app_t *app) {
  * when the ring is full); the groups it did not write are the period
  * before's. One release fence for the slot and both counters. */
 FW_ISR_OPT static void fw_app_publish(fw_app_t *app, fw_app_period_t *p, fw_snapshot_t *dst,
-                                      unsigned written) {
+                                      unsigned written, uint32_t head) {
   if (FW_UNLIKELY(written != FW_SNAP_W_ALL)) {
     fw_snapshot_carry(dst, app->last, written);
   }
   app->last = dst;
-  uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
   const uint32_t step = app->step;
   if (FW_LIKELY(p != NULL)) {
     fw_snapshot_capture_state(&app->ctrl, &p->snap, &p->raw);
@@ -992,13 +990,13 @@ FW_ISR_OPT static void fw_app_publish(fw_app_t *app, fw_app_period_t *p, fw_snap
       p->slow_gen = gen;
     }
     p->step = step; /* p->done is then not step + 1: not completed */
-    head++;
   } else {
     app->count.snap_overruns++; /* the background is behind: it never sees this period */
   }
   app->step = step + 1u;
   atomic_thread_fence(memory_order_release);
-  atomic_store_explicit(&app->ring_head, head, memory_order_relaxed);
+  atomic_store_explicit(&app->ring_head, FW_LIKELY(p != NULL) ? head + 1u : head,
+                        memory_order_relaxed);
   atomic_store_explicit(&app->isr_step, step + 1u, memory_order_relaxed);
 }
 
@@ -1010,11 +1008,14 @@ FW_ISR_OPT void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *
     }
     return;
   }
-  fw_app_period_t *p = fw_app_slot(app);
+  /* the ring's head, read once for the slot and the publication: only the
+   * period's publication writes it */
+  const uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
+  fw_app_period_t *p = fw_app_slot(app, head);
   fw_snapshot_t *dst = FW_LIKELY(p != NULL) ? &p->snap : &app->ctrl.snap;
   /* the core's one ADC conversion and range check */
   const unsigned written = fw_step_into(&app->ctrl, NULL, adc, out, dst);
-  fw_app_publish(app, p, dst, written);
+  fw_app_publish(app, p, dst, written, head);
 }
 
 /* ---- the background loop ------------------------------------------------------- */
@@ -1064,9 +1065,12 @@ void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
   }
   uint32_t now = fw_app_time(app, app->step);
   fw_app_bg_input(app, now);
-  fw_app_period_t *p = fw_app_slot(app);
+  /* the ring's head, read once for the slot and the publication: only the
+   * period's publication writes it */
+  const uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
+  fw_app_period_t *p = fw_app_slot(app, head);
   fw_snapshot_t *dst = p != NULL ? &p->snap : &app->ctrl.snap;
   const unsigned written = fw_step_into(&app->ctrl, in, NULL, out, dst);
-  fw_app_publish(app, p, dst, written);
+  fw_app_publish(app, p, dst, written, head);
   fw_app_bg_output(app, now);
 }

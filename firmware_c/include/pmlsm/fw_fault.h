@@ -66,9 +66,10 @@ static inline fw_fault_t fw_fault_check_inputs(const fw_cfg_protection_t *prot,
                                                const fw_inputs_t *in, bool power_enabled) {
   /* usual case first: every sample inside its limits (each comparison is
    * false for NaN, and for inf against the finite limits) */
-  const float u_min = power_enabled ? prot->u_dc_min_V : -prot->u_dc_max_V;
+  const float u_max = prot->u_dc_max_V; /* read once (it was loaded twice) */
+  const float u_min = power_enabled ? prot->u_dc_min_V : -u_max;
   if (FW_LIKELY(fabsf(in->i_abc_A[0]) <= prot->i_trip_A && fabsf(in->i_abc_A[1]) <= prot->i_trip_A &&
-                fabsf(in->i_abc_A[2]) <= prot->i_trip_A && in->u_dc_V <= prot->u_dc_max_V &&
+                fabsf(in->i_abc_A[2]) <= prot->i_trip_A && in->u_dc_V <= u_max &&
                 in->u_dc_V >= u_min)) {
     return FW_FAULT_NONE;
   }

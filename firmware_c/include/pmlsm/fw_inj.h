@@ -24,6 +24,7 @@
 #ifndef PMLSM_FW_INJ_H
 #define PMLSM_FW_INJ_H
 
+#include <math.h>
 #include <stdbool.h>
 #include <stdint.h>
 
@@ -92,7 +93,7 @@ static inline void fw_inj_adapt(fw_inj_t *j, const fw_cfg_estimator_t *est, floa
    * while the PLL error is large, a narrow one when locked. */
   const float k = est->sogi_k_adapt_min + (est->sogi_k_adapt_max - est->sogi_k_adapt_min) * r;
   const float dk = k - j->sogi_a.k;
-  if (FW_UNLIKELY(dk > FW_INJ_SOGI_K_STEP || dk < -FW_INJ_SOGI_K_STEP)) {
+  if (FW_UNLIKELY(fabsf(dk) > FW_INJ_SOGI_K_STEP)) { /* |dk| exact: dk > step or dk < -step */
     fw_inj_set_k(j, k);
   }
 }

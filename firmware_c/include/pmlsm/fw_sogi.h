@@ -88,6 +88,15 @@ void fw_sogi_reset_f32(fw_sogi_f32_t *s);
  */
 float fw_sogi_step_f32(fw_sogi_f32_t *s, float v, float *qv);
 
+/**
+ * One sample of two SOGIs that share their gains (b initialised as a, and
+ * given a's gains by fw_sogi_copy_gain_f32 whenever a's k changes): each
+ * exactly as fw_sogi_step_f32 (va into a, vb into b; *ya, *yb the in-phase
+ * outputs), with the gains read once, from a.
+ */
+void fw_sogi_step_pair_f32(fw_sogi_f32_t *a, float va, fw_sogi_f32_t *b, float vb, float *ya,
+                           float *yb);
+
 #ifdef __cplusplus
 }
 #endif
