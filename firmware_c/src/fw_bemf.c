@@ -76,7 +76,7 @@ static float angle(const fw_bemf_t *b) {
 
 void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], float w_hat,
                     float w_frame) {
-  if (FW_LIKELY(!b->active && fabsf(w_hat) < 0.5f * b->w_off)) { /* at low speed */
+  if (!b->active && fabsf(w_hat) < 0.5f * b->w_off) {
     b->e_d_f = b->e_q_f = 0.0f; /* far below the handover: nothing to observe */
     b->err_rad = 0.0f;
     b->err_fresh = 1u;
@@ -106,8 +106,8 @@ void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled) {
     return; /* handover off: injection only */
   }
   bool lost = false; /* the back-EMF is too small to give an angle */
-  if (FW_LIKELY(!b->active)) {
-    if (FW_LIKELY(!(w > b->w_on))) {
+  if (!b->active) {
+    if (!(w > b->w_on)) {
       b->t_cond_s = 0.0f;
       return; /* on injection, at full amplitude (it is restored before leaving) */
     }
