@@ -79,11 +79,11 @@ static void foc_param(const fw_config_t *cfg, float dt_s, fw_foc_param_t *p) {
   p->psi_f_Wb = cfg->machine.psi_f_Wb;
 }
 
-/** Reset everything that carries history across an enable (the observer's
- *  position aside: see fw_obs_keep_position). */
 /** A field of fw_snapshot_capture_slow may change (fw_ctrl_t.snap_slow_gen). */
 static void snap_slow_changed(fw_ctrl_t *c) { c->snap_slow_gen++; }
 
+/** Reset everything that carries history across an enable (the observer's
+ *  position aside: see fw_obs_keep_position). */
 static void reset_dynamics(fw_ctrl_t *c) {
   const fw_config_t *cfg = &c->cfg;
   snap_slow_changed(c); /* the flying-start flag */
@@ -518,8 +518,8 @@ static unsigned snap_written_est(const fw_period_t *p, unsigned w) {
  *  disturbance, the monitor's outputs, the injection scale and the back-EMF
  *  flags: only fw_step and the commands that restart the blocks change them)
  *  are read in fw_get_snapshot (off the hot path). */
-static void fill_snapshot_common(const fw_ctrl_t *c, const fw_period_t *p, fw_snapshot_t *s) {
-  (void)p; /* the period's signals went in at stage_inputs (snapshot_inputs) */
+static void fill_snapshot_common(const fw_ctrl_t *c, fw_snapshot_t *s) {
+  /* (the period's signals went in after stage_inputs: snapshot_inputs) */
   s->cia402_state = (uint8_t)c->sm.state;
   s->start_phase = (uint8_t)c->phase;
   s->fault_code = (uint16_t)c->fault.code;
@@ -536,11 +536,10 @@ static void snapshot_inputs(const fw_period_t *p, fw_snapshot_t *s) {
 
 /** End of a period that does not reach stage_output: outputs off, in the snapshot
  *  too. */
-static void end_off(const fw_ctrl_t *c, const fw_period_t *p, fw_outputs_t *out,
-                    fw_snapshot_t *snap) {
+static void end_off(const fw_ctrl_t *c, fw_outputs_t *out, fw_snapshot_t *snap) {
   outputs_off(out);
   snapshot_duties(snap, out);
-  fill_snapshot_common(c, p, snap);
+  fill_snapshot_common(c, snap);
 }
 
 /** Input checks (fault on a bad sample; NaN never enters the state), offset
@@ -854,7 +853,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   snapshot_inputs(&p, snap);
   if (FW_UNLIKELY(!stage_power(c, &p))) {
     stage_off(c, &p, snap);
-    end_off(c, &p, out, snap);
+    end_off(c, out, snap);
     return FW_SNAP_W_COMMON | FW_SNAP_W_OUT;
   }
   if (FW_UNLIKELY(c->phase != FW_START_RUN)) {
@@ -872,7 +871,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   p.braking = p.braking && c->sm.state == FW_CIA402_FAULT_REACTION_ACTIVE;
   if (FW_UNLIKELY(!(fw_cia402_power_enabled(c->sm.state) || p.braking) || /* a fault, above */
                   !stage_references(c, &p))) { /* quick stop / braking done */
-    end_off(c, &p, out, snap);
+    end_off(c, out, snap);
     adapt_at_end(c, &p);
     return snap_written_est(&p, FW_SNAP_W_COMMON);
   }
@@ -891,7 +890,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
     p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, p.u_dc_V);
   }
   if (FW_UNLIKELY(!stage_monitor(c, &hf, &p))) { /* hard fault: switch off now */
-    end_off(c, &p, out, snap);
+    end_off(c, out, snap);
     adapt_at_end(c, &p);
     return snap_written_est(&p, FW_SNAP_W_COMMON);
   }
@@ -904,7 +903,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
       snapshot_duties(snap, out);
     }
   }
-  fill_snapshot_common(c, &p, snap);
+  fill_snapshot_common(c, snap);
   adapt_at_end(c, &p);
   return snap_written_est(&p, FW_SNAP_W_COMMON | FW_SNAP_W_OUT | FW_SNAP_W_REF);
 }
@@ -1018,12 +1017,18 @@ void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
   snap->ref_limited = ctrl->ref_limited;
 }
 
-void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
-  /* what fw_step wrote (every field of ctrl->snap that it writes; the start-up
-   * results are in the slow part), the blocks' present states, the slow part */
-  fw_snapshot_carry(snap, &ctrl->snap, 0u);
+/** The raw snapshot of the period whose step wrote `period`: what the step
+ *  wrote (every field it writes; the start-up results are in the slow part),
+ *  the blocks' present states, the slow part. */
+static void capture_of(const fw_ctrl_t *ctrl, const fw_snapshot_t *period, fw_snapshot_t *snap,
+                       fw_snapshot_raw_t *raw) {
+  fw_snapshot_carry(snap, period, 0u);
   fw_snapshot_capture_state(ctrl, snap, raw);
   fw_snapshot_capture_slow(ctrl, snap);
+}
+
+void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
+  capture_of(ctrl, &ctrl->snap, snap, raw);
 }
 
 void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
@@ -1055,9 +1060,7 @@ void fw_get_snapshot_of(const fw_ctrl_t *ctrl, const fw_snapshot_t *period,
   }
   fw_snapshot_raw_t raw;
   *snap = ctrl->snap; /* padding as before */
-  fw_snapshot_carry(snap, period, 0u);
-  fw_snapshot_capture_state(ctrl, snap, &raw);
-  fw_snapshot_capture_slow(ctrl, snap);
+  capture_of(ctrl, period, snap, &raw);
   fw_snapshot_complete(ctrl, snap, &raw);
   snap->statusword = fw_statusword(ctrl); /* the present state (a command may follow the step) */
 }

@@ -1000,6 +1000,21 @@ FW_ISR_OPT static void fw_app_publish(fw_app_t *app, fw_app_period_t *p, fw_snap
   atomic_store_explicit(&app->isr_step, step + 1u, memory_order_relaxed);
 }
 
+/* One control period (the interrupt's, or fw_app_step's without a background):
+ * the core steps into this period's slot (ctrl.snap when the ring is full) from
+ * the ADC counts or, adc NULL, the physical inputs, then the period is
+ * published. The ring's head is read once for the slot and the publication:
+ * only the publication writes it. */
+FW_ISR_OPT static FW_ALWAYS_INLINE void fw_app_period(fw_app_t *app, const fw_inputs_t *in,
+                                                      const fw_adc_inputs_t *adc,
+                                                      fw_outputs_t *out) {
+  const uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
+  fw_app_period_t *p = fw_app_slot(app, head);
+  fw_snapshot_t *dst = FW_LIKELY(p != NULL) ? &p->snap : &app->ctrl.snap;
+  const unsigned written = fw_step_into(&app->ctrl, in, adc, out, dst);
+  fw_app_publish(app, p, dst, written, head);
+}
+
 FW_ISR_OPT void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *out) {
   fw_app_t *app = (fw_app_t *)ctx;
   if (app == NULL || adc == NULL || out == NULL) {
@@ -1008,14 +1023,7 @@ FW_ISR_OPT void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *
     }
     return;
   }
-  /* the ring's head, read once for the slot and the publication: only the
-   * period's publication writes it */
-  const uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
-  fw_app_period_t *p = fw_app_slot(app, head);
-  fw_snapshot_t *dst = FW_LIKELY(p != NULL) ? &p->snap : &app->ctrl.snap;
-  /* the core's one ADC conversion and range check */
-  const unsigned written = fw_step_into(&app->ctrl, NULL, adc, out, dst);
-  fw_app_publish(app, p, dst, written, head);
+  fw_app_period(app, NULL, adc, out); /* the core's one ADC conversion and range check */
 }
 
 /* ---- the background loop ------------------------------------------------------- */
@@ -1065,12 +1073,6 @@ void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
   }
   uint32_t now = fw_app_time(app, app->step);
   fw_app_bg_input(app, now);
-  /* the ring's head, read once for the slot and the publication: only the
-   * period's publication writes it */
-  const uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
-  fw_app_period_t *p = fw_app_slot(app, head);
-  fw_snapshot_t *dst = p != NULL ? &p->snap : &app->ctrl.snap;
-  const unsigned written = fw_step_into(&app->ctrl, in, NULL, out, dst);
-  fw_app_publish(app, p, dst, written, head);
+  fw_app_period(app, in, NULL, out);
   fw_app_bg_output(app, now);
 }
