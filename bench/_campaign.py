@@ -52,6 +52,9 @@ CASE_TARGETS = ("extractor", "noise", "x0_m")
 #: Keys of ``base``.
 BASE_KEYS = ("scenario", "motor", "extractor", "t_end", "record_decimation", "case",
              "windows", "event_s", "trace")
+#: ``base.motor`` and ``base.extractor`` when the file does not give them.
+BASE_MOTOR = "paper_salient"
+BASE_EXTRACTOR = "sogi_adaptive"
 #: Metrics of a fault_case run (sim_fallback._faults.run_case), beside the drive metrics.
 FAULT_CASE_METRICS = ("blind_max_s", "rms_rad", "max_rad", "t_fault_s", "pwm_off_after_s",
                       "verdict_ok")
@@ -342,7 +345,7 @@ def _plant_value_error(f: str, kind: str, vals: list[float], motor: Any) -> str 
     if isinstance(nominal, int) and (kind == "range" or not all(x.is_integer() for x in xs)):
         return f"{what}: an integer field; need values: [...] of integers in {allowed}"
     try:
-        mot = _motor_and_config(motor, "sogi_adaptive")[0]
+        mot = _motor_and_config(motor, BASE_EXTRACTOR)[0]
         for x in (xs[0], xs[-1]):
             bad = plant_params_refused(plant_params(mot, **{f: int(x) if isinstance(
                 nominal, int) else x}))
@@ -407,8 +410,8 @@ def _is_named_axis(tgt: Any, spec: Any) -> bool:
 
 
 def _parse_named_axis(name: str, spec: dict[str, Any], plant: dict[str, Any] | None,
-                      err: Callable[[str, str], None], motor: Any = "paper_salient",
-                      extractor: Any = "sogi_adaptive") -> Axis | None:
+                      err: Callable[[str, str], None], motor: Any = BASE_MOTOR,
+                      extractor: Any = BASE_EXTRACTOR) -> Axis | None:
     """``name: {values: [...], set: {target: expr}}`` or ``name: {cases: {label: {...}}}``;
     the values a case or an expression gives are checked as an axis's (_value_error)."""
     fld = f"axes.{name}"
@@ -488,11 +491,11 @@ def _check_base(base: dict[str, Any], bnode: yaml.Node | None, sc: str,
         if k not in BASE_KEYS:
             err(node(k), f"base.{k}", f"unknown; known: {', '.join(BASE_KEYS)}")
     plant = None
+    base_motor = base.get("motor", BASE_MOTOR)
     if sc != "fault_case":
-        mot = base.get("motor", "paper_salient")
-        plant = _motor_plant(mot)
+        plant = _motor_plant(base_motor)
         if plant is None:
-            err(node("motor"), "base.motor", _motor_why(mot))
+            err(node("motor"), "base.motor", _motor_why(base_motor))
         if "extractor" in base and not _valid_extractor(base["extractor"]):
             err(node("extractor"), "base.extractor",
                 f"{base['extractor']!r} not one of {_choices('extractor')}")
@@ -671,6 +674,8 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             err(bnode, "base.case", f"{base.get('case')!r} is not a fault case ({len(names)} "
                 "listed in docs/fault_matrix.md)")
     motor_plant, windows, event_s = _check_base(base, bnode, sc, err)
+    base_motor = base.get("motor", BASE_MOTOR)
+    base_extractor = base.get("extractor", BASE_EXTRACTOR)
     samp = data.get("sampling", {"method": "grid"})
     snode = _find(root, "sampling")
     method = samp.get("method", "grid") if isinstance(samp, dict) else None
@@ -719,8 +724,7 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             ax = _parse_named_axis(str(tgt), spec, motor_plant,
                                    lambda f, m, n=node, t=str(tgt):
                                    err(_node_at(n, f[len("axes." + t) + 1:]), f, m),
-                                   base.get("motor", "paper_salient"),
-                                   base.get("extractor", "sogi_adaptive"))
+                                   base_motor, base_extractor)
             if ax is not None:
                 axes.append(ax)
             continue
@@ -739,7 +743,7 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             err(node, fld, f"{kind!r} not one of values, range, scale")
             continue
         if not isinstance(vals, list) or not vals or not all(_finite(v) for v in vals):
-            rng = _allowed(str(tgt), base.get("motor", "paper_salient"))
+            rng = _allowed(str(tgt), base_motor)
             err(node, fld, f"{kind} must be a non-empty list of finite numbers"
                 + (f"; the simulator allows {rng}" if rng else ""))
             continue
@@ -753,8 +757,7 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             err(node, fld, "scale factors must be > 0")
             continue
         why = _field_error(str(tgt), motor_plant) or _value_error(
-            str(tgt), kind, vals, base.get("motor", "paper_salient"),
-            base.get("extractor", "sogi_adaptive"))
+            str(tgt), kind, vals, base_motor, base_extractor)
         if why:
             err(node, fld, why)
             continue
@@ -916,10 +919,10 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
             if m != "verdict_ok":
                 out[m] = float(r[m]) if r.get(m) is not None else float("nan")
         return out
-    motor_name = str(params.get("motor", base.get("motor", "paper_salient")))
-    motor, _ = _motor_and_config(motor_name, "sogi_adaptive")
+    motor_name = str(params.get("motor", base.get("motor", BASE_MOTOR)))
+    motor, _ = _motor_and_config(motor_name, BASE_EXTRACTOR)
     plant, fw, rest = _split(_expand(base, params, motor.plant))
-    extractor = str(rest.get("extractor", base.get("extractor", "sogi_adaptive")))
+    extractor = str(rest.get("extractor", base.get("extractor", BASE_EXTRACTOR)))
     # scale axes multiply the nominal value (motor plant / derived configuration)
     motor, nominal_fw = _motor_and_config(motor_name, extractor)
     fw_abs = {k: (float(getattr(nominal_fw, k)) * v if scales.get("fw." + k) else v)
@@ -965,8 +968,8 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
 # ---- running -----------------------------------------------------------------
 
 
-def warm_worker(motors: tuple[str, ...] = ("paper_salient",),
-                extractors: tuple[str, ...] = ("sogi_adaptive",)) -> None:
+def warm_worker(motors: tuple[str, ...] = (BASE_MOTOR,),
+                extractors: tuple[str, ...] = (BASE_EXTRACTOR,)) -> None:
     """A worker's one-time costs (imports, loading the simulator library, parsing the
     motor files), paid when the cluster starts rather than by its first runs."""
     from sim_fallback import _lib
