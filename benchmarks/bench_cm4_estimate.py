@@ -390,10 +390,12 @@ NO_DEST = {"cmp", "cmn", "tst", "teq", "b", "bx", "cbz", "cbnz", "tbb", "tbh", "
            "vcmp", "vcmpe", "vmsr"}
 
 
+REG_ALIAS = {"ip": "r12", "fp": "r11", "sl": "r10", "sb": "r9"}
+
+
 def _regs(text: str) -> set[str]:
     """Core registers named in an operand string (ip = r12, fp = r11, ...)."""
-    alias = {"ip": "r12", "fp": "r11", "sl": "r10", "sb": "r9"}
-    return {alias.get(r, r) for r in REG_RE.findall(text)}
+    return {REG_ALIAS.get(r, r) for r in REG_RE.findall(text)}
 
 
 def address_regs(b: str, ops: str) -> set[str]:
