@@ -15,10 +15,15 @@
  *           the phase transitions are this file's
  *   obs     HF-loss and PLL-error supervision (fw_obs_supervise)
  *   foc     speed PI (fw_foc_speed_update), current PIs (fw_foc_current_update)
- *   mon     integrity monitor, then prot (fw_protect_update)
+ *   mon     the integrity monitor's inputs, staged (stage_supervision)
  *   inj     the injection sign (fw_inj_output)
  *   foc     modulation (fw_foc_output)
- * and writes the snapshot, which nothing reads back.
+ * and writes the snapshot, which nothing reads back. That is fw_step_into,
+ * the control half: ADC to duties. fw_supervise, the supervision half, then
+ * runs the integrity monitor (fw_mon_update) and the protections
+ * (fw_protect_update) on the staged inputs; a hard fault there switches the
+ * duties just computed off before they take effect (docs/firmware.md,
+ * "the two interrupts").
  */
 #include <math.h>
 #include <stddef.h>
@@ -735,9 +740,10 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
   return true;
 }
 
-/** Integrity monitor and protections. Returns false when a hard fault
- *  switches the power stage off now (braking faults go on braking). */
-static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p) {
+/** The integrity monitor's inputs of this period, staged for fw_supervise
+ *  (after the duties): what the rest of the step changes (the applied voltage,
+ *  the injection sign, the start-up phase) is taken now. */
+static void stage_supervision(fw_ctrl_t *c, const fw_inj_meas_t *hf, const fw_period_t *p) {
   const bool running = c->phase == FW_START_RUN;
   const bool scale_full = c->bemf.inj_scale >= 1.0f;
   const bool scale_steady = scale_full || c->bemf.inj_scale <= c->bemf.inj_share;
@@ -745,10 +751,7 @@ static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p)
    * division while the injection is full, the usual case) */
   const float inv_scale = scale_full ? 1.0f : 1.0f / c->bemf.inj_scale;
   const float *u_applied = fw_foc_u_applied(&c->foc);
-  /* the monitor's inputs in a local that only the inline fw_mon_update reads,
-   * so that its fields stay in registers (every field written, no memset) */
-  fw_mon_in_t m;
-  fw_mon_in_t *const mi = &m;
+  fw_mon_in_t *const mi = &c->sup.mon;
   mi->i_abc_A[0] = p->i_abc[0]; /* after the offset compensation */
   mi->i_abc_A[1] = p->i_abc[1];
   mi->i_abc_A[2] = p->i_abc[2];
@@ -768,17 +771,8 @@ static bool stage_monitor(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p)
                                      c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S &&
                                      fw_inj_sign_applied(&c->inj) != 0.0f);
   mi->pwm_on = 1u;
-  fw_fault_t mf = fw_mon_update(&c->mon, mi);
-  if (FW_LIKELY(mf == FW_FAULT_NONE && running)) {
-    mf = protect(c, p->i_dq, p->quick_stop);
-  }
-  if (FW_UNLIKELY(mf != FW_FAULT_NONE)) {
-    latch_fault(c, mf);
-    if (c->fault.hard) {
-      return false;
-    }
-  }
-  return true;
+  c->sup.quick_stop = (uint8_t)p->quick_stop;
+  c->sup.due = 1u;
 }
 
 /** Square-wave injection on the estimated d axis (on q^ in the second half of
@@ -839,6 +833,10 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   /* outputs_off on every path that does not reach stage_output (which writes
    * every output): not stored twice in the usual period */
   c->step_count++;
+  if (FW_UNLIKELY(c->sup.due)) { /* the last period's supervision did not run */
+    c->sup.due = 0u;
+    latch_fault(c, FW_FAULT_SUPERVISION_MISSED);
+  }
   if (adc == NULL && in == NULL) {
     outputs_off(out);
     latch_fault(c, FW_FAULT_INPUT_INVALID);
@@ -889,11 +887,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
     const float w_ff = FW_LIKELY(c->phase == FW_START_RUN) ? c->obs.omega_f : 0.0f;
     p.u_dq = fw_foc_current_update(&c->foc, p.i_ref, p.i_dq, w_ff, p.u_dc_V);
   }
-  if (FW_UNLIKELY(!stage_monitor(c, &hf, &p))) { /* hard fault: switch off now */
-    end_off(c, out, snap);
-    adapt_at_end(c, &p);
-    return snap_written_est(&p, FW_SNAP_W_COMMON);
-  }
+  stage_supervision(c, &hf, &p); /* judged by fw_supervise, after the duties */
   fw_foc_commit(&c->foc, p.u_dq);
   stage_output(c, &p, p.u_dc_V, out, snap);
   if (c->phase == FW_START_SALIENCY && fw_start_saliency_advance(&c->start, c->inj.n_inj)) {
@@ -908,15 +902,45 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   return snap_written_est(&p, FW_SNAP_W_COMMON | FW_SNAP_W_OUT | FW_SNAP_W_REF);
 }
 
+bool fw_supervise(fw_ctrl_t *c, fw_outputs_t *out, fw_snapshot_t *snap) {
+  if (c == NULL || !c->sup.due) {
+    return false;
+  }
+  c->sup.due = 0u;
+  const fw_mon_in_t *mi = &c->sup.mon;
+  fw_fault_t mf = fw_mon_update(&c->mon, mi);
+  if (FW_LIKELY(mf == FW_FAULT_NONE && mi->running)) {
+    const fw_vec2_f32_t i_dq = {mi->i_dq_A[0], mi->i_dq_A[1]};
+    mf = protect(c, i_dq, c->sup.quick_stop != 0u);
+  }
+  if (FW_LIKELY(mf == FW_FAULT_NONE)) {
+    return false;
+  }
+  latch_fault(c, mf);
+  const bool off = c->fault.hard != 0u; /* braking faults go on braking */
+  if (off && out != NULL) {
+    outputs_off(out);
+    if (snap != NULL) {
+      snapshot_duties(snap, out);
+    }
+  }
+  if (snap != NULL) {
+    fill_snapshot_common(c, snap);
+  }
+  return off && out != NULL;
+}
+
 void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {
   if (c != NULL) {
     (void)fw_step_into(c, in, NULL, out, &c->snap);
+    (void)fw_supervise(c, out, &c->snap);
   }
 }
 
 void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
   if (c != NULL) {
     (void)fw_step_into(c, NULL, in, out, &c->snap);
+    (void)fw_supervise(c, out, &c->snap);
   }
 }
 

@@ -10,6 +10,10 @@
  *     ADC counts it sampled from the plant; fw_port_adc_read hands them to
  *     fw_board_control_isr, fw_port_pwm_write latches the duties the loop
  *     applies to the plant in the next period;
+ *   - supervision interrupt: pended by the control interrupt
+ *     (fw_port_supervision_pend) and run right after it, tail-chained as on a
+ *     Cortex-M (fw_board_supervision_isr): before the duties reach the plant,
+ *     so a hard fault it finds switches them off in the same period;
  *   - background loop: every `background_every` control periods, interleaved
  *     with them (sim_controller_t.background), fw_board_background; its CAN
  *     frames and UART bytes go into queues that the bench reads
@@ -49,6 +53,7 @@ struct fw_port {
   uint32_t uart_head, uart_tail;
   uint32_t crit_depth;
   uint32_t crit_unbalanced;
+  uint8_t sup_pending; /**< the supervision interrupt is pended */
   int has_nvm;
   char path[SIM_NVM_PATH_MAX];
   char tmp[SIM_NVM_PATH_MAX + 8u];
@@ -67,6 +72,8 @@ void fw_port_pwm_write(fw_port_t *port, const float duty_abc[3], bool enable) {
   for (int j = 0; j < 3; ++j) port->duty[j] = duty_abc[j];
   port->pwm_on = enable ? 1u : 0u;
 }
+
+void fw_port_supervision_pend(fw_port_t *port) { port->sup_pending = 1u; }
 
 bool fw_port_adc_read(fw_port_t *port, fw_adc_inputs_t *adc) {
   *adc = port->adc;
@@ -159,6 +166,10 @@ static void sim_app_step_adc(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t
   d->port.adc = *adc;
   d->port.adc_fresh = 1u;
   fw_board_control_isr(&d->board);
+  if (d->port.sup_pending) { /* tail-chained, before the duties take effect */
+    d->port.sup_pending = 0u;
+    fw_board_supervision_isr(&d->board);
+  }
   for (int j = 0; j < 3; ++j) out->duty_abc[j] = d->port.duty[j];
   out->pwm_enable = d->port.pwm_on;
 }

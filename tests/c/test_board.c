@@ -41,12 +41,28 @@ struct fw_port {
   uint32_t depth, enters, unbalanced;
   uint32_t isr_in_lock; /* control interrupts that ran inside a critical section */
   fw_board_t *preempt;  /* run a control interrupt from inside uart_write (once) */
+  uint32_t sup_pends;   /* supervision interrupts pended */
+  uint8_t sup_pending;
 };
 
 void fw_port_pwm_write(fw_port_t *p, const float duty_abc[3], bool enable) {
   memcpy(p->duty, duty_abc, sizeof p->duty);
   p->pwm_on = enable;
   p->pwm_writes++;
+}
+
+void fw_port_supervision_pend(fw_port_t *p) {
+  p->sup_pends++;
+  p->sup_pending = 1u;
+}
+
+/* The PWM interrupt and, tail-chained to it, the supervision it pended. */
+static void board_isr(fw_board_t *b) {
+  fw_board_control_isr(b);
+  if (b->port->sup_pending) {
+    b->port->sup_pending = 0u;
+    fw_board_supervision_isr(b);
+  }
 }
 
 bool fw_port_adc_read(fw_port_t *p, fw_adc_inputs_t *adc) {
@@ -67,7 +83,7 @@ size_t fw_port_uart_write(fw_port_t *p, const uint8_t *data, size_t len) {
   if (p->preempt != NULL) { /* the control interrupt fires in the middle of the background */
     fw_board_t *b = p->preempt;
     p->preempt = NULL;
-    fw_board_control_isr(b);
+    board_isr(b);
   }
   size_t n = len;
   if (p->uart_per_call != 0u && n > p->uart_per_call) n = p->uart_per_call;
@@ -134,8 +150,8 @@ static void rx_both(uint16_t id, const uint8_t d[8]) {
 }
 
 static void period_both(void) {
-  fw_board_control_isr(&g_ba);
-  fw_board_control_isr(&g_bb);
+  board_isr(&g_ba);
+  board_isr(&g_bb);
   fw_board_background(&g_ba);
   fw_board_background(&g_bb);
 }
@@ -147,7 +163,7 @@ static int frames_equal(const fw_can_frame_t *x, const fw_can_frame_t *y) {
 static void test_isr_reads_adc_latches_duties_no_lock(void) {
   boot();
   uint32_t r0 = g_pa.adc_reads;
-  for (int k = 0; k < 10; k++) fw_board_control_isr(&g_ba);
+  for (int k = 0; k < 10; k++) board_isr(&g_ba);
   TT_CHECK(g_pa.adc_reads == r0 + 10u);
   TT_CHECK(g_pa.pwm_writes == 10u);
   TT_CHECK(g_pa.pwm_on == 0); /* SWITCH ON DISABLED: power stage off */
@@ -202,11 +218,11 @@ static void test_background_changes_core_in_balanced_lock(void) {
 
 static void test_lagging_background_loses_oldest_counted(void) {
   boot();
-  for (uint32_t k = 0; k < FW_APP_SNAP_RING + 9u; k++) fw_board_control_isr(&g_ba);
+  for (uint32_t k = 0; k < FW_APP_SNAP_RING + 9u; k++) board_isr(&g_ba);
   TT_CHECK(fw_app_counters(&g_a)->snap_overruns == 9u);
   TT_CHECK(g_pa.pwm_writes == FW_APP_SNAP_RING + 9u); /* the interrupt never waited */
   fw_board_background(&g_ba);
-  fw_board_control_isr(&g_ba);
+  board_isr(&g_ba);
   fw_board_background(&g_ba);
   TT_CHECK(fw_app_counters(&g_a)->snap_overruns == 9u); /* room again */
 }
@@ -218,11 +234,11 @@ static void test_interrupt_inside_background_keeps_order(void) {
      background (while it moves UART bytes) every time */
   uint32_t inside = 0u;
   for (int k = 0; k < 480; k++) {
-    fw_board_control_isr(&g_bb);
+    board_isr(&g_bb);
     fw_board_background(&g_bb);
     if (g_pa.preempt != NULL) { /* no UART write in the last pass: it fires now */
       g_pa.preempt = NULL;
-      fw_board_control_isr(&g_ba);
+      board_isr(&g_ba);
     } else if (k > 0) {
       inside++;
     }
@@ -256,7 +272,7 @@ static void test_time_base_counts_periods_exactly(void) {
   int good = 1;
   for (int k = 0; k < 300; k++) {
     for (int j = 0; j < 1 + (k * 7) % 8; j++) { /* 1..8 periods: never more than the ring */
-      fw_board_control_isr(&g_ba);
+      board_isr(&g_ba);
       n++;
     }
     fw_board_background(&g_ba);
@@ -274,7 +290,7 @@ static void test_time_base_counts_periods_exactly(void) {
   good = 1;
   for (int k = 0; k < 40; k++) {
     for (int j = 0; j < 1 + k % 5; j++) {
-      fw_board_control_isr(&g_ba);
+      board_isr(&g_ba);
       n++;
     }
     fw_board_background(&g_ba);
@@ -291,11 +307,11 @@ static void test_time_base_counts_periods_exactly(void) {
  * above the DC link does not show in the OD, the next period's does. */
 static void test_pending_periods_keep_their_configuration(void) {
   boot();
-  fw_board_control_isr(&g_ba);
+  board_isr(&g_ba);
   fw_board_background(&g_ba);
   co_node_t *node = fw_app_node(&g_a);
   TT_CHECK((co_node_get_u32(node, CO_OD_6041_00) & 0x80u) == 0u); /* ~300 V > 150 V */
-  for (int k = 0; k < 5; k++) fw_board_control_isr(&g_ba); /* pending */
+  for (int k = 0; k < 5; k++) board_isr(&g_ba); /* pending */
   float trip = 400.0f;
   uint32_t bits;
   memcpy(&bits, &trip, sizeof bits);
@@ -316,7 +332,7 @@ static void test_pending_periods_keep_their_configuration(void) {
   }
   TT_CHECK(answered == 1);
   TT_CHECK((co_node_get_u32(node, CO_OD_6041_00) & 0x80u) == 0u);
-  fw_board_control_isr(&g_ba);
+  board_isr(&g_ba);
   fw_board_background(&g_ba);
   TT_CHECK((co_node_get_u32(node, CO_OD_6041_00) & 0x80u) == 0x80u);
   TT_CHECK((fw_statusword(fw_app_ctrl(&g_a)) & 0x80u) == 0x80u);

@@ -978,7 +978,8 @@ static void test_snapshot_halves_equal_get_snapshot(void) {
  * the groups a path does not write carried from the period before's
  * destination; each slot completed as the background does, and
  * fw_get_snapshot_of, equal to the reference core's fw_get_snapshot after
- * every step (power off, start-up, RUN, a fault with braking). */
+ * every step (power off, start-up, RUN, a fault with braking); the twin
+ * runs the two halves (fw_step_into, fw_supervise) as fw_app does. */
 static fw_snapshot_t g_ring[TEST_SLOTS];
 static uint32_t g_ring_gen[TEST_SLOTS];
 
@@ -992,6 +993,7 @@ static int into_matches(fw_ctrl_t *ref, fw_ctrl_t *c2, plant_t *p, uint32_t k,
   fw_snapshot_t *dst = full ? &c2->snap : &g_ring[k % TEST_SLOTS];
   uint32_t *gen = &g_ring_gen[k % TEST_SLOTS];
   const unsigned w = fw_step_into(c2, &in, NULL, &out2, dst);
+  (void)fw_supervise(c2, &out2, dst); /* the second half, into the same slot */
   if (w != FW_SNAP_W_ALL) {
     fw_snapshot_carry(dst, *last, w);
   }

@@ -957,7 +957,7 @@ static void fw_app_serial(fw_app_t *app, const fw_snapshot_t *s, uint32_t step) 
   }
 }
 
-/* ---- the control interrupt ----------------------------------------------------- */
+/* ---- the control and supervision interrupts ---------------------------------- */
 
 /* Before the step: the slot of this period (NULL when the ring is full: the
  * background is behind), into whose snapshot the core writes the period's
@@ -968,18 +968,18 @@ FW_ISR_OPT static inline fw_app_period_t *fw_app_slot(fw_app_t *app, uint32_t he
   return FW_LIKELY(head - tail < FW_APP_SNAP_RING) ? &app->ring[head % FW_APP_SNAP_RING] : NULL;
 }
 
-/* After the step: complete the period's raw half in its slot p (the blocks'
- * states; the background completes the rest), publish it to the background,
- * count the period. dst is where the step wrote (p's snapshot, or ctrl.snap
- * when the ring is full); the groups it did not write are the period
- * before's. One release fence for the slot and both counters. */
-FW_ISR_OPT static void fw_app_publish(fw_app_t *app, fw_app_period_t *p, fw_snapshot_t *dst,
-                                      unsigned written, uint32_t head) {
-  if (FW_UNLIKELY(written != FW_SNAP_W_ALL)) {
-    fw_snapshot_carry(dst, app->last, written);
+/* After the supervision: complete the period's raw half in its slot p (the
+ * blocks' states; the background completes the rest) and publish it to the
+ * background. dst is where the step wrote (p's snapshot, or ctrl.snap when
+ * the ring is full); the groups it did not write are the period before's.
+ * One release fence for the slot and the head. */
+FW_ISR_OPT static void fw_app_publish(fw_app_t *app, const fw_app_sup_t *sp) {
+  fw_app_period_t *p = sp->p;
+  fw_snapshot_t *dst = sp->dst;
+  if (FW_UNLIKELY(sp->written != FW_SNAP_W_ALL)) {
+    fw_snapshot_carry(dst, app->last, sp->written);
   }
   app->last = dst;
-  const uint32_t step = app->step;
   if (FW_LIKELY(p != NULL)) {
     fw_snapshot_capture_state(&app->ctrl, &p->snap, &p->raw);
     /* the fields that change only at start-up events and on commands: when
@@ -989,30 +989,58 @@ FW_ISR_OPT static void fw_app_publish(fw_app_t *app, fw_app_period_t *p, fw_snap
       fw_snapshot_capture_slow(&app->ctrl, &p->snap);
       p->slow_gen = gen;
     }
-    p->step = step; /* p->done is then not step + 1: not completed */
+    p->step = sp->step; /* p->done is then not step + 1: not completed */
   } else {
     app->count.snap_overruns++; /* the background is behind: it never sees this period */
   }
-  app->step = step + 1u;
   atomic_thread_fence(memory_order_release);
-  atomic_store_explicit(&app->ring_head, FW_LIKELY(p != NULL) ? head + 1u : head,
+  atomic_store_explicit(&app->ring_head, FW_LIKELY(p != NULL) ? sp->head + 1u : sp->head,
                         memory_order_relaxed);
-  atomic_store_explicit(&app->isr_step, step + 1u, memory_order_relaxed);
 }
 
-/* One control period (the interrupt's, or fw_app_step's without a background):
- * the core steps into this period's slot (ctrl.snap when the ring is full) from
- * the ADC counts or, adc NULL, the physical inputs, then the period is
- * published. The ring's head is read once for the slot and the publication:
- * only the publication writes it. */
-FW_ISR_OPT static FW_ALWAYS_INLINE void fw_app_period(fw_app_t *app, const fw_inputs_t *in,
-                                                      const fw_adc_inputs_t *adc,
-                                                      fw_outputs_t *out) {
+/* The control half of one period (the control interrupt's, or fw_app_step's):
+ * the core steps into this period's slot (ctrl.snap when the ring is full)
+ * from the ADC counts or, adc NULL, the physical inputs; the period is
+ * counted (the time base) and handed to the supervision. When the last
+ * period's supervision has not finished (it runs at a lower priority and
+ * this interrupt preempted it), its hand-over is left alone: this period
+ * steps into ctrl.snap and is never published (sup_missed), and the core
+ * latches FW_FAULT_SUPERVISION_MISSED when the monitors did not judge the
+ * last period. */
+FW_ISR_OPT static FW_ALWAYS_INLINE void fw_app_control(fw_app_t *app, const fw_inputs_t *in,
+                                                       const fw_adc_inputs_t *adc,
+                                                       fw_outputs_t *out) {
+  const uint32_t step = app->step;
+  const bool missed = atomic_load_explicit(&app->sup_pending, memory_order_relaxed) != 0u;
   const uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
-  fw_app_period_t *p = fw_app_slot(app, head);
+  fw_app_period_t *p = FW_LIKELY(!missed) ? fw_app_slot(app, head) : NULL;
   fw_snapshot_t *dst = FW_LIKELY(p != NULL) ? &p->snap : &app->ctrl.snap;
   const unsigned written = fw_step_into(&app->ctrl, in, adc, out, dst);
-  fw_app_publish(app, p, dst, written, head);
+  if (FW_LIKELY(!missed)) {
+    fw_app_sup_t *sp = &app->sup;
+    sp->p = p;
+    sp->dst = dst;
+    sp->written = written;
+    sp->head = head;
+    sp->step = step;
+    atomic_store_explicit(&app->sup_pending, 1u, memory_order_release);
+  } else {
+    app->count.sup_missed++;
+  }
+  app->step = step + 1u;
+  atomic_store_explicit(&app->isr_step, step + 1u, memory_order_release);
+}
+
+/* The supervision half: the core's supervision of the period the control
+ * half handed over, then its publication. */
+FW_ISR_OPT static FW_ALWAYS_INLINE bool fw_app_sup(fw_app_t *app, fw_outputs_t *out) {
+  if (FW_UNLIKELY(atomic_load_explicit(&app->sup_pending, memory_order_acquire) == 0u)) {
+    return false; /* nothing handed over */
+  }
+  const bool off = fw_supervise(&app->ctrl, out, app->sup.dst);
+  fw_app_publish(app, &app->sup);
+  atomic_store_explicit(&app->sup_pending, 0u, memory_order_release);
+  return off;
 }
 
 FW_ISR_OPT void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *out) {
@@ -1023,7 +1051,15 @@ FW_ISR_OPT void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *
     }
     return;
   }
-  fw_app_period(app, NULL, adc, out); /* the core's one ADC conversion and range check */
+  fw_app_control(app, NULL, adc, out); /* the core's one ADC conversion and range check */
+}
+
+FW_ISR_OPT bool fw_app_supervise(void *ctx, fw_outputs_t *out) {
+  fw_app_t *app = (fw_app_t *)ctx;
+  if (app == NULL || out == NULL) {
+    return false;
+  }
+  return fw_app_sup(app, out);
 }
 
 /* ---- the background loop ------------------------------------------------------- */
@@ -1073,6 +1109,7 @@ void fw_app_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
   }
   uint32_t now = fw_app_time(app, app->step);
   fw_app_bg_input(app, now);
-  fw_app_period(app, in, NULL, out);
+  fw_app_control(app, in, NULL, out);
+  (void)fw_app_sup(app, out);
   fw_app_bg_output(app, now);
 }

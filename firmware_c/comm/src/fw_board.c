@@ -29,6 +29,14 @@ void fw_board_control_isr(fw_board_t *board) {
   }
   fw_app_isr(board->app, &adc, &out);
   fw_port_pwm_write(board->port, out.duty_abc, out.pwm_enable != 0u);
+  fw_port_supervision_pend(board->port);
+}
+
+void fw_board_supervision_isr(fw_board_t *board) {
+  fw_outputs_t out;
+  if (fw_app_supervise(board->app, &out)) {
+    fw_port_pwm_write(board->port, out.duty_abc, false); /* a hard fault: off now */
+  }
 }
 
 bool fw_board_can_rx_isr(fw_board_t *board, const fw_can_frame_t *frame) {

@@ -236,6 +236,13 @@ typedef struct {
   };
   fw_foc_t foc;
   fw_mon_t mon;
+  /** The period's supervision (fw_supervise), staged by fw_step_into: the
+   *  integrity monitor's inputs, the quick stop, and whether they wait. */
+  struct {
+    fw_mon_in_t mon;
+    uint8_t quick_stop;
+    uint8_t due; /**< staged and not yet judged */
+  } sup;
   fw_bemf_t bemf;
   /* last: its rings are large, the hot blocks above stay within the FPU's
    * 1 KB load/store offset from the controller's address */
@@ -347,9 +354,26 @@ uint32_t fw_fault_history(const fw_ctrl_t *ctrl, uint16_t *codes, uint32_t n);
 /**
  * One control period. Checks the inputs (NaN, overcurrent, DC-link range),
  * runs the state machine, the estimator and the loops, and returns the
- * duties to latch at the next PWM period (one-sample update delay).
+ * duties to latch at the next PWM period (one-sample update delay). It is
+ * fw_step_into (the control half) followed by fw_supervise (the
+ * supervision half); an MCU runs the two halves in two interrupts.
  */
 void fw_step(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out);
+
+/**
+ * The period's supervision half: the integrity monitor (fw_mon_update) and
+ * the linear-axis protections (fw_protect_update) on what fw_step_into staged
+ * for them. Call it once after every fw_step_into, before the next one and
+ * before the duties take effect (fw_app: the supervision interrupt, pended by
+ * the control interrupt and tail-chained to it). A fault it finds latches in
+ * the same period as before the split; a hard one switches the outputs off:
+ * out gets duties 0.5 and pwm_enable 0, snap the duties, state and fault code,
+ * and it returns true (the caller then writes the PWM again). Returns false
+ * when it left out unchanged. A period whose supervision did not run before
+ * the next fw_step_into is FW_FAULT_SUPERVISION_MISSED (hard): the monitors
+ * did not judge it.
+ */
+bool fw_supervise(fw_ctrl_t *ctrl, fw_outputs_t *out, fw_snapshot_t *snap);
 
 /** Groups of the snapshot fields fw_step writes (fw_step_into's result): the
  *  period's common signals (step count, the angle estimate at the sample

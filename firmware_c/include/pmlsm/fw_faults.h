@@ -16,6 +16,7 @@ typedef enum {
   FW_FAULT_DC_UNDERVOLTAGE = 0x3220, /**< DC link below u_dc_min_V while enabled */
   FW_FAULT_INPUT_INVALID = 0x5210, /**< NaN or inf in a sampled input */
   FW_FAULT_ADC_RANGE = 0x5220, /**< ADC count outside [0, adc_max_count] */
+  FW_FAULT_SUPERVISION_MISSED = 0x6100, /**< the supervision interrupt did not run between two control interrupts: the period's monitors and protections never judged it */
   FW_FAULT_CONFIG_INVALID = 0x6320, /**< enable requested with a configuration the core refused */
   FW_FAULT_HEARTBEAT_LOST = 0x8130, /**< supervisor heartbeat (0x1016) not heard within its consumer time */
   FW_FAULT_RPDO_TIMEOUT = 0x8250, /**< RPDO data not applied within its event timer (0x1400+n:5) while enabled (raised by fw_app) */
@@ -37,6 +38,6 @@ typedef enum {
 } fw_fault_t;
 
 /** Number of fault codes (without FW_FAULT_NONE). */
-#define FW_FAULT_COUNT 24u
+#define FW_FAULT_COUNT 25u
 
 #endif /* PMLSM_FW_FAULTS_H */

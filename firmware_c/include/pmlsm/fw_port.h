@@ -30,8 +30,10 @@
  * without storage returns FW_NVM_UNSUPPORTED (the drive then answers 'save'
  * with SDO abort 0x08000020 and reads 0 from 0x1010:1).
  *
- * Interrupt handlers copy and flag; the work happens in fw_app_isr (fixed
- * cost) and in the background loop (everything else).
+ * Interrupt handlers copy and flag; the work happens in fw_app_isr (the
+ * control interrupt: ADC to duties), fw_app_supervise (the supervision
+ * interrupt it pends: monitors, protections, publication) and in the
+ * background loop (everything else).
  */
 #ifndef PMLSM_FW_PORT_H
 #define PMLSM_FW_PORT_H
@@ -59,6 +61,16 @@ typedef struct {
 
 /** Latch duties for the next PWM period; enable=false opens all switches. */
 void fw_port_pwm_write(fw_port_t *port, const float duty_abc[3], bool enable);
+
+/** Pend the supervision interrupt (fw_board_supervision_isr): called by the
+ *  control interrupt as its last act. The supervision must run before the
+ *  duties just written take effect where the hardware allows it (a hard
+ *  fault there writes the PWM off again), and in any case before the next
+ *  control interrupt: at a priority below the control interrupt's and above
+ *  the background's (Cortex-M: PendSV or a spare vector, tail-chained). A
+ *  port that never runs it leaves the drive in FW_FAULT_SUPERVISION_MISSED,
+ *  power stage off. */
+void fw_port_supervision_pend(fw_port_t *port);
 
 /** Read the ADC samples taken at the start of this PWM period. */
 bool fw_port_adc_read(fw_port_t *port, fw_adc_inputs_t *adc);

@@ -15,6 +15,8 @@ void fw_port_pwm_write(fw_port_t *port, const float duty_abc[3], bool enable) {
   (void)enable;
 }
 
+void fw_port_supervision_pend(fw_port_t *port) { (void)port; }
+
 bool fw_port_adc_read(fw_port_t *port, fw_adc_inputs_t *adc) {
   (void)port;
   adc->i_abc_counts[0] = 2048u;

@@ -24,6 +24,11 @@ static struct fw_port g_port;
 void pwm_adc_irq_handler(void);
 void pwm_adc_irq_handler(void) { fw_board_control_isr(&g_board); }
 
+/** Supervision interrupt (PendSV on a board: pended by the control interrupt,
+ *  tail-chained to it): monitors, protections, publication. */
+void supervision_irq_handler(void);
+void supervision_irq_handler(void) { fw_board_supervision_isr(&g_board); }
+
 /** CAN receive interrupt: copy and queue only (processed by the background loop). */
 void can_rx_irq_handler(const fw_can_frame_t *frame);
 void can_rx_irq_handler(const fw_can_frame_t *frame) {
@@ -42,9 +47,11 @@ int main(void) {
      block's CRC and the drive boots on defaults. */
   (void)fw_board_init(&g_board, &g_app, &g_port);
   /* TODO(board port): enable the PWM/ADC and CAN interrupts here. Without
-     them (this image) the loop steps the control once per pass. */
+     them (this image) the loop steps the control and the supervision once
+     per pass. */
   for (;;) {
     pwm_adc_irq_handler();
+    supervision_irq_handler(); /* the blank port does not pend it */
     fw_board_background(&g_board);
   }
 }

@@ -155,7 +155,17 @@ typedef struct {
   uint32_t hb_lost;
   uint32_t rpdo_timeouts; /**< RPDO event-timer deadlines missed (0x1400+n:5) */
   uint32_t snap_overruns; /**< periods the background never saw (ring full) */
+  uint32_t sup_missed; /**< control periods that found the last supervision unfinished */
 } fw_app_counters_t;
+
+/** The control interrupt's hand-over of a period to the supervision interrupt. */
+typedef struct {
+  fw_app_period_t *p;  /**< the period's ring slot, NULL when the ring was full */
+  fw_snapshot_t *dst;  /**< where fw_step_into wrote (p's snapshot, or ctrl.snap) */
+  uint32_t head;       /**< the ring's head the slot was taken at */
+  uint32_t step;       /**< the period's index */
+  unsigned written;    /**< FW_SNAP_W_* groups fw_step_into wrote */
+} fw_app_sup_t;
 
 /** The drive application. Treat the members as private. */
 typedef struct {
@@ -166,6 +176,8 @@ typedef struct {
   _Atomic uint32_t ring_head; /**< written by the interrupt only */
   _Atomic uint32_t ring_tail; /**< written by the background only */
   _Atomic uint32_t isr_step;  /**< step as published by the interrupt (the time base) */
+  _Atomic uint32_t sup_pending; /**< a period handed over, its supervision not finished */
+  fw_app_sup_t sup;    /**< the hand-over (written by the control interrupt only) */
   fw_snapshot_t *last; /**< where the interrupt's last period's snapshot fields are (a
                           slot's, or ctrl.snap when the ring was full; fw_step_into) */
   fw_app_period_t ring[FW_APP_SNAP_RING]; /**< interrupt -> background */
@@ -205,9 +217,20 @@ bool fw_app_can_rx(fw_app_t *app, const fw_can_frame_t *frame);
 
 /**
  * The control interrupt (app is a fw_app_t *): raw ADC counts in, duties
- * out (the signature of the simulator's step_adc).
+ * out (the signature of the simulator's step_adc). Its board then pends the
+ * supervision interrupt.
  */
 void fw_app_isr(void *app, const fw_adc_inputs_t *adc, fw_outputs_t *out);
+
+/**
+ * The supervision interrupt (app is a fw_app_t *), once after every control
+ * interrupt, before the next one, at a lower priority: the integrity monitor
+ * and the protections on the period (fw_supervise), then the period's
+ * publication to the background. Returns true when a hard fault switched the
+ * outputs off: out then holds duties 0.5 and pwm_enable 0, to be written to
+ * the PWM at once. False: out untouched, the control interrupt's duties stand.
+ */
+bool fw_app_supervise(void *app, fw_outputs_t *out);
 
 /** The background loop's work (app is a fw_app_t *); see above. */
 void fw_app_background(void *app);

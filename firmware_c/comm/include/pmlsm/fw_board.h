@@ -10,12 +10,15 @@
  *
  *     fw_board_t board;
  *     fw_board_init(&board, &app, &port);         // after fw_app_init: boots from storage
- *     PWM/ADC interrupt: fw_board_control_isr(&board);
+ *     PWM/ADC interrupt: fw_board_control_isr(&board);   // pends the next
+ *     supervision:       fw_board_supervision_isr(&board);
  *     CAN RX interrupt:  fw_board_can_rx_isr(&board, &frame);
  *     main loop:         for (;;) fw_board_background(&board);
  *
- * The control interrupt reads the ADC, runs fw_app_isr (conversion, step,
- * publication) and latches the duties; nothing else. The background runs
+ * The control interrupt reads the ADC, runs fw_app_isr (conversion, control
+ * step) and latches the duties, then pends the supervision interrupt, which
+ * runs fw_app_supervise (integrity monitor, protections, publication) and
+ * writes the PWM off when that found a hard fault. The background runs
  * fw_app_background and moves the frames and bytes the application produced
  * to the port; a frame or bytes the port cannot take now are held and
  * offered again on the next call, never dropped here. The application's
@@ -58,8 +61,14 @@ typedef struct {
  */
 fw_app_nvm_state_t fw_board_init(fw_board_t *board, fw_app_t *app, fw_port_t *port);
 
-/** The PWM/ADC interrupt: ADC -> fw_app_isr -> PWM. */
+/** The PWM/ADC interrupt: ADC -> fw_app_isr -> PWM, then pends the
+ *  supervision interrupt (fw_port_supervision_pend). */
 void fw_board_control_isr(fw_board_t *board);
+
+/** The supervision interrupt (lower priority than the control interrupt,
+ *  higher than the background): fw_app_supervise; a hard fault it finds
+ *  writes the PWM off at once. */
+void fw_board_supervision_isr(fw_board_t *board);
 
 /** The CAN receive interrupt: queue the frame. False when the queue is full. */
 bool fw_board_can_rx_isr(fw_board_t *board, const fw_can_frame_t *frame);
