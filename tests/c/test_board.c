@@ -338,8 +338,56 @@ static void test_pending_periods_keep_their_configuration(void) {
   TT_CHECK((fw_statusword(fw_app_ctrl(&g_a)) & 0x80u) == 0x80u);
 }
 
+/* A port whose supervision interrupt never runs (the pend is lost): every
+ * control interrupt finds the last period unsupervised, runs the late
+ * supervision itself and raises FW_FAULT_SUPERVISION_MISSED, so the drive
+ * stays off and the fault still reaches the bus (EMCY 0x6100). */
+static void test_lost_supervision_faults_and_is_reported(void) {
+  boot();
+  for (int k = 0; k < 10; k++) {
+    fw_board_control_isr(&g_bb); /* never board_isr: the supervision is lost */
+    fw_board_background(&g_bb);
+  }
+  TT_CHECK(g_pb.sup_pends == 10u);
+  TT_CHECK(fw_app_counters(&g_b)->sup_missed == 9u);
+  TT_CHECK(fw_fault_code(fw_app_ctrl(&g_b)) == FW_FAULT_SUPERVISION_MISSED);
+  TT_CHECK(g_pb.pwm_on == 0);
+  int emcy = 0;
+  for (uint32_t i = 0; i < g_pb.can_n; i++) {
+    const fw_can_frame_t *f = &g_pb.can[i];
+    emcy = emcy || (f->id == 0x80u + NID && f->data[0] == 0x00u && f->data[1] == 0x61u);
+  }
+  TT_CHECK(emcy);
+  /* the periods were published: the background saw the fault in a snapshot */
+  fw_snapshot_t s;
+  fw_app_snapshot(&g_b, &s);
+  TT_CHECK(s.fault_code == (uint16_t)FW_FAULT_SUPERVISION_MISSED);
+}
+
+/* A supervision preempted by the next control interrupt (sup_busy) is left
+ * to finish: that period is not handed over (the hand-over stays the
+ * preempted one's), and the fault is raised. */
+static void test_preempted_supervision_keeps_its_period(void) {
+  boot();
+  board_isr(&g_bb);
+  fw_board_control_isr(&g_bb); /* period 1 handed over ... */
+  const uint32_t step = g_b.sup.step;
+  atomic_store(&g_b.sup_busy, 1u); /* ... and its supervision is running */
+  fw_board_control_isr(&g_bb);   /* period 2 preempts it */
+  TT_CHECK(g_b.sup.step == step && step == 1u);
+  TT_CHECK(fw_app_counters(&g_b)->sup_missed == 1u);
+  TT_CHECK(fw_fault_code(fw_app_ctrl(&g_b)) == FW_FAULT_SUPERVISION_MISSED);
+  atomic_store(&g_b.sup_busy, 0u);
+  g_pb.sup_pending = 0u;
+  fw_board_supervision_isr(&g_bb); /* the preempted one completes: period 1 published */
+  TT_CHECK(atomic_load(&g_b.ring_head) == 2u);
+  TT_CHECK(g_b.ring[1].step == 1u);
+}
+
 int main(void) {
   TT_RUN(test_isr_reads_adc_latches_duties_no_lock);
+  TT_RUN(test_lost_supervision_faults_and_is_reported);
+  TT_RUN(test_preempted_supervision_keeps_its_period);
   TT_RUN(test_refused_frames_and_bytes_arrive_later_in_order);
   TT_RUN(test_background_changes_core_in_balanced_lock);
   TT_RUN(test_lagging_background_loses_oldest_counted);

@@ -1070,9 +1070,83 @@ static void test_step_into_slots_equals_step(void) {
   TT_CHECK(good && k > 6000u);
 }
 
+/* The two halves of a period: a control half (fw_step_into) whose supervision
+ * (fw_supervise) never ran is a hard fault at the next control half; the
+ * supervision with nothing staged leaves the outputs alone. */
+static void test_supervision_missed(void) {
+  fw_ctrl_t c;
+  plant_t p;
+  fw_outputs_t out;
+  run_to_operation(&c, &p, &out);
+  TT_CHECK(out.pwm_enable == 1u && fw_fault_code(&c) == FW_FAULT_NONE);
+  /* fw_step ran both halves: nothing waits */
+  fw_outputs_t sentinel = {{0.1f, 0.2f, 0.3f}, 7u};
+  TT_CHECK(!fw_supervise(&c, &sentinel, &c.snap));
+  TT_CHECK(sentinel.duty_abc[0] == 0.1f && sentinel.pwm_enable == 7u);
+  fw_inputs_t in;
+  plant_sample(&p, &in);
+  (void)fw_step_into(&c, &in, NULL, &out, &c.snap); /* its supervision is lost */
+  TT_CHECK(out.pwm_enable == 1u && fw_fault_code(&c) == FW_FAULT_NONE);
+  plant_period(&p, 1.0 / 24000.0);
+  plant_sample(&p, &in);
+  (void)fw_step_into(&c, &in, NULL, &out, &c.snap);
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_SUPERVISION_MISSED);
+  TT_CHECK(out.pwm_enable == 0u);
+  TT_CHECK(fw_state(&c) == FW_CIA402_FAULT);
+  TT_CHECK(c.snap.fault_code == (uint16_t)FW_FAULT_SUPERVISION_MISSED);
+}
+
+/* A hard fault the supervision finds (here the current sum of a phase sensor
+ * with a 3 A offset) switches off the duties the control half has just
+ * computed, in the period a core running fw_step switches off in, with the
+ * same outputs. */
+static void test_supervision_switches_off_same_period(void) {
+  fw_ctrl_t c, ref;
+  plant_t p;
+  fw_outputs_t out, out_ref;
+  run_to_operation(&c, &p, &out);
+  ref = c;
+  int k_off = -1, k_ref = -1;
+  for (int k = 0; k < 4800 && k_off < 0; k++) {
+    fw_inputs_t in;
+    plant_sample(&p, &in);
+    in.i_abc_A[0] += 3.0f;
+    fw_step(&ref, &in, &out_ref);
+    (void)fw_step_into(&c, &in, NULL, &out, &c.snap);
+    const uint8_t pwm_control = out.pwm_enable;
+    const bool off = fw_supervise(&c, &out, &c.snap);
+    if (out_ref.pwm_enable == 0u && k_ref < 0) {
+      k_ref = k;
+    }
+    if (off) {
+      k_off = k;
+      TT_CHECK(pwm_control == 1u); /* the control half did not know */
+      TT_CHECK(out.pwm_enable == 0u);
+      TT_CHECK(out.duty_abc[0] == 0.5f && out.duty_abc[1] == 0.5f && out.duty_abc[2] == 0.5f);
+      TT_CHECK(c.snap.duty_abc[0] == 0.5f && c.snap.fault_code ==
+                                                  (uint16_t)FW_FAULT_CURRENT_SENSOR_SUM);
+      /* fault reaction active, ended (FAULT) at the next control half */
+      TT_CHECK(fw_state(&c) == FW_CIA402_FAULT_REACTION_ACTIVE);
+      TT_CHECK(fw_state(&ref) == fw_state(&c));
+    }
+    TT_CHECK(memcmp(out.duty_abc, out_ref.duty_abc, sizeof out.duty_abc) == 0);
+    TT_CHECK(out.pwm_enable == out_ref.pwm_enable);
+    plant_period(&p, 1.0 / 24000.0);
+    for (int i = 0; i < 3; i++) {
+      p.duty[i] = out.duty_abc[i];
+    }
+    p.enabled = out.pwm_enable;
+  }
+  TT_CHECK(k_off > 0 && k_off == k_ref);
+  TT_CHECK(fw_fault_code(&c) == FW_FAULT_CURRENT_SENSOR_SUM);
+  TT_CHECK(fw_fault_code(&ref) == FW_FAULT_CURRENT_SENSOR_SUM);
+}
+
 int main(void) {
   TT_RUN(test_demod_pseudo);
   TT_RUN(test_step_into_slots_equals_step);
+  TT_RUN(test_supervision_missed);
+  TT_RUN(test_supervision_switches_off_same_period);
   TT_RUN(test_demod_sogi);
   TT_RUN(test_demod_sogi_adaptive);
   TT_RUN(test_demod_pi_ambiguity);

@@ -998,25 +998,56 @@ FW_ISR_OPT static void fw_app_publish(fw_app_t *app, const fw_app_sup_t *sp) {
                         memory_order_relaxed);
 }
 
+/* The supervision half: the core's supervision of the period the control
+ * half handed over, then its publication. */
+FW_ISR_OPT static FW_ALWAYS_INLINE bool fw_app_sup(fw_app_t *app, fw_outputs_t *out) {
+  if (FW_UNLIKELY(atomic_load_explicit(&app->sup_pending, memory_order_acquire) == 0u)) {
+    return false; /* nothing handed over */
+  }
+  atomic_store_explicit(&app->sup_busy, 1u, memory_order_relaxed);
+  const bool off = fw_supervise(&app->ctrl, out, app->sup.dst);
+  fw_app_publish(app, &app->sup);
+  atomic_store_explicit(&app->sup_pending, 0u, memory_order_release);
+  atomic_store_explicit(&app->sup_busy, 0u, memory_order_relaxed);
+  return off;
+}
+
+/* The control interrupt found the last period's supervision not finished: the
+ * timing is broken (the supervision interrupt starved, or a port that never
+ * pends it), a hard fault (FW_FAULT_SUPERVISION_MISSED), and counted. Not
+ * started: the late supervision runs here, so the period is judged and
+ * published (a broken port still shows its fault on the bus). Started and
+ * preempted by this interrupt: it is left to finish; the caller does not
+ * hand this period over (true). */
+static FW_NOINLINE bool fw_app_late(fw_app_t *app) {
+  app->count.sup_missed++;
+  const bool preempted = atomic_load_explicit(&app->sup_busy, memory_order_relaxed) != 0u;
+  if (!preempted) {
+    fw_outputs_t off;
+    (void)fw_app_sup(app, &off); /* the duties of that period are long applied */
+  }
+  fw_raise_fault(&app->ctrl, FW_FAULT_SUPERVISION_MISSED);
+  return preempted;
+}
+
 /* The control half of one period (the control interrupt's, or fw_app_step's):
  * the core steps into this period's slot (ctrl.snap when the ring is full)
  * from the ADC counts or, adc NULL, the physical inputs; the period is
- * counted (the time base) and handed to the supervision. When the last
- * period's supervision has not finished (it runs at a lower priority and
- * this interrupt preempted it), its hand-over is left alone: this period
- * steps into ctrl.snap and is never published (sup_missed), and the core
- * latches FW_FAULT_SUPERVISION_MISSED when the monitors did not judge the
- * last period. */
+ * counted (the time base) and handed to the supervision (fw_app_late when the
+ * last one has not finished). */
 FW_ISR_OPT static FW_ALWAYS_INLINE void fw_app_control(fw_app_t *app, const fw_inputs_t *in,
                                                        const fw_adc_inputs_t *adc,
                                                        fw_outputs_t *out) {
   const uint32_t step = app->step;
-  const bool missed = atomic_load_explicit(&app->sup_pending, memory_order_relaxed) != 0u;
+  bool preempted = false;
+  if (FW_UNLIKELY(atomic_load_explicit(&app->sup_pending, memory_order_relaxed) != 0u)) {
+    preempted = fw_app_late(app);
+  }
   const uint32_t head = atomic_load_explicit(&app->ring_head, memory_order_relaxed);
-  fw_app_period_t *p = FW_LIKELY(!missed) ? fw_app_slot(app, head) : NULL;
+  fw_app_period_t *p = FW_LIKELY(!preempted) ? fw_app_slot(app, head) : NULL;
   fw_snapshot_t *dst = FW_LIKELY(p != NULL) ? &p->snap : &app->ctrl.snap;
   const unsigned written = fw_step_into(&app->ctrl, in, adc, out, dst);
-  if (FW_LIKELY(!missed)) {
+  if (FW_LIKELY(!preempted)) {
     fw_app_sup_t *sp = &app->sup;
     sp->p = p;
     sp->dst = dst;
@@ -1024,23 +1055,9 @@ FW_ISR_OPT static FW_ALWAYS_INLINE void fw_app_control(fw_app_t *app, const fw_i
     sp->head = head;
     sp->step = step;
     atomic_store_explicit(&app->sup_pending, 1u, memory_order_release);
-  } else {
-    app->count.sup_missed++;
   }
   app->step = step + 1u;
   atomic_store_explicit(&app->isr_step, step + 1u, memory_order_release);
-}
-
-/* The supervision half: the core's supervision of the period the control
- * half handed over, then its publication. */
-FW_ISR_OPT static FW_ALWAYS_INLINE bool fw_app_sup(fw_app_t *app, fw_outputs_t *out) {
-  if (FW_UNLIKELY(atomic_load_explicit(&app->sup_pending, memory_order_acquire) == 0u)) {
-    return false; /* nothing handed over */
-  }
-  const bool off = fw_supervise(&app->ctrl, out, app->sup.dst);
-  fw_app_publish(app, &app->sup);
-  atomic_store_explicit(&app->sup_pending, 0u, memory_order_release);
-  return off;
 }
 
 FW_ISR_OPT void fw_app_isr(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t *out) {

@@ -155,7 +155,8 @@ typedef struct {
   uint32_t hb_lost;
   uint32_t rpdo_timeouts; /**< RPDO event-timer deadlines missed (0x1400+n:5) */
   uint32_t snap_overruns; /**< periods the background never saw (ring full) */
-  uint32_t sup_missed; /**< control periods that found the last supervision unfinished */
+  uint32_t sup_missed; /**< control periods that found the last supervision unfinished
+                            (each raises FW_FAULT_SUPERVISION_MISSED) */
 } fw_app_counters_t;
 
 /** The control interrupt's hand-over of a period to the supervision interrupt. */
@@ -177,6 +178,7 @@ typedef struct {
   _Atomic uint32_t ring_tail; /**< written by the background only */
   _Atomic uint32_t isr_step;  /**< step as published by the interrupt (the time base) */
   _Atomic uint32_t sup_pending; /**< a period handed over, its supervision not finished */
+  _Atomic uint32_t sup_busy;    /**< the supervision is running (fw_app_supervise) */
   fw_app_sup_t sup;    /**< the hand-over (written by the control interrupt only) */
   fw_snapshot_t *last; /**< where the interrupt's last period's snapshot fields are (a
                           slot's, or ctrl.snap when the ring was full; fw_step_into) */
