@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Cost of one fw_step() on a Cortex-M4F, from instructions counted under QEMU.
+"""Cost of one fw_step() (and of the drive's interrupts) on a Cortex-M4F, from
+instructions counted under QEMU.
 
 What it does
   1. Cross-compiles the firmware core (firmware_c/src/*.c) with the real
@@ -23,6 +24,11 @@ What it does
      instruction executed from fw_step's first instruction until control is
      back in the harness is counted, callees included; the harness checks
      that the controller is still in RUN without a fault after every batch.
+     --isr measures the drive application's two interrupts of a period the
+     same way (harness modes count_isr and count_sup: per period the control
+     interrupt fw_app_isr, then the supervision interrupt fw_app_supervise
+     it pends, as the board runs them), --bg its background loop
+     (count_bg), and the per-period totals.
   4. Classifies each executed instruction from the image's disassembly and
      converts the counts to cycles with a low and a high Cortex-M4 cost
      model (see CYCLE MODEL below), then prints instructions/step (median
@@ -66,7 +72,9 @@ flash accelerator):
   (reported separately as a cold-flash fetch bound: executed code bytes / 8
   plus one line per change of flow, times 1 + 4 wait states),
   interrupt entry/exit (~12 + ~10 cycles, + ~17 + ~17 with lazy FP
-  stacking; added to the budget line), bus contention with DMA.
+  stacking; added to the budget line; the supervision interrupt is
+  tail-chained to the control interrupt: + 6, see SUP_OVERHEAD), bus
+  contention with DMA.
 """
 
 from __future__ import annotations
@@ -92,6 +100,16 @@ F_ISR_HZ = 24e3
 BUDGET = F_CPU_HZ / F_ISR_HZ  # 7083.3 cycles
 TARGET_SHARE = 0.50
 ISR_OVERHEAD = (22, 56)  # entry + exit cycles, without / with lazy FP context stacking
+# The supervision interrupt (fw_app_supervise) is pended by the control interrupt at a
+# lower priority than it and higher than the background (fw_board.h), so the core
+# tail-chains into it when the control interrupt returns: no exit + entry (10 + 12)
+# between the two, but the ARM tail-chaining latency of 6 cycles instead (Cortex-M4 TRM
+# r0p1 5.5.1 / ARM's interrupt latency figures: 12 entry, 6 tail-chaining). The stacked
+# context (with its lazily stacked FP registers, which the control interrupt's FP code
+# has already saved) is kept across the chain, so no FP stacking again; the one exit (10,
+# + 17 FP unstacking) at the end of the supervision interrupt is the one ISR_OVERHEAD
+# already charges to the control interrupt. Per period: ISR_OVERHEAD + SUP_OVERHEAD.
+SUP_OVERHEAD = (6, 6)  # tail-chaining, without / with lazy FP context stacking
 ISR_TARGET = 1500  # issue 13: the control interrupt's median cycles per step (21 % of a period)
 FLASH_WS = 4  # flash wait states of an STM32G4-class part at 170 MHz
 
@@ -494,13 +512,14 @@ class TrmTiming:
 KINDS = {
     "step": ("fw_step", "replay_batch", "count"),
     "isr": ("fw_app_isr", "replay_isr_batch", "count_isr"),
+    "sup": ("fw_app_supervise", "replay_isr_batch", "count_sup"),
     "bg": ("fw_app_background", "replay_isr_batch", "count_bg"),
 }
 
 
 def parse_trace(log: Path, insns, syms, batch: int, nb: int, kind: str = "step"):
     """Walk the exec log; count per call from the entry of KINDS[kind] (fw_step,
-    fw_app_isr or fw_app_background) until the PC is back in the harness function
+    fw_app_isr, fw_app_supervise or fw_app_background) until the PC is back in the harness function
     that called it. Returns per-call insn counts and low/high cycles, per-class,
     per-function and per-PC totals."""
     by_name = {name: (a, s) for a, s, name in syms}
@@ -718,7 +737,10 @@ def report(res: dict) -> None:
     what = {"force": "FORCE mode as bench_fw_step.c", "speed": "SPEED mode, speed loop on"}
     kind = res["mode"].partition("+")[2] or "step"
     title = {"step": "fw_step", "isr": "fw_app_isr (the control interrupt)",
+             "sup": "fw_app_supervise (the supervision interrupt, tail-chained)",
              "bg": "fw_app_background (one pass of the background loop per period)"}
+    ovh = SUP_OVERHEAD if kind == "sup" else ISR_OVERHEAD
+    entry_exit = "tail-chaining" if kind == "sup" else "ISR entry/exit"
     print(
         f"\n== {title[kind]}"
         f" on Cortex-M4F, -{opt}, {what[res['mode'].partition('+')[0]]} "
@@ -746,7 +768,7 @@ def report(res: dict) -> None:
             "rate: the background loop runs free in the main loop between interrupts "
             "(fw_board_background); it must average one pass per period "
             f"({F_ISR_HZ / 1e3:.0f} kHz) to keep the snapshot ring "
-            f"(FW_APP_SNAP_RING periods) from overrunning, in the time the interrupt leaves"
+            f"(FW_APP_SNAP_RING periods) from overrunning, in the time the interrupts leave"
         )
         report_by_source(res)
         return
@@ -758,10 +780,17 @@ def report(res: dict) -> None:
     print(
         f"share of the {BUDGET:.0f}-cycle budget (170 MHz / 24 kHz): "
         f"{100 * lo / BUDGET:.1f} % .. {100 * hi / BUDGET:.1f} %  "
-        f"(with ISR entry/exit {ISR_OVERHEAD[0]}..{ISR_OVERHEAD[1]} cycles: "
-        f"{100 * (lo + ISR_OVERHEAD[0]) / BUDGET:.1f} % .. "
-        f"{100 * (hi + ISR_OVERHEAD[1]) / BUDGET:.1f} %)"
+        f"(with {entry_exit} {ovh[0]}..{ovh[1]} cycles: "
+        f"{100 * (lo + ovh[0]) / BUDGET:.1f} % .. "
+        f"{100 * (hi + ovh[1]) / BUDGET:.1f} %)"
     )
+    if kind == "sup":
+        print("the supervision interrupt is pended by the control interrupt and runs, "
+              "tail-chained, before the next one (a miss latches 0x6100 "
+              "SUPERVISION_MISSED): per period it adds to the control interrupt "
+              "(see the per-period totals in the summary)")
+        report_by_source(res)
+        return
     tgt = TARGET_SHARE * BUDGET
     worst = worst_step + ISR_OVERHEAD[1]
     verdict = "MEETS" if worst <= tgt else "MISSES"
@@ -781,6 +810,25 @@ def report(res: dict) -> None:
     )
     if res["unknown_pcs"]:
         print(f"warning: {res['unknown_pcs']} executed PCs not found in the disassembly")
+
+
+def period_totals(ctl: dict, sup: dict, bg: dict | None = None) -> dict[str, dict]:
+    """One period's cycles per model (median step of each): the control interrupt
+    (ctl, a `+isr` result) with its entry/exit, the supervision interrupt (sup, a
+    `+sup` result) with its tail-chaining, and with bg (a `+bg` result) one
+    background pass. -> {"low"|"high"|"trm": {control, supervision, entry_exit,
+    tail_chain, background, total, share (% of the period)}}; the low model takes
+    the overheads without lazy FP stacking, high and trm with it."""
+    out = {}
+    for model, key, i in (("low", "cycles_low_median", 0), ("high", "cycles_high_median", 1),
+                          ("trm", "cycles_trm_median", 1)):
+        t = {"control": ctl[key], "supervision": sup[key], "entry_exit": ISR_OVERHEAD[i],
+             "tail_chain": SUP_OVERHEAD[i], "background": bg[key] if bg is not None else 0.0}
+        t["total"] = (t["control"] + t["supervision"] + t["entry_exit"] + t["tail_chain"]
+                      + t["background"])
+        t["share"] = 100 * t["total"] / BUDGET
+        out[model] = t
+    return out
 
 
 def main() -> int:
@@ -804,8 +852,10 @@ def main() -> int:
         "--no-lto", action="store_true", help="build without -flto (one object per source)"
     )
     ap.add_argument("--isr", action="store_true",
-                    help="also measure the whole control interrupt (fw_app_isr: ADC "
-                    "conversion, fw_step, publication to the background)")
+                    help="also measure the drive's two interrupts of a period: the control "
+                    "interrupt (fw_app_isr: ADC conversion, fw_step_into, duties) and the "
+                    "supervision interrupt it pends (fw_app_supervise: integrity monitor, "
+                    "protections, publication to the background), and their sum per period")
     ap.add_argument("--bg", action="store_true",
                     help="also measure the background loop (fw_app_background, one pass "
                     "after every period: CANopen, completing the period, faults, "
@@ -840,7 +890,8 @@ def main() -> int:
     for opt in [o.strip() for o in a.opt.split(",") if o.strip()]:
         elf = build(opt, OUT / opt, lto=not a.no_lto)
         for mode in modes:
-            for kind in ["step", *(["isr"] if a.isr else []), *(["bg"] if a.bg else [])]:
+            for kind in ["step", *(["isr", "sup"] if a.isr else []),
+                         *(["bg"] if a.bg else [])]:
                 res = measure(opt, mode, elf, a.batch, a.batches, a.keep_log, kind,
                               a.by_source)
                 report(res)
@@ -857,6 +908,16 @@ def main() -> int:
                 f"{lo:5.0f} .. {hi:5.0f} cycles per background pass  "
                 f"{100 * lo / BUDGET:4.1f} .. {100 * hi / BUDGET:4.1f} % of a period  "
                 f"(worst pass {r['cycles_high_max_step']} cycles)"
+            )
+            continue
+        if r["mode"].endswith("+sup"):
+            print(
+                f"  -{r['opt']:<3} {r['mode']:<6} {r['insns_per_step_median']:7.1f} insns  "
+                f"{lo:5.0f} .. {hi:5.0f} cycles  "
+                f"{100 * (lo + SUP_OVERHEAD[0]) / BUDGET:4.1f} .. "
+                f"{100 * (hi + SUP_OVERHEAD[1]) / BUDGET:4.1f} % (incl. tail-chaining "
+                f"{SUP_OVERHEAD[1]})  trm {r['cycles_trm_median']:.0f}  "
+                f"(worst step {r['cycles_high_max_step']} cycles)"
             )
             continue
         print(
@@ -877,13 +938,33 @@ def main() -> int:
               f"low model {lo:.0f} -> {'meets' if lo <= ISR_TARGET else 'MISSES'}, "
               f"high model {hi:.0f} -> {'meets' if hi <= ISR_TARGET else 'MISSES'}, "
               f"trm model {tm:.0f} -> {'meets' if tm <= ISR_TARGET else 'MISSES'}")
+        sup = by.get((opt, mode.replace("+isr", "+sup")))
         bg = by.get((opt, mode.replace("+isr", "+bg")))
+        base = mode.replace("+isr", "")
+        if sup is not None:
+            for with_bg in (False, True) if bg is not None else (False,):
+                for model, t in period_totals(r, sup, bg if with_bg else None).items():
+                    parts = (f"control {t['control']:.0f} + supervision "
+                             f"{t['supervision']:.0f} + entry/exit {t['entry_exit']} + "
+                             f"tail-chaining {t['tail_chain']}")
+                    what = "control + supervision"
+                    if with_bg:
+                        parts += f" + background {t['background']:.0f}"
+                        what += " + background"
+                    print(f"  -{opt:<3} {base:<9} per period, {model:<4} model: {what} = "
+                          f"{t['total']:.0f} cycles ({t['share']:.1f} % of the period)  "
+                          f"[{parts}]")
         if bg is not None:
-            # the worst interrupt and the worst background pass in one period, high model
-            tot = r["cycles_high_max_step"] + ISR_OVERHEAD[1] + bg["cycles_high_max_step"]
-            print(f"  -{opt:<3} {mode.replace('+isr', ''):<9} one period, worst of each (high "
-                  f"model): interrupt {r['cycles_high_max_step']} + entry/exit "
-                  f"{ISR_OVERHEAD[1]} + background pass {bg['cycles_high_max_step']} = "
+            # the worst interrupts and the worst background pass in one period, high model
+            sup_w = sup["cycles_high_max_step"] + SUP_OVERHEAD[1] if sup is not None else 0
+            tot = (r["cycles_high_max_step"] + ISR_OVERHEAD[1] + sup_w
+                   + bg["cycles_high_max_step"])
+            sup_txt = (f"supervision {sup['cycles_high_max_step']} + tail-chaining "
+                       f"{SUP_OVERHEAD[1]} + " if sup is not None else "")
+            print(f"  -{opt:<3} {base:<9} one period, worst of each (high "
+                  f"model): control {r['cycles_high_max_step']} + entry/exit "
+                  f"{ISR_OVERHEAD[1]} + {sup_txt}background pass "
+                  f"{bg['cycles_high_max_step']} = "
                   f"{tot} of {BUDGET:.0f} cycles -> "
                   f"{'fits' if tot <= BUDGET else 'DOES NOT FIT'} ({100 * tot / BUDGET:.0f} %)")
     for r in results:

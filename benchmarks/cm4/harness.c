@@ -1,7 +1,9 @@
 /**
  * @file harness.c
  * @brief Cortex-M4F (QEMU mps2-an386) harness for counting the instructions
- *        executed by one fw_step() call. Driven by benchmarks/bench_cm4_estimate.py.
+ *        executed by one fw_step() call, by the drive application's control and
+ *        supervision interrupts and by its background loop. Driven by
+ *        benchmarks/bench_cm4_estimate.py.
  *
  *   harness warm  STATE N [force|speed]
  *                           drive the core into closed-loop RUN against the
@@ -17,26 +19,40 @@
  *                           -singlestep`; the script counts the instructions
  *                           executed between fw_step's entry and its return
  *                           to replay_batch().
- *   harness count_isr STATE B NB  as count, but through the whole control
- *                           interrupt of the drive application: fw_app_isr
- *                           (ADC counts -> the core's conversion -> fw_step
- *                           -> the period's raw snapshot into the
- *                           background's ring -> period count; the
- *                           background's completion is not counted) on
- *                           the recorded inputs turned
- *                           back into ADC counts with the configured scaling;
- *                           the script counts from fw_app_isr's entry to its
- *                           return to replay_isr_batch(). The ring is emptied
- *                           between periods as the background would (not
- *                           counted).
- *   harness count_bg STATE B NB  as count_isr, but the drive application's
+ *   harness count_isr STATE B NB  as count, but through the drive application's
+ *                           two interrupts of a period, on the recorded
+ *                           inputs turned back into ADC counts with the
+ *                           configured scaling: per period the control
+ *                           interrupt fw_app_isr (ADC counts -> the core's
+ *                           conversion -> fw_step_into -> duties; stages the
+ *                           integrity monitor's inputs and pends the
+ *                           supervision), then the supervision interrupt
+ *                           fw_app_supervise (integrity monitor, protections,
+ *                           the period's raw snapshot published to the
+ *                           background's ring), as the board runs them (the
+ *                           supervision is pended by, and tail-chained to,
+ *                           the control interrupt). The script counts from
+ *                           fw_app_isr's entry to its return to
+ *                           replay_isr_batch(). The ring is emptied between
+ *                           periods as the background would (not counted).
+ *   harness count_sup STATE B NB  the same loop; the script counts from
+ *                           fw_app_supervise's entry to its return to
+ *                           replay_isr_batch().
+ *   harness count_bg STATE B NB  the same loop, but the drive application's
  *                           background loop (fw_app_background: CANopen
  *                           receive and commands, completing the period's
  *                           snapshot, faults, serial telemetry, the OD, CANopen
  *                           transmit) runs once after every period instead of
  *                           the drain; the script counts from its entry to its
- *                           return to replay_isr_batch() (the interrupt is not
- *                           counted).
+ *                           return to replay_isr_batch() (the interrupts are
+ *                           not counted).
+ *                           In the count modes the harness fails (exit 1,
+ *                           closed_loop=NO and the batch's fault code printed)
+ *                           when the controller is not in RUN without a fault
+ *                           at the end of any batch, or when (count_isr/sup/bg)
+ *                           a supervision interrupt found a hard fault or a
+ *                           period's supervision was missed: a faulted drive is
+ *                           never measured silently.
  *   harness replay TRACE OUT  processor-in-the-loop: read a trace (magic
  *                           "PILT", n steps, n events, sizeof(fw_config_t),
  *                           the configuration, events {step, kind, value}
@@ -84,24 +100,32 @@ __attribute__((used, noipa)) void replay_batch(fw_ctrl_t *c, const fw_inputs_t *
   }
 }
 
-/* The control interrupt of the drive application, traced the same way. */
+/* The drive application's two interrupts and its background loop, traced the
+ * same way (each through a volatile pointer: the real symbols are entered). */
 static fw_app_t g_app;
 static fw_adc_inputs_t g_adc[N_MAX];
 static void (*volatile g_isr)(void *, const fw_adc_inputs_t *, fw_outputs_t *) = fw_app_isr;
+static bool (*volatile g_sup)(void *, fw_outputs_t *) = fw_app_supervise;
 static void (*volatile g_bg)(void *) = fw_app_background;
+static int g_sup_off; /* periods whose supervision switched the drive off */
 
-/* bg = 0: the ring is drained between periods as the background would (not
- * counted: `count_isr`); bg = 1: the real background loop runs once after
- * every period (`count_bg`: the script then counts fw_app_background). */
+/* One period after another as the board runs them: the control interrupt,
+ * then the supervision interrupt it pends (it must run before the next control
+ * interrupt, or that one latches FW_FAULT_SUPERVISION_MISSED); then bg = 0:
+ * the ring is drained as the background would (not counted: `count_isr`,
+ * `count_sup`), bg = 1: the real background loop runs once (`count_bg`: the
+ * script then counts fw_app_background). */
 __attribute__((used, noipa)) void replay_isr_batch(fw_app_t *app, const fw_adc_inputs_t *adc,
                                                    int n, int bg);
 __attribute__((used, noipa)) void replay_isr_batch(fw_app_t *app, const fw_adc_inputs_t *adc,
                                                    int n, int bg) {
   fw_outputs_t out;
   void (*isr)(void *, const fw_adc_inputs_t *, fw_outputs_t *) = g_isr;
+  bool (*sup)(void *, fw_outputs_t *) = g_sup;
   void (*background)(void *) = g_bg;
   for (int k = 0; k < n; k++) {
     isr(app, &adc[k], &out);
+    if (sup(app, &out)) g_sup_off++;
     g_sink += out.duty_abc[0];
     if (bg) {
       background(app);
@@ -223,7 +247,8 @@ int main(int argc, char **argv) {
     return 0;
   }
   int bg = argc >= 5 && strcmp(argv[1], "count_bg") == 0;
-  int isr = bg || (argc >= 5 && strcmp(argv[1], "count_isr") == 0);
+  int isr = bg || (argc >= 5 && (strcmp(argv[1], "count_isr") == 0 ||
+                                 strcmp(argv[1], "count_sup") == 0));
   if (isr || (argc >= 5 && strcmp(argv[1], "count") == 0)) {
     int batch = atoi(argv[3]), nb = atoi(argv[4]);
     if (batch < 1 || nb < 1 || batch * nb > N_MAX) {
@@ -276,14 +301,23 @@ int main(int argc, char **argv) {
       } else {
         replay_batch(c, &g_rec[b * batch], batch);
       }
-      if (!in_run(c)) all_run = 0;
+      const unsigned missed = isr ? (unsigned)g_app.count.sup_missed : 0u;
+      if (!in_run(c) || g_sup_off != 0 || missed != 0u) {
+        if (all_run) {
+          printf("CM4: batch %d left closed loop: phase %d fault 0x%04x, supervision "
+                 "switched off in %d periods, missed in %u\n",
+                 b, (int)c->phase, (unsigned)fw_fault_code(c), g_sup_off, missed);
+        }
+        all_run = 0;
+      }
     }
     printf("CM4: count done batches=%d batch=%d closed_loop=%s phase=%d fault=0x%04x\n", nb,
            batch, all_run ? "yes" : "NO", (int)c->phase, (unsigned)fw_fault_code(c));
     return all_run ? 0 : 1;
   }
   printf("usage: harness warm STATE N [force|speed] | harness count STATE BATCH NB | "
-         "harness count_isr STATE BATCH NB | harness count_bg STATE BATCH NB | "
+         "harness count_isr STATE BATCH NB | harness count_sup STATE BATCH NB | "
+         "harness count_bg STATE BATCH NB | "
          "harness replay TRACE OUT\n");
   return 2;
 }

@@ -95,3 +95,33 @@ def test_parse_trace_three_models_on_a_hand_made_log(cm4, tmp_path: Path) -> Non
     # trm: adds 1, b 1, literal ldr 3, ldr [r3] 1 (pipelined; r3 came from the adds,
     # but not directly before it: no stall), ldr [r4] 1, bx 1 = 8, + 2 refills x 3
     assert trm == [14]
+
+
+def test_kinds_count_both_interrupts_of_a_period(cm4) -> None:
+    """--isr counts the control and the supervision interrupt, each from its own
+    entry back to the harness loop that runs them one after the other."""
+    assert cm4.KINDS["isr"] == ("fw_app_isr", "replay_isr_batch", "count_isr")
+    assert cm4.KINDS["sup"] == ("fw_app_supervise", "replay_isr_batch", "count_sup")
+    assert cm4.KINDS["bg"][1:] == ("replay_isr_batch", "count_bg")
+    harness = (ROOT / "benchmarks" / "cm4" / "harness.c").read_text()
+    for _entry, _caller, mode in cm4.KINDS.values():
+        assert f'"{mode}"' in harness
+
+
+def test_period_totals(cm4) -> None:
+    """Per period: control interrupt + its entry/exit + the tail-chained supervision
+    interrupt (+ one background pass), per model; low without lazy FP stacking."""
+    def res(lo, hi, trm):
+        return {"cycles_low_median": lo, "cycles_high_median": hi, "cycles_trm_median": trm}
+    ctl, sup, bg = res(1100, 1300, 1310), res(340, 450, 430), res(1000, 1300, 1290)
+    t = cm4.period_totals(ctl, sup)
+    isr, chain = cm4.ISR_OVERHEAD, cm4.SUP_OVERHEAD
+    assert chain == (6, 6)  # ARM's tail-chaining latency, no second FP stacking
+    assert t["low"]["total"] == 1100 + 340 + isr[0] + chain[0]
+    assert t["high"]["total"] == 1300 + 450 + isr[1] + chain[1]
+    assert t["trm"]["total"] == 1310 + 430 + isr[1] + chain[1]
+    assert t["high"]["background"] == 0.0
+    assert t["high"]["share"] == pytest.approx(100 * t["high"]["total"] / cm4.BUDGET)
+    tb = cm4.period_totals(ctl, sup, bg)
+    for model, extra in (("low", 1000), ("high", 1300), ("trm", 1290)):
+        assert tb[model]["total"] == t[model]["total"] + extra
