@@ -9,6 +9,8 @@
  *     fw_app_init(&app, &cfg, 5);
  *     CAN RX interrupt:  fw_app_can_rx(&app, &frame);           // queue only
  *     control interrupt: fw_app_isr(&app, &adc, &out);          // ADC -> step -> duties
+ *     supervision (pended by the control interrupt, tail-chained):
+ *                        if (fw_app_supervise(&app, &out)) pwm_off();  // monitors, publication
  *     background loop:   fw_app_background(&app);               // CANopen, OD, EMCY, telemetry
  *                        while (fw_app_can_tx_pop(&app, &f)) can_send(&f);
  *                        n = fw_app_uart_read(&app, buf, sizeof buf); uart_write(buf, n);
@@ -16,12 +18,18 @@
  * A board does not write that glue itself: fw_board.h is it, once, over
  * fw_port.h (the Cortex-M4F image and the simulated drive both use it).
  *
- * Interrupt and background. fw_app_isr is what the control interrupt does,
+ * Interrupts and background. fw_app_isr is what the control interrupt does,
  * and nothing else: the core's one ADC conversion and range check
- * (fw_step_adc), the control step, and the raw half of the core's snapshot
+ * (fw_step_adc), the control half of the step (fw_step_into), the period
+ * count and the hand-over of the period to the supervision interrupt.
+ * fw_app_supervise, the supervision interrupt the board pends after it (lower
+ * priority, before the next control interrupt), runs the supervision half
+ * (fw_supervise: integrity monitor, protections; a hard fault switches the
+ * outputs off at once) and publishes the raw half of the core's snapshot
  * (fw_snapshot_capture) into a lock-free single-producer ring
- * (FW_APP_SNAP_RING entries) and the period count; its cost does not
- * depend on bus traffic. fw_app_background, called by the background loop
+ * (FW_APP_SNAP_RING entries). A control interrupt that finds the last
+ * supervision unfinished raises FW_FAULT_SUPERVISION_MISSED (counted in
+ * sup_missed). Neither cost depends on bus traffic. fw_app_background, called by the background loop
  * at its own rate, does the rest: it completes the published snapshots
  * (fw_snapshot_complete, with the configuration their period ran with),
  * converts the period count to the time base, processes the queued CAN frames
