@@ -81,6 +81,7 @@ from __future__ import annotations
 
 import argparse
 import bisect
+import functools
 import hashlib
 import json
 import re
@@ -249,8 +250,11 @@ def build(opt: str, outdir: Path, lto: bool = True) -> Path:
 
 
 def qemu(
-    elf: Path, args: list[str], extra: list[str], timeout: float
+    elf: Path, args: list[str], extra: list[str], timeout: float, cwd: Path | None = None
 ) -> subprocess.CompletedProcess:
+    """Runs the image; args go to its main() through semihosting (whose command
+    line is short: newlib's rdimon takes ~255 characters, so long host paths are
+    better given relative to cwd, the directory QEMU runs in)."""
     # QEMU option syntax: a literal comma inside a value is written ",,"
     semi = "enable=on,target=native," + ",".join(
         "arg=" + a.replace(",", ",,") for a in ["harness", *args]
@@ -271,7 +275,7 @@ def qemu(
         *extra,
     ]
     try:
-        return run(cmd, timeout=timeout)
+        return run(cmd, timeout=timeout, cwd=cwd)
     except subprocess.TimeoutExpired:
         die(f"qemu timed out: {' '.join(cmd)}")
     raise AssertionError
@@ -306,6 +310,7 @@ def disassemble(elf: Path) -> dict[int, tuple[int, str, str]]:
 COND = tuple(("eq ne cs cc hs lo mi pl vs vc hi ls ge lt gt le al").split())
 
 
+@functools.cache
 def base_mnemonic(mn: str) -> str:
     mn = mn.split(".")[0]  # drop .w/.n/.f32
     if mn in KNOWN_BASES or mn in V_BASES:
@@ -365,6 +370,7 @@ def reg_words(ops: str) -> int:
     return n
 
 
+@functools.cache
 def classify(mn: str, ops: str) -> tuple[str, int, int, bool]:
     """-> (class, low cycles, high cycles, pipelinable single load/store);
     pipeline refill after a change of flow is added by the caller."""
@@ -480,15 +486,24 @@ class TrmTiming:
         self.prev_dest: set[str] = set()
         self.prev_store = False
 
-    def cost(self, mn: str, ops: str) -> int:
+    @staticmethod
+    @functools.cache
+    def _static(mn: str, ops: str) -> tuple:
+        """What cost() needs of an instruction that does not depend on the stream
+        (cached: parse_trace calls cost() once per executed instruction)."""
         b = base_mnemonic(mn)
         cls, _lo, hi, _pipe = classify(mn, ops)
+        ls = cls in ("load", "store")
+        addr = frozenset(address_regs(b, ops)) if ls else frozenset()
+        reg_offset = bool(re.search(r"\[[^\],]+,\s*(r\d+|ip|fp|sl|sb|lr)", ops))
+        return b, cls, hi, ls, addr, reg_offset, frozenset(written_regs(b, ops))
+
+    def cost(self, mn: str, ops: str) -> int:
+        b, cls, hi, ls, addr, reg_offset, dest = self._static(mn, ops)
         single = b in INT_LOAD or b in INT_STORE or b in ("vldr", "vstr")
-        if cls in ("load", "store"):
-            addr = address_regs(b, ops)
+        if ls:
             c = hi
             if single:
-                reg_offset = bool(re.search(r"\[[^\],]+,\s*(r\d+|ip|fp|sl|sb|lr)", ops))
                 after_ldr = self.prev_b in INT_LOAD and not (self.prev_dest & addr)
                 if b in INT_STORE and not reg_offset:
                     c = 2 if self.prev_store else 1
@@ -503,7 +518,7 @@ class TrmTiming:
         else:
             c = hi
         self.prev_b = b
-        self.prev_dest = written_regs(b, ops)
+        self.prev_dest = dest
         self.prev_store = cls == "store"
         return c
 

@@ -15,7 +15,23 @@
    core has no other libm call on its signal path and C11 mode keeps the
    compilers from contracting a*b+c into FMA).
 
+--cycles additionally measures, per scenario, the Cortex-M4F cost per period of
+the control half (fw_step_into: ADC inputs to duties, the control interrupt's
+core work) and of the supervision half (fw_supervise) in every regime the trace
+goes through (start-up, injection, back-EMF observer, fault). QEMU's exec log
+covers a whole run, so it is kept small with windows: the (untraced) M4 replay
+saves the controller state at the start of every window ([k0, k0 + W) every
+--cycles-every seconds, W = --cycles-window steps; --cycles-window 0: the whole
+trace, in contiguous windows), and a traced run (harness `window` mode,
+`-d exec,nochain`, one instruction per block) continues each window from its
+saved state. Its outputs must equal the full replay's bit for bit (checked).
+Instructions are counted and converted to cycles with bench_cm4_estimate's
+walker and low/high/trm models; ISR entry/exit is not included (the control
+interrupt adds 22..56 cycles, ISR_OVERHEAD; its ADC conversion and staging in
+fw_app_isr around fw_step_into are not in the control half either).
+
 Usage: python benchmarks/pil.py [--t-end 1.0] [--opt Os] [--scenario NAME ...]
+       [--cycles [--cycles-window 100] [--cycles-every 0.05]]
 Exit 0 when every scenario agrees, 1 when one does not, 2 when tools are missing.
 """
 
@@ -43,6 +59,15 @@ EV_CW, EV_MODE, EV_SPEED, EV_IQ = 0, 1, 2, 3
 OUT_DTYPE = np.dtype([("duty", "<f4", 3), ("theta", "<f4"), ("fault", "<u2"),
                       ("pwm", "u1"), ("state", "u1")])
 IN_DTYPE = np.dtype([("i_abc", "<f4", 3), ("u_dc", "<f4")])
+#: harness `window` mode, per step: the replay record, then the regime
+WIN_DTYPE = np.dtype([("o", OUT_DTYPE), ("speed", "<f4"), ("phase", "u1"), ("bemf", "u1"),
+                      ("pad", "u1", 2)])
+PHASES = {0: "IDLE", 1: "ALIGN", 2: "POLARITY", 3: "RUN", 4: "SALIENCY"}
+WIN_MAX_STEPS = 4000  # the harness's window buffer (N_MAX)
+CTL_TARGET = cm4.ISR_TARGET  # cycles of the control half, high model, per period
+# the two halves of a period as the harness's pil_period() calls them
+cm4.KINDS.setdefault("pil_ctl", ("fw_step_into", "pil_period", "window"))
+cm4.KINDS.setdefault("pil_sup", ("fw_supervise", "pil_period", "window"))
 
 #: name -> (motor, speed schedule [(t_s, m/s)], load schedule [(t_s, N)], plant events)
 SCENARIOS: dict[str, tuple[str, list, list, list]] = {
@@ -119,9 +144,22 @@ def replay_host(exe: Path, trace: Path, out: Path) -> np.ndarray:
     return np.fromfile(out, OUT_DTYPE)
 
 
-def replay_cm4(elf: Path, trace: Path, out: Path) -> tuple[np.ndarray, float]:
+def write_windows(path: Path, windows: list[tuple[int, int]]) -> Path:
+    """The harness's windows file: uint32 pairs k0, k1."""
+    np.asarray(windows, "<u4").reshape(-1, 2).tofile(path)
+    return path
+
+
+def replay_cm4(elf: Path, trace: Path, out: Path, states: Path | None = None,
+               windows: list[tuple[int, int]] | None = None) -> tuple[np.ndarray, float]:
+    """The M4 replay; with states and windows also the controller state at the start
+    of each window (k0 ascending) into the file states (for cycle windows)."""
     t0 = time.perf_counter()
-    r = cm4.qemu(elf, ["replay", str(trace), str(out)], [], timeout=900)
+    # file names relative to the trace's directory (semihosting's command line is short)
+    extra = ([states.name, write_windows(states.with_suffix(".ks"), windows).name]
+             if states is not None and windows else [])
+    r = cm4.qemu(elf, ["replay", trace.name, str(out.relative_to(trace.parent)), *extra], [],
+                 timeout=900, cwd=trace.parent)
     if r.returncode != 0 or "replay ok" not in r.stdout:
         raise RuntimeError(f"M4 replay failed: {r.stdout}{r.stderr}")
     return np.fromfile(out, OUT_DTYPE), time.perf_counter() - t0
@@ -150,7 +188,92 @@ def agrees(c: dict) -> bool:
             and c["duty_max_abs"] <= TOL_DUTY and c["theta_max_abs_rad"] <= TOL_THETA_RAD)
 
 
-def run(names: list[str], t_end: float, opt: str, work: Path) -> list[dict]:
+def cycle_windows(n: int, window: int, every_steps: int) -> list[tuple[int, int]]:
+    """[k0, k1) windows of a trace of n steps: `window` steps every `every_steps`
+    steps from 0; window 0: the whole trace in contiguous windows of at most
+    WIN_MAX_STEPS."""
+    if window <= 0:
+        return [(k, min(n, k + WIN_MAX_STEPS)) for k in range(0, n, WIN_MAX_STEPS)]
+    window = min(window, WIN_MAX_STEPS)
+    return [(k, min(n, k + window)) for k in range(0, n, max(every_steps, window))]
+
+
+def regime(phase: int, bemf: int, fault: int) -> str:
+    """A period's regime from the replay's outputs after it."""
+    if fault:
+        return "FAULT"
+    name = PHASES.get(int(phase), str(phase))
+    return f"RUN/{'bemf' if bemf else 'inj'}" if name == "RUN" else name
+
+
+def measure_cycles(elf: Path, trace: Path, full: np.ndarray, windows: list[tuple[int, int]],
+                   states: Path, work: Path) -> dict:
+    """Count the two halves per period over the windows (states: the M4 replay's saved
+    state at every window's k0). The windows run in groups of at most WIN_MAX_STEPS
+    steps, one traced QEMU run each; every window's outputs must equal the full
+    replay's (full). -> per measured period: step, regime, speed and per half
+    insns/low/high/trm cycles."""
+    blob = states.read_bytes()
+    size = len(blob) // len(windows)
+    syms, insns = cm4.symbols(elf), cm4.disassemble(elf)
+    groups: list[list[int]] = [[]]
+    for i, (k0, k1) in enumerate(windows):
+        if groups[-1] and sum(windows[j][1] - windows[j][0] for j in groups[-1]) + k1 - k0 \
+                > WIN_MAX_STEPS:
+            groups.append([])
+        groups[-1].append(i)
+    cols: dict[str, list] = {k: [] for k in ("step", "regime", "speed", "phase")}
+    for half in ("ctl", "sup"):
+        for m in ("insns", "low", "high", "trm"):
+            cols[f"{half}_{m}"] = []
+    exact = True
+    for g, idx in enumerate(groups):
+        st = work / f"{trace.stem}.states{g}"
+        st.write_bytes(b"".join(blob[i * size:(i + 1) * size] for i in idx))
+        wout, log = work / f"{trace.stem}.win{g}.out", work / f"{trace.stem}.exec{g}.log"
+        ks = write_windows(work / f"{trace.stem}.ks{g}", [windows[i] for i in idx])
+        r = cm4.qemu(elf, ["window", trace.name, st.name, wout.name, ks.name],
+                     [*cm4.one_insn_per_tb_args(), "-d", "exec,nochain", "-D", str(log)],
+                     timeout=1800, cwd=work)
+        if r.returncode != 0 or "window ok" not in r.stdout:
+            raise RuntimeError(f"M4 window run failed: {r.stdout}{r.stderr}")
+        w = np.fromfile(wout, WIN_DTYPE)
+        steps = np.concatenate([np.arange(*windows[i]) for i in idx])
+        exact &= w["o"].tobytes() == full[steps].tobytes()
+        nsteps = int(steps.size)
+        for half in ("ctl", "sup"):
+            sn, slo, shi, strm, *_ = cm4.parse_trace(log, insns, syms, nsteps, 1, f"pil_{half}")
+            cols[f"{half}_insns"] += sn
+            cols[f"{half}_low"] += slo
+            cols[f"{half}_high"] += shi
+            cols[f"{half}_trm"] += strm
+        log.unlink()
+        cols["step"] += steps.tolist()
+        cols["speed"] += w["speed"].tolist()
+        cols["phase"] += [PHASES.get(int(p), str(p)) for p in w["phase"]]
+        cols["regime"] += [regime(p, b, f) for p, b, f in
+                           zip(w["phase"], w["bemf"], w["o"]["fault"], strict=True)]
+    res = {k: np.asarray(v) for k, v in cols.items()}
+    res["windows_exact"] = bool(exact)
+    res["windows"] = windows
+    return res
+
+
+def cycle_stats(cy: dict, sel: np.ndarray | None = None) -> dict[str, dict[str, float]]:
+    """median and max per half and measure (insns, low, high, trm) over the periods sel."""
+    out = {}
+    for half in ("ctl", "sup"):
+        for m in ("insns", "low", "high", "trm"):
+            v = cy[f"{half}_{m}"] if sel is None else cy[f"{half}_{m}"][sel]
+            out.setdefault(half, {})[m] = (float(np.median(v)), int(v.max())) if v.size \
+                else (0.0, 0)
+    return out
+
+
+def run(names: list[str], t_end: float, opt: str, work: Path,
+        cycles: tuple[int, float] | None = None) -> list[dict]:
+    """PIL comparison of the scenarios; with cycles = (window steps, every s) also the
+    M4 cost of the two halves per period (measure_cycles) in c["cycles"]."""
     cm4.check_tools()
     elf = cm4.build(opt, work / f"m4-{opt}")
     exe = build_host(work / "host")
@@ -159,7 +282,11 @@ def run(names: list[str], t_end: float, opt: str, work: Path) -> list[dict]:
         trace = work / f"{name}.pilt"
         loop_duty = make_trace(name, t_end, trace)
         a = replay_host(exe, trace, work / f"{name}.host.out")
-        b, wall = replay_cm4(elf, trace, work / f"{name}.m4.out")
+        windows, states = [], None
+        if cycles is not None:
+            windows = cycle_windows(a.size, cycles[0], int(round(cycles[1] * 24000.0)))
+            states = work / f"{name}.states"
+        b, wall = replay_cm4(elf, trace, work / f"{name}.m4.out", states, windows)
         c = compare(a, b)
         # the replay reproduces the closed loop it was recorded from (the host library
         # is built by CMake with other flags, so within the same tolerance)
@@ -167,8 +294,45 @@ def run(names: list[str], t_end: float, opt: str, work: Path) -> list[dict]:
         c["loop_duty_max_abs"] = float(np.abs(loop_duty[on] - a["duty"][on]).max()) if np.any(
             on) else 0.0
         c.update(name=name, opt=opt, qemu_wall_s=wall, ok=agrees(c))
+        if cycles is not None:
+            t0 = time.perf_counter()
+            c["cycles"] = measure_cycles(elf, trace, b, windows, states, work)
+            c["cycles_wall_s"] = time.perf_counter() - t0
+            c["ok"] = c["ok"] and c["cycles"]["windows_exact"]
         results.append(c)
     return results
+
+
+def fmt_stats(st: dict) -> str:
+    def one(half: str) -> str:
+        d = st[half]
+        return (f"insns {d['insns'][0]:.0f}/{d['insns'][1]}, cycles low {d['low'][0]:.0f}/"
+                f"{d['low'][1]}, high {d['high'][0]:.0f}/{d['high'][1]}, trm "
+                f"{d['trm'][0]:.0f}/{d['trm'][1]}")
+    return f"control half {one('ctl')} | supervision half {one('sup')}"
+
+
+def report_cycles(c: dict) -> bool:
+    """Prints the cycle summary of one scenario; -> control half within CTL_TARGET."""
+    cy = c["cycles"]
+    n = cy["step"].size
+    print(f"\n{c['name']} -{c['opt']}: {n} periods measured in {len(cy['windows'])} windows "
+          f"of {c['steps']} (window outputs equal the full replay: {cy['windows_exact']}); "
+          f"median/max per period, ISR entry/exit not included:")
+    print(f"  all           {fmt_stats(cycle_stats(cy))}")
+    for reg in dict.fromkeys(cy["regime"].tolist()):
+        sel = cy["regime"] == reg
+        sp = cy["speed"][sel]
+        print(f"  {reg:<13} {fmt_stats(cycle_stats(cy, sel))}  [{int(sel.sum())} periods, "
+              f"speed {sp.min():+.2f}..{sp.max():+.2f} m/s]")
+    i = int(np.argmax(cy["ctl_high"]))
+    worst = int(cy["ctl_high"][i])
+    ok = worst <= CTL_TARGET
+    print(f"  {c['name']}: control half <= {CTL_TARGET} cycles (high model) in every measured "
+          f"period: {'yes' if ok else 'no'}, max {worst} at step {int(cy['step'][i])} "
+          f"(phase {cy['regime'][i]}, speed {cy['speed'][i]:+.3f} m/s); with ISR entry/exit "
+          f"+{cm4.ISR_OVERHEAD[1]}: {worst + cm4.ISR_OVERHEAD[1]}")
+    return ok
 
 
 def main() -> int:
@@ -176,9 +340,18 @@ def main() -> int:
     ap.add_argument("--t-end", type=float, default=1.0)
     ap.add_argument("--opt", default="Os", help="M4 optimisation level (Os is the shipped one)")
     ap.add_argument("--scenario", nargs="*", default=list(SCENARIOS), choices=list(SCENARIOS))
+    ap.add_argument("--cycles", action="store_true",
+                    help="also measure the M4 cycles per period of the control half "
+                    "(fw_step_into) and of the supervision half (fw_supervise)")
+    ap.add_argument("--cycles-window", type=int, default=100,
+                    help="steps per measured window (0: the whole trace; default 100)")
+    ap.add_argument("--cycles-every", type=float, default=0.05,
+                    help="a window starts every this many seconds (default 0.05)")
     a = ap.parse_args()
+    t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        res = run(a.scenario, a.t_end, a.opt, Path(tmp))
+        res = run(a.scenario, a.t_end, a.opt, Path(tmp),
+                  (a.cycles_window, a.cycles_every) if a.cycles else None)
     for c in res:
         print(f"{c['name']:24s} -{c['opt']}: {c['steps']} steps "
               f"({c['closed_loop_steps']} with PWM), "
@@ -187,6 +360,12 @@ def main() -> int:
               f"{c['fault_equal'] and c['pwm_equal'] and c['state_equal']}, replay vs loop "
               f"{c['loop_duty_max_abs']:.1e}, QEMU {c['qemu_wall_s']:.1f} s -> "
               f"{'AGREE' if c['ok'] else 'DIFFER'}")
+    if a.cycles:
+        verdicts = [report_cycles(c) for c in res]
+        print(f"\nverdict: control half <= {CTL_TARGET} cycles (high model, ISR entry/exit "
+              f"not included) in every measured period of every scenario: "
+              f"{'yes' if all(verdicts) else 'no'}; --cycles run "
+              f"{time.perf_counter() - t0:.0f} s")
     return 0 if all(c["ok"] for c in res) else 1
 
 

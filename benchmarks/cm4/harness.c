@@ -62,6 +62,26 @@
  *                           theta_hat, fault, pwm} to OUT. Built for the host
  *                           and for the M4 from the same sources, so the two
  *                           outputs can be compared (benchmarks/pil.py).
+ *                           Each period is pil_period(): fw_step_into (the
+ *                           control half) then fw_supervise (the supervision
+ *                           half), each through a volatile pointer, exactly
+ *                           what fw_step does.
+ *   harness replay TRACE OUT STATES KS  the same, and the controller state
+ *                           at the start of each step K0 (before that step's
+ *                           events) written to STATES, one fw_ctrl_t per K0;
+ *                           KS: the windows [K0, K1) as uint32 pairs, K0
+ *                           ascending (a file: semihosting's command line is
+ *                           short).
+ *   harness window TRACE STATES OUT KS  for each window
+ *                           [K0, K1) of KS, in order: load its state from STATES (as
+ *                           `replay` wrote it) and replay the trace's steps
+ *                           K0..K1-1 (events included) through pil_period();
+ *                           write per step the `replay` record followed by
+ *                           {speed_hat_mps, start phase, bemf_active, 2 pad}
+ *                           to OUT. Run under `-d exec` (pil.py --cycles):
+ *                           the script counts fw_step_into and fw_supervise
+ *                           per period, each until control is back in
+ *                           pil_period().
  *
  * The plant runs in double (soft-float on the M4) but only in `warm`, which
  * is not traced. The firmware core is float32-only.
@@ -151,6 +171,7 @@ static int in_run(const fw_ctrl_t *c) {
 /* ---- processor-in-the-loop replay ---------------------------------------- */
 
 #define PIL_MAX_EVENTS 64
+#define PIL_MAX_WINDOWS 1024
 enum { PIL_EV_CONTROLWORD = 0, PIL_EV_MODE = 1, PIL_EV_SPEED_REF = 2, PIL_EV_IQ_REF = 3 };
 
 typedef struct {
@@ -165,61 +186,189 @@ typedef struct {
   uint8_t pwm_enable, cia402_state;
 } pil_out_t;
 
+typedef struct {
+  pil_out_t o;
+  float speed_hat_mps;
+  uint8_t phase, bemf_active, pad[2];
+} pil_win_t;
+
 static pil_event_t g_ev[PIL_MAX_EVENTS];
 static pil_out_t g_out[N_REC];
+static pil_win_t g_wout[N_MAX];
+static uint32_t g_hdr[4];
+static uint32_t g_win[2 * PIL_MAX_WINDOWS];
 
-static int pil_replay(const char *trace, const char *outpath) {
+/* Reads the windows file KS (uint32 pairs K0, K1); -> number of windows, -1 on error. */
+static int pil_windows(const char *path) {
+  FILE *f = fopen(path, "rb");
+  if (f == NULL) {
+    printf("PIL: cannot open %s\n", path);
+    return -1;
+  }
+  size_t n = fread(g_win, 2 * sizeof g_win[0], PIL_MAX_WINDOWS, f);
+  fclose(f);
+  return (int)n;
+}
+
+/* The two halves of a period, each through a volatile pointer: LTO keeps both
+ * symbols (the entries the --cycles trace walker looks for) and cannot inline
+ * them into pil_period. */
+static unsigned (*volatile g_ctl)(fw_ctrl_t *, const fw_inputs_t *, const fw_adc_inputs_t *,
+                                  fw_outputs_t *, fw_snapshot_t *) = fw_step_into;
+static bool (*volatile g_supv)(fw_ctrl_t *, fw_outputs_t *, fw_snapshot_t *) = fw_supervise;
+
+/* One period as fw_step runs it: the control half, then the supervision half.
+ * `used`/`noipa`: the trace walker stops counting a half when the PC is back in
+ * here. */
+__attribute__((used, noipa)) void pil_period(fw_ctrl_t *c, const fw_inputs_t *in,
+                                             fw_outputs_t *out);
+__attribute__((used, noipa)) void pil_period(fw_ctrl_t *c, const fw_inputs_t *in,
+                                             fw_outputs_t *out) {
+  (void)g_ctl(c, in, NULL, out, &c->snap);
+  /* not a tail call: fw_supervise must return into here */
+  if (g_supv(c, out, &c->snap)) g_sink += 1.0f;
+}
+
+/* The events of step k (from event index *e on; events are sorted by step). */
+static void pil_events(fw_ctrl_t *c, uint32_t k, uint32_t *e) {
+  for (; *e < g_hdr[2] && g_ev[*e].step <= k; (*e)++) {
+    if (g_ev[*e].step < k) continue;
+    switch (g_ev[*e].kind) {
+    case PIL_EV_CONTROLWORD: (void)fw_controlword(c, (uint16_t)g_ev[*e].value); break;
+    case PIL_EV_MODE: (void)fw_set_mode(c, (fw_mode_t)(int)g_ev[*e].value); break;
+    case PIL_EV_SPEED_REF: (void)fw_set_speed_ref(c, g_ev[*e].value); break;
+    default: (void)fw_set_iq_ref(c, g_ev[*e].value); break;
+    }
+  }
+}
+
+static void pil_record(const fw_ctrl_t *c, const fw_outputs_t *out, pil_out_t *o,
+                       fw_snapshot_t *snap) {
+  fw_get_snapshot(c, snap);
+  memcpy(o->duty_abc, out->duty_abc, sizeof out->duty_abc);
+  o->theta_hat_rad = snap->theta_hat_rad;
+  o->fault = snap->fault_code;
+  o->pwm_enable = out->pwm_enable;
+  o->cia402_state = snap->cia402_state;
+}
+
+/* Reads a PIL trace into g_hdr, g_ev, g_rec; -> the configuration in *cfg. */
+static int pil_read(const char *trace, fw_config_t *cfg) {
   FILE *f = fopen(trace, "rb");
   if (f == NULL) {
     printf("PIL: cannot open %s\n", trace);
-    return 1;
+    return 0;
   }
-  uint32_t hdr[4];
-  fw_config_t cfg;
-  int ok = fread(hdr, sizeof hdr, 1, f) == 1 && hdr[0] == 0x544C4950u /* "PILT" */ &&
+  uint32_t *hdr = g_hdr;
+  int ok = fread(hdr, sizeof g_hdr, 1, f) == 1 && hdr[0] == 0x544C4950u /* "PILT" */ &&
            hdr[1] <= N_REC && hdr[2] <= PIL_MAX_EVENTS && hdr[3] == sizeof(fw_config_t) &&
-           fread(&cfg, sizeof cfg, 1, f) == 1 &&
+           fread(cfg, sizeof *cfg, 1, f) == 1 &&
            fread(g_ev, sizeof g_ev[0], hdr[2], f) == hdr[2] &&
            fread(g_rec, sizeof g_rec[0], hdr[1], f) == hdr[1];
   fclose(f);
   if (!ok) {
-    printf("PIL: bad trace %s (sizeof(fw_config_t) here %u)\n", trace, (unsigned)sizeof cfg);
+    printf("PIL: bad trace %s (sizeof(fw_config_t) here %u)\n", trace,
+           (unsigned)sizeof *cfg);
+  }
+  return ok;
+}
+
+static int pil_replay(const char *trace, const char *outpath, const char *states,
+                      const char *ks) {
+  fw_config_t cfg;
+  if (!pil_read(trace, &cfg)) return 1;
+  int nk = ks != NULL ? pil_windows(ks) : 0;
+  if (nk < 0) return 1;
+  FILE *sf = NULL;
+  if (states != NULL && (sf = fopen(states, "wb")) == NULL) {
+    printf("PIL: cannot open %s\n", states);
     return 1;
   }
   fw_init(&g_c, &cfg);
   uint32_t e = 0;
-  for (uint32_t k = 0; k < hdr[1]; k++) {
-    for (; e < hdr[2] && g_ev[e].step == k; e++) {
-      switch (g_ev[e].kind) {
-      case PIL_EV_CONTROLWORD: (void)fw_controlword(&g_c, (uint16_t)g_ev[e].value); break;
-      case PIL_EV_MODE: (void)fw_set_mode(&g_c, (fw_mode_t)(int)g_ev[e].value); break;
-      case PIL_EV_SPEED_REF: (void)fw_set_speed_ref(&g_c, g_ev[e].value); break;
-      default: (void)fw_set_iq_ref(&g_c, g_ev[e].value); break;
+  int w = 0;
+  for (uint32_t k = 0; k < g_hdr[1]; k++) {
+    for (; sf != NULL && w < nk && g_win[2 * w] == k; w++) {
+      if (fwrite(&g_c, sizeof g_c, 1, sf) != 1) {
+        printf("PIL: cannot write %s\n", states);
+        return 1;
       }
     }
+    pil_events(&g_c, k, &e);
     fw_outputs_t out;
     fw_snapshot_t snap;
-    fw_step(&g_c, &g_rec[k], &out);
-    fw_get_snapshot(&g_c, &snap);
-    memcpy(g_out[k].duty_abc, out.duty_abc, sizeof out.duty_abc);
-    g_out[k].theta_hat_rad = snap.theta_hat_rad;
-    g_out[k].fault = snap.fault_code;
-    g_out[k].pwm_enable = out.pwm_enable;
-    g_out[k].cia402_state = snap.cia402_state;
+    pil_period(&g_c, &g_rec[k], &out);
+    pil_record(&g_c, &out, &g_out[k], &snap);
+  }
+  if (sf != NULL) {
+    fclose(sf);
+    if (w != nk) {
+      printf("PIL: %d of %d states saved (K0 must ascend and be < %u)\n", w, nk,
+             (unsigned)g_hdr[1]);
+      return 1;
+    }
   }
   FILE *o = fopen(outpath, "wb");
-  if (o == NULL || fwrite(g_out, sizeof g_out[0], hdr[1], o) != hdr[1]) {
+  if (o == NULL || fwrite(g_out, sizeof g_out[0], g_hdr[1], o) != g_hdr[1]) {
     printf("PIL: cannot write %s\n", outpath);
     return 1;
   }
   fclose(o);
-  printf("PIL: replay ok steps=%u fault=0x%04x\n", (unsigned)hdr[1], (unsigned)fw_fault_code(&g_c));
+  printf("PIL: replay ok steps=%u fault=0x%04x\n", (unsigned)g_hdr[1],
+         (unsigned)fw_fault_code(&g_c));
+  return 0;
+}
+
+static int pil_window(const char *trace, const char *states, const char *outpath,
+                      const char *ks) {
+  fw_config_t cfg;
+  if (!pil_read(trace, &cfg)) return 1;
+  int nw = pil_windows(ks);
+  if (nw < 1) return 1;
+  FILE *sf = fopen(states, "rb");
+  if (sf == NULL) {
+    printf("PIL: cannot open %s\n", states);
+    return 1;
+  }
+  int n = 0;
+  for (int w = 0; w < nw; w++) {
+    uint32_t k0 = g_win[2 * w], k1 = g_win[2 * w + 1];
+    if (k1 <= k0 || k1 > g_hdr[1] || n + (int)(k1 - k0) > N_MAX ||
+        fread(&g_c, sizeof g_c, 1, sf) != 1) {
+      printf("PIL: bad window %d [%u, %u) (at most %d steps in all) or short state file\n",
+             w, (unsigned)k0, (unsigned)k1, N_MAX);
+      fclose(sf);
+      return 1;
+    }
+    uint32_t e = 0;
+    for (uint32_t k = k0; k < k1; k++, n++) {
+      pil_events(&g_c, k, &e);
+      fw_outputs_t out;
+      fw_snapshot_t snap;
+      pil_period(&g_c, &g_rec[k], &out);
+      pil_record(&g_c, &out, &g_wout[n].o, &snap);
+      g_wout[n].speed_hat_mps = snap.speed_hat_mps;
+      g_wout[n].phase = (uint8_t)g_c.phase;
+      g_wout[n].bemf_active = snap.bemf_active;
+    }
+  }
+  fclose(sf);
+  FILE *o = fopen(outpath, "wb");
+  if (o == NULL || fwrite(g_wout, sizeof g_wout[0], (size_t)n, o) != (size_t)n) {
+    printf("PIL: cannot write %s\n", outpath);
+    return 1;
+  }
+  fclose(o);
+  printf("PIL: window ok windows=%d steps=%d\n", nw, n);
   return 0;
 }
 
 int main(int argc, char **argv) {
   if (argc >= 4 && strcmp(argv[1], "replay") == 0) {
-    return pil_replay(argv[2], argv[3]);
+    return pil_replay(argv[2], argv[3], argc >= 6 ? argv[4] : NULL, argc >= 6 ? argv[5] : NULL);
+  }
+  if (argc >= 6 && strcmp(argv[1], "window") == 0) {
+    return pil_window(argv[2], argv[3], argv[4], argv[5]);
   }
   if (argc >= 4 && strcmp(argv[1], "warm") == 0) {
     int n = atoi(argv[3]);
@@ -318,6 +467,7 @@ int main(int argc, char **argv) {
   printf("usage: harness warm STATE N [force|speed] | harness count STATE BATCH NB | "
          "harness count_isr STATE BATCH NB | harness count_sup STATE BATCH NB | "
          "harness count_bg STATE BATCH NB | "
-         "harness replay TRACE OUT\n");
+         "harness replay TRACE OUT [STATES KS] | "
+         "harness window TRACE STATES OUT KS\n");
   return 2;
 }
