@@ -318,19 +318,26 @@ def report_cycles(c: dict) -> bool:
     n = cy["step"].size
     print(f"\n{c['name']} -{c['opt']}: {n} periods measured in {len(cy['windows'])} windows "
           f"of {c['steps']} (window outputs equal the full replay: {cy['windows_exact']}); "
-          f"median/max per period, ISR entry/exit not included:")
+          f"median/max per period, ISR entry/exit not included; regime = start phase "
+          f"after the period (RUN/inj: HF injection, RUN/bemf: back-EMF observer), "
+          f"speed = the estimate:")
     print(f"  all           {fmt_stats(cycle_stats(cy))}")
     for reg in dict.fromkeys(cy["regime"].tolist()):
         sel = cy["regime"] == reg
         sp = cy["speed"][sel]
         print(f"  {reg:<13} {fmt_stats(cycle_stats(cy, sel))}  [{int(sel.sum())} periods, "
               f"speed {sp.min():+.2f}..{sp.max():+.2f} m/s]")
+    top = np.argsort(cy["ctl_high"], kind="stable")[::-1][:5]
+    print("  worst control halves (high model): " + ", ".join(
+        f"{int(cy['ctl_high'][j])} at step {int(cy['step'][j])} ({cy['regime'][j]})"
+        for j in top))
     i = int(np.argmax(cy["ctl_high"]))
     worst = int(cy["ctl_high"][i])
     ok = worst <= CTL_TARGET
     print(f"  {c['name']}: control half <= {CTL_TARGET} cycles (high model) in every measured "
           f"period: {'yes' if ok else 'no'}, max {worst} at step {int(cy['step'][i])} "
-          f"(phase {cy['regime'][i]}, speed {cy['speed'][i]:+.3f} m/s); with ISR entry/exit "
+          f"(phase {cy['regime'][i]}, speed estimate {cy['speed'][i]:+.3f} m/s); "
+          f"with ISR entry/exit "
           f"+{cm4.ISR_OVERHEAD[1]}: {worst + cm4.ISR_OVERHEAD[1]}")
     return ok
 
