@@ -134,10 +134,15 @@ void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled) {
     }
   }
   if (b->active && b->going_up) {
-    b->inj_scale = fmaxf(b->inj_share, b->inj_scale - b->step_down);
+    /* a compare, not fmaxf: newlib's is a call that classifies both operands
+     * (about 60 cycles per period on the M4 in the back-EMF regime); both are
+     * finite here, where the two agree */
+    const float down = b->inj_scale - b->step_down;
+    b->inj_scale = down > b->inj_share ? down : b->inj_share;
     b->t_full_s = 0.0f;
   } else {
-    b->inj_scale = fminf(1.0f, b->inj_scale + b->step_back);
+    const float up = b->inj_scale + b->step_back;
+    b->inj_scale = up < 1.0f ? up : 1.0f; /* as above, fminf */
     b->t_full_s = b->inj_scale >= 1.0f ? b->t_full_s + b->dt_s : 0.0f;
     /* the PLL returns to the HF error once the extraction has settled at full injection,
      * or at once, at whatever injection, when the back-EMF is too small to give an angle
