@@ -745,25 +745,24 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
  *  the injection sign, the start-up phase) is taken now. */
 static void stage_supervision(fw_ctrl_t *c, const fw_inj_meas_t *hf, const fw_period_t *p) {
   const bool running = c->phase == FW_START_RUN;
-  const bool scale_full = c->bemf.inj_scale >= 1.0f;
-  const bool scale_steady = scale_full || c->bemf.inj_scale <= c->bemf.inj_share;
-  /* the HF witness judges the response per volt of injection: scale back (no
-   * division while the injection is full, the usual case) */
-  const float inv_scale = scale_full ? 1.0f : 1.0f / c->bemf.inj_scale;
+  const bool scale_steady =
+      c->bemf.inj_scale >= 1.0f || c->bemf.inj_scale <= c->bemf.inj_share;
   const float *u_applied = fw_foc_u_applied(&c->foc);
   fw_mon_in_t *const mi = &c->sup.mon;
   mi->i_abc_A[0] = p->i_abc[0]; /* after the offset compensation */
   mi->i_abc_A[1] = p->i_abc[1];
   mi->i_abc_A[2] = p->i_abc[2];
-  mi->e_hf_dq_A[0] = hf->e_raw_dq_A.x * inv_scale;
-  mi->e_hf_dq_A[1] = hf->e_raw_dq_A.y * inv_scale;
+  /* the raw HF difference: fw_supervise scales it (the injection scale does
+   * not change before it runs) */
+  mi->e_hf_dq_A[0] = hf->e_raw_dq_A.x;
+  mi->e_hf_dq_A[1] = hf->e_raw_dq_A.y;
   mi->u_dq_V[0] = u_applied[0];
   mi->u_dq_V[1] = u_applied[1];
   mi->i_dq_A[0] = p->i_dq.x;
   mi->i_dq_A[1] = p->i_dq.y;
   mi->i_dq_ref_A[0] = p->i_ref.x;
   mi->i_dq_ref_A[1] = p->i_ref.y;
-  mi->omega_hat_radps = c->obs.pll.w_i_radps;
+  mi->omega_hat_radps = c->obs.pll.w_i_radps; /* saliency_done may restart the observer */
   mi->accel_dist_radps2 = c->obs.accel_dist;
   mi->running = (uint8_t)running;
   mi->hf_valid = (uint8_t)FW_LIKELY(running && !p->pulses && scale_steady &&
@@ -907,7 +906,14 @@ bool fw_supervise(fw_ctrl_t *c, fw_outputs_t *out, fw_snapshot_t *snap) {
     return false;
   }
   c->sup.due = 0u;
-  const fw_mon_in_t *mi = &c->sup.mon;
+  fw_mon_in_t *const mi = &c->sup.mon;
+  /* the HF witness judges the response per volt of injection: scale back (no
+   * division while the injection is full, the usual case) */
+  if (FW_UNLIKELY(c->bemf.inj_scale < 1.0f)) {
+    const float inv_scale = 1.0f / c->bemf.inj_scale;
+    mi->e_hf_dq_A[0] *= inv_scale;
+    mi->e_hf_dq_A[1] *= inv_scale;
+  }
   fw_fault_t mf = fw_mon_update(&c->mon, mi);
   if (FW_LIKELY(mf == FW_FAULT_NONE && mi->running)) {
     const fw_vec2_f32_t i_dq = {mi->i_dq_A[0], mi->i_dq_A[1]};
