@@ -902,7 +902,7 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
 }
 
 bool fw_supervise(fw_ctrl_t *c, fw_outputs_t *out, fw_snapshot_t *snap) {
-  if (c == NULL || !c->sup.due) {
+  if (c == NULL || out == NULL || snap == NULL || !c->sup.due) {
     return false;
   }
   c->sup.due = 0u;
@@ -923,17 +923,12 @@ bool fw_supervise(fw_ctrl_t *c, fw_outputs_t *out, fw_snapshot_t *snap) {
     return false;
   }
   latch_fault(c, mf);
-  const bool off = c->fault.hard != 0u; /* braking faults go on braking */
-  if (off && out != NULL) {
-    outputs_off(out);
-    if (snap != NULL) {
-      snapshot_duties(snap, out);
-    }
+  if (c->fault.hard) {
+    end_off(c, out, snap);
+    return true;
   }
-  if (snap != NULL) {
-    fill_snapshot_common(c, snap);
-  }
-  return off && out != NULL;
+  fill_snapshot_common(c, snap); /* braking faults go on braking */
+  return false;
 }
 
 void fw_step(fw_ctrl_t *c, const fw_inputs_t *in, fw_outputs_t *out) {

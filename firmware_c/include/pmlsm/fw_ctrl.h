@@ -369,7 +369,8 @@ void fw_step(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out);
  * the same period as before the split; a hard one switches the outputs off:
  * out gets duties 0.5 and pwm_enable 0, snap the duties, state and fault code,
  * and it returns true (the caller then writes the PWM again). Returns false
- * when it left out unchanged. A period whose supervision did not run before
+ * when it left out unchanged (and when out or snap is NULL: the staged inputs
+ * then stay unjudged). A period whose supervision did not run before
  * the next fw_step_into is FW_FAULT_SUPERVISION_MISSED (hard): the monitors
  * did not judge it.
  */
