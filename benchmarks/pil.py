@@ -53,6 +53,8 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import bench_cm4_estimate as cm4  # noqa: E402
 
+from protocols.generated import od_names as od  # noqa: E402
+
 TOL_DUTY = 1e-4  # of the 0..1 duty range
 TOL_THETA_RAD = 1e-3
 EV_CW, EV_MODE, EV_SPEED, EV_IQ = 0, 1, 2, 3
@@ -62,7 +64,6 @@ IN_DTYPE = np.dtype([("i_abc", "<f4", 3), ("u_dc", "<f4")])
 #: harness `window` mode, per step: the replay record, then the regime
 WIN_DTYPE = np.dtype([("o", OUT_DTYPE), ("speed", "<f4"), ("phase", "u1"), ("bemf", "u1"),
                       ("pad", "u1", 2)])
-PHASES = {0: "IDLE", 1: "ALIGN", 2: "POLARITY", 3: "RUN", 4: "SALIENCY"}
 WIN_MAX_STEPS = 4000  # the harness's window buffer (N_MAX)
 CTL_TARGET = cm4.ISR_TARGET  # cycles of the control half, high model, per period
 # the two halves of a period as the harness's pil_period() calls them
@@ -198,11 +199,19 @@ def cycle_windows(n: int, window: int, every_steps: int) -> list[tuple[int, int]
     return [(k, min(n, k + window)) for k in range(0, n, max(every_steps, window))]
 
 
+def phase_name(phase: int) -> str:
+    """The start phase's name (the generated StartPhase, fw_start_phase_t)."""
+    try:
+        return od.StartPhase(int(phase)).name
+    except ValueError:
+        return str(phase)
+
+
 def regime(phase: int, bemf: int, fault: int) -> str:
     """A period's regime from the replay's outputs after it."""
     if fault:
         return "FAULT"
-    name = PHASES.get(int(phase), str(phase))
+    name = phase_name(phase)
     return f"RUN/{'bemf' if bemf else 'inj'}" if name == "RUN" else name
 
 
@@ -250,7 +259,7 @@ def measure_cycles(elf: Path, trace: Path, full: np.ndarray, windows: list[tuple
         log.unlink()
         cols["step"] += steps.tolist()
         cols["speed"] += w["speed"].tolist()
-        cols["phase"] += [PHASES.get(int(p), str(p)) for p in w["phase"]]
+        cols["phase"] += [phase_name(p) for p in w["phase"]]
         cols["regime"] += [regime(p, b, f) for p, b, f in
                            zip(w["phase"], w["bemf"], w["o"]["fault"], strict=True)]
     res = {k: np.asarray(v) for k, v in cols.items()}
