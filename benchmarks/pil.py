@@ -10,10 +10,12 @@
    -mfloat-abi=hard), run under QEMU (mps2-an386). Both replay the recorded
    inputs and write duties, angle estimate, fault code and PWM state per period.
 3. The outputs are compared. Expected: identical fault codes and PWM states in
-   every period; duties and angle within ``TOL`` (the two libms differ in the
-   last bit of expf/atan2f used for filter coefficients and the monitor; the
-   core has no other libm call on its signal path and C11 mode keeps the
-   compilers from contracting a*b+c into FMA).
+   every period; duties and angle within ``TOL`` (the two libms may differ in
+   the last bit of expf, used for filter coefficients at configuration, and of
+   atan2f, which the core's own atan2 leaves to zeros and non-finite input;
+   the core has no other libm call on its signal path and C11 mode keeps the
+   compilers from contracting a*b+c into FMA). In practice every shipped
+   scenario replays bit for bit.
 
 --cycles additionally measures, per scenario, the Cortex-M4F cost per period of
 the control half (fw_step_into: ADC inputs to duties, the control interrupt's

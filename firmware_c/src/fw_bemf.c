@@ -65,7 +65,7 @@ float fw_bemf_angle_of(const fw_bemf_t *b, float e_d, float e_q, uint8_t w_neg) 
   if (e_d * e_d + e_q * e_q < b->e_min2) {
     return 0.0f;
   }
-  const float ang = atan2f(-e_d, e_q);
+  const float ang = fw_atan2_inline_f32(-e_d, e_q); /* every period above the handover */
   return w_neg ? fw_wrap_pi_f32(ang + FW_PI_F32) : ang;
 }
 

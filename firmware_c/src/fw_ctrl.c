@@ -153,6 +153,7 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   c->e_start_max_V = fw_units_bemf_V(cfg, cfg->protection.start_speed_max_mps);
   fw_mon_init(&c->mon, cfg, c->dt_s);
   fw_bemf_init(&c->bemf, cfg, c->dt_s);
+  fw_start_init(&c->start, c->dt_s);
   /* references set under the old limits must obey the new ones (a reference clamped
      before stays marked: the background gives the raw one again at its next pass) */
   const uint8_t was_limited = c->ref_limited;
@@ -685,7 +686,7 @@ static void stage_startup(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p)
    * needs is the back-EMF of a moving mover (judged once the loop and the
    * monitor's filter have settled, and again at the end). */
   if (FW_UNLIKELY(c->phase == FW_START_ALIGN)) {
-    fw_start_fly_observe(&c->start, &cfg->machine, c->dt_s, hf->i_f_ab_A, c->phase_time_s);
+    fw_start_fly_observe(&c->start, &cfg->machine, hf->i_f_ab_A, c->phase_time_s);
   }
   if (c->phase == FW_START_ALIGN && c->phase_time_s >= FW_MOTION_CHECK_S &&
       fw_mon_motion(&c->mon, c->e_start_max_V) != FW_FAULT_NONE) {
@@ -1067,7 +1068,7 @@ void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
   snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, w);
   snap->force_hat_N = fw_units_force_per_A(cfg) * snap->i_dq_A[1];
   snap->torque_hat_Nm = 1.5f * cfg->machine.pole_pairs * cfg->machine.psi_f_Wb * snap->i_dq_A[1];
-  /* the observer's angle error as at the capture (an atan2f on demand, as fw_bemf_error) */
+  /* the observer's angle error as at the capture (an atan2 on demand, as fw_bemf_error) */
   snap->bemf_err_rad = raw->bemf_fresh ? raw->bemf_err_rad
                                        : fw_bemf_angle_of(&ctrl->bemf, raw->bemf_e_dq_V[0],
                                                           raw->bemf_e_dq_V[1], raw->bemf_w_neg);

@@ -130,7 +130,7 @@ fw_fault_t fw_mon_saliency(fw_mon_t *m, const fw_config_t *cfg, float y_dd, floa
   m->L_large_meas_H = Ts_u_Vs / l_small;
   /* axis of the larger response (smaller inductance) in the estimated frame;
    * it should be d^ when L_q > L_d, q^ otherwise */
-  const float axis = 0.5f * atan2f(2.0f * b, y_dd - y_qq);
+  const float axis = 0.5f * fw_atan2_f32(2.0f * b, y_dd - y_qq);
   m->sal_axis_rad = wrap_half_pi(axis - (q_larger ? 0.0f : 0.5f * FW_PI_F32));
   const float L_lo = q_larger ? cfg->machine.L_d_H : cfg->machine.L_q_H;
   const float L_hi = q_larger ? cfg->machine.L_q_H : cfg->machine.L_d_H;
@@ -228,7 +228,7 @@ FW_NOINLINE void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float acce
     float g = (m->rho + 1.0f) / m->e_ref_A;
     float c2 = m->e_d_f * g - m->rho;
     float s2 = m->e_q_f * g;
-    m->angle_hf_rad = 0.5f * fabsf(atan2f(s2, c2));
+    m->angle_hf_rad = 0.5f * fabsf(fw_atan2_f32(s2, c2));
   }
   m->t_hf = persist(m->t_hf, m->angle_hf_rad > m->angle_max_rad, dte);
 
@@ -242,7 +242,7 @@ FW_NOINLINE void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float acce
       bad = true;
       m->angle_bemf_rad = FW_PI_F32; /* magnitude disagrees: no angle to speak of */
     } else {
-      float ang = atan2f(-m->r_d_f, m->r_q_f);
+      float ang = fw_atan2_f32(-m->r_d_f, m->r_q_f);
       if (m->w_f < 0.0f) {
         ang = fw_wrap_pi_f32(ang + FW_PI_F32);
       }

@@ -8,21 +8,32 @@
 
 #include "pmlsm/fw_ctrl.h"
 
-void fw_start_reset(fw_start_t *s) { memset(s, 0, sizeof(*s)); }
+void fw_start_init(fw_start_t *s, float dt_s) {
+  memset(s, 0, sizeof(*s));
+  s->fly_a = 1.0f - expf(-dt_s / FW_FLY_TAU_S);
+  s->inv_dt = 1.0f / dt_s;
+}
+
+void fw_start_reset(fw_start_t *s) {
+  const float fly_a = s->fly_a, inv_dt = s->inv_dt;
+  memset(s, 0, sizeof(*s));
+  s->fly_a = fly_a;
+  s->inv_dt = inv_dt;
+}
 
 /* ---- ALIGN ---------------------------------------------------------------- */
 
-void fw_start_fly_observe(fw_start_t *s, const fw_cfg_machine_t *mach, float dt_s,
-                          fw_vec2_f32_t i_f_ab, float phase_time_s) {
+void fw_start_fly_observe(fw_start_t *s, const fw_cfg_machine_t *mach, fw_vec2_f32_t i_f_ab,
+                          float phase_time_s) {
   const float L = 0.5f * (mach->L_d_H + mach->L_q_H);
-  const float inv_dt = 1.0f / dt_s;
+  const float inv_dt = s->inv_dt;
   float ea = s->u_ab_prev_V[0] - mach->R_ohm * i_f_ab.x -
              L * (i_f_ab.x - s->i_f_ab_prev_A[0]) * inv_dt;
   float eb = s->u_ab_prev_V[1] - mach->R_ohm * i_f_ab.y -
              L * (i_f_ab.y - s->i_f_ab_prev_A[1]) * inv_dt;
   s->i_f_ab_prev_A[0] = i_f_ab.x;
   s->i_f_ab_prev_A[1] = i_f_ab.y;
-  const float a = 1.0f - expf(-dt_s / FW_FLY_TAU_S);
+  const float a = s->fly_a;
   float pa = s->fly_e_ab_V[0], pb = s->fly_e_ab_V[1];
   s->fly_e_ab_V[0] += a * (ea - pa);
   s->fly_e_ab_V[1] += a * (eb - pb);
@@ -30,7 +41,7 @@ void fw_start_fly_observe(fw_start_t *s, const fw_cfg_machine_t *mach, float dt_
     /* angle step between successive filtered vectors (cross / dot) */
     float cr = pa * s->fly_e_ab_V[1] - pb * s->fly_e_ab_V[0];
     float dt = pa * s->fly_e_ab_V[0] + pb * s->fly_e_ab_V[1];
-    s->fly_rot_rad += atan2f(cr, dt);
+    s->fly_rot_rad += fw_atan2_f32(cr, dt);
   }
 }
 
@@ -48,7 +59,7 @@ fw_fault_t fw_start_fly_catch(fw_start_t *s, const fw_config_t *cfg, float bemf_
   }
   const float w0 = (s->fly_rot_rad > 0.0f ? 1.0f : -1.0f) * E / cfg->machine.psi_f_Wb;
   /* e_ab = w psi_f (-sin theta, cos theta); the filter lags by about w tau */
-  float th = atan2f(-ea, eb) + (w0 < 0.0f ? FW_PI_F32 : 0.0f) + w0 * FW_FLY_TAU_S;
+  float th = fw_atan2_f32(-ea, eb) + (w0 < 0.0f ? FW_PI_F32 : 0.0f) + w0 * FW_FLY_TAU_S;
   *theta_rad = fw_wrap_pi_f32(th);
   *w0_radps = w0;
   s->flying = 1u;

@@ -1,7 +1,8 @@
-/* Tests for fw_math: sin/cos accuracy, wrap, Clarke/Park, SVPWM, PI.
+/* Tests for fw_math: sin/cos and atan2 accuracy, wrap, Clarke/Park, SVPWM, PI.
  * References: tests/c/ref_vectors.h (numpy, gen_ref_vectors.py). */
 #include <float.h>
 #include <math.h>
+#include <stddef.h>
 #include <stdint.h>
 #include <string.h>
 
@@ -134,6 +135,113 @@ static void test_sincos_add(void) {
   TT_CHECK(sc.s == 0.0f && sc.c == 1.0f);
   sc = fw_sincos_add_f32(sc0, 0.7f, INFINITY);
   TT_CHECK(sc.s == 0.0f && sc.c == 1.0f);
+}
+
+/* |fw_atan2_f32(y, x) - atan2 in double| for one float pair */
+static double atan2_err(float y, float x) {
+  return fabs((double)fw_atan2_f32(y, x) - atan2((double)y, (double)x));
+}
+
+/* fw_atan2_f32 against double atan2: 2^21 directions over the whole circle at
+ * eight magnitudes from 1e-30 to 1e30 (the inputs are the float vectors, so
+ * the reference sees exactly what the function sees), and +-64 ulp of the
+ * ratio around every octant boundary and the reduction's tan(pi/8) switch.
+ * Bound: FW_ATAN2_MAX_ERR. Outside the fast path (zeros, NaN, infinities,
+ * overflowing |x| + |y|) the result is libm's atan2f, bit for bit. */
+static void test_atan2(void) {
+  static const float mags[] = {1e-30f, 1e-6f, 1e-3f, 0.7f, 1.0f, 311.0f, 1e6f, 1e30f};
+  double max_err = 0.0;
+  float worst_y = 0.0f, worst_x = 0.0f;
+  int32_t out_of_range = 0;
+  for (size_t m = 0; m < sizeof mags / sizeof mags[0]; m++) {
+    for (int32_t i = -(1 << 20); i < (1 << 20); i++) {
+      const double th = PI_D * ((double)i + 0.37) / (double)(1 << 20);
+      const float x = (float)((double)mags[m] * cos(th));
+      const float y = (float)((double)mags[m] * sin(th));
+      const float a = fw_atan2_f32(y, x);
+      out_of_range += !(a >= -(float)PI_D && a <= (float)PI_D);
+      const double e = atan2_err(y, x);
+      if (e > max_err) {
+        max_err = e;
+        worst_y = y;
+        worst_x = x;
+      }
+    }
+  }
+  /* ratios r around 0, tan(pi/8), 1, 1/tan(pi/8) (octant and reduction
+   * switches), in every quadrant */
+  static const float ratios[] = {0.0f, 0.414213562373095f, 1.0f, 2.41421356237310f};
+  for (size_t k = 0; k < sizeof ratios / sizeof ratios[0]; k++) {
+    float r = ratios[k];
+    for (int j = 0; j < 64; j++) {
+      r = nextafterf(r, 0.0f);
+    }
+    for (int j = 0; j < 129; j++, r = nextafterf(r, 10.0f)) {
+      for (int q = 0; q < 4; q++) {
+        const float x = (q & 1) ? -1.0f : 1.0f;
+        const float y = (q & 2) ? -r : r;
+        const double e = atan2_err(y, x);
+        if (e > max_err) {
+          max_err = e;
+          worst_y = y;
+          worst_x = x;
+        }
+        const double e2 = atan2_err(x, y); /* the swapped octant */
+        if (e2 > max_err) {
+          max_err = e2;
+          worst_y = x;
+          worst_x = y;
+        }
+      }
+    }
+  }
+  printf("  atan2 max abs error: %.3e at (y, x) = (%.9g, %.9g) (bound %.1e)\n", max_err,
+         (double)worst_y, (double)worst_x, (double)FW_ATAN2_MAX_ERR);
+  TT_CHECK(max_err <= (double)FW_ATAN2_MAX_ERR);
+  TT_CHECK(max_err > 0.0); /* the fast path, not libm, was measured */
+  TT_CHECK(out_of_range == 0);
+  /* the axes */
+  TT_CHECK(fw_atan2_f32(0.0f, 2.0f) == 0.0f);
+  TT_CHECK(fabs((double)fw_atan2_f32(2.0f, 0.0f) - 0.5 * PI_D) <= (double)FW_ATAN2_MAX_ERR);
+  TT_CHECK(fabs((double)fw_atan2_f32(-2.0f, 0.0f) + 0.5 * PI_D) <= (double)FW_ATAN2_MAX_ERR);
+  TT_CHECK(fabs((double)fw_atan2_f32(0.0f, -2.0f) - PI_D) <= (double)FW_ATAN2_MAX_ERR);
+  /* y's sign, a zero's included (libm: atan2(-0, x > 0) = -0, atan2(-0, x < 0) = -pi) */
+  TT_CHECK(fw_atan2_f32(-0.0f, 2.0f) == 0.0f && signbit(fw_atan2_f32(-0.0f, 2.0f)));
+  TT_CHECK(fabs((double)fw_atan2_f32(-0.0f, -2.0f) + PI_D) <= (double)FW_ATAN2_MAX_ERR);
+  /* outside the fast path: libm's atan2f exactly */
+  static const float spec[][2] = {{0.0f, 0.0f},       {-0.0f, 0.0f},      {0.0f, -0.0f},
+                                  {-0.0f, -0.0f},     {INFINITY, 1.0f},   {1.0f, -INFINITY},
+                                  {-INFINITY, INFINITY}, {FLT_MAX, FLT_MAX}, {-FLT_MAX, 3.0f}};
+  for (size_t k = 0; k < sizeof spec / sizeof spec[0]; k++) {
+    const float a = fw_atan2_f32(spec[k][0], spec[k][1]);
+    const float b = atan2f(spec[k][0], spec[k][1]);
+    TT_CHECK(memcmp(&a, &b, sizeof a) == 0);
+  }
+  TT_CHECK(isnan(fw_atan2_f32(NAN, 1.0f)) && isnan(fw_atan2_f32(1.0f, NAN)));
+  TT_CHECK(isnan(fw_atan2_f32(NAN, INFINITY)));
+}
+
+/* fw_wrap_pi_f32's inline one-turn path against the general wrap
+ * (fw_wrap_pi_slow_f32): every float with pi <= |theta| < FW_WRAP_TURN_MAX
+ * (about 2.4e7 of them), bit for bit, and the neighbours of both limits. */
+static void test_wrap_one_turn(void) {
+  uint32_t differ = 0, n = 0;
+  for (int sign = -1; sign <= 1; sign += 2) {
+    const float lo = nextafterf(FW_PI_F32, 0.0f);
+    const float hi = nextafterf(FW_WRAP_TURN_MAX, 10.0f);
+    for (float a = lo; a <= hi; a = nextafterf(a, 10.0f)) {
+      const float th = (float)sign * a;
+      const float w = fw_wrap_pi_f32(th);
+      const float ws = fw_wrap_pi_slow_f32(th);
+      differ += memcmp(&w, &ws, sizeof w) != 0;
+      differ += !(w >= -FW_PI_F32 && w < FW_PI_F32);
+      n++;
+    }
+  }
+  printf("  wrap one turn: %u floats, %u differ from the general wrap\n", (unsigned)n,
+         (unsigned)differ);
+  TT_CHECK(n > 23000000u);
+  TT_CHECK(differ == 0u);
 }
 
 /* Fast path (|theta| <= 8192 rad) and the clamped path beyond it agree at the
@@ -428,7 +536,9 @@ int main(void) {
   TT_RUN(test_sincos_special);
   TT_RUN(test_sincos_add);
   TT_RUN(test_sincos_paths_and_isfinite);
+  TT_RUN(test_atan2);
   TT_RUN(test_wrap);
+  TT_RUN(test_wrap_one_turn);
   TT_RUN(test_transforms_ref);
   TT_RUN(test_transforms_props);
   TT_RUN(test_svpwm_ref);

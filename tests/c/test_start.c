@@ -104,14 +104,14 @@ static void test_fly_catch(void) {
   const float psi = cfg.machine.psi_f_Wb;
   for (int dir = -1; dir <= 1; dir += 2) {
     fw_start_t s;
-    fw_start_reset(&s);
+    fw_start_init(&s, dt);
     const double w = dir * 400.0; /* el. rad/s: |e| = 73 V */
     double th = 0.3;
     const fw_vec2_f32_t i0 = {0.0f, 0.0f};
     float t = 0.0f;
     for (int k = 0; k < 360; k++) { /* 15 ms at zero current: e_ab = u_ab */
       t += dt;
-      fw_start_fly_observe(&s, &cfg.machine, dt, i0, t);
+      fw_start_fly_observe(&s, &cfg.machine, i0, t);
       th += w * (double)dt;
       const fw_vec2_f32_t u = {(float)(-w * psi * sin(th)), (float)(w * psi * cos(th))};
       fw_start_fly_set_u(&s, u);
@@ -130,7 +130,16 @@ static void test_fly_catch(void) {
   }
   /* standing still: refused */
   fw_start_t s;
+  fw_start_init(&s, dt);
+  /* the configuration: exp(-T/tau) in double; a reset keeps it and clears the rest */
+  TT_CHECK_NEAR(s.fly_a, 1.0 - exp(-(double)dt / FW_FLY_TAU_S), 1e-6);
+  TT_CHECK_NEAR(s.inv_dt, (double)cfg.sensing.f_pwm_Hz, 1e-3);
+  const float fly_a = s.fly_a, inv_dt = s.inv_dt;
+  s.fly_e_ab_V[0] = 5.0f;
+  s.fly_rot_rad = 1.0f;
   fw_start_reset(&s);
+  TT_CHECK(s.fly_a == fly_a && s.inv_dt == inv_dt);
+  TT_CHECK(s.fly_e_ab_V[0] == 0.0f && s.fly_rot_rad == 0.0f);
   float th_hat, w0;
   TT_CHECK(fw_start_fly_catch(&s, &cfg, 100.0f, &th_hat, &w0) == FW_FAULT_MOVING_AT_ENABLE);
 }

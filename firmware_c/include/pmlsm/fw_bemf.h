@@ -88,7 +88,7 @@ void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], 
 /** Angle error dtheta seen by the back-EMF at the last update (rad, [-pi, pi)); 0 when
  *  |E| is too small or the speed far below the handover (not observed there).
  *  Computed in the update only while the PLL tracks it (active); otherwise here,
- *  on demand (an atan2f the control step does not need). */
+ *  on demand (an atan2 the control step does not need). */
 float fw_bemf_error(const fw_bemf_t *b);
 /** The angle error of a filtered back-EMF (e_d, e_q) in the estimated frame, with the
  *  speed's sign (w_neg) and b's threshold: what fw_bemf_error computes from b's own

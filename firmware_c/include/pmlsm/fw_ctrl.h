@@ -432,7 +432,7 @@ typedef struct {
  * The snapshot in two halves, for a control interrupt that hands its periods
  * to a background loop (fw_app): fw_snapshot_capture copies this period's
  * signals and the blocks' present states (loads and stores only: no unit
- * conversion, no division, no statusword, no atan2f) into snap and raw;
+ * conversion, no division, no statusword, no atan2) into snap and raw;
  * fw_snapshot_complete computes the rest of snap from them (positions and
  * speeds in units, thrust, torque, the back-EMF angle error, the statusword)
  * with ctrl's configuration, later and elsewhere. Right after fw_step (with

@@ -1,7 +1,7 @@
 /**
  * @file fw_math.h
  * @brief Control primitives: Clarke/Park transforms, space-vector modulation,
- *        PI regulator with anti-windup, angle wrap, fast sin/cos.
+ *        PI regulator with anti-windup, angle wrap, fast sin/cos and atan2.
  *
  * All blocks are pure functions or caller-owned structs (CMSIS-DSP style).
  * float32 only; no globals; no I/O.
@@ -14,6 +14,7 @@
 #ifndef PMLSM_FW_MATH_H
 #define PMLSM_FW_MATH_H
 
+#include <float.h>
 #include <math.h>
 #include <stdbool.h>
 #include <stdint.h>
@@ -65,6 +66,23 @@ fw_sincos_f32_t fw_sincos_f32(float theta_rad);
  */
 static inline fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, float theta0_rad,
                                                 float d_rad);
+
+/**
+ * Fast atan2 for an MCU: the angle of the vector (x, y) in [-pi, pi]. The
+ * call of fw_atan2_inline_f32 (below; the back-EMF angle, every period above
+ * the handover speed, takes it inline). One
+ * division and a degree-9 odd polynomial (octant reduction to
+ * |t| <= tan(pi/8), cephes atanf minimax coefficients) instead of libm's
+ * atanf + atan2f (about 170 cycles on the Cortex-M4F). For finite (x, y)
+ * not both zero the absolute error is below FW_ATAN2_MAX_ERR (tested against
+ * double atan2). Zeros, infinities, NaN and |x| + |y| beyond FLT_MAX take
+ * libm's atan2f (its conventions: atan2(+-0, +0) = +-0, NaN in, NaN out);
+ * the result carries y's sign (-0 included), as libm's does.
+ */
+float fw_atan2_f32(float y, float x);
+
+/** Documented bound on |fw_atan2_f32 - atan2| for finite input (tested). */
+#define FW_ATAN2_MAX_ERR 1.0e-6f
 
 /** fw_wrap_pi_f32 for an angle outside [-pi, pi) (any float). */
 float fw_wrap_pi_slow_f32(float theta_rad);
@@ -243,12 +261,99 @@ static FW_ALWAYS_INLINE fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, f
   return out;
 }
 
+/* Angle wrap (fw_math.c): 2 pi in two parts, FW_TWO_PI_1 with 8 significant
+ * bits, so n * FW_TWO_PI_1 is exact for |n| < 2^16. */
+#define FW_TWO_PI_1 6.28125f
+#define FW_TWO_PI_2 1.9353071795864769e-3f
+/** fw_wrap_pi_f32 subtracts one turn inline for pi <= |theta| < this (a
+ *  difference of two wrapped angles reaches 2 pi; floor((theta + pi) / 2 pi)
+ *  is +-1 up to here, 2.5 pi, with room to spare). */
+#define FW_WRAP_TURN_MAX 8.0f
+
+/** theta - n 2 pi for the number of turns n (an integer in float) that
+ *  brings theta into [lo, lo + 2 pi), with the compares that keep the
+ *  rounded result inside (the wrap's common tail). */
+static FW_ALWAYS_INLINE float fw_wrap_turns_f32(float theta_rad, float nf, float lo) {
+  float r = (theta_rad - nf * FW_TWO_PI_1) - nf * FW_TWO_PI_2;
+  if (r >= lo + FW_TWO_PI_F32) {
+    r -= FW_TWO_PI_F32;
+  }
+  if (r < lo) {
+    r += FW_TWO_PI_F32;
+  }
+  /* r + 2pi may round up to exactly lo + 2pi for tiny negative r. */
+  if (r >= lo + FW_TWO_PI_F32) {
+    r = lo;
+  }
+  return r;
+}
+
 /** Wrap an angle into [-pi, pi). Non-finite input returns 0. Inline: the
- *  usual angle is already in range (one compare, no call). */
+ *  usual angle is already in range (one compare, no call), and an angle one
+ *  turn out (pi <= |theta| < FW_WRAP_TURN_MAX: an estimate stepping past +-pi
+ *  once per electrical revolution, or the difference of two estimates across
+ *  it) loses that turn without a call. There floor((theta + pi) / 2 pi) is
+ *  +-1, so theta -+ 2 pi in fw_wrap_turns_f32's two parts is the general
+ *  wrap's value before its corrections, which leave a value inside
+ *  [-pi, pi) as it is: the same result, bit for bit (test_math.c checks every
+ *  float of that range). */
 static FW_ALWAYS_INLINE float fw_wrap_pi_f32(float theta_rad) {
-  /* |theta| < pi: one constant and one compare; -pi (in range) and the rest
-   * go to fw_wrap_pi_slow_f32, which returns -pi as it is */
-  return FW_LIKELY(fabsf(theta_rad) < FW_PI_F32) ? theta_rad : fw_wrap_pi_slow_f32(theta_rad);
+  /* |theta| < pi: one constant and one compare */
+  if (FW_LIKELY(fabsf(theta_rad) < FW_PI_F32)) {
+    return theta_rad;
+  }
+  /* -pi is in range as it is; NaN, inf, the far angles and a result that
+   * needs a correction take the call */
+  if (fabsf(theta_rad) < FW_WRAP_TURN_MAX && theta_rad != -FW_PI_F32) {
+    const bool pos = theta_rad > 0.0f;
+    const float r = (theta_rad - (pos ? FW_TWO_PI_1 : -FW_TWO_PI_1)) -
+                    (pos ? FW_TWO_PI_2 : -FW_TWO_PI_2);
+    if (FW_LIKELY(fabsf(r) < FW_PI_F32)) {
+      return r;
+    }
+  }
+  return fw_wrap_pi_slow_f32(theta_rad);
+}
+
+/* ---- atan2 ----------------------------------------------------------------
+ * With lo = min(|x|, |y|) and hi = max: atan(lo/hi) in [0, pi/4]. Beyond
+ * tan(pi/8), atan(lo/hi) = pi/4 + atan((lo - hi)/(lo + hi)), so the
+ * polynomial's argument stays within |t| <= tan(pi/8) with one division on
+ * either side (lo - hi is exact for lo >= hi/2, Sterbenz). The polynomial is
+ * cephes atanf's (odd, degree 9, relative error ~2e-7 on that interval); the
+ * octant is restored by pi/2 - r (|y| > |x|), pi - r (x < 0) and y's sign.
+ * Measured (test_math.c) against double atan2: see FW_ATAN2_MAX_ERR. */
+#define FW_TAN_PI_8 0.414213562373095f
+#define FW_PI_4_F32 0.785398163397448f
+#define FW_PI_2_F32 1.57079632679490f
+
+/** fw_atan2_f32 inline (the same function: fw_atan2_f32 calls this). */
+static FW_ALWAYS_INLINE float fw_atan2_inline_f32(float y, float x) {
+  const float ax = fabsf(x), ay = fabsf(y);
+  const float sum = ax + ay;
+  if (FW_UNLIKELY(!(sum > 0.0f && sum <= FLT_MAX))) {
+    return atan2f(y, x); /* (0, 0), NaN, infinities, overflow: libm's conventions */
+  }
+  const bool swap = ay > ax;
+  const float lo = swap ? ax : ay;
+  const float hi = swap ? ay : ax;
+  float num = lo, den = hi, r = 0.0f;
+  if (lo > FW_TAN_PI_8 * hi) {
+    num = lo - hi;
+    den = lo + hi;
+    r = FW_PI_4_F32;
+  }
+  const float t = num / den;
+  const float z = t * t;
+  r += (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z -
+        3.33329491539e-1f) * z * t + t;
+  if (swap) {
+    r = FW_PI_2_F32 - r;
+  }
+  if (x < 0.0f) {
+    r = FW_PI_F32 - r;
+  }
+  return copysignf(r, y); /* r >= 0; y's sign, -0 included, as libm */
 }
 
 /** True for a finite float (not NaN, not inf), without libm: x - x is 0 for

@@ -66,15 +66,22 @@ typedef struct {
   float fly_rot_rad;        /**< rotation of that vector over the observation window */
   uint8_t flying;           /**< 1: this run started on a moving mover */
   uint8_t sal_retries;      /**< saliency checks repeated after turning the estimate */
+  /* configured (fw_start_init), kept by fw_start_reset */
+  float fly_a;              /**< the flying-start low-pass's coefficient 1 - exp(-T/tau) */
+  float inv_dt;             /**< 1 / T, the control period's inverse (1/s) */
 } fw_start_t;
 
-/** Everything cleared (an enable, or the handover to closed loop). */
+/** Configure for the control period dt_s (> 0) and clear everything. */
+void fw_start_init(fw_start_t *s, float dt_s);
+
+/** Everything but the configuration cleared (an enable, or the handover to
+ *  closed loop). */
 void fw_start_reset(fw_start_t *s);
 
 /* ---- ALIGN ---- */
 /** Back-EMF observation with this period's fundamental current. */
-void fw_start_fly_observe(fw_start_t *s, const fw_cfg_machine_t *mach, float dt_s,
-                          fw_vec2_f32_t i_f_ab_A, float phase_time_s);
+void fw_start_fly_observe(fw_start_t *s, const fw_cfg_machine_t *mach, fw_vec2_f32_t i_f_ab_A,
+                          float phase_time_s);
 /** Fundamental alpha/beta voltage commanded this period (acts next period). */
 void fw_start_fly_set_u(fw_start_t *s, fw_vec2_f32_t u_f_ab_V);
 /**
