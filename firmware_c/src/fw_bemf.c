@@ -90,11 +90,16 @@ void fw_bemf_update(fw_bemf_t *b, const float u_dq_V[2], const float i_dq_A[2], 
   b->e_d_f += b->a_f * (e[0] - b->e_d_f);
   b->e_q_f += b->a_f * (e[1] - b->e_q_f);
   b->w_neg = (uint8_t)(w_hat < 0.0f);
-  /* the angle error for this period: now when the PLL uses it (next period),
-   * else on demand (fw_bemf_error; fw_bemf_schedule when it hands over) */
-  b->err_fresh = b->active;
-  if (b->active) {
+  /* the angle error for this period: fw_bemf_prepare (the supervision) forms it
+   * when the PLL uses it (next period), else on demand (fw_bemf_error;
+   * fw_bemf_schedule when it hands over) */
+  b->err_fresh = 0u;
+}
+
+void fw_bemf_prepare(fw_bemf_t *b) {
+  if (b->active && !b->err_fresh) {
     b->err_rad = angle(b);
+    b->err_fresh = 1u;
   }
 }
 

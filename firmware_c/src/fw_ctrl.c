@@ -903,7 +903,13 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
 }
 
 bool fw_supervise(fw_ctrl_t *c, fw_outputs_t *out, fw_snapshot_t *snap) {
-  if (c == NULL || out == NULL || snap == NULL || !c->sup.due) {
+  if (c == NULL || out == NULL || snap == NULL) {
+    return false;
+  }
+  /* the back-EMF angle error the PLL reads next period (also after a switch-off
+   * period, where nothing is due: its value is the same whenever it is formed) */
+  fw_bemf_prepare(&c->bemf);
+  if (!c->sup.due) {
     return false;
   }
   c->sup.due = 0u;

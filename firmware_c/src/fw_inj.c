@@ -7,6 +7,12 @@
 
 #include "pmlsm/fw_ctrl.h"
 
+/** The SOGI gain after a reset: the adaptive extractor starts at its largest. */
+static float reset_k(const fw_cfg_estimator_t *est) {
+  return est->extractor == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE ? est->sogi_k_adapt_max
+                                                                : est->sogi_k;
+}
+
 void fw_inj_init(fw_inj_t *j, const fw_config_t *cfg, float dt_s) {
   j->dt_s = dt_s;
   j->n_inj = (uint32_t)(cfg->sensing.f_pwm_Hz / cfg->estimator.f_inj_Hz + 0.5f);
@@ -17,7 +23,15 @@ void fw_inj_init(fw_inj_t *j, const fw_config_t *cfg, float dt_s) {
   const float h = 0.5f * w0 * dt_s;
   const float t = tanf(h);
   j->sogi_gd_s_k = (2.0f / w0) * h * (1.0f + t * t) / t;
-  fw_inj_reset(j, &cfg->estimator);
+  /* the SOGIs' centre frequency (a tanf) once, with the gain a reset gives
+   * them; a reset sets only the gain */
+  const fw_cfg_estimator_t *est = &cfg->estimator;
+  const float k = reset_k(est);
+  (void)fw_sogi_init_f32(&j->sogi_a, est->f_inj_Hz, k, dt_s);
+  (void)fw_sogi_init_f32(&j->sogi_b, est->f_inj_Hz, k, dt_s);
+  /* once: after a reset every row is written before it is read (ring_fill) */
+  memset(j->ring, 0, sizeof(j->ring));
+  fw_inj_reset(j, est);
 }
 
 static void restart_averages(fw_inj_t *j) {
@@ -27,16 +41,17 @@ static void restart_averages(fw_inj_t *j) {
 }
 
 void fw_inj_reset(fw_inj_t *j, const fw_cfg_estimator_t *est) {
-  float k = est->extractor == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE ? est->sogi_k_adapt_max
-                                                                   : est->sogi_k;
-  (void)fw_sogi_init_f32(&j->sogi_a, est->f_inj_Hz, k, j->dt_s);
-  (void)fw_sogi_init_f32(&j->sogi_b, est->f_inj_Hz, k, j->dt_s);
-  j->sogi_gd_s = j->sogi_gd_s_k / j->sogi_a.k;
+  const float k = reset_k(est);
+  /* what fw_sogi_init_f32 with k would give on the filters fw_inj_init set up
+   * (the same gains from the same k, the state cleared), without its tanf; a
+   * filter the configuration left uninitialised stays a zero-output one */
+  fw_sogi_reset_f32(&j->sogi_a);
+  fw_sogi_reset_f32(&j->sogi_b);
+  fw_inj_set_k(j, k);
   memset(j->h_prev_raw, 0, sizeof(j->h_prev_raw));
   memset(j->h_prev_sogi, 0, sizeof(j->h_prev_sogi));
   memset(j->sign_hist, 0, sizeof(j->sign_hist));
-  restart_averages(j);
-  memset(j->ring, 0, sizeof(j->ring));
+  restart_averages(j); /* the ring's rows are rewritten before they are read */
   j->inj_idx = 0u;
 }
 

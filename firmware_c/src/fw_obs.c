@@ -100,14 +100,14 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
   float eps = 0.0f;
   const float floor_A = 1e-6f;
   const bool switched = o->est_hold_s > 0.0f; /* extractor just switched: no HF error */
-  if (switched) {
+  if (FW_UNLIKELY(switched)) {
     o->est_hold_s -= dt;
   }
-  if (in->hold) {
+  if (FW_UNLIKELY(in->hold)) {
     eps = 0.0f; /* injection moves to q^ during the saliency check: hold the estimate */
   } else if (in->bemf_active) {
     eps = in->bemf_err_rad; /* above injection speeds (the HF error is not formed) */
-  } else if (!switched && in->E_d_A > floor_A) {
+  } else if (FW_LIKELY(!switched && in->E_d_A > floor_A)) {
     eps = (in->E_q_A / in->E_d_A) * o->eps_gain;
     eps = fw_clamp_symf(eps, 1.0f);
   }

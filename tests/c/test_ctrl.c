@@ -1142,7 +1142,58 @@ static void test_supervision_switches_off_same_period(void) {
   TT_CHECK(fw_fault_code(&ref) == FW_FAULT_CURRENT_SENSOR_SUM);
 }
 
+/* The back-EMF angle error the PLL reads next period: the update (control
+ * half) leaves it unformed, fw_bemf_prepare (the supervision) forms it, bit for
+ * bit what fw_bemf_error computes on demand from the same filters; nothing is
+ * formed while the PLL is on injection. */
+static void test_bemf_prepare(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  const float dt = 1.0f / cfg.sensing.f_pwm_Hz;
+  fw_bemf_t b;
+  fw_bemf_init(&b, &cfg, dt);
+  const float w0 = 600.0f; /* el. rad/s */
+  const float i0[2] = {0.0f, 1.0f};
+  fw_bemf_catch(&b, w0, i0);
+  const float u[2] = {-4.0f, w0 * cfg.machine.psi_f_Wb + cfg.machine.R_ohm};
+  for (int k = 0; k < 240; k++) { /* 10 ms: the 1 ms filters settle */
+    fw_bemf_update(&b, u, i0, w0, w0);
+  }
+  TT_CHECK(b.active == 1u && b.err_fresh == 0u);
+  const float on_demand = fw_bemf_error(&b);
+  printf("  back-EMF angle error on demand %.6f rad (e_dq %.3f, %.3f V)\n", (double)on_demand,
+         (double)b.e_d_f, (double)b.e_q_f);
+  TT_CHECK(on_demand == fw_bemf_angle_of(&b, b.e_d_f, b.e_q_f, b.w_neg));
+  TT_CHECK(fabsf(on_demand) > 0.01f && fabsf(on_demand) < 1.0f); /* not the zero of too small an E */
+  fw_bemf_prepare(&b);
+  TT_CHECK(b.err_fresh == 1u && memcmp(&b.err_rad, &on_demand, sizeof on_demand) == 0);
+  TT_CHECK(fw_bemf_error(&b) == on_demand);
+  b.err_rad = 7.0f; /* formed already: prepare leaves it */
+  fw_bemf_prepare(&b);
+  TT_CHECK(b.err_rad == 7.0f);
+  /* on injection: not formed (fw_bemf_error computes it when asked) */
+  b.active = 0u;
+  fw_bemf_update(&b, u, i0, w0, w0);
+  fw_bemf_prepare(&b);
+  TT_CHECK(b.err_fresh == 0u);
+  /* the core in RUN on the back-EMF: the control half leaves it to the
+   * supervision half */
+  static fw_ctrl_t c;
+  plant_t p;
+  fw_outputs_t out;
+  run_to_operation(&c, &p, &out);
+  TT_CHECK(c.phase == FW_START_RUN && out.pwm_enable == 1u);
+  fw_bemf_catch(&c.bemf, w0, i0);
+  fw_inputs_t in;
+  plant_sample(&p, &in);
+  (void)fw_step_into(&c, &in, NULL, &out, &c.snap);
+  TT_CHECK(c.bemf.active == 1u && c.bemf.err_fresh == 0u);
+  (void)fw_supervise(&c, &out, &c.snap);
+  TT_CHECK(c.bemf.err_fresh == 1u);
+}
+
 int main(void) {
+  TT_RUN(test_bemf_prepare);
   TT_RUN(test_demod_pseudo);
   TT_RUN(test_step_into_slots_equals_step);
   TT_RUN(test_supervision_missed);
