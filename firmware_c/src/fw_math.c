@@ -57,8 +57,7 @@ float fw_atan2_f32(float y, float x) { return fw_atan2_inline_f32(y, x); }
  * i.e. |theta| < 4e5 rad). Larger angles (float ulp >= 0.03 rad, the phase
  * is meaningless there) are first folded with the exact fmodf so the result
  * is still in range. A final compare keeps it in [lo, lo + FW_TWO_PI_F32).
- * FW_TWO_PI_1/2 and the subtraction with its compares (fw_wrap_turns_f32)
- * are in fw_math.h: fw_wrap_pi_f32 uses them inline for one turn. */
+ * FW_TWO_PI_1/2 are in fw_math.h: fw_wrap_pi_f32 subtracts one turn inline. */
 #define FW_INV_TWO_PI 0.159154943091895336f
 #define FW_WRAP_FOLD 4.0e5f
 
@@ -72,7 +71,19 @@ static float fw_wrap_core(float theta_rad, float lo) {
   if ((float)n > y) {
     n--; /* ... corrected to floor */
   }
-  return fw_wrap_turns_f32(theta_rad, (float)n, lo);
+  const float nf = (float)n;
+  float r = (theta_rad - nf * FW_TWO_PI_1) - nf * FW_TWO_PI_2;
+  if (r >= lo + FW_TWO_PI_F32) {
+    r -= FW_TWO_PI_F32;
+  }
+  if (r < lo) {
+    r += FW_TWO_PI_F32;
+  }
+  /* r + 2pi may round up to exactly lo + 2pi for tiny negative r. */
+  if (r >= lo + FW_TWO_PI_F32) {
+    r = lo;
+  }
+  return r;
 }
 
 float fw_wrap_pi_slow_f32(float theta_rad) {

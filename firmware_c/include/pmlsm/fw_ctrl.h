@@ -361,9 +361,10 @@ uint32_t fw_fault_history(const fw_ctrl_t *ctrl, uint16_t *codes, uint32_t n);
 void fw_step(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out);
 
 /**
- * The period's supervision half: the integrity monitor (fw_mon_update) and
- * the linear-axis protections (fw_protect_update) on what fw_step_into staged
- * for them. Call it once after every fw_step_into, before the next one and
+ * The period's supervision half: the back-EMF angle error the PLL reads next
+ * period (fw_bemf_prepare, also in a period with nothing staged), then the
+ * integrity monitor (fw_mon_update) and the linear-axis protections
+ * (fw_protect_update) on what fw_step_into staged for them. Call it once after every fw_step_into, before the next one and
  * before the duties take effect (fw_app: the supervision interrupt, pended by
  * the control interrupt and tail-chained to it). A fault it finds latches in
  * the same period as before the split; a hard one switches the outputs off:

@@ -261,8 +261,9 @@ static FW_ALWAYS_INLINE fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, f
   return out;
 }
 
-/* Angle wrap (fw_math.c): 2 pi in two parts, FW_TWO_PI_1 with 8 significant
- * bits, so n * FW_TWO_PI_1 is exact for |n| < 2^16. */
+/* Angle wrap (fw_math.c, and one turn inline below): 2 pi in two parts,
+ * FW_TWO_PI_1 with 8 significant bits, so n * FW_TWO_PI_1 is exact for
+ * |n| < 2^16. */
 #define FW_TWO_PI_1 6.28125f
 #define FW_TWO_PI_2 1.9353071795864769e-3f
 /** fw_wrap_pi_f32 subtracts one turn inline for pi <= |theta| < this (a
@@ -270,31 +271,13 @@ static FW_ALWAYS_INLINE fw_sincos_f32_t fw_sincos_add_f32(fw_sincos_f32_t sc0, f
  *  is +-1 up to here, 2.5 pi, with room to spare). */
 #define FW_WRAP_TURN_MAX 8.0f
 
-/** theta - n 2 pi for the number of turns n (an integer in float) that
- *  brings theta into [lo, lo + 2 pi), with the compares that keep the
- *  rounded result inside (the wrap's common tail). */
-static FW_ALWAYS_INLINE float fw_wrap_turns_f32(float theta_rad, float nf, float lo) {
-  float r = (theta_rad - nf * FW_TWO_PI_1) - nf * FW_TWO_PI_2;
-  if (r >= lo + FW_TWO_PI_F32) {
-    r -= FW_TWO_PI_F32;
-  }
-  if (r < lo) {
-    r += FW_TWO_PI_F32;
-  }
-  /* r + 2pi may round up to exactly lo + 2pi for tiny negative r. */
-  if (r >= lo + FW_TWO_PI_F32) {
-    r = lo;
-  }
-  return r;
-}
-
 /** Wrap an angle into [-pi, pi). Non-finite input returns 0. Inline: the
  *  usual angle is already in range (one compare, no call), and an angle one
  *  turn out (pi <= |theta| < FW_WRAP_TURN_MAX: an estimate stepping past +-pi
  *  once per electrical revolution, or the difference of two estimates across
  *  it) loses that turn without a call. There floor((theta + pi) / 2 pi) is
- *  +-1, so theta -+ 2 pi in fw_wrap_turns_f32's two parts is the general
- *  wrap's value before its corrections, which leave a value inside
+ *  +-1, so theta -+ 2 pi in the two parts of 2 pi is the general wrap's
+ *  value before its corrections, which leave a value inside
  *  [-pi, pi) as it is: the same result, bit for bit (test_math.c checks every
  *  float of that range). */
 static FW_ALWAYS_INLINE float fw_wrap_pi_f32(float theta_rad) {
