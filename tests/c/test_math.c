@@ -137,9 +137,19 @@ static void test_sincos_add(void) {
   TT_CHECK(sc.s == 0.0f && sc.c == 1.0f);
 }
 
-/* |fw_atan2_f32(y, x) - atan2 in double| for one float pair */
-static double atan2_err(float y, float x) {
-  return fabs((double)fw_atan2_f32(y, x) - atan2((double)y, (double)x));
+/* The largest |fw_atan2_f32(y, x) - atan2 in double| seen, and where. */
+typedef struct {
+  double err;
+  float y, x;
+} atan2_worst_t;
+
+static void atan2_check(atan2_worst_t *w, float y, float x) {
+  const double e = fabs((double)fw_atan2_f32(y, x) - atan2((double)y, (double)x));
+  if (e > w->err) {
+    w->err = e;
+    w->y = y;
+    w->x = x;
+  }
 }
 
 /* fw_atan2_f32 against double atan2: 2^21 directions over the whole circle at
@@ -150,8 +160,7 @@ static double atan2_err(float y, float x) {
  * overflowing |x| + |y|) the result is libm's atan2f, bit for bit. */
 static void test_atan2(void) {
   static const float mags[] = {1e-30f, 1e-6f, 1e-3f, 0.7f, 1.0f, 311.0f, 1e6f, 1e30f};
-  double max_err = 0.0;
-  float worst_y = 0.0f, worst_x = 0.0f;
+  atan2_worst_t w = {0.0, 0.0f, 0.0f};
   int32_t out_of_range = 0;
   for (size_t m = 0; m < sizeof mags / sizeof mags[0]; m++) {
     for (int32_t i = -(1 << 20); i < (1 << 20); i++) {
@@ -160,12 +169,7 @@ static void test_atan2(void) {
       const float y = (float)((double)mags[m] * sin(th));
       const float a = fw_atan2_f32(y, x);
       out_of_range += !(a >= -(float)PI_D && a <= (float)PI_D);
-      const double e = atan2_err(y, x);
-      if (e > max_err) {
-        max_err = e;
-        worst_y = y;
-        worst_x = x;
-      }
+      atan2_check(&w, y, x);
     }
   }
   /* ratios r around 0, tan(pi/8), 1, 1/tan(pi/8) (octant and reduction
@@ -180,25 +184,15 @@ static void test_atan2(void) {
       for (int q = 0; q < 4; q++) {
         const float x = (q & 1) ? -1.0f : 1.0f;
         const float y = (q & 2) ? -r : r;
-        const double e = atan2_err(y, x);
-        if (e > max_err) {
-          max_err = e;
-          worst_y = y;
-          worst_x = x;
-        }
-        const double e2 = atan2_err(x, y); /* the swapped octant */
-        if (e2 > max_err) {
-          max_err = e2;
-          worst_y = x;
-          worst_x = y;
-        }
+        atan2_check(&w, y, x);
+        atan2_check(&w, x, y); /* the swapped octant */
       }
     }
   }
-  printf("  atan2 max abs error: %.3e at (y, x) = (%.9g, %.9g) (bound %.1e)\n", max_err,
-         (double)worst_y, (double)worst_x, (double)FW_ATAN2_MAX_ERR);
-  TT_CHECK(max_err <= (double)FW_ATAN2_MAX_ERR);
-  TT_CHECK(max_err > 0.0); /* the fast path, not libm, was measured */
+  printf("  atan2 max abs error: %.3e at (y, x) = (%.9g, %.9g) (bound %.1e)\n", w.err,
+         (double)w.y, (double)w.x, (double)FW_ATAN2_MAX_ERR);
+  TT_CHECK(w.err <= (double)FW_ATAN2_MAX_ERR);
+  TT_CHECK(w.err > 0.0); /* the fast path, not libm, was measured */
   TT_CHECK(out_of_range == 0);
   /* the axes */
   TT_CHECK(fw_atan2_f32(0.0f, 2.0f) == 0.0f);
