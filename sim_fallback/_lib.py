@@ -142,7 +142,7 @@ class FwSnapshot(C.Structure):
         ("mon_angle_hf_rad", _f), ("mon_angle_bemf_rad", _f), ("mon_e_bemf_V", _f),
         ("mon_i_sum_A", _f), ("sal_meas", _f), ("L_small_meas_H", _f), ("L_large_meas_H", _f),
         ("bemf_err_rad", _f), ("inj_scale", _f), ("bemf_active", _u8), ("flying_start", _u8),
-        ("ref_limited", _u8),
+        ("ref_limited", _u8), ("ref_pos_m", _f),
     ]
 
     def as_dict(self) -> dict:
@@ -180,6 +180,7 @@ class SimPlantParams(C.Structure):
         ("adc_offset_counts", _d * 3), ("adc_gain_err", _d * 3),
         ("udc_fullscale_V", _d), ("udc_noise_V", _d), ("seed", C.c_uint64),
         ("open_phase_mask", _u32), ("adc_stuck_mask", _u32),
+        ("ref_res_m", _d), ("ref_offset_m", _d), ("ref_fault", _u32), ("ref_pad_", _u32),
     ]
 
 
@@ -208,7 +209,8 @@ class SimController(C.Structure):
 
     _fields_ = [("ctx", C.c_void_p), ("step", C.c_void_p), ("step_adc", C.c_void_p),
                 ("snapshot", C.c_void_p), ("set_ref", C.c_void_p),
-                ("background", C.c_void_p), ("background_every", C.c_uint32)]
+                ("background", C.c_void_p), ("background_every", C.c_uint32),
+                ("sample_ref", C.c_void_p)]
 
 
 _PD = C.POINTER(_d)

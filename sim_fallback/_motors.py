@@ -181,6 +181,10 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float, float, str, Any]] = {
     ("controller", "bemf_v_on_mps"): (False, 0.0, 100.0, "m/s", None),
     ("controller", "bemf_v_off_mps"): (False, 0.0, 100.0, "m/s", None),
     ("controller", "mon_bemf_min_mps"): (False, 0.001, 1000.0, "m/s", None),
+    # the rig's reference position sensor (a quadrature scale), modelled as the true
+    # position quantised to its resolution; 0 = no sensor fitted
+    ("reference_sensor", "resolution_m"): (False, 0.0, 0.01, "m (0: none)", 1e-6),
+    ("reference_sensor", "offset_m"): (False, -1000.0, 1000.0, "m", 0.0),
 }
 #: ``[controller]`` keys that are fw_config_t fields of the same name, set as given (the
 #: back-EMF speeds only when the file gives them: else the firmware's defaults).
@@ -291,6 +295,8 @@ PLANT_FIELD_SOURCES: dict[str, tuple[str, str]] = {
     "adc_offset_counts": ("sensing", "adc_offset_counts"),
     "adc_gain_err": ("sensing", "adc_gain_err"),
     "udc_fullscale_V": ("sensing", "udc_fullscale_V"), "udc_noise_V": ("sensing", "udc_noise_V"),
+    "ref_res_m": ("reference_sensor", "resolution_m"),
+    "ref_offset_m": ("reference_sensor", "offset_m"),
 }
 
 
@@ -501,7 +507,8 @@ def _build(path: Path, doc: dict[str, Any]) -> Motor:
         adc_noise_counts=float(g["adc_noise_counts"]),
         adc_offset_counts=list(g["adc_offset_counts"]), adc_gain_err=list(g["adc_gain_err"]),
         udc_fullscale_V=float(g["udc_fullscale_V"]), udc_noise_V=float(g["udc_noise_V"]),
-        seed=0,
+        seed=0, ref_res_m=float(g["resolution_m"]), ref_offset_m=float(g["offset_m"]),
+        ref_fault=0,
     )
     ctrl = {k: float(g[k]) for (s, k) in _SCHEMA if s == "controller" and g[k] is not None}
     return Motor(name=str(m.get("name", path.stem)), path=path,

@@ -16,7 +16,7 @@ from enum import IntEnum
 from typing import Any, NamedTuple
 
 #: the firmware's version (device.firmware_version; 0x100A, 0x2040 packed)
-FW_VERSION_STRING = '0.2.0'
+FW_VERSION_STRING = '0.3.0'
 
 FAULTS: dict[int, tuple[str, str]] = {
     0x2310: ('OVERCURRENT', '|phase current| above i_trip_A'),
@@ -127,6 +127,32 @@ class Reaction(IntEnum):
     SWITCH_OFF = 0  # PWM off at once (disable drive function)
     RAMP = 1  # brake under control, then PWM off (time-bounded)
     QUICK_RAMP = 2  # same as RAMP with the quick-stop time bound
+
+    @property
+    def key(self) -> str:
+        return self.name.lower()
+
+
+class DriveKind(IntEnum):
+    """What a port makes of the drive (0x2090:1): set by the port, read by the bench to label every result (fw_drive_kind_t); ``.key`` is the bench's lower-case name."""
+
+    HARDWARE = 0  # a real power stage and motor
+    SIMULATED = 1  # the host simulated drive (plant in the same process)
+    EMULATED = 2  # the firmware image on an emulated MCU with a virtual motor
+    NO_IO = 3  # the blank port: no power stage at all
+
+    @property
+    def key(self) -> str:
+        return self.name.lower()
+
+
+class RefStatus(IntEnum):
+    """Reference position sensor reading (0x2091:1, fw_port_ref_read) (fw_ref_status_t); ``.key`` is the bench's lower-case name."""
+
+    NONE = 0  # no reference sensor on this board
+    OK = 1  # valid reading
+    FAULT = 2  # the sensor reports an error (signal loss), or the port found the count implausible
+    NOT_REFERENCED = 3  # the reference mark has not been passed since power-up
 
     @property
     def key(self) -> str:
@@ -263,6 +289,8 @@ INDEX_BOARD_SENSING = 0x2056
 INDEX_TELEMETRY = 0x2060
 INDEX_TRACE = 0x2070
 INDEX_IDENTIFICATION = 0x2080
+INDEX_BOARD = 0x2090
+INDEX_REFERENCE_SENSOR = 0x2091
 INDEX_ERROR_CODE = 0x603F
 INDEX_CONTROLWORD = 0x6040
 INDEX_STATUSWORD = 0x6041
@@ -547,6 +575,17 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2080, 1): 'd-axis current reference',
     (0x2080, 2): 'Measured smaller inductance',
     (0x2080, 3): 'Measured larger inductance',
+    (0x2090, 0): 'Highest sub-index supported',
+    (0x2090, 1): 'Drive kind',
+    (0x2090, 2): 'Board name',
+    (0x2090, 3): 'Drive time',
+    (0x2091, 0): 'Highest sub-index supported',
+    (0x2091, 1): 'Status',
+    (0x2091, 2): 'Resolution',
+    (0x2091, 3): 'Electrical zero',
+    (0x2091, 4): 'Count',
+    (0x2091, 5): 'Position',
+    (0x2091, 6): 'Faults seen',
     (0x603F, 0): 'Error code',
     (0x6040, 0): 'Controlword',
     (0x6041, 0): 'Statusword',
@@ -817,6 +856,15 @@ TRACE__SIGNAL_8 = Entry(0x2070, 15)
 IDENTIFICATION__D_AXIS_CURRENT_REFERENCE = Entry(0x2080, 1, unit='A')
 IDENTIFICATION__MEASURED_SMALLER_INDUCTANCE = Entry(0x2080, 2, unit='H')
 IDENTIFICATION__MEASURED_LARGER_INDUCTANCE = Entry(0x2080, 3, unit='H')
+BOARD__DRIVE_KIND = Entry(0x2090, 1)
+BOARD__BOARD_NAME = Entry(0x2090, 2)
+BOARD__DRIVE_TIME = Entry(0x2090, 3)
+REFERENCE_SENSOR__STATUS = Entry(0x2091, 1)
+REFERENCE_SENSOR__RESOLUTION = Entry(0x2091, 2, unit='m')
+REFERENCE_SENSOR__ELECTRICAL_ZERO = Entry(0x2091, 3, unit='m')
+REFERENCE_SENSOR__COUNT = Entry(0x2091, 4)
+REFERENCE_SENSOR__POSITION = Entry(0x2091, 5, unit='m')
+REFERENCE_SENSOR__FAULTS_SEEN = Entry(0x2091, 6)
 ERROR_CODE = Entry(0x603F, 0, var=True)
 CONTROLWORD = Entry(0x6040, 0, var=True)
 STATUSWORD = Entry(0x6041, 0, var=True)

@@ -65,6 +65,12 @@ typedef struct {
   /* fault injection (0 = healthy) */
   uint32_t open_phase_mask;  /**< bit j: phase j open (no current can flow in it) */
   uint32_t adc_stuck_mask;   /**< bit j: current ADC channel j repeats its last count */
+  /* reference position sensor: the rig's quadrature scale, sampled with the ADC */
+  double ref_res_m;          /**< scale resolution (m per count); 0: no scale fitted */
+  double ref_offset_m;       /**< scale reading (m) at x = 0 (electrical angle 0) */
+  uint32_t ref_fault;        /**< 0 healthy; 1 signal lost: the scale's error output is
+                                  set (FW_REF_FAULT) and its count frozen */
+  uint32_t ref_pad_;
 } sim_plant_params_t;
 
 /** Plant state (truth). */
@@ -108,6 +114,9 @@ typedef struct {
   void (*set_ref)(void *ctx, sim_ref_kind_t kind, double value);
   void (*background)(void *ctx);
   uint32_t background_every;
+  /** optional: the reference sensor's reading (fw_ref_status_t, count) at the sampling
+   *  instant, handed over right before the control step of every period */
+  void (*sample_ref)(void *ctx, uint8_t status, int32_t count);
 } sim_controller_t;
 
 /**
@@ -159,6 +168,24 @@ int sim_params_check(const sim_plant_params_t *p, const char **bad_field);
 int sim_set_params(sim_t *s, const sim_plant_params_t *p, const char **bad_field);
 /** Create (malloc) a simulation; NULL on bad params. Initial state zero. */
 sim_t *sim_new(const sim_plant_params_t *p);
+/** sizeof(sim_t): storage for sim_init_in. */
+size_t sim_sizeof(void);
+/**
+ * sim_new into caller-owned storage (size bytes, 8-byte aligned): no malloc,
+ * for an image that runs the plant as an on-target virtual motor. NULL on bad
+ * params or too small a block. Never sim_free such a simulation; it must not
+ * get schedules (sim_set_schedule allocates): use sim_set_load instead.
+ */
+sim_t *sim_init_in(void *mem, size_t size, const sim_plant_params_t *p);
+/** The external load force from now on (N, opposes +x); without a load schedule. */
+void sim_set_load(sim_t *s, double F_N);
+/**
+ * One PWM period of the plant alone, as the batch loop runs it: the duties the
+ * inverter applies (NaN or infinite -> 0.5, others clamped to [0, 1]) over
+ * [t_k, t_k + T), n_sub RK4 steps, then the time advances. Sample (sim_sample,
+ * sim_ref_sample) before it for the period's ADC and scale readings.
+ */
+void sim_plant_step(sim_t *s, const float duty_abc[3], int pwm_on);
 void sim_free(sim_t *s);
 /** Attach a controller (copied). */
 void sim_set_controller(sim_t *s, const sim_controller_t *c);
@@ -196,6 +223,10 @@ void sim_plant_advance(sim_t *s, const double duty_abc[3], int pwm_enable,
                        double dt_s, uint32_t n_sub);
 /** Sample the ADC now (advances the RNG). */
 void sim_sample(sim_t *s, fw_inputs_t *in, fw_adc_inputs_t *adc);
+/** The reference scale's reading now: a fw_ref_status_t (FW_REF_NONE without a
+ *  scale, ref_res_m = 0) and, when valid, *count = floor((x + ref_offset_m) /
+ *  ref_res_m) saturated to int32 (the plant's true position quantised). */
+uint8_t sim_ref_sample(sim_t *s, int32_t *count);
 /** Truth: electromagnetic thrust at the present state. */
 double sim_force_N(const sim_t *s);
 

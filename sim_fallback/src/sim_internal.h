@@ -58,6 +58,7 @@ struct sim_s {
   double duty[3];
   int pwm_on;
   double F_load_N;      /**< load force applied over the present period */
+  int32_t ref_last;     /**< the scale's last valid count (held while its signal is lost) */
   /* controller */
   sim_controller_t ctrl;
   int use_adc;

@@ -10,6 +10,7 @@
  */
 #include <math.h>
 #include <stddef.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -64,6 +65,9 @@ int sim_params_check(const sim_plant_params_t *p, const char **bad_field) {
   }
   CHECK(isfinite(p->udc_fullscale_V) && p->udc_fullscale_V > p->u_dc_V, "udc_fullscale_V");
   NONNEG(udc_noise_V);
+  CHECK(isfinite(p->ref_res_m) && p->ref_res_m >= 0.0 && p->ref_res_m <= 0.01, "ref_res_m");
+  CHECK(isfinite(p->ref_offset_m) && fabs(p->ref_offset_m) <= 1000.0, "ref_offset_m");
+  CHECK(p->ref_fault <= 1u, "ref_fault");
   return 0;
 }
 
@@ -72,13 +76,15 @@ int sim_params_check(const sim_plant_params_t *p, const char **bad_field) {
 _Static_assert(offsetof(sim_t, flux_tab) + sizeof(((sim_t *)0)->flux_tab) == sizeof(sim_t),
                "sim_new leaves the flux grid, the last member of sim_t, unzeroed");
 
-sim_t *sim_new(const sim_plant_params_t *p) {
+size_t sim_sizeof(void) { return sizeof(sim_t); }
+
+sim_t *sim_init_in(void *mem, size_t size, const sim_plant_params_t *p) {
+  if (!mem || size < sizeof(sim_t) || ((uintptr_t)mem & 7u) != 0u) return NULL;
   if (sim_params_check(p, NULL) != 0) return NULL;
   /* Zeroed but for the flux grid (the last member, ~90 KiB): an entry is only
    * read once flux_ok marks it computed. calloc zeroed all of it in every
    * run (a reused heap block), ~100k instructions and the cache lines with them. */
-  sim_t *s = (sim_t *)malloc(sizeof(sim_t));
-  if (!s) return NULL;
+  sim_t *s = (sim_t *)mem;
   memset(s, 0, offsetof(sim_t, flux_tab));
   s->p = *p;
   sim_plant_derive(s);
@@ -87,6 +93,19 @@ sim_t *sim_new(const sim_plant_params_t *p) {
   for (int k = 0; k < SIM_REF_COUNT; ++k) s->sched[k].last_sent = (double)NAN;
   s->sched_next_t = -(double)INFINITY;
   return s;
+}
+
+sim_t *sim_new(const sim_plant_params_t *p) {
+  if (sim_params_check(p, NULL) != 0) return NULL;
+  void *mem = malloc(sizeof(sim_t));
+  if (!mem) return NULL;
+  sim_t *s = sim_init_in(mem, sizeof(sim_t), p);
+  if (!s) free(mem);
+  return s;
+}
+
+void sim_set_load(sim_t *s, double F_N) {
+  if (s && isfinite(F_N)) s->F_load_N = F_N;
 }
 
 int sim_set_params(sim_t *s, const sim_plant_params_t *p, const char **bad_field) {
@@ -309,6 +328,24 @@ static void sample_adc(sim_t *s, fw_adc_inputs_t *adc) {
   adc->u_dc_counts = (uint16_t)cnt[3];
 }
 
+/** The scale's reading with the mover at x_m (sim_ref_sample). */
+static uint8_t ref_sample_at(sim_t *s, double x_m, int32_t *count) {
+  const sim_plant_params_t *p = &s->p;
+  if (!(p->ref_res_m > 0.0)) return (uint8_t)FW_REF_NONE;
+  if (p->ref_fault != 0u) { /* signal lost: the error output set, the count frozen */
+    *count = s->ref_last;
+    return (uint8_t)FW_REF_FAULT;
+  }
+  const double c = floor((x_m + p->ref_offset_m) / p->ref_res_m);
+  s->ref_last = c >= 2147483647.0 ? INT32_MAX : (c <= -2147483648.0 ? INT32_MIN : (int32_t)c);
+  *count = s->ref_last;
+  return (uint8_t)FW_REF_OK;
+}
+
+uint8_t sim_ref_sample(sim_t *s, int32_t *count) {
+  return (s && count) ? ref_sample_at(s, s->st.x_m, count) : (uint8_t)FW_REF_NONE;
+}
+
 double sim_force_N(const sim_t *s) { return s ? sim_plant_force(s, &s->st) : (double)NAN; }
 
 void sim_plant_advance(sim_t *s, const double duty_abc[3], int pwm_enable, double dt_s,
@@ -327,6 +364,15 @@ static inline double sanitize_duty(float d) {
   if (x >= 0.0 && x <= 1.0) return x;
   if (!isfinite(x)) return 0.5;
   return x < 0.0 ? 0.0 : 1.0;
+}
+
+void sim_plant_step(sim_t *s, const float duty_abc[3], int pwm_on) {
+  if (!s || !duty_abc) return;
+  for (int j = 0; j < 3; ++j) s->duty[j] = sanitize_duty(duty_abc[j]);
+  s->pwm_on = pwm_on ? 1 : 0;
+  sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
+  s->k++;
+  s->t_s = (double)s->k * s->dt_s;
 }
 
 int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *rec) {
@@ -394,9 +440,17 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
 
     /* 5. plant over [t_k, t_k+1) with the duties from step k-1 (independent of
      * step k below, which sees only the samples taken above) */
+    const double x_k = s->st.x_m;
     sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
 
-    /* 6. controller (the control interrupt) on the samples of t_k */
+    /* 6. controller (the control interrupt) on the samples of t_k; the reference
+     * scale read at the same instant, beside them (s->st is x(t_k + T) by now: the
+     * position at t_k was x_k, kept below) */
+    if (s->ctrl.sample_ref) {
+      int32_t cnt = 0;
+      const uint8_t st = ref_sample_at(s, x_k, &cnt);
+      s->ctrl.sample_ref(s->ctrl.ctx, st, cnt);
+    }
     memset(&out, 0, sizeof out);
     if (adc_mode)
       s->ctrl.step_adc(s->ctrl.ctx, &adc, &out);

@@ -22,6 +22,9 @@
  *     batches;
  *   - critical sections: one thread runs both, so entering is counting (the
  *     depth is checked: an unbalanced exit is a bug and counted);
+ *   - reference sensor: the plant's scale (sim_ref_sample), read by the batch loop
+ *     with the ADC samples and handed over before the control interrupt
+ *     (sim_controller_t.sample_ref);
  *   - non-volatile memory: one file per simulated drive, replaced atomically
  *     (write "<path>.tmp", fsync, rename), so a crash while saving leaves the
  *     old block or the new one, never a mix; no path: no storage
@@ -54,6 +57,8 @@ struct fw_port {
   uint32_t crit_depth;
   uint32_t crit_unbalanced;
   uint8_t sup_pending; /**< the supervision interrupt is pended */
+  uint8_t ref_status;  /**< the reference scale's reading of this period (sim_loop) */
+  int32_t ref_count;
   int has_nvm;
   char path[SIM_NVM_PATH_MAX];
   char tmp[SIM_NVM_PATH_MAX + 8u];
@@ -74,6 +79,19 @@ void fw_port_pwm_write(fw_port_t *port, const float duty_abc[3], bool enable) {
 }
 
 void fw_port_supervision_pend(fw_port_t *port) { port->sup_pending = 1u; }
+
+void fw_port_info(fw_port_t *port, fw_port_info_t *info) {
+  (void)port;
+  info->kind = (uint8_t)FW_DRIVE_SIMULATED;
+  info->board = "host_sim";
+}
+
+uint8_t fw_port_ref_read(fw_port_t *port, int32_t *count) {
+  if (port->ref_status != (uint8_t)FW_REF_NONE) {
+    *count = port->ref_count;
+  }
+  return port->ref_status;
+}
 
 bool fw_port_adc_read(fw_port_t *port, fw_adc_inputs_t *adc) {
   *adc = port->adc;
@@ -176,6 +194,12 @@ static void sim_app_step_adc(void *ctx, const fw_adc_inputs_t *adc, fw_outputs_t
 
 static void sim_app_background(void *ctx) { fw_board_background(&((sim_app_t *)ctx)->board); }
 
+static void sim_app_sample_ref(void *ctx, uint8_t status, int32_t count) {
+  sim_app_t *d = (sim_app_t *)ctx;
+  d->port.ref_status = status;
+  d->port.ref_count = count;
+}
+
 static void sim_app_snapshot(const void *ctx, fw_snapshot_t *snap) {
   fw_app_snapshot(&((const sim_app_t *)ctx)->app, snap);
 }
@@ -217,6 +241,7 @@ void sim_app_controller(sim_app_t *d, uint32_t background_every, sim_controller_
   c->step_adc = sim_app_step_adc;
   c->snapshot = sim_app_snapshot;
   c->background = sim_app_background;
+  c->sample_ref = sim_app_sample_ref;
   c->background_every = background_every > 0u ? background_every : 1u;
 }
 

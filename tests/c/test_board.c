@@ -43,7 +43,22 @@ struct fw_port {
   fw_board_t *preempt;  /* run a control interrupt from inside uart_write (once) */
   uint32_t sup_pends;   /* supervision interrupts pended */
   uint8_t sup_pending;
+  uint8_t ref_status;   /* the reference sensor this port reports (fw_ref_status_t) */
+  int32_t ref_count;
+  uint32_t ref_reads;
 };
+
+void fw_port_info(fw_port_t *p, fw_port_info_t *info) {
+  (void)p;
+  info->kind = (uint8_t)FW_DRIVE_HARDWARE;
+  info->board = "test_board";
+}
+
+uint8_t fw_port_ref_read(fw_port_t *p, int32_t *count) {
+  p->ref_reads++;
+  if (p->ref_status != (uint8_t)FW_REF_NONE) *count = p->ref_count;
+  return p->ref_status;
+}
 
 void fw_port_pwm_write(fw_port_t *p, const float duty_abc[3], bool enable) {
   memcpy(p->duty, duty_abc, sizeof p->duty);
@@ -384,8 +399,111 @@ static void test_preempted_supervision_keeps_its_period(void) {
   TT_CHECK(g_b.ring[1].step == 1u);
 }
 
+
+/* The port says what it makes of the drive (0x2090:1, :2); the application
+ * keeps it over an NMT reset node, which reloads the OD defaults. */
+static void test_port_info_in_od_survives_reset(void) {
+  boot();
+  co_node_t *node = fw_app_node(&g_a);
+  TT_CHECK(co_node_get_u32(node, CO_OD_2090_01) == (uint32_t)FW_DRIVE_HARDWARE);
+  char name[32] = {0};
+  size_t len = co_od_load(node->od, sizeof node->od, CO_OD_2090_02, (uint8_t *)name,
+                          sizeof name - 1u);
+  TT_CHECK(len == 10u && memcmp(name, "test_board", 10u) == 0);
+  uint8_t nmt[8] = {0x81, NID, 0, 0, 0, 0, 0, 0}; /* NMT reset node */
+  fw_can_frame_t f;
+  memset(&f, 0, sizeof f);
+  f.id = 0x000u;
+  f.dlc = 2u;
+  memcpy(f.data, nmt, 8u);
+  TT_CHECK(fw_board_can_rx_isr(&g_ba, &f));
+  g_pa.can_room = CAN_BOX;
+  period_both();
+  TT_CHECK(co_node_get_u32(node, CO_OD_2090_01) == (uint32_t)FW_DRIVE_HARDWARE);
+  memset(name, 0, sizeof name);
+  len = co_od_load(node->od, sizeof node->od, CO_OD_2090_02, (uint8_t *)name, sizeof name - 1u);
+  TT_CHECK(len == 10u && memcmp(name, "test_board", 10u) == 0);
+  /* without a board: the application says "no I/O", never "hardware" */
+  fw_app_t bare;
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  TT_CHECK(fw_app_init(&bare, &cfg, NID) == FW_OK);
+  TT_CHECK(co_node_get_u32(fw_app_node(&bare), CO_OD_2090_01) == (uint32_t)FW_DRIVE_NO_IO);
+}
+
+/* The reference sensor's reading taken with the period's ADC samples: the
+ * period's time (0x2090:3) and count (0x2091:4), scaled (0x2091:5, telemetry
+ * ref_pos_m = count x resolution - electrical zero); an invalid reading shows
+ * as INT32_MIN / NaN and is counted (0x2091:6). */
+static void test_reference_sensor_published_with_its_period(void) {
+  boot();
+  co_node_t *node = fw_app_node(&g_a);
+  g_pa.ref_status = (uint8_t)FW_REF_OK;
+  g_pa.ref_count = 123456;
+  co_node_set_f32(node, CO_OD_2091_02, 0.5e-6f);
+  co_node_set_f32(node, CO_OD_2091_03, 0.01f);
+  for (int k = 0; k < 5; k++) board_isr(&g_ba);
+  fw_board_background(&g_ba);
+  TT_CHECK(g_pa.ref_reads == 5u);
+  TT_CHECK(co_node_get_u32(node, CO_OD_2090_03) == 4u); /* the newest period's index */
+  TT_CHECK(co_node_get_u32(node, CO_OD_2091_01) == (uint32_t)FW_REF_OK);
+  TT_CHECK((int32_t)co_node_get_u32(node, CO_OD_2091_04) == 123456);
+  TT_CHECK_NEAR(co_node_get_f32(node, CO_OD_2091_05), 123456 * 0.5e-6 - 0.01, 2e-8);
+  fw_snapshot_t snap;
+  TT_CHECK_NEAR(g_a.ring[4].snap.ref_pos_m, 123456 * 0.5e-6 - 0.01, 2e-8);
+  TT_CHECK(co_node_get_u32(node, CO_OD_2091_06) == 0u);
+  /* a fault: no count, no position, counted per period */
+  g_pa.ref_status = (uint8_t)FW_REF_FAULT;
+  for (int k = 0; k < 3; k++) board_isr(&g_ba);
+  fw_board_background(&g_ba);
+  TT_CHECK(co_node_get_u32(node, CO_OD_2091_01) == (uint32_t)FW_REF_FAULT);
+  TT_CHECK(co_node_get_u32(node, CO_OD_2091_04) == 0x80000000u);
+  TT_CHECK(isnan(co_node_get_f32(node, CO_OD_2091_05)));
+  TT_CHECK(co_node_get_u32(node, CO_OD_2091_06) == 3u);
+  fw_app_snapshot(&g_a, &snap); /* the core's view knows nothing of it */
+  (void)snap;
+}
+
+/* The control never reads the reference sensor: two drives fed the same ADC
+ * samples, one with the true position and one with garbage (and faults),
+ * enabled and running in closed loop, give the same duties bit for bit in
+ * every period. A leak into the estimator or the control would break it. */
+static void test_reference_sensor_never_reaches_the_control(void) {
+  boot();
+  g_pa.can_room = g_pb.can_room = CAN_BOX;
+  const uint16_t cws[3] = {0x06, 0x07, 0x0F};
+  for (int i = 0; i < 3; i++) {
+    uint8_t req[8] = {0x2B, 0x40, 0x60, 0x00, (uint8_t)cws[i], 0, 0, 0};
+    rx_both((uint16_t)(0x600 + NID), req);
+    for (int k = 0; k < 3; k++) period_both();
+  }
+  uint32_t differ = 0u, on = 0u;
+  uint32_t x = 12345u;
+  for (int k = 0; k < 4800; k++) {
+    /* the same ADC samples on both: a 3 kHz ripple and a slow rotation */
+    for (int j = 0; j < 3; j++) {
+      uint16_t c = (uint16_t)(2048 + (int)(40.0 * sin(0.01 * k + 2.094 * j)) + ((k / 4) % 2 ? 6 : -6));
+      g_pa.adc.i_abc_counts[j] = g_pb.adc.i_abc_counts[j] = c;
+    }
+    g_pa.ref_status = (uint8_t)FW_REF_OK;
+    g_pa.ref_count = k * 7;
+    x = x * 1664525u + 1013904223u; /* B: garbage, sometimes a fault */
+    g_pb.ref_status = (uint8_t)(x >> 30);
+    g_pb.ref_count = (int32_t)x;
+    period_both();
+    differ += memcmp(g_pa.duty, g_pb.duty, sizeof g_pa.duty) != 0 || g_pa.pwm_on != g_pb.pwm_on;
+    on += g_pa.pwm_on != 0;
+  }
+  TT_CHECK(on > 100u); /* the power stage was on: the control ran */
+  TT_CHECK(differ == 0u);
+  TT_CHECK(fw_fault_code(fw_app_ctrl(&g_a)) == fw_fault_code(fw_app_ctrl(&g_b)));
+}
+
 int main(void) {
   TT_RUN(test_isr_reads_adc_latches_duties_no_lock);
+  TT_RUN(test_port_info_in_od_survives_reset);
+  TT_RUN(test_reference_sensor_published_with_its_period);
+  TT_RUN(test_reference_sensor_never_reaches_the_control);
   TT_RUN(test_lost_supervision_faults_and_is_reported);
   TT_RUN(test_preempted_supervision_keeps_its_period);
   TT_RUN(test_refused_frames_and_bytes_arrive_later_in_order);

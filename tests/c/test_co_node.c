@@ -408,7 +408,11 @@ static void test_tpdo(void) {
   TT_CHECK(count_id((uint16_t)(0x180 + NID), NULL) == 0);
   co_node_process_tx(&g_node, 201000); /* event timer */
   TT_CHECK(count_id((uint16_t)(0x180 + NID), NULL) == 1);
-  /* remap TPDO4 (disabled by default) to the estimator and enable it */
+  /* TPDO4 (by default the drive time and the reference sensor, every SYNC): a
+     valid PDO's mapping cannot change (CiA 301), so disable it, remap it to the
+     estimator and enable it again */
+  TT_CHECK(sdo_write(0x1A03, 0, 0, 1) == 0x06010000u); /* unsupported access */
+  TT_CHECK(sdo_write(0x1803, 1, 0x80000000u | (0x480 + NID), 4) == 0);
   TT_CHECK(sdo_write(0x1A03, 0, 0, 1) == 0);
   TT_CHECK(sdo_write(0x1A03, 1, 0x20200120, 4) == 0);
   TT_CHECK(sdo_write(0x1A03, 2, 0x20200220, 4) == 0);

@@ -844,6 +844,8 @@ static int snap_fields_same(const fw_snapshot_t *a, const fw_snapshot_t *b, size
   SAME(mon_angle_hf_rad); SAME(mon_angle_bemf_rad); SAME(mon_e_bemf_V); SAME(mon_i_sum_A);
   SAME(sal_meas); SAME(L_small_meas_H); SAME(L_large_meas_H); SAME(bemf_err_rad);
   SAME(inj_scale); SAME(bemf_active); SAME(flying_start); SAME(ref_limited);
+  /* the application's field (the reference sensor): never the core's to write */
+  *listed += sizeof a->ref_pos_m;
 #undef SAME
   return same;
 }

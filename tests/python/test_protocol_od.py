@@ -18,6 +18,9 @@ from protocols import generate
 from protocols._od import INT_RANGE, OdError, load
 
 EDS = Path(generate.ROOT) / "protocols" / "generated" / "pmlsm_drive.eds"
+#: the firmware version as od.yaml writes it (the edits below start from it)
+_FW_VERSION = yaml.safe_load((Path(generate.ROOT) / "protocols" / "od.yaml").read_text())[
+    "device"]["firmware_version"]
 NODE_ID = 5
 
 
@@ -311,9 +314,10 @@ def test_firmware_version_is_written_once(od):
 
 
 @pytest.mark.parametrize("old, new, match", [
-    ("  firmware_version: 0.2.0\n", "  firmware_version: 0.2\n",
+    (f"  firmware_version: {_FW_VERSION}\n", "  firmware_version: 0.2\n",
      r"device.firmware_version: '0.2', expected MAJOR.MINOR.PATCH"),
-    ("  firmware_version: 0.2.0\n", "  firmware_version: 0.2.0\n  revision_number: 0x200\n",
+    (f"  firmware_version: {_FW_VERSION}\n",
+     f"  firmware_version: {_FW_VERSION}\n  revision_number: 0x200\n",
      r"device.revision_number: derived from device.firmware_version"),
     ("    default: device.firmware_version\n", "    default: device.firmware\n",
      r"0x100A: default 'device.firmware', the device section has no 'firmware'"),

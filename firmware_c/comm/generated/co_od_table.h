@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 284u
-#define CO_OD_RAM_SIZE 942u
+#define CO_OD_COUNT 295u
+#define CO_OD_RAM_SIZE 995u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -275,25 +275,36 @@
 #define CO_OD_2080_01 262u /* Identification: d-axis current reference */
 #define CO_OD_2080_02 263u /* Identification: Measured smaller inductance */
 #define CO_OD_2080_03 264u /* Identification: Measured larger inductance */
-#define CO_OD_603F_00 265u /* Error code: Error code */
-#define CO_OD_6040_00 266u /* Controlword: Controlword */
-#define CO_OD_6041_00 267u /* Statusword: Statusword */
-#define CO_OD_605A_00 268u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 269u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 270u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 271u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 272u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 273u /* Following error window: Following error window */
-#define CO_OD_6066_00 274u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 275u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 276u /* Target torque: Target torque */
-#define CO_OD_6077_00 277u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 278u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 279u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 280u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 281u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 282u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 283u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2090_00 265u /* Board: Highest sub-index supported */
+#define CO_OD_2090_01 266u /* Board: Drive kind */
+#define CO_OD_2090_02 267u /* Board: Board name */
+#define CO_OD_2090_03 268u /* Board: Drive time */
+#define CO_OD_2091_00 269u /* Reference sensor: Highest sub-index supported */
+#define CO_OD_2091_01 270u /* Reference sensor: Status */
+#define CO_OD_2091_02 271u /* Reference sensor: Resolution */
+#define CO_OD_2091_03 272u /* Reference sensor: Electrical zero */
+#define CO_OD_2091_04 273u /* Reference sensor: Count */
+#define CO_OD_2091_05 274u /* Reference sensor: Position */
+#define CO_OD_2091_06 275u /* Reference sensor: Faults seen */
+#define CO_OD_603F_00 276u /* Error code: Error code */
+#define CO_OD_6040_00 277u /* Controlword: Controlword */
+#define CO_OD_6041_00 278u /* Statusword: Statusword */
+#define CO_OD_605A_00 279u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 280u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 281u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 282u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 283u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 284u /* Following error window: Following error window */
+#define CO_OD_6066_00 285u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 286u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 287u /* Target torque: Target torque */
+#define CO_OD_6077_00 288u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 289u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 290u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 291u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 292u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 293u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 294u /* Supported drive modes: Supported drive modes */
 
 /** Where each entry's value lives in the OD RAM (compile-time handles for the
  *  application's per-period access, co_node.h CO_NODE_PUT/CO_NODE_GET):
@@ -830,43 +841,65 @@
 #define CO_OD_LEN_2080_02 4u
 #define CO_OD_OFF_2080_03 887u
 #define CO_OD_LEN_2080_03 4u
-#define CO_OD_OFF_603F_00 891u
+#define CO_OD_OFF_2090_00 891u
+#define CO_OD_LEN_2090_00 1u
+#define CO_OD_OFF_2090_01 892u
+#define CO_OD_LEN_2090_01 1u
+#define CO_OD_OFF_2090_02 893u
+#define CO_OD_LEN_2090_02 24u
+#define CO_OD_OFF_2090_03 918u
+#define CO_OD_LEN_2090_03 4u
+#define CO_OD_OFF_2091_00 922u
+#define CO_OD_LEN_2091_00 1u
+#define CO_OD_OFF_2091_01 923u
+#define CO_OD_LEN_2091_01 1u
+#define CO_OD_OFF_2091_02 924u
+#define CO_OD_LEN_2091_02 4u
+#define CO_OD_OFF_2091_03 928u
+#define CO_OD_LEN_2091_03 4u
+#define CO_OD_OFF_2091_04 932u
+#define CO_OD_LEN_2091_04 4u
+#define CO_OD_OFF_2091_05 936u
+#define CO_OD_LEN_2091_05 4u
+#define CO_OD_OFF_2091_06 940u
+#define CO_OD_LEN_2091_06 4u
+#define CO_OD_OFF_603F_00 944u
 #define CO_OD_LEN_603F_00 2u
-#define CO_OD_OFF_6040_00 893u
+#define CO_OD_OFF_6040_00 946u
 #define CO_OD_LEN_6040_00 2u
-#define CO_OD_OFF_6041_00 895u
+#define CO_OD_OFF_6041_00 948u
 #define CO_OD_LEN_6041_00 2u
-#define CO_OD_OFF_605A_00 897u
+#define CO_OD_OFF_605A_00 950u
 #define CO_OD_LEN_605A_00 2u
-#define CO_OD_OFF_605E_00 899u
+#define CO_OD_OFF_605E_00 952u
 #define CO_OD_LEN_605E_00 2u
-#define CO_OD_OFF_6060_00 901u
+#define CO_OD_OFF_6060_00 954u
 #define CO_OD_LEN_6060_00 1u
-#define CO_OD_OFF_6061_00 902u
+#define CO_OD_OFF_6061_00 955u
 #define CO_OD_LEN_6061_00 1u
-#define CO_OD_OFF_6064_00 903u
+#define CO_OD_OFF_6064_00 956u
 #define CO_OD_LEN_6064_00 4u
-#define CO_OD_OFF_6065_00 907u
+#define CO_OD_OFF_6065_00 960u
 #define CO_OD_LEN_6065_00 4u
-#define CO_OD_OFF_6066_00 911u
+#define CO_OD_OFF_6066_00 964u
 #define CO_OD_LEN_6066_00 2u
-#define CO_OD_OFF_606C_00 913u
+#define CO_OD_OFF_606C_00 966u
 #define CO_OD_LEN_606C_00 4u
-#define CO_OD_OFF_6071_00 917u
+#define CO_OD_OFF_6071_00 970u
 #define CO_OD_LEN_6071_00 2u
-#define CO_OD_OFF_6077_00 919u
+#define CO_OD_OFF_6077_00 972u
 #define CO_OD_LEN_6077_00 2u
-#define CO_OD_OFF_607D_00 921u
+#define CO_OD_OFF_607D_00 974u
 #define CO_OD_LEN_607D_00 1u
-#define CO_OD_OFF_607D_01 922u
+#define CO_OD_OFF_607D_01 975u
 #define CO_OD_LEN_607D_01 4u
-#define CO_OD_OFF_607D_02 926u
+#define CO_OD_OFF_607D_02 979u
 #define CO_OD_LEN_607D_02 4u
-#define CO_OD_OFF_6080_00 930u
+#define CO_OD_OFF_6080_00 983u
 #define CO_OD_LEN_6080_00 4u
-#define CO_OD_OFF_60FF_00 934u
+#define CO_OD_OFF_60FF_00 987u
 #define CO_OD_LEN_60FF_00 4u
-#define CO_OD_OFF_6502_00 938u
+#define CO_OD_OFF_6502_00 991u
 #define CO_OD_LEN_6502_00 4u
 
 /** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */
@@ -1136,6 +1169,17 @@
   X(2080_01) \
   X(2080_02) \
   X(2080_03) \
+  X(2090_00) \
+  X(2090_01) \
+  X(2090_02) \
+  X(2090_03) \
+  X(2091_00) \
+  X(2091_01) \
+  X(2091_02) \
+  X(2091_03) \
+  X(2091_04) \
+  X(2091_05) \
+  X(2091_06) \
   X(603F_00) \
   X(6040_00) \
   X(6041_00) \

@@ -38,4 +38,5 @@ const fw_serial_signal_t fw_serial_signals[FW_SERIAL_SIGNAL_COUNT] = {
     {"speed_hat_rpm", "r/min", offsetof(fw_snapshot_t, speed_hat_rpm), FW_SIG_F32},
     {"torque_hat_Nm", "N m", offsetof(fw_snapshot_t, torque_hat_Nm), FW_SIG_F32},
     {"accel_dist_radps2", "rad/s^2", offsetof(fw_snapshot_t, accel_dist_radps2), FW_SIG_F32},
+    {"ref_pos_m", "m", offsetof(fw_snapshot_t, ref_pos_m), FW_SIG_F32},
 };

@@ -16,7 +16,7 @@ typedef struct {
   uint8_t type;  /**< fw_serial_sig_type_t */
 } fw_serial_signal_t;
 
-#define FW_SERIAL_SIGNAL_COUNT 33u
+#define FW_SERIAL_SIGNAL_COUNT 34u
 
 #define FW_SIG_THETA_HAT_RAD 0u
 #define FW_SIG_OMEGA_HAT_RADPS 1u
@@ -51,6 +51,7 @@ typedef struct {
 #define FW_SIG_SPEED_HAT_RPM 30u
 #define FW_SIG_TORQUE_HAT_NM 31u
 #define FW_SIG_ACCEL_DIST_RADPS2 32u
+#define FW_SIG_REF_POS_M 33u
 
 extern const fw_serial_signal_t fw_serial_signals[FW_SERIAL_SIGNAL_COUNT];
 

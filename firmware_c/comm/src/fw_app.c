@@ -101,6 +101,11 @@ static uint32_t fw_app_time(fw_app_t *app, uint32_t step) {
 static void fw_app_complete(fw_app_t *app, fw_app_period_t *p) {
   if (p->done != p->step + 1u) {
     fw_snapshot_complete(&app->ctrl, &p->snap, &p->raw);
+    /* the reference sensor: scaled here, never seen by the core */
+    p->snap.ref_pos_m = p->ref_status == (uint8_t)FW_REF_OK
+                            ? (float)p->ref_count * CO_NODE_GET_F32(&app->node, 2091_02) -
+                                  CO_NODE_GET_F32(&app->node, 2091_03)
+                            : NAN;
     p->done = p->step + 1u;
   }
 }
@@ -220,6 +225,8 @@ static void fw_app_sync_static_od(fw_app_t *app) {
   co_node_set_u32(&app->node, CO_OD_1011_01, app->nvm_supported ? 1u : 0u);
   co_node_set_u32(&app->node, CO_OD_2040_00, FW_VERSION_U32);
   co_node_set_str(&app->node, CO_OD_2041_00, PMLSM_BUILD_ID);
+  co_node_set_u32(&app->node, CO_OD_2090_01, app->board_kind);
+  co_node_set_str(&app->node, CO_OD_2090_02, app->board_name != NULL ? app->board_name : "");
   fw_app_sync_cfg_to_od(app);
 }
 
@@ -777,6 +784,7 @@ fw_status_t fw_app_init(fw_app_t *app, const fw_config_t *cfg, uint8_t node_id) 
   }
   memset(app, 0, sizeof *app);
   app->mode_applied = -1;
+  app->board_kind = (uint8_t)FW_DRIVE_NO_IO; /* until the board says (fw_app_set_board) */
   app->boot_cfg = *cfg;
   fw_status_t st = fw_app_start_core(app, cfg);
   co_callbacks_t cb = {app, fw_app_on_write, fw_app_on_event};
@@ -787,6 +795,21 @@ fw_status_t fw_app_init(fw_app_t *app, const fw_config_t *cfg, uint8_t node_id) 
   co_node_set_u32(&app->node, CO_OD_6041_00, fw_statusword(&app->ctrl));
   app->init_done = 1u;
   return st;
+}
+
+void fw_app_set_board(fw_app_t *app, uint8_t kind, const char *board) {
+  if (app == NULL) {
+    return;
+  }
+  app->board_kind = kind;
+  app->board_name = board;
+  co_node_set_u32(&app->node, CO_OD_2090_01, kind);
+  co_node_set_str(&app->node, CO_OD_2090_02, board != NULL ? board : "");
+}
+
+FW_ISR_OPT void fw_app_ref_sample(fw_app_t *app, uint8_t status, int32_t count) {
+  app->ref_status_in = status;
+  app->ref_count_in = count;
 }
 
 bool fw_app_can_rx(fw_app_t *app, const fw_can_frame_t *frame) {
@@ -871,7 +894,8 @@ _Static_assert(CO_OD_OFF_2030_08 == CO_OD_OFF_2030_01 + 7u * CO_OD_LEN_2030_01,
 _Static_assert(CO_OD_LEN_2060_03 == 1u && CO_OD_OFF_2060_0A == CO_OD_OFF_2060_03 + 7u,
                "0x2060:3..10 contiguous bytes");
 
-static void fw_app_update_od(fw_app_t *app, const fw_snapshot_t *s) {
+static void fw_app_update_od(fw_app_t *app, const fw_app_period_t *p) {
+  const fw_snapshot_t *s = &p->snap;
   co_node_t *n = &app->node;
   const fw_config_t *cfg = fw_get_config(&app->ctrl);
   float i_max = (cfg != NULL && cfg->loops.i_max_A > 0.0f) ? cfg->loops.i_max_A : 1.0f;
@@ -890,6 +914,11 @@ static void fw_app_update_od(fw_app_t *app, const fw_snapshot_t *s) {
   CO_NODE_PUT_F32(n, 2020_07, s->sogi_k_eff);
   CO_NODE_PUT(n, 2020_08, s->start_phase);
   CO_NODE_PUT_F32(n, 2020_09, s->accel_dist_radps2);
+  CO_NODE_PUT(n, 2090_03, p->step);
+  CO_NODE_PUT(n, 2091_01, p->ref_status);
+  CO_NODE_PUT(n, 2091_04, p->ref_status == (uint8_t)FW_REF_OK ? p->ref_count : INT32_MIN);
+  CO_NODE_PUT_F32(n, 2091_05, s->ref_pos_m);
+  CO_NODE_PUT(n, 2091_06, app->ref_faults);
   uint16_t hist[FW_FAULT_HISTORY_LEN];
   uint32_t nh = fw_fault_history(&app->ctrl, hist, FW_FAULT_HISTORY_LEN);
   for (uint32_t k = 0u; k < 8u; k++) {
@@ -1047,6 +1076,10 @@ FW_ISR_OPT static FW_ALWAYS_INLINE void fw_app_control(fw_app_t *app, const fw_i
   fw_app_period_t *p = FW_LIKELY(!preempted) ? fw_app_slot(app, head) : NULL;
   fw_snapshot_t *dst = FW_LIKELY(p != NULL) ? &p->snap : &app->ctrl.snap;
   const unsigned written = fw_step_into(&app->ctrl, in, adc, out, dst);
+  if (FW_LIKELY(p != NULL)) { /* the reference sensor's reading of this period, as sampled */
+    p->ref_count = app->ref_count_in;
+    p->ref_status = app->ref_status_in;
+  }
   if (FW_LIKELY(!preempted)) {
     fw_app_sup_t *sp = &app->sup;
     sp->p = p;
@@ -1095,10 +1128,13 @@ static void fw_app_bg_output(fw_app_t *app, uint32_t now) {
   while (tail != head) {
     fw_app_period_t *p = &app->ring[tail % FW_APP_SNAP_RING];
     fw_app_complete(app, p);
+    if (p->ref_status == (uint8_t)FW_REF_FAULT || p->ref_status == (uint8_t)FW_REF_NOT_REFERENCED) {
+      app->ref_faults++;
+    }
     fw_app_faults(app, &p->snap);
     fw_app_serial(app, &p->snap, p->step);
     if (tail + 1u == head) {
-      fw_app_update_od(app, &p->snap);
+      fw_app_update_od(app, p);
     }
     tail++;
     atomic_store_explicit(&app->ring_tail, tail, memory_order_release);

@@ -15,6 +15,9 @@ fw_app_nvm_state_t fw_board_init(fw_board_t *board, fw_app_t *app, fw_port_t *po
   board->port = port;
   const fw_app_lock_t lock = {port, fw_port_critical_enter, fw_port_critical_exit};
   fw_app_attach_lock(app, &lock);
+  fw_port_info_t info = {(uint8_t)FW_DRIVE_NO_IO, ""};
+  fw_port_info(port, &info);
+  fw_app_set_board(app, info.kind, info.board);
   const fw_app_nvm_t nvm = {port, fw_port_nvm_read, fw_port_nvm_write};
   return fw_app_attach_nvm(app, &nvm);
 }
@@ -27,6 +30,10 @@ void fw_board_control_isr(fw_board_t *board) {
        its range check and estimator monitors judge it */
     board->adc_failed++;
   }
+  /* the reference sensor at the same instant, beside (never into) the control */
+  int32_t count = 0;
+  const uint8_t ref = fw_port_ref_read(board->port, &count);
+  fw_app_ref_sample(board->app, ref, count);
   fw_app_isr(board->app, &adc, &out);
   fw_port_pwm_write(board->port, out.duty_abc, out.pwm_enable != 0u);
   fw_port_supervision_pend(board->port);

@@ -176,6 +176,10 @@ typedef struct {
   uint8_t bemf_active;      /**< 1: the PLL tracks the back-EMF, 0: the HF response */
   uint8_t flying_start;     /**< 1: closed loop was entered on a moving mover */
   uint8_t ref_limited;      /**< FW_REF_LIMITED_* of the references in use */
+  /* the board's reference position sensor (fw_port_ref_read), for the bench's
+   * judgement only: written by the drive application (fw_app) into the periods
+   * it publishes, never by the core, which never reads it */
+  float ref_pos_m; /**< reference sensor position (electrical zero at 0), NaN: none */
 } fw_snapshot_t;
 
 /**

@@ -37,4 +37,20 @@ typedef enum {
   FW_REACT_QUICK_RAMP = 2 /**< same as RAMP with the quick-stop time bound */
 } fw_reaction_t;
 
+/** What a port makes of the drive (0x2090:1): set by the port, read by the bench to label every result */
+typedef enum {
+  FW_DRIVE_HARDWARE = 0, /**< a real power stage and motor */
+  FW_DRIVE_SIMULATED = 1, /**< the host simulated drive (plant in the same process) */
+  FW_DRIVE_EMULATED = 2, /**< the firmware image on an emulated MCU with a virtual motor */
+  FW_DRIVE_NO_IO = 3 /**< the blank port: no power stage at all */
+} fw_drive_kind_t;
+
+/** Reference position sensor reading (0x2091:1, fw_port_ref_read) */
+typedef enum {
+  FW_REF_NONE = 0, /**< no reference sensor on this board */
+  FW_REF_OK = 1, /**< valid reading */
+  FW_REF_FAULT = 2, /**< the sensor reports an error (signal loss), or the port found the count implausible */
+  FW_REF_NOT_REFERENCED = 3 /**< the reference mark has not been passed since power-up */
+} fw_ref_status_t;
+
 #endif /* PMLSM_FW_ENUMS_H */

@@ -2,8 +2,9 @@
  * @file fw_port.h
  * @brief The one hardware contract of the firmware.
  *
- * Everything hardware-shaped crosses this header: PWM, ADC, CAN frames,
- * UART bytes, critical sections and the non-volatile parameter memory. The
+ * Everything hardware-shaped crosses this header: PWM, ADC, the reference
+ * position sensor, CAN frames, UART bytes, critical sections, the
+ * non-volatile parameter memory and what kind of drive the port makes. The
  * control core (fw_ctrl.h) does not call any of it: it is a pure step
  * function. The board glue (comm/src/fw_board.c: control interrupt ->
  * fw_app_isr -> PWM; background loop -> fw_app_background -> CAN/UART) is
@@ -86,6 +87,30 @@ size_t fw_port_uart_write(fw_port_t *port, const uint8_t *data, size_t len);
  *  the control core are made inside one (fw_app_attach_lock). */
 uint32_t fw_port_critical_enter(fw_port_t *port);
 void fw_port_critical_exit(fw_port_t *port, uint32_t key);
+
+/** What the port makes of the drive: published in 0x2090 (drive kind, board
+ *  name) so that the bench labels every result from what the drive says,
+ *  whatever interface reached it. kind is a fw_drive_kind_t (fw_enums.h:
+ *  hardware, simulated, emulated, no I/O); board a static string. */
+typedef struct {
+  uint8_t kind;
+  const char *board;
+} fw_port_info_t;
+
+/** Fill info (called once, by fw_board_init). */
+void fw_port_info(fw_port_t *port, fw_port_info_t *info);
+
+/**
+ * Read the reference position sensor (on a linear rig, a quadrature scale)
+ * latched at the sampling instant of this period's ADC conversion: called by
+ * the control interrupt right after fw_port_adc_read. Returns a
+ * fw_ref_status_t (FW_REF_NONE on a board without one; *count is then left
+ * as it is). The count is the sensor's position in its counts from its
+ * reference mark; the application scales it (0x2091:2, :3). The drive's
+ * control never reads it: it is published beside the estimate for the
+ * bench's judgement (docs/boards.md).
+ */
+uint8_t fw_port_ref_read(fw_port_t *port, int32_t *count);
 
 /** Result of the non-volatile memory functions. */
 typedef enum {

@@ -17,6 +17,18 @@ void fw_port_pwm_write(fw_port_t *port, const float duty_abc[3], bool enable) {
 
 void fw_port_supervision_pend(fw_port_t *port) { (void)port; }
 
+void fw_port_info(fw_port_t *port, fw_port_info_t *info) {
+  (void)port;
+  info->kind = (uint8_t)FW_DRIVE_NO_IO;
+  info->board = "blank";
+}
+
+uint8_t fw_port_ref_read(fw_port_t *port, int32_t *count) {
+  (void)port;
+  (void)count;
+  return (uint8_t)FW_REF_NONE;
+}
+
 bool fw_port_adc_read(fw_port_t *port, fw_adc_inputs_t *adc) {
   (void)port;
   adc->i_abc_counts[0] = 2048u;

@@ -153,6 +153,8 @@ typedef struct {
   uint32_t slow_gen; /**< fw_snapshot_slow_gen at the last copy of the slow part into snap */
   uint32_t done; /**< step + 1 when snap is completed (background; a slot's new period
                       makes it stale without a store by the interrupt) */
+  int32_t ref_count;  /**< the reference sensor's count at the period's sampling */
+  uint8_t ref_status; /**< its fw_ref_status_t */
 } fw_app_period_t;
 
 /** Application counters (diagnostics, tests). */
@@ -213,6 +215,12 @@ typedef struct {
   uint8_t nvm_supported;  /**< the port has non-volatile memory (0x1010:1 bit 0) */
   uint8_t nvm_state;      /**< fw_app_nvm_state_t of the last boot */
   uint8_t nvm_buf[FW_APP_NVM_LEN]; /**< block being read or written */
+  /* the board (fw_port_info) and its reference sensor (fw_app_ref_sample) */
+  const char *board_name; /**< 0x2090:2 */
+  uint8_t board_kind;     /**< 0x2090:1, fw_drive_kind_t */
+  uint8_t ref_status_in;  /**< the control interrupt's last reading (fw_ref_status_t) ... */
+  int32_t ref_count_in;   /**< ... and count, taken into the period's slot */
+  uint32_t ref_faults;    /**< 0x2091:6: periods whose reading was not valid */
 } fw_app_t;
 
 /**
@@ -221,6 +229,21 @@ typedef struct {
  * status, FW_ERR_NULL or FW_ERR_RANGE (bad node id).
  */
 fw_status_t fw_app_init(fw_app_t *app, const fw_config_t *cfg, uint8_t node_id);
+
+/** What the drive runs on (0x2090:1 fw_drive_kind_t, 0x2090:2 board name: a
+ *  static string). fw_board_init sets it from fw_port_info; kept over NMT
+ *  resets. Without a call the drive says FW_DRIVE_NO_IO (the OD default). */
+void fw_app_set_board(fw_app_t *app, uint8_t kind, const char *board);
+
+/**
+ * The reference position sensor's reading of this period (fw_port_ref_read):
+ * the control interrupt calls it right before fw_app_isr, so the reading goes
+ * with the period's ADC samples into the period's slot. The core never sees
+ * it; the background scales it (0x2091:2, :3) into fw_snapshot_t.ref_pos_m
+ * (telemetry signal ref_pos_m), 0x2091:4/:5 and TPDO4. Not calling it
+ * leaves FW_REF_NONE.
+ */
+void fw_app_ref_sample(fw_app_t *app, uint8_t status, int32_t count);
 
 /** CAN receive path (ISR side): queue the frame. False when the queue is full. */
 bool fw_app_can_rx(fw_app_t *app, const fw_can_frame_t *frame);

@@ -15,7 +15,10 @@
  *     CAN RX interrupt:  fw_board_can_rx_isr(&board, &frame);
  *     main loop:         for (;;) fw_board_background(&board);
  *
- * The control interrupt reads the ADC, runs fw_app_isr (conversion, control
+ * fw_board_init tells the application what the port makes of the drive
+ * (fw_port_info: 0x2090). The control interrupt reads the ADC and the
+ * reference position sensor (fw_port_ref_read, handed to fw_app_ref_sample:
+ * published, never controlled on), runs fw_app_isr (conversion, control
  * step) and latches the duties, then pends the supervision interrupt, which
  * runs fw_app_supervise (integrity monitor, protections, publication) and
  * writes the PWM off when that found a hard fault. The background runs
