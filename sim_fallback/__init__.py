@@ -11,6 +11,7 @@ Metrics (one definition for the simulator, the bench and the reports):
 ``sim_fallback.metrics`` (public, numpy only). See docs/simulator.md.
 """
 
+from ._emu_blob import EMU_BLOB_ADDR, emu_boot_blob, write_emu_boot_blob
 from ._firmware import ConfigError, Firmware, RefError, config_error
 from ._lib import FwConfig, FwSnapshot, SimPlantParams, lib_path
 from ._motors import (
@@ -31,13 +32,15 @@ from ._sim import (
     SIM_REF_SPEED,
     Result,
     Sim,
+    drive_params,
     paper_scenario,
     run_scenario,
 )
 from .metrics import METRIC_DEFS, METRIC_NAMES, METRICS, compute_metrics, run_metrics, wrap_pi
 
 __all__ = [
-    "CHANNELS", "ConfigError", "RefError", "config_error", "METRIC_DEFS", "METRIC_NAMES",
+    "CHANNELS", "ConfigError", "EMU_BLOB_ADDR", "drive_params", "emu_boot_blob",
+    "write_emu_boot_blob", "RefError", "config_error", "METRIC_DEFS", "METRIC_NAMES",
     "METRICS", "MOTOR_DIR", "PAPER_SCENARIOS",
     "SIM_REF_FORCE", "SIM_REF_LOAD", "SIM_REF_SPEED", "Firmware", "FwConfig", "FwSnapshot",
     "Motor", "MotorFileError", "Result", "Sim", "SimPlantParams", "compute_metrics",

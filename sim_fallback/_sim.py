@@ -92,6 +92,35 @@ def _record_layout(want: tuple[str, ...], n_rec: int
 X0_MAX_M = 1000.0
 
 
+def drive_params(motor: str | Path | Motor = "paper_salient",
+                 extractor: int | str = "sogi_adaptive", seed: int = 0, noise: float = 1.0,
+                 plant: dict[str, Any] | None = None, fw: dict[str, float] | None = None
+                 ) -> tuple[_lib.SimPlantParams, _lib.FwConfig]:
+    """The simulated drive's two halves for a motor: the plant it drives
+    (``sim_plant_params_t``: the motor file's values, ADC noise and offsets scaled by
+    ``noise``, the noise ``seed``, ``plant`` overrides) and the drive's configuration
+    (``fw_config_t``: :func:`fw_config` with the board's ADC scaling, ``fw`` overrides).
+    One definition for every simulated drive: :class:`Sim`, the bench's simulated drive
+    and the emulated board's boot block (:func:`sim_fallback.emu_boot_blob`).
+
+    Raises ValueError naming a plant parameter the simulator refuses.
+    """
+    m = motor if isinstance(motor, Motor) else load_motor(motor)
+    ov = dict(plant or {})
+    mp = m.plant
+    ov.setdefault("adc_noise_counts", mp["adc_noise_counts"] * noise)
+    ov.setdefault("udc_noise_V", mp["udc_noise_V"] * noise)
+    ov.setdefault("adc_offset_counts", [o * noise for o in mp["adc_offset_counts"]])
+    ov.setdefault("seed", int(seed) & 0xFFFFFFFFFFFFFFFF)
+    params = plant_params(m, **ov)
+    bad = plant_params_refused(params)
+    if bad is not None:
+        raise ValueError(f"plant parameter '{bad}' invalid")
+    cfg = fw_config(m, extractor,  # the drive knows its own board's ADC
+                    sensing={k: getattr(params, k) for k in SENSING_SCALE_KEYS}, **(fw or {}))
+    return params, cfg
+
+
 class Sim:
     """One simulated drive: plant (truth) + firmware core, stepped in C.
 
@@ -124,23 +153,11 @@ class Sim:
         self._rec_raw = _SimRecordRaw()  # advance()'s record, reused
         self._rec = _lib.SimRecord.from_buffer(self._rec_raw)
         self.motor = motor if isinstance(motor, Motor) else load_motor(motor)
-        ov = dict(plant or {})
-        mp = self.motor.plant
-        ov.setdefault("adc_noise_counts", mp["adc_noise_counts"] * noise)
-        ov.setdefault("udc_noise_V", mp["udc_noise_V"] * noise)
-        ov.setdefault("adc_offset_counts", [o * noise for o in mp["adc_offset_counts"]])
-        ov.setdefault("seed", int(seed) & 0xFFFFFFFFFFFFFFFF)
-        self.params = plant_params(self.motor, **ov)
-        bad = plant_params_refused(self.params)
-        if bad is not None:
-            raise ValueError(f"plant parameter '{bad}' invalid")
+        self.params, self.cfg = drive_params(self.motor, extractor, seed, noise, plant, fw)
         self._h = self._L.sim_new(self.params)
         if not self._h:
             raise MemoryError("sim_new failed")
         self.dt_s = 1.0 / self.params.f_pwm_Hz
-        self.cfg = fw_config(self.motor, extractor,  # the drive knows its own board's ADC
-                             sensing={k: getattr(self.params, k) for k in SENSING_SCALE_KEYS},
-                             **(fw or {}))
         self.firmware = Firmware(self.cfg, strict=strict)
         self._port = _lib.SimController()
         self._L.sim_fw_port(self.firmware.handle, C.byref(self._port))
