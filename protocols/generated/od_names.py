@@ -20,6 +20,7 @@ FW_VERSION_STRING = '0.3.0'
 
 FAULTS: dict[int, tuple[str, str]] = {
     0x2310: ('OVERCURRENT', '|phase current| above i_trip_A'),
+    0x2320: ('POWER_STAGE_BREAK', "the power stage's hardware protection (the PWM timer's break input: overcurrent comparator, gate-driver fault) switched the outputs off; raised by the board (fw_port_hw_fault)"),
     0x2350: ('I2T', 'current-time integral above the i2t limit (i_rated_A, i2t_time_s)'),
     0x3210: ('DC_OVERVOLTAGE', 'DC link above u_dc_max_V'),
     0x3220: ('DC_UNDERVOLTAGE', 'DC link below u_dc_min_V while enabled'),
@@ -48,6 +49,7 @@ FAULTS: dict[int, tuple[str, str]] = {
 
 FAULT_REACTIONS: dict[int, str] = {
     0x2310: 'PWM off at once',
+    0x2320: 'PWM off at once (already off in hardware)',
     0x2350: 'brakes (0x605E), PWM off within fault_brake_time_s',
     0x3210: 'PWM off at once',
     0x3220: 'PWM off at once',

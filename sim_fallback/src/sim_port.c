@@ -93,6 +93,11 @@ uint8_t fw_port_ref_read(fw_port_t *port, int32_t *count) {
   return port->ref_status;
 }
 
+uint16_t fw_port_hw_fault(fw_port_t *port) {
+  (void)port;
+  return 0u; /* the simulated inverter has no break input */
+}
+
 bool fw_port_adc_read(fw_port_t *port, fw_adc_inputs_t *adc) {
   *adc = port->adc;
   bool fresh = port->adc_fresh != 0u;

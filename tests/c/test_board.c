@@ -46,6 +46,7 @@ struct fw_port {
   uint8_t ref_status;   /* the reference sensor this port reports (fw_ref_status_t) */
   int32_t ref_count;
   uint32_t ref_reads;
+  uint16_t hw_fault; /* a break the power stage latched (fw_port_hw_fault, once) */
 };
 
 void fw_port_info(fw_port_t *p, fw_port_info_t *info) {
@@ -78,6 +79,12 @@ static void board_isr(fw_board_t *b) {
     b->port->sup_pending = 0u;
     fw_board_supervision_isr(b);
   }
+}
+
+uint16_t fw_port_hw_fault(fw_port_t *p) {
+  const uint16_t f = p->hw_fault;
+  p->hw_fault = 0u;
+  return f;
 }
 
 bool fw_port_adc_read(fw_port_t *p, fw_adc_inputs_t *adc) {
@@ -499,7 +506,37 @@ static void test_reference_sensor_never_reaches_the_control(void) {
   TT_CHECK(fw_fault_code(fw_app_ctrl(&g_a)) == fw_fault_code(fw_app_ctrl(&g_b)));
 }
 
+/* The power stage's hardware protection (break input) tripped: the next
+ * control interrupt raises FW_FAULT_POWER_STAGE_BREAK in the core before its
+ * step, the duties it writes are off, the EMCY names the fault. */
+static void test_hardware_break_raises_the_fault(void) {
+  boot();
+  g_pb.can_room = CAN_BOX;
+  const uint16_t cws[3] = {0x06, 0x07, 0x0F};
+  for (int i = 0; i < 3; i++) {
+    uint8_t req[8] = {0x2B, 0x40, 0x60, 0x00, (uint8_t)cws[i], 0, 0, 0};
+    rx_both((uint16_t)(0x600 + NID), req);
+    for (int k = 0; k < 3; k++) period_both();
+  }
+  for (int k = 0; k < 50; k++) period_both();
+  TT_CHECK(g_pb.pwm_on != 0);
+  g_pb.hw_fault = (uint16_t)FW_FAULT_POWER_STAGE_BREAK;
+  board_isr(&g_bb);
+  TT_CHECK(g_pb.pwm_on == 0);
+  TT_CHECK(fw_fault_code(fw_app_ctrl(&g_b)) == FW_FAULT_POWER_STAGE_BREAK);
+  TT_CHECK(g_bb.hw_faults == 1u);
+  g_pb.can_n = 0u;
+  fw_board_background(&g_bb);
+  int emcy = 0;
+  for (uint32_t i = 0; i < g_pb.can_n; i++) {
+    const fw_can_frame_t *f = &g_pb.can[i];
+    emcy = emcy || (f->id == 0x80u + NID && f->data[0] == 0x20u && f->data[1] == 0x23u);
+  }
+  TT_CHECK(emcy);
+}
+
 int main(void) {
+  TT_RUN(test_hardware_break_raises_the_fault);
   TT_RUN(test_isr_reads_adc_latches_duties_no_lock);
   TT_RUN(test_port_info_in_od_survives_reset);
   TT_RUN(test_reference_sensor_published_with_its_period);

@@ -25,6 +25,11 @@ fw_app_nvm_state_t fw_board_init(fw_board_t *board, fw_app_t *app, fw_port_t *po
 void fw_board_control_isr(fw_board_t *board) {
   fw_adc_inputs_t adc;
   fw_outputs_t out;
+  const uint16_t hw = fw_port_hw_fault(board->port);
+  if (FW_UNLIKELY(hw != 0u)) { /* the outputs are off in hardware already */
+    fw_raise_fault(fw_app_ctrl(board->app), (fw_fault_t)hw);
+    board->hw_faults++;
+  }
   if (!fw_port_adc_read(board->port, &adc)) {
     /* no fresh conversion: the core steps on what the port left in adc, and
        its range check and estimator monitors judge it */

@@ -11,6 +11,7 @@
 typedef enum {
   FW_FAULT_NONE = 0x0000, /**< no fault */
   FW_FAULT_OVERCURRENT = 0x2310, /**< |phase current| above i_trip_A */
+  FW_FAULT_POWER_STAGE_BREAK = 0x2320, /**< the power stage's hardware protection (the PWM timer's break input: overcurrent comparator, gate-driver fault) switched the outputs off; raised by the board (fw_port_hw_fault) */
   FW_FAULT_I2T = 0x2350, /**< current-time integral above the i2t limit (i_rated_A, i2t_time_s) */
   FW_FAULT_DC_OVERVOLTAGE = 0x3210, /**< DC link above u_dc_max_V */
   FW_FAULT_DC_UNDERVOLTAGE = 0x3220, /**< DC link below u_dc_min_V while enabled */
@@ -38,6 +39,6 @@ typedef enum {
 } fw_fault_t;
 
 /** Number of fault codes (without FW_FAULT_NONE). */
-#define FW_FAULT_COUNT 25u
+#define FW_FAULT_COUNT 26u
 
 #endif /* PMLSM_FW_FAULTS_H */

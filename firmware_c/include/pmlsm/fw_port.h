@@ -73,6 +73,16 @@ void fw_port_pwm_write(fw_port_t *port, const float duty_abc[3], bool enable);
  *  power stage off. */
 void fw_port_supervision_pend(fw_port_t *port);
 
+/**
+ * A fault the power stage's hardware protection latched since the last call:
+ * the PWM timer's break input (an overcurrent comparator, a gate driver's
+ * fault output) has already switched the outputs off in hardware; the
+ * control interrupt raises it in the core (FW_FAULT_POWER_STAGE_BREAK) at
+ * its start. Returns a fw_fault_t code, 0 for none (a board without such an
+ * input always returns 0).
+ */
+uint16_t fw_port_hw_fault(fw_port_t *port);
+
 /** Read the ADC samples taken at the start of this PWM period. */
 bool fw_port_adc_read(fw_port_t *port, fw_adc_inputs_t *adc);
 

@@ -29,6 +29,11 @@ uint8_t fw_port_ref_read(fw_port_t *port, int32_t *count) {
   return (uint8_t)FW_REF_NONE;
 }
 
+uint16_t fw_port_hw_fault(fw_port_t *port) {
+  (void)port;
+  return 0u;
+}
+
 bool fw_port_adc_read(fw_port_t *port, fw_adc_inputs_t *adc) {
   (void)port;
   adc->i_abc_counts[0] = 2048u;

@@ -16,7 +16,9 @@
  *     main loop:         for (;;) fw_board_background(&board);
  *
  * fw_board_init tells the application what the port makes of the drive
- * (fw_port_info: 0x2090). The control interrupt reads the ADC and the
+ * (fw_port_info: 0x2090). The control interrupt first raises a fault the
+ * power stage's hardware protection latched (fw_port_hw_fault: the outputs
+ * are off in hardware already), then reads the ADC and the
  * reference position sensor (fw_port_ref_read, handed to fw_app_ref_sample:
  * published, never controlled on), runs fw_app_isr (conversion, control
  * step) and latches the duties, then pends the supervision interrupt, which
@@ -54,6 +56,7 @@ typedef struct {
   uint8_t uart[FW_BOARD_UART_CHUNK]; /**< bytes the port has not taken yet */
   uint16_t uart_off, uart_len;
   uint32_t adc_failed; /**< control periods whose ADC read failed (stepped anyway) */
+  uint32_t hw_faults;  /**< hardware protection trips the port reported (fw_port_hw_fault) */
 } fw_board_t;
 
 /**
