@@ -3,8 +3,10 @@
 :class:`Drive` wraps a ``canopen.BaseNode402`` built from the EDS generated
 from ``protocols/od.yaml``. It is the same code for hardware and for the
 simulated drive: only the python-can bus underneath differs. Time is read
-from a :class:`Clock`: the wall clock on hardware, the simulation clock for
-the simulated drive.
+from a :class:`Clock`: the drive's own clock over the bus
+(:class:`bench._clock.DriveClock`, its period count in TPDO4) on a bus, the
+simulation clock for the in-process simulated drive, the wall clock for a drive
+that does not publish its time.
 
 Units: the drive's CiA 402 objects use um, um/s and per mille of the rated
 force (see od.yaml); this module converts to and from m/s and N.
@@ -85,6 +87,12 @@ class DriveFault(DriveError):
     def __init__(self, msg: str, code: int) -> None:
         super().__init__(msg)
         self.code = code
+
+
+class DriveLost(DriveError):
+    """The drive stopped answering mid-run: its time (0x2090:3) stopped, or its bus
+    failed. Nothing the bench sends reaches it any more; the drive's own supervision
+    (the bench's heartbeat it watches, 0x1016) switches its power stage off."""
 
 
 class ParamError(DriveError):
@@ -267,6 +275,24 @@ class Drive:
             "build_id": str(v(od.BUILD_ID).raw),
         }
         return out
+
+    def kind(self) -> tuple[str, str]:
+        """What the drive says it is (0x2090:1, set by its port, never by the bench) and
+        its board's name (0x2090:2): ``("hardware" | "simulated" | "emulated" | "no_io",
+        board)``; ``("unknown", "")`` when it does not say (a firmware without 0x2090).
+        Every result is labelled from this, whatever interface reached the drive."""
+        try:
+            k = int(self.var(od.BOARD__DRIVE_KIND).raw)
+        except Exception:  # noqa: BLE001 - an SDO abort or no answer: it does not say
+            return "unknown", ""
+        try:
+            board = str(self.var(od.BOARD__BOARD_NAME).raw)
+        except Exception:  # noqa: BLE001 - an empty or unreadable name: the kind stands
+            board = ""
+        try:
+            return od.DriveKind(k).key, board
+        except ValueError:
+            return "unknown", board
 
     def check_firmware(self, ident: dict[str, Any] | None = None) -> list[str]:
         """Compare the drive's identity with the EDS; return the mismatches (empty: ok)."""

@@ -2,15 +2,18 @@
 
 It answers SDOs from the generated EDS, runs the CiA 402 state machine from
 the controlword, mirrors 0x6060 into 0x6061, sends TPDO1 (statusword, mode
-display) on every change and can be told to raise a fault. It has no plant
-and no truth: it exists to test the bench's protocol side (state machine,
-parameters, safe state, logging) without the simulated drive.
+display) on every change, TPDO4 (its time, 0x2090:3, at 24 kHz of the host's
+monotonic clock; no reference sensor) on every SYNC, and can be told to raise a
+fault. It has no plant and no truth, and says so: its drive kind (0x2090:1) is
+"no I/O", as the blank port's. It exists to test the bench's protocol side
+(state machine, parameters, safe state, logging) without the simulated drive.
 """
 
 from __future__ import annotations
 
 import struct
 import threading
+import time
 from typing import Any
 
 import can
@@ -59,7 +62,9 @@ class FakeDrive402:
         self.fail_disable = False
         self.node.add_write_callback(self._on_write)
         self._set(od.STATUSWORD, _SW[self.state])
+        self._t0 = time.monotonic()
         self.network.subscribe(0x200 + node_id, self._on_rpdo1)
+        self.network.subscribe(0x080, self._on_sync)
 
     def close(self) -> None:
         self.network.disconnect()
@@ -119,6 +124,11 @@ class FakeDrive402:
         elif index == _OD.MODES_OF_OPERATION.index:
             self.mode = int(value)
             self._set(_OD.MODES_OF_OPERATION_DISPLAY, self.mode)
+
+    def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        """TPDO4 as the drive's default mapping: its period count, no reference count."""
+        periods = int((time.monotonic() - self._t0) * 24000.0) & 0xFFFFFFFF
+        self.network.send_message(0x480 + self.node_id, struct.pack("<Ii", periods, -2**31))
 
     def _on_rpdo1(self, can_id: int, data: bytearray, timestamp: float) -> None:
         cw, vel = struct.unpack_from("<Hi", bytes(data).ljust(6, b"\0"))

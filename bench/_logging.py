@@ -313,6 +313,16 @@ class RunLogger:
         with self._lock:
             return {k: c.unit for k, c in self._channels.items()}
 
+    def evidence_channels(self, until_s: float | None = None) -> dict[str, np.ndarray] | None:
+        """The channels the run's metrics are computed from, in sequence time
+        (:class:`bench._evidence.Evidence`: the simulator's record, a reference sensor
+        with the drive's signals, or the drive's signals alone); ``until_s``: wait
+        briefly for a link's latency to cover that sequence time."""
+        ev = getattr(self, "evidence", None)
+        if ev is None:
+            return self.truth()
+        return ev.collect(self, self.t_origin_s, until_s)
+
     def truth(self) -> dict[str, np.ndarray] | None:
         """Truth + estimate channels in sequence time (None if no true angle recorded).
 
@@ -482,7 +492,7 @@ class RunLogger:
             "sequence": str(seq.get("name", "")), "sequence_file": str(seq.get("file", "")),
             "seed": str(seq.get("seed", "")), "motor": str(seq.get("motor", "")),
             "extractor": str(seq.get("extractor", "")),
-            "drive": "SIMULATED" if info.get("kind") == "sim" else "HARDWARE",
+            "drive": str(info.get("kind", "unknown")),  # what the drive said it is (0x2090:1)
             "connection": str(m.get("connection", "")),
             "firmware_version": str(drv.get("firmware_version", "")),
             "firmware_build": str(drv.get("build_id", "")),

@@ -44,9 +44,11 @@ def summary(result: RunResult, extra: dict[str, Any] | None = None) -> dict[str,
         "metric_windows_s": _clean({k: list(w) for k, w in result.metric_windows.items()}),
         "expectations": [_clean({"name": e.name, "metric": e.metric, "measured": e.measured,
                                  "criterion": e.criterion, "window_s": list(e.window_s),
-                                 "passed": e.passed, "paper": e.paper,
-                                 "paper_reproduced": e.paper_met})
+                                 "passed": e.passed, "judged": e.judged,
+                                 "status": e.status.lower(), "message": e.message or None,
+                                 "paper": e.paper, "paper_reproduced": e.paper_met})
                          for e in result.expectations],
+        "evidence": _clean(dict(result.evidence)) or None,
         "aborted": result.aborted,
         "error": result.error,
         "safe_state": result.safe_state,
@@ -69,15 +71,16 @@ def write_junit(path: str | Path, results: list[RunResult],
     A sequence that aborted (exception, Ctrl-C) or could not reach the safe
     state gets an ``<error>`` testcase named ``run``. ``drive`` (from
     ``bench._session.drive_kind``) becomes testsuite properties ``drive``
-    (SIMULATED / HARDWARE), ``simulated`` and ``fallback``, so that a CI job
-    can tell a simulated pass from a hardware pass.
+    (what the drive said it is: hardware, simulated, emulated, no_io, unknown),
+    ``simulated``, ``fallback`` and ``board``, so that a CI job can tell a simulated
+    or emulated pass from a hardware pass.
     """
     suites = ET.Element("testsuites")
     for r in results:
         suite_props = None
         if drive:
             suite_props = ET.Element("properties")
-            for k in ("drive", "simulated", "fallback"):
+            for k in ("drive", "simulated", "fallback", "board"):
                 v = drive.get(k)
                 ET.SubElement(suite_props, "property", name=k,
                               value=str(v).lower() if isinstance(v, bool) else str(v))
@@ -86,7 +89,9 @@ def write_junit(path: str | Path, results: list[RunResult],
             # time = the stretch of sequence time the expectation judged (s)
             tc = ET.Element("testcase", classname=f"bench.{r.sequence}", name=e.name,
                             time=f"{max(0.0, e.window_s[1] - e.window_s[0]):.6g}")
-            if not e.passed:
+            if not e.judged:  # needs what the run did not have (a reference sensor)
+                ET.SubElement(tc, "skipped", message=e.message or "not judged")
+            elif not e.passed:
                 f = ET.SubElement(tc, "failure", message=e.message or "failed",
                                   type="ExpectationFailed")
                 f.text = (f"{e.metric} over {list(e.window_s)} s: measured {e.measured!r}, "
@@ -115,8 +120,9 @@ def write_junit(path: str | Path, results: list[RunResult],
         cases.append(run)
         n_fail = sum(1 for c in cases if c.find("failure") is not None)
         n_err = sum(1 for c in cases if c.find("error") is not None)
+        n_skip = sum(1 for c in cases if c.find("skipped") is not None)
         suite = ET.SubElement(suites, "testsuite", name=r.sequence, tests=str(len(cases)),
-                              failures=str(n_fail), errors=str(n_err),
+                              failures=str(n_fail), errors=str(n_err), skipped=str(n_skip),
                               time=f"{r.wall_s:.3f}")
         if suite_props is not None:
             suite.append(suite_props)
@@ -448,21 +454,56 @@ def _fmt(v: Any) -> str:
     return html.escape(str(v))
 
 
+#: what each kind of drive (0x2090:1, what the drive says it is) means for the results
+_KIND_BANNER = {
+    "simulated": ("SIMULATED DRIVE", "These results come from the simulator (plant + "
+                  "firmware on this host), not from hardware."),
+    "emulated": ("EMULATED BOARD", "These results come from the firmware image running on "
+                 "an emulated MCU (QEMU) with a virtual motor, not from hardware."),
+    "no_io": ("NO-I/O DRIVE", "The drive has no power stage at all (the blank port): "
+              "nothing was driven."),
+    "unknown": ("UNKNOWN DRIVE", "The drive did not say what it is (no 0x2090): these "
+                "results are not labelled as hardware."),
+}
+
+
+def drive_kind_of(meta_or_summary: dict[str, Any]) -> str:
+    """The kind of drive a run's meta.json (connection_info.kind) or summary.json (drive)
+    names; older files ("sim", "SIMULATED", "HARDWARE") read as their kind."""
+    info = meta_or_summary.get("connection_info") or {}
+    k = str(info.get("kind") or meta_or_summary.get("drive") or "unknown")
+    return {"sim": "simulated", "SIMULATED": "simulated", "HARDWARE": "hardware"}.get(k, k)
+
+
 def _sim_banner(meta: dict[str, Any]) -> str:
-    """A banner that no reader can miss when the drive was simulated."""
+    """A banner that no reader can miss when the drive was not hardware."""
     info = meta.get("connection_info") or {}
-    if info.get("kind") != "sim":
+    kind = drive_kind_of(meta)
+    if kind == "hardware":
         return ""
+    title, what = _KIND_BANNER.get(kind, _KIND_BANNER["unknown"])
     why = ("FALLBACK: no drive hardware answered, the bench used the simulated drive. "
            if info.get("fallback") else "")
-    return ('<p class="simbanner">SIMULATED DRIVE &mdash; ' + why +
-            "These results come from the simulator (plant + firmware), not from hardware. "
-            "Use --require-hardware to make a missing rig an error.</p>")
+    return (f'<p class="simbanner">{title} &mdash; ' + why + what +
+            " Use --require-hardware to make a missing rig an error.</p>")
 
 
 def _sim_suffix(meta: dict[str, Any]) -> str:
-    info = meta.get("connection_info") or {}
-    return " (SIMULATED drive)" if info.get("kind") == "sim" else ""
+    kind = drive_kind_of(meta)
+    return "" if kind == "hardware" else f" ({_KIND_BANNER.get(kind, _KIND_BANNER['unknown'])[0]})"
+
+
+def _evidence_html(result: RunResult) -> str:
+    """What the run was judged on, and - once - what it could not judge."""
+    ev = result.evidence or {}
+    if not ev:
+        return ""
+    n_nj = sum(1 for e in result.expectations if not e.judged)
+    note = ev.get("note") or ""
+    extra = (f" {n_nj} expectation(s) not judged." if n_nj else "")
+    cls = "evidence nosensor" if note else "evidence"
+    return (f"<p class='{cls}'>Judged on: {html.escape(str(ev.get('description', '')))}."
+            + (f"<br>{html.escape(note)}." if note else "") + html.escape(extra) + "</p>")
 
 
 def write_html(path: Path, result: RunResult, plots: list[tuple[str, str]],
@@ -477,10 +518,11 @@ def write_html(path: Path, result: RunResult, plots: list[tuple[str, str]],
         return METRIC_DEFS[metric].unit if metric in METRIC_DEFS else ""
 
     rows = "\n".join(
-        f"<tr class='{'pass' if e.passed else 'fail'}'><td>{_fmt(e.name)}</td>"
+        f"<tr class='{'nj' if not e.judged else 'pass' if e.passed else 'fail'}'>"
+        f"<td>{_fmt(e.name)}</td>"
         f"<td>{_fmt(e.metric)}</td><td>[{e.window_s[0]:g}, {e.window_s[1]:g}]</td>"
         f"<td>{_fmt(e.measured)}</td><td>{_fmt(e.criterion)}</td><td>{_fmt(unit(e.metric))}</td>"
-        f"<td>{'PASS' if e.passed else 'FAIL'}</td>"
+        f"<td>{e.status}</td>"
         f"<td>{'' if e.paper is None else _fmt(e.paper)}</td>"
         f"<td>{'' if e.paper_met is None else ('yes' if e.paper_met else 'NO')}</td>"
         f"<td>{_fmt(e.doc)}{'<br>' if e.doc and e.message else ''}{_fmt(e.message)}</td></tr>"
@@ -523,6 +565,9 @@ table {{ border-collapse: collapse; margin: 1em 0; }}
 td, th {{ border: 1px solid #ccc; padding: 3px 8px; font-size: 14px; }}
 tr.pass td:nth-child(7) {{ color: #070; font-weight: bold; }}
 tr.fail td {{ background: #fee; }} tr.fail td:nth-child(7) {{ color: #b00; font-weight: bold; }}
+tr.nj td {{ color: #666; }} tr.nj td:nth-child(7) {{ font-weight: bold; }}
+.evidence {{ border-left: 4px solid #888; padding: 0.3em 0.8em; }}
+.nosensor {{ border-left-color: #c80; font-weight: bold; }}
 .cite {{ color: #444; font-size: 13px; }}
 .verdict {{ font-size: 1.4em; font-weight: bold; color: {'#070' if ok else '#b00'}; }}
 img {{ max-width: 100%; }} figcaption {{ color: #555; font-size: 13px; }}
@@ -533,6 +578,7 @@ img {{ max-width: 100%; }} figcaption {{ color: #555; font-size: 13px; }}
 <h1>{html.escape(result.sequence)}</h1>
 {_sim_banner(meta)}
 <p class="verdict">{'PASSED' if ok else 'FAILED'}{_sim_suffix(meta)}</p>
+{_evidence_html(result)}
 <p>{html.escape(str(meta.get('sequence', {}).get('description', '')))}</p>
 <h2>Expectations</h2>
 <table><tr><th>expectation</th><th>metric</th><th>window (s)</th><th>measured</th>
@@ -590,8 +636,7 @@ def _read_run(d: Path) -> dict[str, Any] | None:
     metrics = s.get("metrics") if isinstance(s.get("metrics"), dict) else {}
     return {
         "dir": d.name, "sequence": str(s.get("sequence")), "date": date.replace("T", " ")[:19],
-        "verdict": verdict, "drive": str(s.get("drive") or ("SIMULATED" if s.get("simulated")
-                                                             else "")),
+        "verdict": verdict, "drive": drive_kind_of(s).upper(),
         "motor": seq.get("motor"), "extractor": seq.get("extractor"), "seed": seq.get("seed"),
         "passed_exp": sum(1 for e in exps if e.get("passed")), "n_exp": len(exps),
         "paper_not_reproduced": sum(1 for e in exps if e.get("paper_reproduced") is False),

@@ -9,6 +9,7 @@ that path is ignored, so it cannot be cut short.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import signal
@@ -21,10 +22,19 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from bench._evidence import NO_SENSOR
 from bench._load import LoadDevice, NoLoad
 from bench._sequence import Sequence, Step
 from bench._units import MotorUnits
-from sim_fallback.metrics import METRIC_NAMES, compute_metrics, default_window, run_metrics
+from sim_fallback.metrics import (
+    METRIC_DEFS,
+    METRIC_NAMES,
+    TRUE_CHANNELS,
+    compute_metrics,
+    default_window,
+    run_metrics,
+    window_mask,
+)
 
 log = logging.getLogger("bench.runner")
 
@@ -130,6 +140,13 @@ class ExpectResult:
     paper: float | None = None
     paper_met: bool | None = None
     doc: str = ""
+    judged: bool = True
+
+    @property
+    def status(self) -> str:
+        """``PASS``, ``FAIL`` or ``NOT JUDGED`` (the metric needs what the run did not
+        have: a reference sensor, a signal the link does not carry; ``message`` says)."""
+        return "NOT JUDGED" if not self.judged else ("PASS" if self.passed else "FAIL")
 
 
 @dataclass
@@ -172,6 +189,8 @@ class RunResult:
     duration_s: float = 0.0
     wall_s: float = 0.0
     events: list[dict[str, Any]] = field(default_factory=list)
+    #: what the run was judged on (bench._evidence.Evidence.to_dict())
+    evidence: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -185,6 +204,9 @@ class _NullRecorder:
         self.events.append({"t_s": t_s, "kind": kind, **detail})
 
     def truth(self) -> dict[str, np.ndarray] | None:
+        return None
+
+    def evidence_channels(self, until_s: float | None = None) -> dict[str, np.ndarray] | None:
         return None
 
     def trace_window(self, name: str, t0_s: float, t1_s: float, signals: list[str]) -> None:
@@ -250,11 +272,22 @@ class Runner:
         self._speed_mps = 0.0
         self._force_N = 0.0
         self._load_N = 0.0
+        #: why the drive was lost mid-run (bench._drive.DriveLost), None while it answers
+        self.drive_lost: str | None = None
 
     # ---- time -------------------------------------------------------------------------
     def now(self) -> float:
         """Sequence time (s)."""
-        return self.clock.now() - self._t0
+        t = self.clock.now() - self._t0
+        self._last_now = t
+        return t
+
+    def _now_or_last(self) -> float:
+        """Sequence time, or the last one read when the drive (its clock) is lost."""
+        try:
+            return self.now()
+        except Exception:  # noqa: BLE001 - DriveLost: the clock stopped with the drive
+            return getattr(self, "_last_now", 0.0)
 
     def _check_fault(self) -> None:
         """Stop the sequence when the drive announced a fault (EMCY): what follows would
@@ -379,12 +412,13 @@ class Runner:
         t0, t1 = (float(v) for v in p.get("window_s",
                                             default_window(p["metric"], seq.settle_s, now)))
         name = p.get("name") or f"{p['metric']}@[{t0:g},{t1:g}]s"
-        truth = self.rec.truth()
-        if truth is None:
+        data = self._evidence(until_s=t1)
+        why = self._not_judged(p["metric"], data, (t0, t1))
+        if why:
             return ExpectResult(name, p["metric"], (t0, t1), float("nan"), False, _criterion(p),
-                                "metric unavailable: needs the true position (simulated drive "
-                                "or a reference encoder)", step.line, doc=str(p.get("doc", "")))
-        m = compute_metrics(truth, self.units.pole_pitch_m, self.units.pole_pairs, (t0, t1),
+                                why, step.line, p.get("paper"), None, str(p.get("doc", "")),
+                                judged=False)
+        m = compute_metrics(data, self.units.pole_pitch_m, self.units.pole_pairs, (t0, t1),
                             (p["metric"],))[p["metric"]]
         ok = evaluate(p, m)
         msg = "" if ok else f"measured {m:.6g}, required {_criterion(p)}"
@@ -398,9 +432,47 @@ class Runner:
         return ExpectResult(name, p["metric"], (t0, t1), m, ok, _criterion(p), msg, step.line,
                             paper, paper_met, str(p.get("doc", "")))
 
+    def _evidence(self, until_s: float | None = None) -> dict[str, np.ndarray] | None:
+        get = getattr(self.rec, "evidence_channels", None)
+        return get(until_s) if get is not None else self.rec.truth()
+
+    def _not_judged(self, metric: str, data: dict[str, np.ndarray] | None,
+                    window: tuple[float, float]) -> str:
+        """Why ``metric`` cannot be judged on this run's evidence ("" when it can)."""
+        ev = getattr(self.rec, "evidence", None)
+        d = METRIC_DEFS[metric]
+        if d.needs_truth and ev is not None and not ev.has_truth:
+            return ev.note or NO_SENSOR
+        if data is None:
+            return ("metric unavailable: nothing recorded to judge it on (no truth, no "
+                    "signals from the drive)")
+        missing = [c for c in d.channels if c not in data]
+        if missing:
+            via = f" over {ev.path}" if ev is not None else ""
+            return (f"not judged: {', '.join(missing)} not recorded{via}"
+                    + (" (the drive publishes it on the serial link: give --serial)"
+                       if ev is not None and ev.path == "TPDO" else ""))
+        if d.needs_truth:
+            t = np.asarray(data["t_s"])
+            w = window_mask(t, *window)
+            bad = [c for c in d.channels if c in TRUE_CHANNELS
+                   and np.any(~np.isfinite(np.asarray(data[c], dtype=float)[w]))]
+            if bad:
+                i = int(np.argmax(~np.isfinite(np.asarray(data[bad[0]], dtype=float)[w])))
+                return (f"not judged: the reference sensor had no valid reading at t = "
+                        f"{float(t[w][i]):.3f} s in the window (a sensor fault)")
+        return ""
+
     # ---- safe state -------------------------------------------------------------------
     def safe_state(self) -> str:
-        """Remove the load and disable the drive; never raises. Returns a status text."""
+        """Remove the load and disable the drive; never raises. Returns a status text.
+        A lost drive (its time stopped, its bus failed) is not waited for: nothing the
+        bench sends reaches it; its own supervision switches it off."""
+        if self.drive_lost is not None:
+            with contextlib.suppress(Exception):
+                self.load.disable()
+            return (f"SAFE STATE NOT CONFIRMED: {self.drive_lost}; the drive's heartbeat "
+                    "consumer (0x1016) switches its PWM off without the bench's heartbeat")
         in_main = threading.current_thread() is threading.main_thread()
         old = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None
         try:
@@ -465,9 +537,13 @@ class Runner:
                 yield step
             result.duration_s = self.now()
         except BaseException as e:
+            from bench._drive import DriveLost
+
+            if isinstance(e, DriveLost):
+                self.drive_lost = str(e)
             result.aborted = True
             result.error = f"{type(e).__name__}: {e}" if str(e) else type(e).__name__
-            self.rec.event(self.now(), "abort", {"error": result.error})
+            self.rec.event(self._now_or_last(), "abort", {"error": result.error})
             raise
         finally:
             if self.guard is not None:  # run_sequence's guard spans the saving too
@@ -481,10 +557,14 @@ class Runner:
     def _finish(self, seq: Sequence, result: RunResult, wall0: float) -> None:
         """Safe state, metrics and verdict (runs with interrupts deferred)."""
         result.safe_state = self.safe_state()
-        self.rec.event(self.now(), "safe_state", {"status": result.safe_state})
-        result.duration_s = result.duration_s or self.now()
+        now = self._now_or_last()
+        self.rec.event(now, "safe_state", {"status": result.safe_state})
+        result.duration_s = result.duration_s or now
+        ev = getattr(self.rec, "evidence", None)
+        if ev is not None:
+            result.evidence = ev.to_dict()
         try:
-            truth = self.rec.truth()
+            truth = self._evidence()
         except Exception as e:  # noqa: BLE001 - never mask the original exception
             log.error("truth data unavailable: %s", e)
             truth = None
@@ -497,10 +577,14 @@ class Runner:
                 t_end = min(t_end, self._t_disable - 1e-9)
             result.metrics, result.metric_windows = run_metrics(
                 truth, self.units.pole_pitch_m, self.units.pole_pairs, seq.settle_s, t_end)
+            if ev is not None and not ev.has_truth:  # never a number without its truth
+                for k in METRIC_NAMES:
+                    if METRIC_DEFS[k].needs_truth:
+                        result.metrics[k] = float("nan")
         else:
             result.metrics = dict.fromkeys(METRIC_NAMES, float("nan"))
         result.passed = (not result.aborted and result.safe_state == "disabled"
-                         and all(x.passed for x in result.expectations))
+                         and all(x.passed for x in result.expectations if x.judged))
         result.wall_s = time.monotonic() - wall0
         if isinstance(self.rec, _NullRecorder):
             result.events = self.rec.events

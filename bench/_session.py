@@ -18,6 +18,7 @@ Connection rules
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sys
 import threading
@@ -66,6 +67,9 @@ _PDO_SIGNALS: dict[tuple[int, int], tuple[str, str, float | None]] = {
         (od.ESTIMATOR__FILTERED_PLL_ERROR, "pll_err_f_rad"),
         (od.ESTIMATOR__SOGI_K_IN_USE, "sogi_k_eff"),
         (od.ESTIMATOR__START_UP_PHASE, "start_phase"),
+        (od.BOARD__DRIVE_TIME, "drive_periods"),
+        (od.REFERENCE_SENSOR__COUNT, "ref_count"),
+        (od.REFERENCE_SENSOR__POSITION, "ref_pos_m"),
     )
 }
 
@@ -112,11 +116,30 @@ class Connection:
     def is_sim(self) -> bool:
         return self.sim is not None
 
+    _sync_on: bool = False
+
+    @property
+    def kind(self) -> str:
+        """What the drive said it is (0x2090:1): hardware, simulated, emulated, no_io or
+        unknown (:meth:`bench.Drive.kind`)."""
+        return str(self.info.get("kind", "unknown"))
+
     def clock_of(self, msg_ts: float) -> float:
         """Convert a frame timestamp (s since the epoch) to the drive clock (s)."""
         if self.sim is not None:
             return msg_ts - self.sim.epoch
+        of_host = getattr(self.drive.clock, "of_host", None)
+        if of_host is not None:
+            return float(of_host(msg_ts))
         return msg_ts - (time.time() - time.monotonic())
+
+    def start_sync(self) -> None:
+        """Produce SYNC every ``sync_period_ms`` (the drive's TPDOs, its time among them,
+        are SYNC-triggered); idempotent, stopped by :meth:`close`. Not for the
+        in-process simulated drive, which produces its SYNC in simulated time."""
+        if self.sim is None and not self._sync_on and self.sync_period_ms > 0:
+            self.network.sync.start(self.sync_period_ms / 1000.0)
+            self._sync_on = True
 
     def control_rate_Hz(self) -> float | None:
         """The drive's control rate (= its PWM frequency, ``f_pwm_Hz``) read from the
@@ -144,9 +167,8 @@ class Connection:
         for d in self._watchers():  # the load machine too: a dead bench must stop it as well
             d.var(HB_WATCH).raw = (0x7F << 16) | (5 * period_ms)
         # The bench is also the SYNC producer: the drive's TPDOs (position,
-        # velocity, torque) are SYNC-triggered and would never flow without one.
-        if self.sync_period_ms > 0:
-            self.network.sync.start(self.sync_period_ms / 1000.0)
+        # velocity, torque, its time) are SYNC-triggered and would never flow without one.
+        self.start_sync()
 
     def _watchers(self) -> list[Drive]:
         """The nodes that watch the bench's heartbeat: the drive and a load machine."""
@@ -164,8 +186,12 @@ class Connection:
                                 d.node_id, e)
             self._hb_task.stop()
             self._hb_task = None
-            if self.sync_period_ms > 0:
+        if self._sync_on:
+            self._sync_on = False
+            try:
                 self.network.sync.stop()
+            except Exception as e:  # noqa: BLE001 - a dead bus: nothing left to stop
+                log.warning("could not stop SYNC: %s", e)
         try:
             self.network.disconnect()
         except Exception as e:  # noqa: BLE001 - canopen re-raises receive-thread errors here
@@ -209,25 +235,106 @@ def open_sim(motor: str = "paper_salient", extractor: str = "sogi_adaptive", see
         # would be an extra frame that moves the simulated clock (not reproducible)
         drive = Drive(net, node_id, clock=sim.clock, sdo_timeout_s=5.0)
         drive.setup(read_pdos=read_pdos)
+        kind, board = drive.kind()  # what the drive says: the simulated drive's port
     except Exception:
         sim.close()
         raise
     units = MotorUnits(pole_pitch_m=sim.motor.tau_m, pole_pairs=float(sim.motor.pole_pairs))
     other = (f", simulating another motor than configured ({len(plant)} plant parameters "
              "overridden)") if plant else ""
-    desc = (f"SIMULATED drive (motor {sim.motor.name}{other}, extractor {extractor}, seed {seed}, "
+    desc = (f"{KIND_LABEL.get(kind, kind)} drive (motor {sim.motor.name}{other}, extractor "
+            f"{extractor}, seed {seed}, "
             f"{'paced to the wall clock' if realtime else 'as fast as possible'}) on "
             f"python-can virtual channel {channel}")
     return Connection(bus, net, drive, SimLoad(sim), units, desc, sim=sim, serial=sim.serial,
-                      info={"kind": "sim", "channel": channel, "x0_m": sim.x0_m})
+                      info={"kind": kind, "board": board, "via": "in-process",
+                            "channel": channel, "x0_m": sim.x0_m})
+
+
+#: how each kind the drive says it is (0x2090:1) is written in the console and reports
+KIND_LABEL = {"hardware": "HARDWARE", "simulated": "SIMULATED", "emulated": "EMULATED",
+              "no_io": "NO-I/O (blank port)", "unknown": "UNKNOWN (it does not say what it is)"}
+
+
+class _BusWatch(can.Listener):
+    """Tells the drive clock at once when the bus under the drive fails (a closed
+    socket, an unplugged adapter), and ends the receive thread quietly instead of a
+    traceback per read (python-can retries a handled error forever)."""
+
+    def __init__(self, clock: Any, notifier: Any) -> None:
+        self.clock = clock
+        self.notifier = notifier
+        self.error: str | None = None
+
+    def on_message_received(self, msg: can.Message) -> None:
+        pass
+
+    def on_error(self, exc: Exception) -> None:
+        self.error = " ".join(f"{type(exc).__name__}: {exc}".split())
+        self.clock.fail(f"its bus failed ({self.error})")
+        self.notifier._stopped = True  # python-can's receive loop ends after this error
+
+
+def _start_drive_clock(conn: Connection, wait_s: float = 1.5) -> str:
+    """Give the connection's drive its own clock (:class:`bench._clock.DriveClock`): the
+    period count it publishes in a TPDO (0x2090:3, TPDO4 by default), SYNC started.
+    Returns how the run is paced, for the metadata. A drive that publishes no time
+    (an older firmware, a remapped TPDO) keeps the host's clock, said once."""
+    from bench._clock import DriveClock
+
+    drive = conn.drive
+    tpdo_var = None
+    for tpdo in drive.node.tpdo.values():
+        if not tpdo.enabled:
+            continue
+        for var in tpdo:
+            key = (var.index, var.subindex)
+            if key == (od.BOARD__DRIVE_TIME.index, od.BOARD__DRIVE_TIME.sub) and \
+                    var.offset % 8 == 0 and var.length == 32:
+                tpdo_var = (tpdo, var.offset // 8)
+    f_pwm = conn.control_rate_Hz()
+    if tpdo_var is None or not f_pwm:
+        _say("bench: the drive publishes no time (0x2090:3 in no TPDO): the run is paced by "
+             "this host's clock")
+        conn.start_sync()
+        return "host clock (the drive publishes no time)"
+    clock = DriveClock(f_pwm, what=f"drive node {drive.node_id}")
+    tpdo, off = tpdo_var
+
+    def on_time(pdo_map: Any) -> None:
+        data = pdo_map.data
+        if len(data) >= off + 4:
+            clock.observe(int.from_bytes(bytes(data[off:off + 4]), "little"),
+                          pdo_map.timestamp or time.time())
+
+    tpdo.add_callback(on_time)
+    watch = _BusWatch(clock, conn.network.notifier)
+    conn.network.notifier.add_listener(watch)
+    conn.start_sync()
+    if not clock.wait_first(wait_s):
+        tpdo.callbacks.remove(on_time)
+        why = watch.error or f"no TPDO with its time within {wait_s:g} s"
+        raise NoHardware(f"drive node {drive.node_id} does not publish its time ({why}); "
+                         "is SYNC produced (--sync-period-ms)?")
+    drive.clock = clock
+    cob = getattr(tpdo, "cob_id", None)
+    return (f"the drive's own clock (0x2090:3 in the TPDO of COB-ID "
+            f"{'?' if cob is None else hex(cob)}, every SYNC; {f_pwm:g} periods/s)")
 
 
 def open_hardware(interface: str | None, channel: str | None, bitrate: int | None,
                   node_id: int = 1, load_node: int | None = None, motor: str | None = None,
                   serial_url: str | None = None, probe_timeout_s: float = 0.5,
-                  bus_kw: dict[str, Any] | None = None) -> Connection:
+                  bus_kw: dict[str, Any] | None = None, sync_period_ms: int = 10,
+                  load: LoadDevice | None = None) -> Connection:
     """Open a python-can bus and check that the drive answers (``bus_kw``: further
-    python-can arguments, e.g. socketcand's host and port).
+    python-can arguments, e.g. socketcand's host and port). This is the one way the
+    bench reaches a drive on a bus - a rig, the simulated drive server, the emulated
+    board - and every result is labelled from what the drive says it is (0x2090:1).
+
+    The run is paced by the drive's own clock (its period count, 0x2090:3, every
+    SYNC; the bench produces SYNC every ``sync_period_ms``). ``load``: the load device
+    when it is not a CANopen load machine (the emulated board's virtual one).
 
     Raises
     ------
@@ -251,42 +358,59 @@ def open_hardware(interface: str | None, channel: str | None, bitrate: int | Non
         if not cfg.get("interface"):
             raise NoHardware("no CAN interface given (--interface) or configured "
                              "(~/.canrc, CAN_INTERFACE)")
+    shown = {k: v for k, v in kw.items() if k not in ("sleep_after_open",)}
     try:
         bus = can.Bus(**kw)
-    except (can.CanError, OSError, ImportError, ValueError, NotImplementedError) as e:
-        raise NoHardware(f"cannot open CAN bus {kw}: {e}") from e
+    except (can.CanError, OSError, ImportError, ValueError, NotImplementedError,
+            TypeError) as e:
+        raise NoHardware(f"cannot open CAN bus {shown}: {' '.join(str(e).split())}") from e
     net = canopen.Network(bus)
     net.connect()
+    conn: Connection | None = None
     try:
         drive = Drive(net, node_id, sdo_timeout_s=probe_timeout_s)
         try:
             _ = drive.var(od.DEVICE_TYPE).raw  # probe: does the drive answer?
         except Exception as e:
-            raise NoHardware(f"no answer from drive node {node_id} on {kw}: {e}") from e
+            raise NoHardware(f"no answer from drive node {node_id} on {shown}: "
+                             f"{' '.join(str(e).split())}") from e
         drive.node.sdo.RESPONSE_TIMEOUT = 0.5
         drive.setup(read_pdos=True)
-        load: LoadDevice = NoLoad()
+        kind, board = drive.kind()
+        dev: LoadDevice = load if load is not None else NoLoad()
         if load_node:
             ld = Drive(net, load_node, sdo_timeout_s=probe_timeout_s)
             try:
                 _ = ld.var(od.DEVICE_TYPE).raw  # probe: does the load machine answer?
             except Exception as e:
                 # the drive is there, so no fallback to the simulator: a clear error
-                raise ConnectionError(f"load machine node {load_node} on {kw} does not "
+                raise ConnectionError(f"load machine node {load_node} on {shown} does not "
                                       f"answer: {e}") from e
             ld.node.sdo.RESPONSE_TIMEOUT = 0.5
             ld.setup(read_pdos=True)
-            load = CanopenLoad(ld)
+            dev = CanopenLoad(ld)
         port = None
         if serial_url:
             import serial
 
-            port = serial.serial_for_url(serial_url, baudrate=921600, timeout=0.1)
+            try:
+                port = serial.serial_for_url(serial_url, baudrate=921600, timeout=0.1)
+            except (serial.SerialException, ValueError, OSError) as e:
+                raise NoHardware(f"--serial {serial_url}: cannot open: "
+                                 f"{' '.join(str(e).split())}") from e
         units = motor_units(motor)
-        desc = f"HARDWARE drive node {node_id} on {kw}"
-        return Connection(bus, net, drive, load, units, desc, serial=port,
-                          info={"kind": "hardware", "bus": kw, "node_id": node_id})
+        where = f"{board} " if board else ""
+        desc = f"{KIND_LABEL.get(kind, kind)} drive {where}node {node_id} on {shown}"
+        conn = Connection(bus, net, drive, dev, units, desc, serial=port,
+                          info={"kind": kind, "board": board, "via": "bus", "bus": shown,
+                                "node_id": node_id},
+                          sync_period_ms=sync_period_ms)
+        conn.info["clock"] = _start_drive_clock(conn)
+        return conn
     except BaseException:
+        if conn is not None and conn._sync_on:
+            with contextlib.suppress(Exception):
+                net.sync.stop()
         net.disconnect()
         raise
 
@@ -297,42 +421,48 @@ def connect(sim: bool = False, interface: str | None = None, channel: str | None
             extractor: str = "sogi_adaptive", seed: int = 0, x0: float | str = 0.0,
             node_id: int = 1, load_node: int | None = None, record_decimation: int = 1,
             say: Callable[[str], None] = _say, require_hardware: bool = False,
-            sim_server: Any = None, sim_plant: dict[str, Any] | None = None
-            ) -> Connection:
+            sim_server: Any = None, sim_plant: dict[str, Any] | None = None,
+            emu: Any = None, bus_kw: dict[str, Any] | None = None,
+            sync_period_ms: int = 10) -> Connection:
     """Hardware if available and not ``sim``; else the simulated drive (announced).
 
     ``sim_plant``: the simulated drive drives another motor than ``motor`` (plant
     overrides, see :func:`open_sim`); only with ``sim``.
 
-    With ``require_hardware`` (a rig's CI job) a missing drive raises
-    :class:`NoHardware` instead of falling back. A fallback connection has
-    ``info["fallback"] = True``; the report, summary.json and JUnit say SIMULATED.
+    An explicit ``interface`` (or ``require_hardware``, a rig's CI job) never falls
+    back: a missing drive raises :class:`NoHardware`. Without one, a missing drive
+    falls back to the in-process simulated drive, said on stderr; the connection then
+    has ``info["fallback"] = True`` and every result says SIMULATED.
 
-    ``sim_server`` (a :class:`bench._simserver.ServerState`): the simulated drive server
-    of ``bench sim start``, reached exactly as hardware (python-can ``socketcand``, the
-    same canopen code path), never a fallback; its results say SIMULATED too.
+    ``sim_server`` (a :class:`bench._simserver.ServerState`, ``bench sim start``) and
+    ``emu`` (a :class:`bench._emu.EmuState`, ``bench emu start``) are reached exactly as
+    a rig is (:func:`open_hardware`), never a fallback; what they are comes from the
+    drive (0x2090:1), as for every drive on a bus.
     """
-    if sim_server is not None:
-        bc = sim_server.bus_config()
+    if sim_server is not None or emu is not None:
+        target = sim_server if sim_server is not None else emu
+        bc = target.bus_config()
+        load = target.load_device() if emu is not None else None
         c = open_hardware(bc.pop("interface"), bc.pop("channel"), None, node_id, load_node,
-                          motor, serial_url, bus_kw=bc)
-        c.description = (f"SIMULATED drive server node {node_id} (pid {sim_server.pid}, "
-                         f"socketcand {sim_server.address}, motor {sim_server.motor})")
-        c.info.update(kind="sim", via="sim_server", server_pid=sim_server.pid,
-                      fallback=False)
+                          motor, serial_url or target.serial_url(), bus_kw=bc,
+                          sync_period_ms=sync_period_ms, load=load)
+        c.info.update(via="sim_server" if sim_server is not None else "emu",
+                      process_pid=target.pid, fallback=False)
+        c.description += f" ({target.what()})"
         say(f"bench: connected to the {c.description}")
         return c
     fallback = False
     if not sim:
         try:
             c = open_hardware(interface, channel, bitrate, node_id, load_node, motor,
-                              serial_url)
-            say(f"bench: connected to {c.description}")
+                              serial_url, bus_kw=bus_kw, sync_period_ms=sync_period_ms)
+            say(f"bench: connected to the {c.description}")
             return c
         except NoHardware as e:
-            if require_hardware:
-                raise NoHardware(f"{e}; --require-hardware forbids the simulated "
-                                 "fallback") from None
+            if require_hardware or interface:
+                why = ("--require-hardware forbids" if require_hardware else
+                       f"--interface {interface} was named: no")
+                raise NoHardware(f"{e}; {why} fallback to the simulated drive") from None
             say(f"bench: no drive hardware found ({e}).")
             say("bench: FALLING BACK TO THE SIMULATED DRIVE - results are from a simulation, "
                 "not from hardware.")
@@ -348,11 +478,14 @@ def connect(sim: bool = False, interface: str | None = None, channel: str | None
 
 
 def drive_kind(conn: Connection) -> dict[str, Any]:
-    """What produced the results: ``{"drive": "SIMULATED"|"HARDWARE", "simulated": bool,
-    "fallback": bool}`` (summary.json, JUnit properties, report banner)."""
-    simulated = conn.is_sim or conn.info.get("kind") == "sim"  # in process or sim server
-    return {"drive": "SIMULATED" if simulated else "HARDWARE", "simulated": simulated,
-            "fallback": bool(conn.info.get("fallback", False))}
+    """What produced the results, from what the drive said it is (0x2090:1):
+    ``{"drive": "hardware" | "simulated" | "emulated" | "no_io" | "unknown", "simulated":
+    bool (anything but hardware), "fallback": bool, "board": str}`` (summary.json, JUnit
+    properties, report banner). Only a drive that says "hardware" is hardware."""
+    kind = conn.kind
+    return {"drive": kind, "simulated": kind != "hardware",
+            "fallback": bool(conn.info.get("fallback", False)),
+            "board": str(conn.info.get("board", ""))}
 
 
 # ---- decoding what comes over the wire --------------------------------------------------
@@ -720,6 +853,10 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
         tel.start()
     drive = conn.drive
     conn.start_heartbeat()
+    from bench._evidence import finish_evidence, plan_evidence
+
+    evidence = plan_evidence(conn, tel is not None, _say)
+    logger.evidence = evidence
     meta: dict[str, Any] = {
         "connection": conn.description, "connection_info": conn.info,
         "sequence": {"name": seq.name, "file": str(seq.path), "motor": seq.motor,
@@ -727,6 +864,7 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
                      "description": seq.description, "document": seq.raw},
         "seed": seq.seed, "units": {"pole_pitch_m": conn.units.pole_pitch_m,
                                     "pole_pairs": conn.units.pole_pairs},
+        "evidence": evidence.to_dict(), "clock": conn.info.get("clock", "simulation clock"),
     }
     try:
         ident = drive.identity()
@@ -773,6 +911,8 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
                 bar.close()
         if runner.traces and tel is not None:
             _collect_trace(runner, drive, tel, logger)
+        if evidence.restore and not getattr(runner, "drive_lost", False):
+            finish_evidence(conn, evidence)
         if conn.sim is not None:
             conn.sim.sink = None
         if conn.sim is not None and conn.sim.wait_idle():
@@ -802,7 +942,8 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
                            "logging": logstats})
         rep = None
         extra = {"run_dir": str(run_dir), "lost_frames": logstats["lost_frames"],
-                 "receive_errors": logstats["receive_errors"], **drive_kind(conn)}
+                 "receive_errors": logstats["receive_errors"], **drive_kind(conn),
+                 "evidence": evidence.to_dict()}
         if report:
             plots = make_plots(logger, result, conn.units, run_dir)
             rep = run_dir / "report.html"

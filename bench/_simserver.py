@@ -107,6 +107,14 @@ class ServerState:
         return {"interface": "socketcand", "channel": self.channel, "host": self.host,
                 "port": self.port}
 
+    def serial_url(self) -> None:
+        """The server has no serial link (its drive's telemetry stays in its process)."""
+        return None
+
+    def what(self) -> str:
+        return f"simulated drive server pid {self.pid}, socketcand {self.address}, motor " \
+               f"{self.motor}"
+
 
 def read_state(folder: Path | None = None) -> ServerState | None:
     """The state file, or None when there is none (or it is unreadable: stale)."""

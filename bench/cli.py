@@ -55,14 +55,23 @@ def _conn_args(p: argparse.ArgumentParser) -> None:
                    help="the simulated drive server of `bench sim start` (its own process, "
                         "reached over python-can socketcand on 127.0.0.1 exactly as "
                         "hardware; successive commands see the same drive)")
+    g.add_argument("--emu", action="store_true",
+                   help="the emulated board of `bench emu start` (the firmware image on QEMU "
+                        "with a virtual motor), reached exactly as hardware: python-can slcan "
+                        "over 127.0.0.1, the serial link, its virtual load machine")
     g.add_argument("--require-hardware", action="store_true",
                    help="fail with exit 3 when no drive answers instead of falling back to "
                         "the simulated drive (for a rig's CI job)")
     g.add_argument("--interface", help="python-can interface: socketcan, pcan, slcan, kvaser, "
-                                       "... (default: python-can configuration)")
+                                       "socketcand, ... (default: python-can configuration); "
+                                       "a named interface never falls back to the simulated "
+                                       "drive")
     g.add_argument("--channel", help="python-can channel, e.g. can0, PCAN_USBBUS1, "
                                      "/dev/ttyACM0 or socket://host:port for slcan")
     g.add_argument("--bitrate", type=int, help="CAN bitrate in bit/s, e.g. 1000000")
+    g.add_argument("--host", help="socketcand: the server's host (e.g. 127.0.0.1)")
+    g.add_argument("--port", type=int, dest="bus_port", metavar="PORT",
+                   help="socketcand: the server's TCP port")
     g.add_argument("--serial", metavar="URL",
                    help="serial telemetry link (pyserial URL: /dev/ttyUSB0, socket://host:port,"
                         " loop://)")
@@ -259,6 +268,49 @@ def build_parser() -> argparse.ArgumentParser:
                     description="Show the simulated drive server's state; exit 3 when none "
                     "is running.")
 
+    p = sub.add_parser("emu", help="the emulated board: the drive's firmware image on QEMU",
+                       description="Start, stop or show the emulated board: the drive's "
+                       "firmware image (board port mps2_an386: the whole drive application) "
+                       "on an emulated Cortex-M4F in qemu-system-arm, with the simulator's "
+                       "plant compiled in as its virtual motor, bound to 127.0.0.1. Every "
+                       "subcommand reaches it with --emu exactly as it reaches a rig (slcan "
+                       "CAN adapter, serial telemetry link; load steps through its virtual "
+                       "load machine); it runs paced by its own virtual clock, at a fraction "
+                       "of real time, and every run is paced by the drive's clock. Its flash "
+                       "page (bench config save) survives stop/start. State, log and flash "
+                       "files: $BENCH_SIM_DIR, else $XDG_STATE_HOME/pmlsm-bench, else "
+                       "~/.local/state/pmlsm-bench.",
+                       epilog="Exit codes: 0 ok (status: running), 2 bad option or already "
+                              "running, 3 not running, no image or QEMU, or it failed to "
+                              "start (the board's own line from its log).")
+    esub = p.add_subparsers(dest="emu_cmd", metavar="ACTION", required=True)
+    es = esub.add_parser("start", help="boot the emulated board in the background",
+                         description="Boot the emulated board and wait until it listens; "
+                         "prints the connect line.")
+    es.add_argument("--motor", default="paper_salient",
+                    help="motor file the drive is configured for (default paper_salient)")
+    es.add_argument("--plant", metavar="MOTOR",
+                    help="the motor the virtual motor actually is, when not the configured "
+                         "one (wrong-motor tests): a motor name or file")
+    es.add_argument("--extractor", choices=EXTRACTOR_KEYS, default="sogi_adaptive",
+                    help="HF extractor (default sogi_adaptive)")
+    es.add_argument("--seed", type=int, default=0, help="ADC noise seed (default 0)")
+    es.add_argument("--node-id", type=int, default=1, help="drive node id (default 1)")
+    es.add_argument("--x0", type=float, default=0.0, metavar="M",
+                    help="initial mover position (m, default 0)")
+    es.add_argument("--no-ref-sensor", action="store_true",
+                    help="no reference scale on the emulated rig (runs then say 'no reference "
+                         "sensor: estimate metrics not judged')")
+    es.add_argument("--image", metavar="ELF", help="firmware image (default: the installed "
+                                                   "one)")
+    esub.add_parser("stop", help="stop the emulated board",
+                    description="Stop QEMU (SIGTERM, SIGKILL after 5 s); a stale state file "
+                    "is removed.")
+    et = esub.add_parser("status", help="is it running, where, how fast",
+                         description="Show the emulated board's state and measure its speed "
+                         "(drive seconds per wall second over 1 s); exit 3 when none runs.")
+    et.add_argument("--no-measure", action="store_true", help="do not measure the speed")
+
     p = sub.add_parser("shell", help="IPython with a connected drive (parameters by name, "
                        "live set-points and telemetry, sequences step by step)",
                        description="Open IPython with `drive` connected: drive.p.<TAB> "
@@ -297,12 +349,41 @@ def _sigterm_as_interrupt() -> None:
     signal.signal(signal.SIGTERM, handler)
 
 
+def _emu_state(args: argparse.Namespace) -> Any:
+    """The running emulated board for ``--emu`` (None without it)."""
+    if not getattr(args, "emu", False):
+        return None
+    for opt, val in (("--sim", args.sim), ("--sim-server", getattr(args, "sim_server", False)),
+                     ("--interface", args.interface), ("--channel", args.channel),
+                     ("--bitrate", args.bitrate), ("--host", args.host),
+                     ("--port", args.bus_port), ("--realtime", args.realtime),
+                     ("--sim-plant", getattr(args, "sim_plant", None))):
+        if val:
+            raise UserError(f"--emu and {opt} contradict each other (the emulated board is "
+                            "reached on its own ports, paced by its own clock; its motor is "
+                            "chosen by `bench emu start`); drop one")
+    if args.serial:
+        raise UserError(f"--emu and --serial {args.serial} contradict each other (the "
+                        "emulated board's serial link is used); drop one")
+    from bench._emu import EmuError, check_running
+
+    try:
+        st = check_running()
+    except EmuError as e:
+        raise UserError(str(e), EXIT_DRIVE) from None
+    if args.node_id != st.node_id:
+        raise UserError(f"--node-id {args.node_id}: the emulated board's drive is node "
+                        f"{st.node_id}")
+    return st
+
+
 def _sim_server_state(args: argparse.Namespace) -> Any:
     """The running simulated drive server for ``--sim-server`` (None without it)."""
     if not getattr(args, "sim_server", False):
         return None
     for opt, val in (("--sim", args.sim), ("--interface", args.interface),
                      ("--channel", args.channel), ("--bitrate", args.bitrate),
+                     ("--host", args.host), ("--port", args.bus_port),
                      ("--realtime", args.realtime)):
         if val:
             raise UserError(f"--sim-server and {opt} contradict each other (the server's "
@@ -323,8 +404,22 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
     from bench._session import connect
 
     server = _sim_server_state(args)
+    emu = _emu_state(args)
     if server is not None and not args.motor and (seq is None or seq.motor == server.motor):
         args.motor = server.motor  # units from the motor the server simulates
+    if emu is not None and not args.motor and (seq is None or seq.motor == emu.motor):
+        args.motor = emu.motor  # units from the motor the emulated board is configured for
+    bus_kw: dict[str, Any] = {}
+    if args.host is not None or args.bus_port is not None:
+        if (args.interface or "") != "socketcand":
+            raise UserError(f"--host/--port are socketcand's (--interface socketcand); with "
+                            f"--interface {args.interface or '(none)'} give the channel "
+                            "instead")
+        if args.host is None or args.bus_port is None:
+            raise UserError("--interface socketcand needs both --host and --port")
+        if not 1 <= args.bus_port <= 65535:
+            raise UserError(f"--port {args.bus_port}: allowed range [1, 65535]")
+        bus_kw = {"host": args.host, "port": args.bus_port}
 
     motor = args.motor or (seq.motor if seq is not None else "paper_salient")
     extractor = args.extractor or (seq.extractor if seq is not None else "sogi_adaptive")
@@ -336,6 +431,9 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
         raise UserError(f"--node-id {args.node_id}: allowed range [1, 127]")
     if args.sim and getattr(args, "require_hardware", False):
         raise UserError("--sim and --require-hardware contradict each other; drop one of them")
+    if args.sim and args.interface:
+        raise UserError(f"--sim and --interface {args.interface} contradict each other; drop "
+                        "one of them")
     if args.sim and args.serial:
         raise UserError(f"--serial {args.serial} cannot be used with --sim (the simulated drive "
                         "has its own in-process serial link); drop one of them")
@@ -345,10 +443,13 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
     if server is not None and motor != server.motor:
         raise UserError(f"{where} is {motor!r}, the simulated drive server simulates "
                         f"{server.motor!r}: restart it with `bench sim start --motor {motor}`")
+    if emu is not None and motor != emu.motor:
+        raise UserError(f"{where} is {motor!r}, the emulated board is configured for "
+                        f"{emu.motor!r}: restart it with `bench emu start --motor {motor}`")
     refusal = _check_motor(motor, extractor, where, sim_only=args.sim)
     sim_plant = None
     if getattr(args, "sim_plant", None):
-        if not args.sim or server is not None:
+        if not args.sim or server is not None or emu is not None:
             raise UserError(f"--sim-plant {args.sim_plant}: only with --sim (the in-process "
                             "simulated drive)")
         from sim_fallback import load_motor
@@ -365,7 +466,8 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
                        motor=motor, extractor=extractor, seed=seed, x0=x0,
                        node_id=args.node_id, load_node=args.load_node,
                        require_hardware=getattr(args, "require_hardware", False),
-                       sim_server=server, sim_plant=sim_plant)
+                       sim_server=server, sim_plant=sim_plant, emu=emu, bus_kw=bus_kw,
+                       sync_period_ms=args.sync_period_ms)
     except UserError:
         raise
     except Exception as e:  # noqa: BLE001 - the bus, the drive or the simulator library
@@ -549,19 +651,26 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def _print_result(r: Any, out: Any, kind: dict[str, Any] | None = None) -> None:
+    from bench._session import KIND_LABEL
+
     sim = ""
-    if kind and kind.get("simulated"):
-        sim = " [SIMULATED drive" + (", fallback: no hardware found]" if kind.get("fallback")
-                                     else "]")
+    if kind:
+        sim = f" [{KIND_LABEL.get(kind.get('drive', 'unknown'), 'UNKNOWN')} drive" + (
+            ", fallback: no hardware found]" if kind.get("fallback") else "]")
     print(f"\n{r.sequence}: {'PASSED' if r.passed else 'FAILED'}{sim}  "
           f"(sequence {r.duration_s:.3f} s, wall {r.wall_s:.2f} s)")
+    ev = getattr(r, "evidence", None) or {}
+    if ev.get("description"):
+        print(f"  judged on: {ev['description']}")
     for e in r.expectations:
         m = "n/a" if e.measured != e.measured else f"{e.measured:.5g}"
+        if not e.judged:
+            print(f"  [NOT JUDGED] {e.name}: {e.message}")
+            continue
         paper = ""
         if e.paper is not None:
             paper = f"; paper {e.paper:g}: {'reproduced' if e.paper_met else 'NOT reproduced'}"
-        print(f"  [{'PASS' if e.passed else 'FAIL'}] {e.name}: {m} "
-              f"(required {e.criterion}{paper})")
+        print(f"  [{e.status}] {e.name}: {m} (required {e.criterion}{paper})")
     lost = out.logstats.get("lost_frames", {})
     print(f"  CAN frames logged: {out.logstats.get('frames_logged')}, lost frames: {lost}")
     if out.logstats.get("receive_errors"):
@@ -598,7 +707,8 @@ def cmd_live(args: argparse.Namespace) -> int:
     if lim is not None and abs(args.speed) > lim:
         raise UserError(f"--speed {args.speed:g} {args.unit}: allowed range [{-lim:.4g}, "
                         f"{lim:.4g}] {args.unit} (the drive's speed limit)")
-    args.realtime = True  # live: the simulated drive is paced to the wall clock
+    if args.sim:
+        args.realtime = True  # live: the in-process simulated drive is paced to the wall clock
     conn = _connect(args)
     try:
         out = run_live(conn, spec, conn.units.speed_to_mps(args.speed, args.unit),
@@ -845,6 +955,58 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_emu(args: argparse.Namespace) -> int:
+    """``bench emu start|stop|status``."""
+    import math
+
+    from bench import _emu as E
+
+    if args.emu_cmd == "status":
+        try:
+            st = E.check_running()
+        except E.EmuError as e:
+            stale = E.read_state()
+            if stale is not None and not E.pid_is_emu(stale.pid):
+                E.stop()  # removes the stale state file
+            raise UserError(str(e), EXIT_DRIVE) from None
+        print(E.describe(st, measure=not args.no_measure))
+        return EXIT_OK
+    if args.emu_cmd == "stop":
+        how, pid = E.stop()
+        print({"none": "bench: no emulated board running",
+               "stale": f"bench: removed a stale state file (QEMU pid {pid} was not running)",
+               "stopped": f"bench: emulated board stopped (QEMU pid {pid})",
+               "killed": f"bench: emulated board killed (QEMU pid {pid}: no exit within 5 s "
+                         "of SIGTERM)"}[how])
+        return EXIT_OK
+    if not 1 <= args.node_id <= 127:
+        raise UserError(f"--node-id {args.node_id}: allowed range [1, 127]")
+    if args.seed < 0:
+        raise UserError(f"--seed {args.seed}: allowed range >= 0")
+    if not (math.isfinite(args.x0) and abs(args.x0) <= 1000.0):
+        raise UserError(f"--x0 {args.x0}: allowed range [-1000, 1000] m")
+    _check_motor(args.motor, args.extractor, f"--motor {args.motor}", sim_only=True)
+    if args.plant:
+        try:
+            from sim_fallback import load_motor
+
+            load_motor(args.plant)
+        except Exception as e:  # noqa: BLE001 - unknown name, broken file: one line
+            raise UserError(f"--plant {args.plant}: {' '.join(str(e).split())}") from None
+    try:
+        st = E.start(args.motor, args.extractor, args.seed, args.node_id, args.x0,
+                     plant_motor=args.plant, ref_sensor=not args.no_ref_sensor,
+                     image=args.image, say=lambda m: print(m, file=sys.stderr))
+    except E.AlreadyRunning as e:
+        raise UserError(str(e)) from None
+    except E.EmuError as e:
+        raise UserError(str(e), EXIT_DRIVE) from None
+    except ValueError as e:  # the boot block: a value it cannot hold
+        raise UserError(f"bench emu start: {e}") from None
+    print(E.describe(st))
+    return EXIT_OK
+
+
 def cmd_faults(args: argparse.Namespace) -> int:
     from bench._drive import DriveError, fault_text
 
@@ -893,6 +1055,7 @@ def main(argv: list[str] | None = None) -> int:
                 "identify": cmd_identify,
                 "param": cmd_param, "config": cmd_config, "faults": cmd_faults,
                 "campaign": _campaign_cmd, "report": cmd_report, "sim": cmd_sim,
+                "emu": cmd_emu,
                 "shell": cmd_shell}
     try:
         return handlers[args.cmd](args)

@@ -71,6 +71,16 @@ class MetricDef:
     window: str
     channels: tuple[str, ...]
 
+    @property
+    def needs_truth(self) -> bool:
+        """Whether the metric needs the true position or speed (:data:`TRUE_CHANNELS`):
+        the simulator's truth, or on a rig a reference sensor. The others judge the
+        drive from what it says about itself."""
+        return any(c in TRUE_CHANNELS for c in self.channels)
+
+
+#: the channels of the truth: the true electrical angle and speed
+TRUE_CHANNELS: tuple[str, ...] = ("theta_e_rad", "omega_e_radps")
 
 _POS = ("theta_e_rad", "theta_hat_rad")
 _EST = ("omega_e_radps", "omega_hat_radps")
@@ -109,6 +119,21 @@ METRICS: tuple[MetricDef, ...] = (
               f"time from the window start until it enters {SETTLE_BAND_RAD:g} rad and "
               f"stays there to the window end; NaN if it never does or stays less than "
               f"{SETTLE_HOLD_S * 1e3:g} ms", "s", "whole run", _POS),
+    # judged without truth: what the drive says about itself
+    MetricDef("speed_tracking_estimate_error_max_rpm",
+              "omega_f - omega_ref: the drive's filtered speed estimate minus its speed "
+              "reference (no truth needed: the drive's own view of its tracking)",
+              "max |.|", "r/min (rotary equivalent)", "settled",
+              ("omega_f_radps", "speed_ref_radps_e")),
+    MetricDef("estimate_settling_time_s",
+              f"|PLL error| (the drive's own angle-error signal) averaged over "
+              f"{SETTLE_AVG_S * 1e3:g} ms",
+              f"time from the window start until it enters {SETTLE_BAND_RAD:g} rad and stays "
+              f"there to the window end (as settling_time_s, without truth)", "s",
+              "whole run", ("pll_err_rad",)),
+    MetricDef("current_q_max_A",
+              "i_q: the drive's measured thrust current (estimated frame)", "max |i_q|", "A",
+              "settled", ("i_dq_hat_A",)),
 )
 
 #: Metric names in result order.
@@ -134,6 +159,50 @@ def wrap_pi(x: np.ndarray | float) -> np.ndarray:
         Wrapped angles (rad).
     """
     return (np.asarray(x) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+#: span of the central difference that turns a reference sensor's position into speed (s)
+REF_SPEED_SPAN_S = 2e-3
+
+
+def truth_from_reference(t_s: np.ndarray, ref_pos_m: np.ndarray, pole_pitch_m: float,
+                         span_s: float = REF_SPEED_SPAN_S) -> dict[str, np.ndarray]:
+    """The truth channels from a reference position sensor (on a linear rig, a
+    quadrature scale read by the drive with its ADC samples, 0x2091).
+
+    ``theta_e_rad = pi x / tau`` (the sensor's position from electrical zero) and
+    ``omega_e_radps`` its central difference over about ``span_s`` (the nearest samples
+    at least ``span_s / 2`` before and after; one-sided at the ends): a scale of
+    resolution r read every T quantises the speed to about r / span_s. Invalid readings
+    (NaN: a sensor fault) stay NaN, and so does every speed computed across them.
+
+    Parameters
+    ----------
+    t_s : ndarray
+        Sample times (s).
+    ref_pos_m : ndarray
+        Reference positions (m), NaN where invalid.
+    pole_pitch_m : float
+        Pole pitch tau (m).
+    span_s : float
+        Span of the central difference (s).
+
+    Returns
+    -------
+    dict
+        ``theta_e_rad`` and ``omega_e_radps`` (rad, rad/s electrical).
+    """
+    t = np.asarray(t_s, dtype=float)
+    x = np.asarray(ref_pos_m, dtype=float)
+    k = math.pi / pole_pitch_m
+    w = np.full(t.shape, np.nan)
+    if t.size >= 2:
+        hi = np.searchsorted(t, t + 0.5 * span_s, side="left").clip(0, t.size - 1)
+        lo = (np.searchsorted(t, t - 0.5 * span_s, side="right") - 1).clip(0, t.size - 1)
+        dt = t[hi] - t[lo]
+        ok = dt > 0
+        w[ok] = k * (x[hi][ok] - x[lo][ok]) / dt[ok]
+    return {"theta_e_rad": k * x, "omega_e_radps": w}
 
 
 def default_window(name: str, settle_s: float, t_end_s: float) -> tuple[float, float]:
@@ -247,6 +316,14 @@ def compute_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pa
                 * rpm_per_radps
         elif name == "speed_tracking_error_max_rpm":
             v = absmax(sig("omega_e_radps", "speed_ref_radps_e")) * rpm_per_radps
+        elif name == "speed_tracking_estimate_error_max_rpm":
+            v = absmax(sig("omega_f_radps", "speed_ref_radps_e")) * rpm_per_radps
+        elif name == "estimate_settling_time_s":
+            v = _settling_time(tw, np.asarray(data["pll_err_rad"], dtype=float)[m], t0)
+        elif name == "current_q_max_A":
+            iq = np.asarray(data["i_dq_hat_A"], dtype=float)
+            iq = iq[:, 1] if iq.ndim == 2 else iq
+            v = absmax(iq[m])
         else:  # settling_time_s
             v = _settling_time(tw, e, t0)
         out[name] = v

@@ -170,29 +170,41 @@ def test_parameter_range_error_from_the_drives_sdo_abort() -> None:
         c.close()
 
 
-def test_no_hardware_falls_back_to_the_simulated_drive_and_says_so() -> None:
+def test_no_hardware_falls_back_to_the_simulated_drive_and_says_so(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """No interface named or configured (no ~/.canrc, no CAN_INTERFACE): the bench falls
+    back to the simulated drive and says so."""
     from bench import connect
 
+    for k in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        monkeypatch.delenv(k, raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.chdir(tmp_path)
     said: list[str] = []
-    c = connect(interface="virtual-does-not-exist", channel="x", say=said.append)
+    c = connect(say=said.append)
     try:
         assert c.is_sim and c.drive.state == "SWITCH ON DISABLED"
+        assert c.info["fallback"] is True and c.kind == "simulated"
     finally:
         c.close()
     text = "\n".join(said)
     assert "no drive hardware found" in text and "FALLING BACK TO THE SIMULATED DRIVE" in text
 
 
-def test_no_drive_answering_on_a_real_bus_falls_back(tmp_path: Path) -> None:
+@pytest.mark.parametrize("interface, channel, why", [
+    ("virtual-does-not-exist", "x", "Unknown interface"),
+    ("virtual", "empty-bus", "no answer from drive node 1")])
+def test_a_named_interface_never_falls_back(interface: str, channel: str, why: str) -> None:
+    """A named --interface that cannot be opened, or on which no drive answers, is an
+    error naming it - never a run on a throwaway simulated drive."""
     from bench import connect
+    from bench._session import NoHardware
 
     said: list[str] = []
-    c = connect(interface="virtual", channel=f"empty-{tmp_path.name}", say=said.append)
-    try:
-        assert c.is_sim
-    finally:
-        c.close()
-    assert any("no answer from drive node 1" in s for s in said)
+    with pytest.raises(NoHardware, match=why) as ei:
+        connect(interface=interface, channel=f"{channel}-{os.getpid()}", say=said.append)
+    assert f"--interface {interface} was named: no fallback" in str(ei.value)
+    assert not any("SIMULATED" in s for s in said)
 
 
 def test_simulated_runs_are_reproducible(tmp_path: Path) -> None:
@@ -310,19 +322,22 @@ def test_require_hardware_refuses_the_fallback(tmp_path: Path,
                "--require-hardware", "--runs", str(runs), "--no-progress"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 3
-    assert len(err) == 1 and "--require-hardware forbids the simulated fallback" in err[0]
+    assert len(err) == 1 and "--require-hardware forbids fallback to the simulated" in err[0]
     assert not runs.exists() or not any(runs.rglob("summary.json"))  # nothing ran
     rc = main(["run", str(seq), "--sim", "--require-hardware", "--runs", str(runs)])
     assert rc == 2 and "contradict" in capsys.readouterr().err
 
 
-def test_fallback_is_never_silent(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_fallback_is_never_silent(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                  monkeypatch: pytest.MonkeyPatch) -> None:
     """Fallback to the simulated drive: console, report banner, summary.json and JUnit all
     say SIMULATED (and that it was a fallback); a --sim run says SIMULATED, no fallback."""
     seq = tmp_path / "short.yaml"
     seq.write_text(_SHORT)
-    for mode, args in (("fallback", ["--interface", "virtual", "--channel",
-                                     f"nobody-{tmp_path.name}"]), ("sim", ["--sim"])):
+    for k in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_CONFIG"):  # nothing configured: fallback
+        monkeypatch.delenv(k, raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    for mode, args in (("fallback", []), ("sim", ["--sim"])):
         s, j, runs = tmp_path / f"{mode}.json", tmp_path / f"{mode}.xml", tmp_path / mode
         rc = main(["run", str(seq), *args, "--summary-json", str(s), "--junit", str(j),
                    "--runs", str(runs), "--no-progress"])
@@ -330,17 +345,18 @@ def test_fallback_is_never_silent(tmp_path: Path, capsys: pytest.CaptureFixture[
         assert rc == 0, out
         fb = mode == "fallback"
         doc = json.loads(s.read_text())
-        assert doc["drive"] == "SIMULATED" and doc["simulated"] is True
+        assert doc["drive"] == "simulated" and doc["simulated"] is True
         assert doc["fallback"] is fb
         props = {p.get("name"): p.get("value") for p in
                  ET.parse(j).getroot().find("testsuite").find("properties")}
-        assert props == {"drive": "SIMULATED", "simulated": "true", "fallback": str(fb).lower()}
+        assert props == {"drive": "simulated", "simulated": "true", "fallback": str(fb).lower(),
+                         "board": "host_sim"}
         assert ("[SIMULATED drive, fallback" in out) is fb and "[SIMULATED drive" in out
         html = next(runs.rglob("report.html")).read_text()
         assert 'class="simbanner"' in html and "SIMULATED DRIVE" in html
         assert ("FALLBACK" in html) is fb
         run_summary = json.loads(next(runs.rglob("summary.json")).read_text())
-        assert run_summary["drive"] == "SIMULATED" and run_summary["fallback"] is fb
+        assert run_summary["drive"] == "simulated" and run_summary["fallback"] is fb
 
 
 @pytest.mark.parametrize("gap_ms", [10, 25, 50])

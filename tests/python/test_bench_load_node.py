@@ -177,7 +177,10 @@ def _connect(ch: str) -> Any:
     conn = connect(interface="virtual", channel=ch, load_node=LOAD, motor=MOTOR,
                    say=said.append)
     assert not conn.is_sim, said
-    assert "HARDWARE" in conn.description and "FALLING BACK" not in " ".join(said)
+    # the hardware code path (a bus, --load-node), labelled from what the drive says it
+    # is: the drive bridge's simulated drive says "simulated", never HARDWARE
+    assert conn.info["via"] == "bus" and conn.kind == "simulated"
+    assert "SIMULATED" in conn.description and "FALLING BACK" not in " ".join(said)
     assert isinstance(conn.load, CanopenLoad) and conn.load.drive.node_id == LOAD
     return conn
 

@@ -114,15 +114,17 @@ def test_failed_safe_state_is_reported(rig) -> None:
     assert not runner.result.passed
 
 
-def test_expectation_without_truth_fails_with_reason(rig) -> None:
+def test_expectation_without_truth_is_not_judged_with_reason(rig) -> None:
+    """Nothing to judge on: the expectation is NOT JUDGED with the reason, never a pass
+    (and never a number); the run's verdict rests on what was judged."""
     drive, _ = rig
     seq = validate_sequence(HEAD + "  - enable: {}\n  - wait: {duration_s: 0.05}\n"
                             "  - expect: {metric: position_error_rms_rad, op: '<', limit: 1}\n"
                             "  - disable: {}\n")
     r = Runner(drive, UNITS).run(seq)
     (e,) = r.expectations
-    assert not e.passed and "true position" in e.message
-    assert not r.passed
+    assert not e.judged and not e.passed and e.status == "NOT JUDGED"
+    assert "nothing recorded" in e.message and e.measured != e.measured
 
 
 def test_fault_on_enable_is_a_clear_error(rig) -> None:
@@ -161,7 +163,11 @@ def test_hardware_path_with_a_stand_in_drive(tmp_path) -> None:
     try:
         conn = connect(interface="virtual", channel=ch, say=said.append)
         try:
-            assert not conn.is_sim and "HARDWARE" in conn.description
+            # the hardware path (a bus), labelled from what the drive says: the stand-in
+            # has no power stage and says "no I/O" - never HARDWARE
+            assert not conn.is_sim and conn.info["via"] == "bus"
+            assert conn.kind == "no_io" and "NO-I/O" in conn.description
+            assert "HARDWARE" not in conn.description
             seq = validate_sequence(HEAD + "  - enable: {}\n"
                                     "  - set_speed: {value: 10, unit: mm/s}\n"
                                     "  - wait: {duration_s: 0.2}\n  - disable: {}\n")
@@ -180,9 +186,10 @@ def test_hardware_path_with_a_stand_in_drive(tmp_path) -> None:
         assert fake.history[-1] == "SWITCH ON DISABLED"
         assert (0x60FF, 0, 10000) in fake.writes
         meta = json.loads((out.run_dir / "meta.json").read_text())
-        assert meta["connection_info"]["kind"] == "hardware"
-        assert meta["drive"]["firmware_version"] == od_names.FW_VERSION_STRING == "0.2.0"
-        assert any("connected to HARDWARE" in s for s in said)
+        assert meta["connection_info"]["kind"] == "no_io"
+        assert meta["drive"]["firmware_version"] == od_names.FW_VERSION_STRING
+        assert meta["clock"].startswith("the drive's own clock")
+        assert any("connected to the NO-I/O" in s for s in said)
     finally:
         fake.close()
         spy.shutdown()

@@ -34,10 +34,18 @@ def test_summaries_follow_the_schema(run: tuple[Path, Path]) -> None:
     for doc in (json.loads(s.read_text()), json.loads((run_dir / "summary.json").read_text())):
         jsonschema.validate(doc, SCHEMA)
     # the schema can fail: a hardware run claiming a fallback, a string metric
-    bad = json.loads(s.read_text()) | {"drive": "HARDWARE", "simulated": False,
+    bad = json.loads(s.read_text()) | {"drive": "hardware", "simulated": False,
                                        "fallback": True}
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate(bad, SCHEMA)
+    # ... an emulated or simulated drive that claims not to be simulated, an old label
+    for drive in ("emulated", "simulated", "unknown"):
+        bad = json.loads(s.read_text()) | {"drive": drive, "simulated": False,
+                                           "fallback": False}
+        with pytest.raises(jsonschema.ValidationError):
+            jsonschema.validate(bad, SCHEMA)
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(json.loads(s.read_text()) | {"drive": "SIMULATED"}, SCHEMA)
     bad = json.loads(s.read_text())
     bad["metrics"]["position_error_rms_rad"] = "0.01"
     with pytest.raises(jsonschema.ValidationError):
@@ -55,7 +63,7 @@ def test_one_compressed_mf4_with_header_units_and_comments(run: tuple[Path, Path
                              else f"<x>{mdf.header.comment}</x>")
         props = {e.get("name"): e.text or "" for e in root.iter("e")}
         assert props["sequence"] == "paper_load_step" and props["seed"] == "1"
-        assert props["motor"] == "paper_salient" and props["drive"] == "SIMULATED"
+        assert props["motor"] == "paper_salient" and props["drive"] == "simulated"
         assert props["firmware_version"] == meta["drive"]["firmware_version"]
         assert props["bench_version"] == meta["bench_version"]
         assert float(props["time_origin_s"]) == pytest.approx(meta["time_origin_s"], abs=1e-9)
