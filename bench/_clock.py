@@ -124,6 +124,15 @@ class DriveClock:
                             "or its process is gone)")
         return hl, dl
 
+    def lost(self) -> str | None:
+        """Why the drive counts as lost now (None while it answers); never raises."""
+        try:
+            with self._lock:
+                self._check(time.time())
+        except DriveLost as e:
+            return str(e)
+        return None
+
     def now(self) -> float:
         """Drive time (s); raises :class:`DriveLost` for a lost drive."""
         h = time.time()

@@ -238,7 +238,7 @@ def qemu_command(image: Path, boot: Path, ports: tuple[int, int, int],
            "-semihosting-config", "enable=on,target=native",
            "-kernel", str(image), "-device", f"loader,file={boot},addr=0x21000000"]
     for p in ports:  # UART0 CAN adapter, UART1 serial telemetry, UART2 virtual load machine
-        cmd += ["-serial", f"tcp:{HOST}:{p},server=on,wait=off"]
+        cmd += ["-serial", f"tcp:{HOST}:{p},server=on,wait=off,nodelay=on"]
     return cmd
 
 

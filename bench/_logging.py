@@ -72,7 +72,9 @@ class ErrorListener(can.Listener):
 
     def on_error(self, exc: Exception) -> None:
         text = f"{type(exc).__name__}: {exc}"
-        log.error("CAN receive thread: %s", text, exc_info=exc)
+        # one line (the run's result names what it means); the traceback with -v
+        log.error("CAN receive thread: %s", text, exc_info=exc if log.isEnabledFor(
+            logging.DEBUG) else None)
         if len(self.errors) < 100:
             self.errors.append(text)
         if self.notifier is not None and self.notifier.exception is exc:

@@ -175,10 +175,18 @@ class Connection:
         load = self.load.drive if isinstance(self.load, CanopenLoad) else None
         return [self.drive] + ([load] if load is not None else [])
 
+    def drive_lost(self) -> str | None:
+        """Why the drive on the bus counts as lost (its time stopped, its bus failed),
+        None while it answers or when that cannot be told."""
+        lost = getattr(self.drive.clock, "lost", None)
+        return lost() if callable(lost) else None
+
     def close(self) -> None:
-        """Disconnect everything (does not change the drive state)."""
+        """Disconnect everything (does not change the drive state). A lost drive is not
+        asked anything (each request would wait for its SDO timeout)."""
+        lost = self.drive_lost()
         if self._hb_task is not None:
-            for d in self._watchers():
+            for d in ([] if lost else self._watchers()):
                 try:
                     d.var(HB_WATCH).raw = 0  # stop watching, then stop beating
                 except Exception as e:  # noqa: BLE001
@@ -909,9 +917,9 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
             guard.begin_stop()
             if bar is not None:
                 bar.close()
-        if runner.traces and tel is not None:
+        if runner.traces and tel is not None and runner.drive_lost is None:
             _collect_trace(runner, drive, tel, logger)
-        if evidence.restore and not getattr(runner, "drive_lost", False):
+        if evidence.restore and runner.drive_lost is None:
             finish_evidence(conn, evidence)
         if conn.sim is not None:
             conn.sim.sink = None

@@ -69,6 +69,15 @@ SIM_CHANNELS: dict[str, str] = {
 }
 
 
+#: How every drive the bench simulates models its plant, the host's and the emulated
+#: board's alike (sim_fallback.emu_boot_blob): the ADC noise restarts from the seed when
+#: the inverter is switched on, so the noise after an enable depends on the seed alone -
+#: not on how long the drive idled on the bus before it (which differs between the two,
+#: and between any two runs reached over a bus): the twin comparison then compares the
+#: drives, not two draws of the noise (docs/boards.md).
+BENCH_PLANT: dict[str, Any] = {"noise_restart": 1}
+
+
 class SimSerial:
     """Serial-port-like byte pipe carrying the drive's UART output (read side).
 
@@ -202,7 +211,8 @@ class SimDrive(DriveBridge):
                              realtime=0.0, sim_kwargs={"motor": mot, "extractor": extractor,
                                                        "seed": seed, "noise": noise,
                                                        "x0_m": x0_m,
-                                                       "plant": plant or None},
+                                                       "plant": {**BENCH_PLANT,
+                                                                 **(plant or {})}},
                              background_every=background_every, nvm_path=nvm_path)
         except BaseException:
             bus.shutdown()

@@ -337,9 +337,70 @@ def build_parser() -> argparse.ArgumentParser:
     ri.add_argument("--runs", default="runs", metavar="DIR", help="run folder root (default "
                                                                   "runs/)")
 
+    p = sub.add_parser("flash", help="program a board's image and check the drive after "
+                       "its reboot", description="Program a board's firmware image with the "
+                       "board's debug probe (openocd or pyocd, the first installed unless "
+                       "--tool), then - on the CAN bus given (--interface/--channel/--bitrate, "
+                       "or python-can's configuration) - wait for the drive to answer and check "
+                       "its firmware version (0x2040) against this bench's and its board name "
+                       "(0x2090:2). The parameter page at the end of the flash is not part of "
+                       "the image: a stored configuration survives. docs/hardware_bringup.md.",
+                       epilog="Exit codes: 0 programmed, rebooted and the expected version "
+                              "answered, 1 another version or board answered, 2 bad input or "
+                              "no tool (nothing written), 3 no probe, programming or "
+                              "verification failed, or no answer on CAN.")
+    p.add_argument("image", metavar="IMAGE.elf", help="e.g. build/cm4/firmware_c/boards/"
+                   "nucleo_g474re/pmlsm_nucleo_g474re.elf")
+    p.add_argument("--tool", choices=("openocd", "pyocd"), help="programming tool")
+    p.add_argument("--probe", metavar="SERIAL", help="the debug probe's serial number")
+    p.add_argument("--board", default="nucleo_g474re",
+                   help="the board name the drive must report (default nucleo_g474re)")
+    p.add_argument("--timeout", type=float, default=10.0, metavar="S",
+                   help="how long the drive may take to answer after the reset (default 10)")
+    p.add_argument("--no-check", action="store_true",
+                   help="program only; do not check the drive over CAN")
+    p.add_argument("--interface", help="python-can interface of the drive's bus")
+    p.add_argument("--channel", help="python-can channel")
+    p.add_argument("--bitrate", type=int, help="CAN bitrate in bit/s")
+    p.add_argument("--node-id", type=int, default=1, help="drive node id (default 1)")
+
+    p = sub.add_parser("compare", help="two runs side by side against tolerances (twin "
+                       "check: emulated vs simulated, hardware vs its simulation)",
+                       description="Compare two run folders: every metric of both (their "
+                       "default windows), the difference against the metric's tolerance, the "
+                       "faults each drive raised (must be the same codes); writes a page "
+                       "overlaying their signals (default: in RUN_B, compare_<RUN_A>.html).",
+                       epilog="Exit codes: 0 within tolerances and the same faults, 1 a "
+                              "difference beyond tolerance or other faults, 2 bad input.")
+    p.add_argument("run_a", metavar="RUN_A")
+    p.add_argument("run_b", metavar="RUN_B")
+    p.add_argument("--tol", action="append", metavar="METRIC=VALUE",
+                   help="tolerance of a metric: METRIC=10%% (relative to RUN_A) or "
+                        "METRIC=0.002 (absolute, the metric's unit); repeatable")
+    p.add_argument("--out", metavar="PAGE.html", help="where to write the comparison page")
+
     from bench import _campaign
     _campaign.add_parser(sub)
     return ap
+
+
+def _quiet_thread_errors(verbose: bool) -> None:
+    """An exception that ends a background thread (python-can's periodic senders when
+    the bus is gone, a receive thread) is one line, not a traceback; BENCH_DEBUG=1 or -v
+    keep the traceback. What it means for the run is said by the run itself."""
+    import threading
+
+    default = threading.excepthook
+
+    def hook(a: Any) -> None:
+        if verbose or os.environ.get("BENCH_DEBUG"):
+            default(a)
+            return
+        name = a.thread.name if a.thread is not None else "a background thread"
+        print(f"bench: {name} stopped: {a.exc_type.__name__}: "
+              f"{' '.join(str(a.exc_value).split())}", file=sys.stderr)
+
+    threading.excepthook = hook
 
 
 def _sigterm_as_interrupt() -> None:
@@ -1007,6 +1068,59 @@ def cmd_emu(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_flash(args: argparse.Namespace) -> int:
+    """``bench flash IMAGE``: :func:`bench._flash.flash`, checked over CANopen."""
+    import math
+
+    import can
+
+    from bench._flash import flash
+
+    if not 1 <= args.node_id <= 127:
+        raise UserError(f"--node-id {args.node_id}: allowed range [1, 127]")
+    if not (math.isfinite(args.timeout) and 0.1 <= args.timeout <= 600):
+        raise UserError(f"--timeout {args.timeout}: allowed range [0.1, 600] s")
+    bus = None
+    if not args.no_check:
+        kw = {k: v for k, v in (("interface", args.interface), ("channel", args.channel),
+                                ("bitrate", args.bitrate)) if v}
+        if not args.interface:
+            try:
+                cfg = can.util.load_config()
+            except (can.CanError, NotImplementedError, ValueError):
+                cfg = {}
+            if not cfg.get("interface"):
+                raise UserError("flash: no CAN bus to check the drive on after its reboot: "
+                                "give --interface/--channel (or python-can's configuration), "
+                                "or --no-check to program only")
+        try:
+            bus = can.Bus(**kw)
+        except (can.CanError, OSError, ImportError, ValueError, NotImplementedError,
+                TypeError) as e:
+            raise UserError(f"flash: cannot open CAN bus {kw}: {' '.join(str(e).split())}",
+                            EXIT_DRIVE) from None
+    try:
+        res = flash(args.image, bus, node_id=args.node_id, tool=args.tool, probe=args.probe,
+                    board=args.board, timeout_s=args.timeout)
+    finally:
+        if bus is not None:
+            bus.shutdown()
+    print(res.message, file=sys.stdout if res.ok else sys.stderr)
+    return int(res.code)
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    """``bench compare RUN_A RUN_B``: :func:`bench._compare.compare`."""
+    from bench._compare import CompareError, compare
+
+    try:
+        rc, text, _ = compare(args.run_a, args.run_b, args.tol, args.out)
+    except CompareError as e:
+        raise UserError(str(e)) from None
+    print(text)
+    return EXIT_OK if rc == 0 else EXIT_FAIL
+
+
 def cmd_faults(args: argparse.Namespace) -> int:
     from bench._drive import DriveError, fault_text
 
@@ -1045,8 +1159,12 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     if not args.verbose:
         logging.getLogger("canopen").setLevel(logging.ERROR)
+        # python-can's periodic senders (SYNC, heartbeat) log a traceback per failed send
+        # when the bus is gone; the run's result names the lost drive in one line
+        logging.getLogger("can.bcm").setLevel(logging.CRITICAL)
         # python-can's socketcand client warns for every frame split across two TCP reads
         logging.getLogger("can.interfaces.socketcand").setLevel(logging.ERROR)
+    _quiet_thread_errors(args.verbose > 0)
     if args.cmd is None:
         ap.print_help()
         return EXIT_USAGE
@@ -1055,7 +1173,7 @@ def main(argv: list[str] | None = None) -> int:
                 "identify": cmd_identify,
                 "param": cmd_param, "config": cmd_config, "faults": cmd_faults,
                 "campaign": _campaign_cmd, "report": cmd_report, "sim": cmd_sim,
-                "emu": cmd_emu,
+                "emu": cmd_emu, "compare": cmd_compare, "flash": cmd_flash,
                 "shell": cmd_shell}
     try:
         return handlers[args.cmd](args)

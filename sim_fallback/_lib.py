@@ -180,7 +180,7 @@ class SimPlantParams(C.Structure):
         ("adc_offset_counts", _d * 3), ("adc_gain_err", _d * 3),
         ("udc_fullscale_V", _d), ("udc_noise_V", _d), ("seed", C.c_uint64),
         ("open_phase_mask", _u32), ("adc_stuck_mask", _u32),
-        ("ref_res_m", _d), ("ref_offset_m", _d), ("ref_fault", _u32), ("ref_pad_", _u32),
+        ("ref_res_m", _d), ("ref_offset_m", _d), ("ref_fault", _u32), ("noise_restart", _u32),
     ]
 
 

@@ -508,7 +508,7 @@ def _build(path: Path, doc: dict[str, Any]) -> Motor:
         adc_offset_counts=list(g["adc_offset_counts"]), adc_gain_err=list(g["adc_gain_err"]),
         udc_fullscale_V=float(g["udc_fullscale_V"]), udc_noise_V=float(g["udc_noise_V"]),
         seed=0, ref_res_m=float(g["resolution_m"]), ref_offset_m=float(g["offset_m"]),
-        ref_fault=0,
+        ref_fault=0, noise_restart=0,
     )
     ctrl = {k: float(g[k]) for (s, k) in _SCHEMA if s == "controller" and g[k] is not None}
     return Motor(name=str(m.get("name", path.stem)), path=path,

@@ -70,7 +70,11 @@ typedef struct {
   double ref_offset_m;       /**< scale reading (m) at x = 0 (electrical angle 0) */
   uint32_t ref_fault;        /**< 0 healthy; 1 signal lost: the scale's error output is
                                   set (FW_REF_FAULT) and its count frozen */
-  uint32_t ref_pad_;
+  uint32_t noise_restart;    /**< 1: the noise generator restarts from seed when the inverter
+                                  is switched on (the first PWM period after an off one): the
+                                  noise after an enable depends on the seed alone, not on how
+                                  long the drive idled before (twin comparisons of the host
+                                  and the emulated drive); 0: one stream from creation */
 } sim_plant_params_t;
 
 /** Plant state (truth). */

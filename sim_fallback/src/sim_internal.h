@@ -59,6 +59,7 @@ struct sim_s {
   int pwm_on;
   double F_load_N;      /**< load force applied over the present period */
   int32_t ref_last;     /**< the scale's last valid count (held while its signal is lost) */
+  int pwm_was_on;       /**< the inverter applied PWM in the last integrated period */
   /* controller */
   sim_controller_t ctrl;
   int use_adc;
@@ -185,6 +186,14 @@ void sim_plant_period(sim_t *s, const double duty[3], int pwm_on, double dt_s,
                       uint32_t n_sub);
 double sim_plant_force(const sim_t *s, const sim_plant_state_t *st);
 void sim_rng_seed(sim_t *s, uint64_t seed);
+/** The generator's state from seed again (the ziggurat tables kept). */
+void sim_rng_restart(sim_t *s, uint64_t seed);
+/** Before a period's plant integration: the noise restart at a switch-on
+ *  (sim_plant_params_t.noise_restart), in every loop that integrates. */
+static inline void sim_noise_on_switch(sim_t *s, int pwm_on) {
+  if (pwm_on && !s->pwm_was_on && s->p.noise_restart) sim_rng_restart(s, s->p.seed);
+  s->pwm_was_on = pwm_on ? 1 : 0;
+}
 double sim_rng_gauss(sim_t *s);
 
 #endif

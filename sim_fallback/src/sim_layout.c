@@ -179,7 +179,7 @@ static const layout_row_t k_rows[] = {
     ROW(sim_plant_params_t, ref_res_m),
     ROW(sim_plant_params_t, ref_offset_m),
     ROW(sim_plant_params_t, ref_fault),
-    ROW(sim_plant_params_t, ref_pad_),
+    ROW(sim_plant_params_t, noise_restart),
     ROW(sim_plant_state_t, i_d_A),
     ROW(sim_plant_state_t, i_q_A),
     ROW(sim_plant_state_t, x_m),

@@ -68,6 +68,7 @@ int sim_params_check(const sim_plant_params_t *p, const char **bad_field) {
   CHECK(isfinite(p->ref_res_m) && p->ref_res_m >= 0.0 && p->ref_res_m <= 0.01, "ref_res_m");
   CHECK(isfinite(p->ref_offset_m) && fabs(p->ref_offset_m) <= 1000.0, "ref_offset_m");
   CHECK(p->ref_fault <= 1u, "ref_fault");
+  CHECK(p->noise_restart <= 1u, "noise_restart");
   return 0;
 }
 
@@ -370,6 +371,7 @@ void sim_plant_step(sim_t *s, const float duty_abc[3], int pwm_on) {
   if (!s || !duty_abc) return;
   for (int j = 0; j < 3; ++j) s->duty[j] = sanitize_duty(duty_abc[j]);
   s->pwm_on = pwm_on ? 1 : 0;
+  sim_noise_on_switch(s, s->pwm_on);
   sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
   s->k++;
   s->t_s = (double)s->k * s->dt_s;
@@ -441,6 +443,7 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
     /* 5. plant over [t_k, t_k+1) with the duties from step k-1 (independent of
      * step k below, which sees only the samples taken above) */
     const double x_k = s->st.x_m;
+    sim_noise_on_switch(s, s->pwm_on);
     sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
 
     /* 6. controller (the control interrupt) on the samples of t_k; the reference

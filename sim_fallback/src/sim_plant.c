@@ -23,9 +23,13 @@ static uint64_t splitmix64(uint64_t *x) {
 #define ZIG_R 3.442619855899
 #define ZIG_V 9.91256303526217e-3
 
-void sim_rng_seed(sim_t *s, uint64_t seed) {
+void sim_rng_restart(sim_t *s, uint64_t seed) {
   uint64_t x = seed;
   for (int i = 0; i < 4; ++i) s->rng[i] = splitmix64(&x);
+}
+
+void sim_rng_seed(sim_t *s, uint64_t seed) {
+  sim_rng_restart(s, seed);
   /* layer tables */
   double f = exp(-0.5 * ZIG_R * ZIG_R);
   s->zig_x[0] = ZIG_V / f;

@@ -84,6 +84,14 @@ def main() -> None:
     (q / "telemetry").write_bytes(
         link.send(sl.FrameType.TELEMETRY, sl.telemetry_payload(5, [0, 1], [1.0, 2.0])) * 2)
     (q / "long").write_bytes(link.send(sl.FrameType.TRACE_DATA, bytes(range(240))))
+    c = HERE / "fuzz_slcan"
+    c.mkdir(parents=True, exist_ok=True)
+    # what python-can's slcan interface writes: open (with a bit rate), frames, close
+    (c / "python_can").write_bytes(b"C\rS8\r\rO\r" + b"t0000201\r" + b"t60184023402001000000\r"
+                                   + b"t0800\r" + b"r6018\rT1ABCDEF82DEADBEEF01020304\r"
+                                   + b"R1FFFFFFF0\rC\r")
+    (c / "commands").write_bytes(b"V\rN\rF\rZ1\rs031C\rL\rt1232ABCD\rF\rC\rO\r\n"
+                                 + b"t7FF8FFFFFFFFFFFFFFFF\r\n" + b"x" * 40 + b"\r")
 
 
 if __name__ == "__main__":

@@ -3,8 +3,9 @@
 #
 #   tests/fuzz/run.sh [seconds-per-target] [target...]
 #
-# Targets: fuzz_sdo fuzz_pdo fuzz_serial fuzz_app (default: all; fuzz_app includes the
-# control core and the application glue). Corpora persist in
+# Targets: fuzz_sdo fuzz_pdo fuzz_serial fuzz_app fuzz_slcan (default: all; fuzz_app
+# includes the control core and the application glue, fuzz_slcan the boards' serial-line
+# CAN endpoint firmware_c/boards/_common/slcan.c). Corpora persist in
 # build/comm/fuzz/corpus/<target> (seeded from tests/fuzz/seeds/<target> if
 # present); crashes are written to build/comm/fuzz/artifacts/. Prints one
 # summary line per target: "FUZZ <target> runs=<n> exec/s=<n> cov=<n> ft=<n>".
@@ -13,7 +14,7 @@ set -euo pipefail
 SECS="${1:-10}"
 shift || true
 TARGETS=("$@")
-[ ${#TARGETS[@]} -eq 0 ] && TARGETS=(fuzz_sdo fuzz_pdo fuzz_serial fuzz_app)
+[ ${#TARGETS[@]} -eq 0 ] && TARGETS=(fuzz_sdo fuzz_pdo fuzz_serial fuzz_app fuzz_slcan)
 ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
 OUT="$ROOT/build/comm/fuzz"
 CC="${FUZZ_CC:-clang}"
@@ -29,6 +30,8 @@ for t in "${TARGETS[@]}"; do
   extra=()
   if [ "$t" = fuzz_app ]; then
     extra=("$COMM/src/fw_app.c" "$ROOT"/firmware_c/src/*.c)
+  elif [ "$t" = fuzz_slcan ]; then
+    extra=(-I"$ROOT/firmware_c/boards/_common" "$ROOT/firmware_c/boards/_common/slcan.c")
   fi
   "$CC" "${FLAGS[@]}" -o "$OUT/$t" "$ROOT/tests/fuzz/$t.c" "${SRCS[@]}" "${extra[@]}" -lm
   mkdir -p "$OUT/corpus/$t"

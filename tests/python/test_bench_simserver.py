@@ -79,7 +79,9 @@ def test_successive_commands_see_the_same_drive_and_save_survives_restart(env):
     assert rc == 2 and "already running" in err and _state(env)["pid"] == st["pid"]
     rc, out, err = bench("param", "set", "u_inj_V", "25", "--sim-server", env=env)
     assert rc == 0, err
-    assert "SIMULATED drive server" in err  # never presented as hardware
+    # never presented as hardware: labelled from what the drive says, and named
+    assert "connected to the SIMULATED drive host_sim" in err and "HARDWARE" not in err
+    assert "simulated drive server pid" in err
     rc, out, _ = bench("param", "get", "u_inj_V", "--sim-server", env=env)
     assert rc == 0 and "= 25.0 V" in out, out  # a second process, the same drive
     rc, out, err = bench("config", "save", "--sim-server", env=env)

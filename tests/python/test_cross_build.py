@@ -48,9 +48,10 @@ def test_cm4_image_links_and_fits(cm4_build: tuple[Path, str]) -> None:
     text, data, bss = (int(g) for g in m.groups())
     print(f"cortex-m4f drive application: text={text} data={data} bss={bss}")
     # The whole application (core + CANopen + serial link + 16 KiB trace buffer) on a
-    # 128 KiB-flash / 32 KiB-RAM part (e.g. STM32G431), with room to spare.
+    # 128 KiB-flash / 32 KiB-RAM part (e.g. STM32G431), with room to spare: 3 KiB left
+    # for the stack (the board ports' images are checked against their own parts).
     assert 20_000 < text < 96 * 1024
-    assert data + bss < 28 * 1024
+    assert data + bss < 29 * 1024
     # const tables (object dictionary, configuration fields) stay in flash: with PIC
     # they would land in .data.rel.ro, i.e. RAM (15.6 KB measured before the fix)
     assert data < 1024

@@ -16,7 +16,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 RUN = ROOT / "tests" / "fuzz" / "run.sh"
-TARGETS = ("fuzz_sdo", "fuzz_pdo", "fuzz_serial", "fuzz_app")
+TARGETS = ("fuzz_sdo", "fuzz_pdo", "fuzz_serial", "fuzz_app", "fuzz_slcan")
 
 
 def _need_clang() -> None:

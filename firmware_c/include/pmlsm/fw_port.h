@@ -23,6 +23,12 @@
  *     bench, one file per simulated drive as non-volatile memory.
  *   - tests/c/test_board.c : a test port that refuses frames and takes
  *     bytes piecemeal, to test the board glue.
+ *   - boards/<name>/ : the board ports, one folder per board, nothing
+ *     board-specific outside it (docs/boards.md): boards/mps2_an386/ the
+ *     emulated board (QEMU: the image with the simulator's plant as its
+ *     virtual motor), boards/nucleo_g474re/ the NUCLEO-G474RE with a
+ *     three-shunt power stage (not yet tested on silicon); boards/_common/
+ *     the glue they share.
  *
  * Non-volatile memory: the drive application stores one parameter block
  * (CiA 301 0x1010 'save', see fw_app.h). It does not call the two nvm
