@@ -1159,6 +1159,9 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     if not args.verbose:
         logging.getLogger("canopen").setLevel(logging.ERROR)
+        # python-can's interfaces warn about optional libraries at import (e.g. pcan's
+        # "uptime library not available"): not the user's business unless -v
+        logging.getLogger("can").setLevel(logging.ERROR)
         # python-can's periodic senders (SYNC, heartbeat) log a traceback per failed send
         # when the bus is gone; the run's result names the lost drive in one line
         logging.getLogger("can.bcm").setLevel(logging.CRITICAL)

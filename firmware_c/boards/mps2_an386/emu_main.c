@@ -291,6 +291,10 @@ static size_t board_stats(void *ctx, char *buf, size_t cap) {
   text_u64(&t, g_port.can_rx_bytes);
   text_str(&t, " can_tx=");
   text_u64(&t, g_port.can_tx_bytes);
+  text_str(&t, " can_frames_out=");
+  text_u64(&t, g_port.slcan.count.frames_out);
+  text_str(&t, " can_frames_in=");
+  text_u64(&t, g_port.slcan.count.frames_in);
   text_str(&t, " tel_tx=");
   text_u64(&t, g_port.tel_tx_bytes);
   text_str(&t, " rx_lost=");
