@@ -537,6 +537,9 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
                             "cannot run this motor") from None
         raise UserError(f"cannot connect: {' '.join(str(e).split())}", EXIT_DRIVE) from e
     conn.sync_period_ms = args.sync_period_ms
+    if seq is not None and not conn.is_sim and seq.x0 not in (0, 0.0):
+        print(f"bench: {seq.path}: x0 {seq.x0} applies to the in-process simulated drive only; "
+              "on this drive the mover starts where it is", file=sys.stderr)
     return conn
 
 
