@@ -200,6 +200,9 @@ class Connection:
                 self.network.sync.stop()
             except Exception as e:  # noqa: BLE001 - a dead bus: nothing left to stop
                 log.warning("could not stop SYNC: %s", e)
+        close_load = getattr(self.load, "close", None)  # the emulated rig's load link
+        if callable(close_load):
+            close_load()
         try:
             self.network.disconnect()
         except Exception as e:  # noqa: BLE001 - canopen re-raises receive-thread errors here

@@ -165,3 +165,26 @@ def test_killed_emulator_ends_the_run_within_a_second(tmp_path: Path) -> None:
     s = _summary(_run_dir(out))
     assert s["aborted"] and "DriveLost" in s["error"]
     assert s["safe_state"].startswith("SAFE STATE NOT CONFIRMED")
+
+
+def test_two_concurrent_starts_leave_one_board(tmp_path: Path) -> None:
+    """Two `bench emu start` at once on one state folder: one board, the other start is
+    refused (exit 2, one line); `bench emu stop` stops it; status then says none (exit 3)."""
+    env = _env(tmp_path / "state")
+    ps = [subprocess.Popen([sys.executable, "-m", "bench", "emu", "start"], cwd=REPO, env=env,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+          for _ in range(2)]
+    res = [(p.wait(timeout=120), *p.communicate()) for p in ps]
+    try:
+        rcs = sorted(r[0] for r in res)
+        assert rcs == [0, 2], res
+        refused = next(r for r in res if r[0] == 2)
+        assert "already running" in refused[2] and refused[2].count("\n") == 1
+        st = json.loads((tmp_path / "state" / "emu.json").read_text())
+        qemus = subprocess.run(["pgrep", "-f", str(tmp_path / "state" / "emu_boot.bin")],
+                               capture_output=True, text=True).stdout.split()
+        assert qemus == [str(st["pid"])]
+    finally:
+        assert bench("emu", "stop", env=env)[0] == 0
+    rc, _, err = bench("emu", "status", env=env)
+    assert rc == 3 and "no emulated board running" in err
