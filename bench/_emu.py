@@ -45,7 +45,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from bench._simserver import HOST, state_dir
+from bench._simserver import HOST, log_tail, process_is, state_dir, write_state_file
 
 STATE_FILE = "emu.json"
 LOG_FILE = "emu.log"
@@ -242,7 +242,8 @@ def qemu_command(image: Path, boot: Path, ports: tuple[int, int, int],
     return cmd
 
 
-def _free_ports(n: int) -> list[int]:
+def free_ports(n: int) -> list[int]:
+    """n free TCP ports on 127.0.0.1 (bound and released: free at the time of asking)."""
     socks = []
     try:
         for _ in range(n):
@@ -281,28 +282,13 @@ def read_state(folder: Path | None = None) -> EmuState | None:
 
 
 def _write_state(folder: Path, st: EmuState) -> None:
-    tmp = folder / f".{STATE_FILE}.{os.getpid()}.tmp"
-    tmp.write_text(json.dumps(asdict(st), indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, folder / STATE_FILE)
+    write_state_file(folder, STATE_FILE, asdict(st))
 
 
 def pid_is_emu(pid: int, folder: Path | None = None) -> bool:
     """Whether ``pid`` is alive and is this state folder's QEMU (not a reused pid)."""
-    if pid <= 0:
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return False
-    try:
-        cmd = Path(f"/proc/{pid}/cmdline").read_bytes()
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return True  # no /proc: trust the pid
     boot = str((folder or state_dir()) / BOOT_FILE).encode()
-    return b"qemu-system-arm" in cmd and boot in cmd and stat.rsplit(")", 1)[1].split()[0] != "Z"
+    return process_is(pid, b"qemu-system-arm", boot)
 
 
 def check_running(folder: Path | None = None) -> EmuState:
@@ -320,17 +306,8 @@ def check_running(folder: Path | None = None) -> EmuState:
 
 
 def _exit_reason(folder: Path) -> str:
-    tail = _log_tail(folder / LOG_FILE, 2)
+    tail = log_tail(folder / LOG_FILE, 2)
     return f" (its log: {tail})" if tail else ""
-
-
-def _log_tail(logf: Path, lines: int = 3) -> str:
-    try:
-        text = logf.read_text(encoding="utf-8", errors="replace").strip().splitlines()
-    except OSError:
-        return ""
-    tail = [t.strip() for t in text[-lines:] if t.strip() and not t.startswith("---")]
-    return " | ".join(tail)
 
 
 @contextlib.contextmanager
@@ -394,7 +371,7 @@ def start(motor: str = "paper_salient", extractor: str = "sogi_adaptive", seed: 
         boot = folder / BOOT_FILE
         write_emu_boot_blob(boot, motor=motor, extractor=extractor, seed=seed, x0_m=x0_m,
                             node_id=node_id, nvm_path=nvm.name, plant=plant)
-        ports = _free_ports(3)
+        ports = free_ports(3)
         logf = folder / LOG_FILE
         cmd = qemu_command(img, boot, (ports[0], ports[1], ports[2]), qemu)
         with open(logf, "ab") as out:
@@ -407,7 +384,7 @@ def start(motor: str = "paper_salient", extractor: str = "sogi_adaptive", seed: 
         while True:
             if proc.poll() is not None:
                 raise EmuError(f"the emulated board exited with code {proc.returncode}: "
-                               f"{_log_tail(logf) or 'no output'} (log: {logf})")
+                               f"{log_tail(logf) or 'no output'} (log: {logf})")
             if all(_listening(p) for p in ports[1:]):  # not the CAN port: one client there
                 break
             if time.monotonic() > deadline:

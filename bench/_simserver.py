@@ -130,15 +130,21 @@ def read_state(folder: Path | None = None) -> ServerState | None:
                            started=0.0, bench_version="?")
 
 
-def _write_state(folder: Path, st: ServerState) -> None:
+def write_state_file(folder: Path, name: str, doc: dict[str, Any]) -> None:
+    """A state file written atomically (a reader never sees half of it)."""
     folder.mkdir(parents=True, exist_ok=True)
-    tmp = folder / f".{STATE_FILE}.{os.getpid()}.tmp"
-    tmp.write_text(json.dumps(asdict(st), indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, folder / STATE_FILE)
+    tmp = folder / f".{name}.{os.getpid()}.tmp"
+    tmp.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    os.replace(tmp, folder / name)
 
 
-def pid_is_server(pid: int) -> bool:
-    """Whether ``pid`` is alive and is a simulated drive server (not a reused pid)."""
+def _write_state(folder: Path, st: ServerState) -> None:
+    write_state_file(folder, STATE_FILE, asdict(st))
+
+
+def process_is(pid: int, *needles: bytes) -> bool:
+    """Whether ``pid`` is alive, not a zombie, and its command line holds every needle
+    (a background process of ours, not a reused pid)."""
     if pid <= 0:
         return False
     try:
@@ -151,13 +157,18 @@ def pid_is_server(pid: int) -> bool:
         cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ")
     except OSError:
         return True  # no /proc: trust the pid
-    if b"bench._simserver" not in cmd:
+    if not all(n in cmd for n in needles):
         return False
     try:  # a zombie (killed, not yet reaped by its parent) is gone for us
         stat = Path(f"/proc/{pid}/stat").read_text()
         return stat.rsplit(")", 1)[1].split()[0] != "Z"
     except (OSError, IndexError):
         return True
+
+
+def pid_is_server(pid: int) -> bool:
+    """Whether ``pid`` is alive and is a simulated drive server (not a reused pid)."""
+    return process_is(pid, b"bench._simserver")
 
 
 def probe(host: str, port: int, timeout_s: float = 1.0) -> str | None:
@@ -504,13 +515,19 @@ def start(motor: str, extractor: str, seed: int, node_id: int, port: int,
                          f"({_log_tail(logf)})")
 
 
-def _log_tail(logf: Path, lines: int = 3) -> str:
+def log_tail(logf: Path, lines: int = 3) -> str:
+    """The last lines of a background process's log, as one line ("" when none)."""
     try:
         text = logf.read_text(encoding="utf-8", errors="replace").strip().splitlines()
     except OSError:
-        return "no log"
+        return ""
     tail = [t.strip() for t in text[-lines:] if t.strip() and not t.startswith("---")]
-    return " | ".join(tail) + f" (log: {logf})" if tail else f"see {logf}"
+    return " | ".join(tail)
+
+
+def _log_tail(logf: Path, lines: int = 3) -> str:
+    tail = log_tail(logf, lines)
+    return f"{tail} (log: {logf})" if tail else f"see {logf}"
 
 
 def stop(timeout_s: float = 5.0) -> tuple[str, int | None]:

@@ -980,27 +980,36 @@ def cmd_shell(args: argparse.Namespace) -> int:
     return _shell.start(conn, args.runs)
 
 
+def _status_or_stop(action: str, mod: Any, error: type[Exception], alive: Any, what: str,
+                    pid_word: str, describe: Any) -> int:
+    """``bench sim|emu status|stop``: a background process and its state file (``mod``:
+    bench._simserver or bench._emu). Status of none or a dead one: exit 3, one line (a stale
+    state file is removed)."""
+    if action == "status":
+        try:
+            st = mod.check_running()
+        except error as e:
+            stale = mod.read_state()
+            if stale is not None and not alive(stale.pid):
+                mod.stop()  # removes the stale state file
+            raise UserError(str(e), EXIT_DRIVE) from None
+        print(describe(st))
+        return EXIT_OK
+    how, pid = mod.stop()
+    print({"none": f"bench: no {what} running",
+           "stale": f"bench: removed a stale state file ({pid_word} {pid} was not running)",
+           "stopped": f"bench: {what} stopped ({pid_word} {pid})",
+           "killed": f"bench: {what} killed ({pid_word} {pid}: no exit within 5 s of "
+                     "SIGTERM)"}[how])
+    return EXIT_OK
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     from bench import _simserver as S
 
-    if args.sim_cmd == "status":
-        try:
-            st = S.check_running()
-        except S.SimServerError as e:
-            stale = S.read_state()
-            if stale is not None and not S.pid_is_server(stale.pid):
-                S.stop()  # removes the stale state file
-            raise UserError(str(e), EXIT_DRIVE) from None
-        print(S.describe(st))
-        return EXIT_OK
-    if args.sim_cmd == "stop":
-        how, pid = S.stop()
-        print({"none": "bench: no simulated drive server running",
-               "stale": f"bench: removed a stale state file (pid {pid} was not running)",
-               "stopped": f"bench: simulated drive server stopped (pid {pid})",
-               "killed": f"bench: simulated drive server killed (pid {pid}: no exit within "
-                         "5 s of SIGTERM)"}[how])
-        return EXIT_OK
+    if args.sim_cmd in ("status", "stop"):
+        return _status_or_stop(args.sim_cmd, S, S.SimServerError, S.pid_is_server,
+                               "simulated drive server", "pid", S.describe)
     if not 1 <= args.node_id <= 127:
         raise UserError(f"--node-id {args.node_id}: allowed range [1, 127]")
     if not 0 <= args.port <= 65535:
@@ -1025,24 +1034,9 @@ def cmd_emu(args: argparse.Namespace) -> int:
 
     from bench import _emu as E
 
-    if args.emu_cmd == "status":
-        try:
-            st = E.check_running()
-        except E.EmuError as e:
-            stale = E.read_state()
-            if stale is not None and not E.pid_is_emu(stale.pid):
-                E.stop()  # removes the stale state file
-            raise UserError(str(e), EXIT_DRIVE) from None
-        print(E.describe(st, measure=not args.no_measure))
-        return EXIT_OK
-    if args.emu_cmd == "stop":
-        how, pid = E.stop()
-        print({"none": "bench: no emulated board running",
-               "stale": f"bench: removed a stale state file (QEMU pid {pid} was not running)",
-               "stopped": f"bench: emulated board stopped (QEMU pid {pid})",
-               "killed": f"bench: emulated board killed (QEMU pid {pid}: no exit within 5 s "
-                         "of SIGTERM)"}[how])
-        return EXIT_OK
+    if args.emu_cmd in ("status", "stop"):
+        return _status_or_stop(args.emu_cmd, E, E.EmuError, E.pid_is_emu, "emulated board",
+                               "QEMU pid", lambda st: E.describe(st, not args.no_measure))
     if not 1 <= args.node_id <= 127:
         raise UserError(f"--node-id {args.node_id}: allowed range [1, 127]")
     if args.seed < 0:

@@ -96,16 +96,9 @@ def test_image_size(emu_build: tuple[Path, str]) -> None:
 
 
 def _free_ports(n: int) -> list[int]:
-    socks = []
-    try:
-        for _ in range(n):
-            s = socket.socket()
-            s.bind((HOST, 0))
-            socks.append(s)
-        return [s.getsockname()[1] for s in socks]
-    finally:
-        for s in socks:
-            s.close()
+    from bench._emu import free_ports
+
+    return free_ports(n)
 
 
 def qemu_command(elf: Path, boot: str | None, ports: list[int]) -> list[str]:

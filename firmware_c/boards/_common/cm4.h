@@ -75,6 +75,18 @@ static inline uint32_t cm4_primask_save(void) {
 }
 static inline void cm4_primask_restore(uint32_t v) { __asm volatile("msr primask, %0" ::"r"(v) : "memory"); }
 static inline void cm4_wfi(void) { __asm volatile("wfi" ::: "memory"); }
+
+/** The drive's critical section on every board (fw_port_critical_enter/exit): BASEPRI
+ *  raised to the control interrupt's level, so the background's changes of the core
+ *  never race the control and supervision interrupts, while more urgent ones (a power
+ *  stage's break, an emulated board's hardware model) stay live. The key is the BASEPRI
+ *  before: sections nest. */
+static inline uint32_t cm4_critical_enter(uint32_t control_level) {
+  const uint32_t key = cm4_basepri_get();
+  cm4_basepri_max(CM4_PRIO(control_level));
+  return key;
+}
+static inline void cm4_critical_exit(uint32_t key) { cm4_basepri_set(key); }
 static inline void cm4_dsb(void) { __asm volatile("dsb" ::: "memory"); }
 static inline void cm4_isb(void) { __asm volatile("isb" ::: "memory"); }
 #endif

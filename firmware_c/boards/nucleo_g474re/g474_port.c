@@ -655,14 +655,12 @@ size_t fw_port_uart_write(fw_port_t *port, const uint8_t *data, size_t len) {
 
 uint32_t fw_port_critical_enter(fw_port_t *port) {
   (void)port;
-  const uint32_t key = cm4_basepri_get();
-  cm4_basepri_max(CM4_PRIO(G474_PRIO_CONTROL)); /* masks levels 1..15; the break (0) stays */
-  return key;
+  return cm4_critical_enter(G474_PRIO_CONTROL); /* masks levels 1..15; the break (0) stays */
 }
 
 void fw_port_critical_exit(fw_port_t *port, uint32_t key) {
   (void)port;
-  cm4_basepri_set(key);
+  cm4_critical_exit(key);
 }
 
 void fw_port_info(fw_port_t *port, fw_port_info_t *info) {
