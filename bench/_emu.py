@@ -31,7 +31,6 @@ at a time, as with a USB-CAN adapter.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
 import os
 import shutil
@@ -40,12 +39,18 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from bench._simserver import HOST, log_tail, process_is, state_dir, write_state_file
+from bench._simserver import (
+    HOST,
+    log_tail,
+    process_is,
+    state_dir,
+    state_lock,
+    write_state_file,
+)
 
 STATE_FILE = "emu.json"
 LOG_FILE = "emu.log"
@@ -310,19 +315,6 @@ def _exit_reason(folder: Path) -> str:
     return f" (its log: {tail})" if tail else ""
 
 
-@contextlib.contextmanager
-def _locked(folder: Path) -> Iterator[None]:
-    """One ``bench emu start/stop`` at a time per state folder (two concurrent starts
-    leave one board, never an orphan)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / LOCK_FILE, "a+") as f:
-        fcntl.flock(f.fileno(), fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(f.fileno(), fcntl.LOCK_UN)
-
-
 def nvm_file(folder: Path, motor: str) -> Path:
     name = Path(motor).stem if motor.endswith((".toml", ".yaml")) else motor
     safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name)
@@ -347,7 +339,7 @@ def start(motor: str = "paper_salient", extractor: str = "sogi_adaptive", seed: 
     from sim_fallback import write_emu_boot_blob
 
     folder = state_dir()
-    with _locked(folder):
+    with state_lock(folder, LOCK_FILE):
         st = read_state(folder)
         if st is not None:
             if pid_is_emu(st.pid, folder):
@@ -404,7 +396,7 @@ def stop(timeout_s: float = 5.0) -> tuple[str, int | None]:
     """Stop the board (SIGTERM, SIGKILL after ``timeout_s``): ``("stopped" | "killed" |
     "stale" | "none", pid)``."""
     folder = state_dir()
-    with _locked(folder):
+    with state_lock(folder, LOCK_FILE):
         st = read_state(folder)
         if st is None:
             return "none", None

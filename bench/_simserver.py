@@ -43,6 +43,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -51,6 +52,7 @@ log = logging.getLogger("bench.simserver")
 
 STATE_FILE = "simserver.json"
 LOG_FILE = "simserver.log"
+LOCK_FILE = "simserver.lock"
 HOST = "127.0.0.1"  # never anything else: the simulated drive is not a network service
 CAN_CHANNEL = "can0"  # the bus name the server offers (socketcand serves interfaces by name)
 
@@ -128,6 +130,21 @@ def read_state(folder: Path | None = None) -> ServerState | None:
         return ServerState(pid=-1, host=HOST, port=0, channel=CAN_CHANNEL, motor="?",
                            extractor="?", seed=0, node_id=1, nvm="", nvm_state="", log="",
                            started=0.0, bench_version="?")
+
+
+@contextlib.contextmanager
+def state_lock(folder: Path, name: str) -> Iterator[None]:
+    """One start/stop at a time per state folder and kind of process (an exclusive lock
+    on ``folder/name``): two concurrent starts leave one process, never an orphan."""
+    import fcntl
+
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / name, "a+") as f:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f.fileno(), fcntl.LOCK_UN)
 
 
 def write_state_file(folder: Path, name: str, doc: dict[str, Any]) -> None:
@@ -480,6 +497,13 @@ def start(motor: str, extractor: str, seed: int, node_id: int, port: int,
         The process did not come up (its log's last lines).
     """
     folder = state_dir()
+    with state_lock(folder, LOCK_FILE):
+        return _start_locked(folder, motor, extractor, seed, node_id, port, nvm, timeout_s,
+                             say)
+
+
+def _start_locked(folder: Path, motor: str, extractor: str, seed: int, node_id: int,
+                  port: int, nvm: str | None, timeout_s: float, say: Any) -> ServerState:
     st = read_state(folder)
     if st is not None:
         if pid_is_server(st.pid):
@@ -537,6 +561,11 @@ def stop(timeout_s: float = 5.0) -> tuple[str, int | None]:
     file of a dead process removed) or ``"none"``.
     """
     folder = state_dir()
+    with state_lock(folder, LOCK_FILE):
+        return _stop_locked(folder, timeout_s)
+
+
+def _stop_locked(folder: Path, timeout_s: float) -> tuple[str, int | None]:
     st = read_state(folder)
     if st is None:
         return "none", None

@@ -225,3 +225,21 @@ def test_socketcand_server_survives_garbage_and_bridges_clients(env):
         b.close()
     rc, out, _ = bench("sim", "status", env=env)
     assert rc == 0 and "running" in out
+
+
+def test_two_concurrent_starts_leave_one_server(env):
+    """Two `bench sim start` at once on one state folder: one server, the other start
+    refused (exit 2, one line); `bench sim stop` stops it - no orphan left running."""
+    ps = [subprocess.Popen([sys.executable, "-m", "bench", "sim", "start"], cwd=REPO, env=env,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+          for _ in range(2)]
+    res = [(p.wait(timeout=120), *p.communicate()) for p in ps]
+    assert sorted(r[0] for r in res) == [0, 2], res
+    refused = next(r for r in res if r[0] == 2)
+    assert "already running" in refused[2] and refused[2].count("\n") == 1
+    pid = _state(env)["pid"]
+    assert bench("sim", "stop", env=env)[0] == 0
+    pattern = f"bench._simserver --state-dir {env['BENCH_SIM_DIR']}"
+    servers = subprocess.run(["pgrep", "-f", pattern], capture_output=True,
+                             text=True).stdout.split()
+    assert servers == [] and pid > 0
