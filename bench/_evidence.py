@@ -155,7 +155,18 @@ class Evidence:
 def plan_evidence(conn: Any, serial: bool, say: Any) -> Evidence:
     """How this run is judged (see the module text); configures the drive's telemetry
     for it when judged over the serial link (restored by :func:`finish_evidence`).
-    Says once what cannot be judged."""
+    Says once what cannot be judged. Never raises for a drive that stops answering
+    while it asks: the run itself then ends on the lost drive, with its result."""
+    try:
+        return _plan(conn, serial, say)
+    except Exception as e:  # noqa: BLE001 - a lost drive, an SDO timeout
+        why = " ".join(f"{type(e).__name__}: {e}".split())
+        return Evidence("none", "none", f"not determined: the drive did not answer ({why})",
+                        note=f"not judged: the drive did not answer ({why})",
+                        pole_pitch_m=conn.units.pole_pitch_m)
+
+
+def _plan(conn: Any, serial: bool, say: Any) -> Evidence:
     tau = conn.units.pole_pitch_m
     if conn.sim is not None:
         return Evidence("simulator", "simulator record",
@@ -175,7 +186,11 @@ def plan_evidence(conn: Any, serial: bool, say: Any) -> Evidence:
     if serial:
         ev = Evidence("reference sensor" if has_ref else "none", "serial telemetry", "",
                       pole_pitch_m=tau, ref_res_m=res, ref_zero_m=zero, f_pwm_Hz=f_pwm)
-        _configure_telemetry(d, ev)
+        try:
+            _configure_telemetry(d, ev)
+        except Exception:
+            finish_evidence(conn, ev)  # what was changed goes back, if the drive answers
+            raise
         rate = f_pwm / max(1, round(f_pwm / JUDGE_RATE_HZ))
         path = f"serial telemetry at {rate:g} Hz"
     else:

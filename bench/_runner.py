@@ -522,12 +522,13 @@ class Runner:
         self.result = result
         self._t_disable: float | None = None
         wall0 = time.monotonic()
-        self._t0 = self.clock.now()
-        mark = getattr(self.rec, "mark_start", None)
-        if mark is not None:
-            mark(self._t0)
-        self.rec.event(0.0, "start", {"sequence": seq.name})
+        self._t0 = 0.0
         try:
+            self._t0 = self.clock.now()  # a drive lost before the first step: aborted too
+            mark = getattr(self.rec, "mark_start", None)
+            if mark is not None:
+                mark(self._t0)
+            self.rec.event(0.0, "start", {"sequence": seq.name})
             for step in seq.steps:
                 if step.kind != "enable":  # a fault before enable is enable's to report
                     self._check_fault()

@@ -627,6 +627,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     from bench._mf4writer import Mf4Writer
 
     Mf4Writer.shared()  # its asammdf import runs in a child process beside ours
+    import can
+    from canopen.sdo.exceptions import SdoCommunicationError
+
+    from bench._drive import DriveError
     from bench._live import RerunStartError
     from bench._report import summary, write_junit
     from bench._sequence import SequenceError, load_sequence
@@ -661,6 +665,11 @@ def cmd_run(args: argparse.Namespace) -> int:
                                rerun=rerun, trace_format=args.trace_format)
         except RerunStartError as e:  # before the sequence started: nothing moved
             raise UserError(f"--rerun {rerun.mode}: {e}", EXIT_DRIVE) from None
+        except (DriveError, SdoCommunicationError, can.CanError, OSError) as e:
+            # the drive or its bus went away while the run was being set up (the run itself
+            # ends on a lost drive with its result)
+            raise UserError(f"run: the drive stopped answering before the sequence started: "
+                            f"{' '.join(str(e).split())}", EXIT_DRIVE) from None
         finally:
             conn.close()
         r = out.result
@@ -676,7 +685,9 @@ def cmd_run(args: argparse.Namespace) -> int:
                 print(f"bench: interrupted; drive safe state: {r.safe_state}", file=sys.stderr)
                 rc = EXIT_INTERRUPT
             else:
-                print(f"bench: run aborted: {r.error}; drive safe state: {r.safe_state}",
+                why = r.error or " ".join(
+                    f"{type(out.interrupted).__name__}: {out.interrupted}".split())
+                print(f"bench: run aborted: {why}; drive safe state: {r.safe_state or 'n/a'}",
                       file=sys.stderr)
                 rc = EXIT_DRIVE
             break

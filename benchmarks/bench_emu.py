@@ -34,6 +34,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from protocols.generated import od_names as od  # noqa: E402
+
 SEQ = ROOT / "sequences" / "paper_load_step.yaml"
 
 
@@ -72,7 +75,8 @@ def can_loss(st, seconds: float) -> tuple[int, int, float]:
     net.connect()
     net.notifier.add_listener(Count())
     node = net.add_node(st.node_id, str(ROOT / "protocols" / "generated" / "pmlsm_drive.eds"))
-    node.sdo[0x1017].raw = 0  # no heartbeat: after the last SYNC the drive sends nothing
+    hb = od.PRODUCER_HEARTBEAT_TIME.of(node.sdo)
+    hb.raw = 0  # no heartbeat: after the last SYNC the drive sends nothing
     net.nmt.send_command(0x01)  # NMT start (all nodes): the TPDOs flow on SYNC
     time.sleep(0.3)
     got[0] = 0
@@ -84,7 +88,7 @@ def can_loss(st, seconds: float) -> tuple[int, int, float]:
     time.sleep(1.0)  # the last answers
     after = _stats(st)
     n = got[0]
-    node.sdo[0x1017].raw = 100
+    hb.raw = 100
     net.disconnect()
     sent = int(after["can_frames_out"]) - int(before["can_frames_out"])
     return sent, n, (int(after["periods"]) - p0) / 24000.0

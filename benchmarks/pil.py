@@ -22,18 +22,27 @@ the control half (fw_step_into: ADC inputs to duties, the control interrupt's
 core work) and of the supervision half (fw_supervise) in every regime the trace
 goes through (start-up, injection, back-EMF observer, fault). QEMU's exec log
 covers a whole run, so it is kept small with windows: the (untraced) M4 replay
-saves the controller state at the start of every window ([k0, k0 + W) every
---cycles-every seconds, W = --cycles-window steps; --cycles-window 0: the whole
-trace, in contiguous windows), and a traced run (harness `window` mode,
-`-d exec,nochain`, one instruction per block) continues each window from its
-saved state. Its outputs must equal the full replay's bit for bit (checked).
-Instructions are counted and converted to cycles with bench_cm4_estimate's
-walker and low/high/trm models; ISR entry/exit is not included (the control
-interrupt adds 22..56 cycles, ISR_OVERHEAD; its ADC conversion and staging in
-fw_app_isr around fw_step_into are not in the control half either).
+saves the controller state at the start of every window (the start-up, the
+first --cycles-startup seconds, contiguously: the alignment, the saliency check
+and its judgement, the polarity test, the handover to closed loop or a flying
+start; then [k0, k0 + W) every --cycles-every seconds, W = --cycles-window
+steps; --cycles-window 0: the whole trace, in contiguous windows), and a traced
+run (harness `window` mode, `-d exec,nochain`, one instruction per block)
+continues each window from its saved state. Its outputs must equal the full
+replay's bit for bit (checked). Instructions are counted and converted to
+cycles with bench_cm4_estimate's walker and low/high/trm models.
+
+The control interrupt is more than the control half: fw_app_isr's ADC
+conversion (fw_adc_convert, inside fw_step_into on that path) and its hand-over
+to the supervision and the background (fw_app_control, fw_app_slot), the glue,
+and the ISR entry/exit (22..56 cycles, ISR_OVERHEAD). --cycles measures the
+glue once per run on the same image (bench_cm4_estimate's control interrupt,
+locked mover, SPEED, by source: the cycles of fw_app.c's functions and of
+fw_adc_convert per period, high model) and judges each period's control
+interrupt as control half + glue + entry/exit (with lazy FP stacking).
 
 Usage: python benchmarks/pil.py [--t-end 1.0] [--opt Os] [--scenario NAME ...]
-       [--cycles [--cycles-window 100] [--cycles-every 0.05]]
+       [--cycles [--cycles-window 100] [--cycles-every 0.05] [--cycles-startup 0.1]]
 Exit 0 when every scenario agrees, 1 when one does not, 2 when tools are missing.
 """
 
@@ -67,7 +76,8 @@ IN_DTYPE = np.dtype([("i_abc", "<f4", 3), ("u_dc", "<f4")])
 WIN_DTYPE = np.dtype([("o", OUT_DTYPE), ("speed", "<f4"), ("phase", "u1"), ("bemf", "u1"),
                       ("pad", "u1", 2)])
 WIN_MAX_STEPS = 4000  # the harness's window buffer (N_MAX)
-CTL_TARGET = cm4.ISR_TARGET  # cycles of the control half, high model, per period
+CTL_TARGET = cm4.ISR_TARGET  # cycles of the control interrupt, high model, every period
+GLUE_WHAT = "fw_app_isr, fw_app_control, fw_app_slot, fw_adc_convert"
 # the two halves of a period as the harness's pil_period() calls them
 cm4.KINDS.setdefault("pil_ctl", ("fw_step_into", "pil_period", "window"))
 cm4.KINDS.setdefault("pil_sup", ("fw_supervise", "pil_period", "window"))
@@ -81,7 +91,13 @@ SCENARIOS: dict[str, tuple[str, list, list, list]] = {
     # the monitor's fault path: phase a opens at 0.4 s
     "paper_open_phase": ("paper_salient", [(0.0, 0.3)], [(0.0, 0.0)],
                          [(0.4, {"open_phase_mask": 1})]),
+    # enabled while the mover coasts at 0.94 m/s (the fault matrix's
+    # enable_moving_0.94mps): the flying start (the motion check, the catch on the
+    # back-EMF), then slowed to 0.1 m/s, the way back from the back-EMF to injection
+    "iron_core_flying_start": ("iron_core_linear", [(0.0, 0.1)], [(0.0, 0.0)], []),
 }
+#: scenario -> the mover's speed at the enable, m/s (0 when not listed)
+V0_MPS: dict[str, float] = {"iron_core_flying_start": 0.94}
 
 
 def make_trace(name: str, t_end: float, path: Path, seed: int = 3) -> np.ndarray:
@@ -94,6 +110,8 @@ def make_trace(name: str, t_end: float, path: Path, seed: int = 3) -> np.ndarray
     x0 = 0.37 * 2 * mot.tau_m if "random" in name else 0.0
     k_w = mot.mps_to_radps_e(1.0)
     with Sim(mot, seed=seed, x0_m=x0) as sim:
+        if V0_MPS.get(name):
+            sim.set_state(x0_m=x0, v0_mps=V0_MPS[name])
         n = int(round(t_end / sim.dt_s))
         sim.set_schedule(SIM_REF_SPEED, speed, k_w)
         sim.set_schedule(SIM_REF_LOAD, load)
@@ -191,14 +209,19 @@ def agrees(c: dict) -> bool:
             and c["duty_max_abs"] <= TOL_DUTY and c["theta_max_abs_rad"] <= TOL_THETA_RAD)
 
 
-def cycle_windows(n: int, window: int, every_steps: int) -> list[tuple[int, int]]:
-    """[k0, k1) windows of a trace of n steps: `window` steps every `every_steps`
-    steps from 0; window 0: the whole trace in contiguous windows of at most
-    WIN_MAX_STEPS."""
+def cycle_windows(n: int, window: int, every_steps: int,
+                  start_steps: int = 0) -> list[tuple[int, int]]:
+    """[k0, k1) windows of a trace of n steps: the first start_steps contiguously
+    (in windows of at most WIN_MAX_STEPS), then `window` steps every `every_steps`
+    steps from 0 (those starting at or after start_steps); window 0: the whole
+    trace in contiguous windows of at most WIN_MAX_STEPS."""
     if window <= 0:
         return [(k, min(n, k + WIN_MAX_STEPS)) for k in range(0, n, WIN_MAX_STEPS)]
+    start = min(max(start_steps, 0), n)
+    out = [(k, min(start, k + WIN_MAX_STEPS)) for k in range(0, start, WIN_MAX_STEPS)]
     window = min(window, WIN_MAX_STEPS)
-    return [(k, min(n, k + window)) for k in range(0, n, max(every_steps, window))]
+    return out + [(k, min(n, k + window)) for k in range(0, n, max(every_steps, window))
+                  if k >= start]
 
 
 def phase_name(phase: int) -> str:
@@ -281,13 +304,32 @@ def cycle_stats(cy: dict, sel: np.ndarray | None = None) -> dict[str, dict[str, 
     return out
 
 
+def measure_glue(elf: Path, opt: str) -> dict[str, float]:
+    """The control interrupt's glue around the core, per period, on the image elf:
+    bench_cm4_estimate's control interrupt (fw_app_isr, locked mover, SPEED mode,
+    800 periods) by source, the cycles of fw_app.c's functions (fw_app_isr,
+    fw_app_control, fw_app_slot: the null checks, the ring slot, the hand-over to
+    the supervision, the period count) and of fw_adc_convert (the ADC conversion,
+    inlined into fw_step_into on that path). -> {"low", "high", "trm"} cycles per
+    period, and "isr_high" the whole interrupt's median (high)."""
+    res = cm4.measure(opt, "speed", elf, 80, 10, False, "isr", True)
+    glue = {"low": 0.0, "high": 0.0, "trm": 0.0, "isr_high": res["cycles_high_median"]}
+    for e in res["source_functions_per_step"]:
+        if "(fw_app.c)" in e["function"] or e["function"].startswith("fw_adc_convert "):
+            for m in ("low", "high", "trm"):
+                glue[m] += e[f"cycles_{m}"]
+    return glue
+
+
 def run(names: list[str], t_end: float, opt: str, work: Path,
-        cycles: tuple[int, float] | None = None) -> list[dict]:
-    """PIL comparison of the scenarios; with cycles = (window steps, every s) also the
-    M4 cost of the two halves per period (measure_cycles) in c["cycles"]."""
+        cycles: tuple | None = None, glue: bool = False) -> list[dict]:
+    """PIL comparison of the scenarios; with cycles = (window steps, every s[, start-up
+    s]) also the M4 cost of the two halves per period (measure_cycles) in c["cycles"];
+    with glue the control interrupt's glue (measure_glue) in c["glue"]."""
     cm4.check_tools()
     elf = cm4.build(opt, work / f"m4-{opt}")
     exe = build_host(work / "host")
+    glue_cy = measure_glue(elf, opt) if glue else None
     results = []
     for name in names:
         trace = work / f"{name}.pilt"
@@ -295,7 +337,8 @@ def run(names: list[str], t_end: float, opt: str, work: Path,
         a = replay_host(exe, trace, work / f"{name}.host.out")
         windows, states = [], None
         if cycles is not None:
-            windows = cycle_windows(a.size, cycles[0], int(round(cycles[1] * 24000.0)))
+            start = int(round(cycles[2] * 24000.0)) if len(cycles) > 2 else 0
+            windows = cycle_windows(a.size, cycles[0], int(round(cycles[1] * 24000.0)), start)
             states = work / f"{name}.states"
         b, wall = replay_cm4(elf, trace, work / f"{name}.m4.out", states, windows)
         c = compare(a, b)
@@ -310,6 +353,8 @@ def run(names: list[str], t_end: float, opt: str, work: Path,
             c["cycles"] = measure_cycles(elf, trace, b, windows, states, work)
             c["cycles_wall_s"] = time.perf_counter() - t0
             c["ok"] = c["ok"] and c["cycles"]["windows_exact"]
+        if glue_cy is not None:
+            c["glue"] = glue_cy
         results.append(c)
     return results
 
@@ -323,10 +368,21 @@ def fmt_stats(st: dict) -> str:
     return f"control half {one('ctl')} | supervision half {one('sup')}"
 
 
+def isr_extra(c: dict) -> int:
+    """Cycles the control interrupt adds to the control half (high model): the
+    glue measured on the image (c["glue"], measure_glue) and the ISR entry/exit with
+    lazy FP stacking; 0 when the glue was not measured."""
+    g = c.get("glue")
+    return int(round(g["high"])) + cm4.ISR_OVERHEAD[1] if g else 0
+
+
 def report_cycles(c: dict) -> bool:
-    """Prints the cycle summary of one scenario; -> control half within CTL_TARGET."""
+    """Prints the cycle summary of one scenario; -> the control interrupt (control half
+    + glue + entry/exit, isr_extra; the control half alone when the glue was not
+    measured) within CTL_TARGET in every measured period."""
     cy = c["cycles"]
     n = cy["step"].size
+    extra = isr_extra(c)
     print(f"\n{c['name']} -{c['opt']}: {n} periods measured in {len(cy['windows'])} windows "
           f"of {c['steps']} (window outputs equal the full replay: {cy['windows_exact']}); "
           f"median/max per period, ISR entry/exit not included; regime = start phase "
@@ -338,18 +394,27 @@ def report_cycles(c: dict) -> bool:
         sp = cy["speed"][sel]
         print(f"  {reg:<13} {fmt_stats(cycle_stats(cy, sel))}  [{int(sel.sum())} periods, "
               f"speed {sp.min():+.2f}..{sp.max():+.2f} m/s]")
-    top = np.argsort(cy["ctl_high"], kind="stable")[::-1][:5]
+    # the five worst periods, the earliest first among equals
+    top = np.lexsort((cy["step"], -cy["ctl_high"]))[:5]
     print("  worst control halves (high model): " + ", ".join(
         f"{int(cy['ctl_high'][j])} at step {int(cy['step'][j])} ({cy['regime'][j]})"
         for j in top))
-    i = int(np.argmax(cy["ctl_high"]))
+    i = int(top[0])
     worst = int(cy["ctl_high"][i])
-    ok = worst <= CTL_TARGET
-    print(f"  {c['name']}: control half <= {CTL_TARGET} cycles (high model) in every measured "
-          f"period: {'yes' if ok else 'no'}, max {worst} at step {int(cy['step'][i])} "
-          f"(phase {cy['regime'][i]}, speed estimate {cy['speed'][i]:+.3f} m/s); "
-          f"with ISR entry/exit "
-          f"+{cm4.ISR_OVERHEAD[1]}: {worst + cm4.ISR_OVERHEAD[1]}")
+    where = (f"max {worst} at step {int(cy['step'][i])} (phase {cy['regime'][i]}, speed "
+             f"estimate {cy['speed'][i]:+.3f} m/s)")
+    if extra:
+        g = c["glue"]
+        ok = worst + extra <= CTL_TARGET
+        print(f"  {c['name']}: control interrupt (control half + glue {g['high']:.0f} + ISR "
+              f"entry/exit {cm4.ISR_OVERHEAD[1]}) <= {CTL_TARGET} cycles (high model) in every "
+              f"measured period: {'yes' if ok else 'no'}, control half {where}: "
+              f"{worst + extra}")
+    else:
+        ok = worst <= CTL_TARGET
+        print(f"  {c['name']}: control half <= {CTL_TARGET} cycles (high model) in every "
+              f"measured period: {'yes' if ok else 'no'}, {where}; with ISR entry/exit "
+              f"+{cm4.ISR_OVERHEAD[1]}: {worst + cm4.ISR_OVERHEAD[1]}")
     return ok
 
 
@@ -365,11 +430,15 @@ def main() -> int:
                     help="steps per measured window (0: the whole trace; default 100)")
     ap.add_argument("--cycles-every", type=float, default=0.05,
                     help="a window starts every this many seconds (default 0.05)")
+    ap.add_argument("--cycles-startup", type=float, default=0.1,
+                    help="the first this many seconds traced contiguously: the start-up "
+                    "(default 0.1; 0: windows only)")
     a = ap.parse_args()
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         res = run(a.scenario, a.t_end, a.opt, Path(tmp),
-                  (a.cycles_window, a.cycles_every) if a.cycles else None)
+                  (a.cycles_window, a.cycles_every, a.cycles_startup) if a.cycles else None,
+                  glue=a.cycles)
     for c in res:
         print(f"{c['name']:24s} -{c['opt']}: {c['steps']} steps "
               f"({c['closed_loop_steps']} with PWM), "
@@ -379,11 +448,16 @@ def main() -> int:
               f"{c['loop_duty_max_abs']:.1e}, QEMU {c['qemu_wall_s']:.1f} s -> "
               f"{'AGREE' if c['ok'] else 'DIFFER'}")
     if a.cycles:
+        g = res[0]["glue"]
+        print(f"\nthe control interrupt's glue (fw_app_isr around the core: {GLUE_WHAT}), "
+              f"measured on this image: {g['low']:.0f} .. {g['high']:.0f} cycles per period "
+              f"(low .. high), trm {g['trm']:.0f}; the whole interrupt, locked mover, "
+              f"median {g['isr_high']:.0f} (high)")
         verdicts = [report_cycles(c) for c in res]
-        print(f"\nverdict: control half <= {CTL_TARGET} cycles (high model, ISR entry/exit "
-              f"not included) in every measured period of every scenario: "
-              f"{'yes' if all(verdicts) else 'no'}; --cycles run "
-              f"{time.perf_counter() - t0:.0f} s")
+        print(f"\nverdict: control interrupt (control half + glue {g['high']:.0f} + ISR "
+              f"entry/exit {cm4.ISR_OVERHEAD[1]}) <= {CTL_TARGET} cycles (high model) in every "
+              f"measured period of every scenario: {'yes' if all(verdicts) else 'no'}; "
+              f"--cycles run {time.perf_counter() - t0:.0f} s")
     return 0 if all(c["ok"] for c in res) else 1
 
 

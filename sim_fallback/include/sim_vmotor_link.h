@@ -42,7 +42,7 @@ extern "C" {
 #endif
 
 #define SIM_VMOTOR_LINE_MAX 80u     /**< longest line (bytes before its "\n", "\r" not counted) */
-#define SIM_VMOTOR_REPLY_MAX 320u   /**< longest reply, "\n" included */
+#define SIM_VMOTOR_REPLY_MAX 512u   /**< longest reply, "\n" included */
 #define SIM_VMOTOR_LOAD_MAX_N 1.0e6 /**< |load| limit (N) */
 
 /** The owner's lock around changes of the plant (enter returns the key for exit). */

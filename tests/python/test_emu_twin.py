@@ -145,10 +145,15 @@ def test_killed_emulator_ends_the_run_within_a_second(tmp_path: Path) -> None:
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60
-        while not list((tmp_path / "runs").glob("*/events.jsonl")):
+
+        def waiting() -> bool:  # the drive is enabled, at speed, in the long wait
+            ev = list((tmp_path / "runs").glob("*/events.jsonl"))
+            return bool(ev) and '"step": "wait"' in ev[0].read_text()
+
+        while not waiting():
             assert p.poll() is None and time.monotonic() < deadline, p.communicate()
             time.sleep(0.1)
-        time.sleep(1.0)  # the drive is enabled and running
+        time.sleep(0.5)
         os.kill(st["pid"], signal.SIGKILL)
         t_kill = time.monotonic()
         out, err = p.communicate(timeout=20)
