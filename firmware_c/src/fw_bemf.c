@@ -119,8 +119,11 @@ void fw_bemf_schedule(fw_bemf_t *b, float w_hat, uint8_t hf_settled) {
     b->t_cond_s += b->dt_s;
     if (b->t_cond_s >= BEMF_HOLD_S) {
       b->active = 1u; /* both estimates valid here: switch the PLL, then reduce injection */
-      b->err_rad = angle(b); /* the PLL reads it next period */
-      b->err_fresh = 1u;
+      /* the angle error the PLL reads next period: fw_bemf_prepare forms it now
+       * that the observer is active (or fw_bemf_error on demand), from the
+       * filters of this update, which nothing changes before (its atan2 was the
+       * control interrupt's worst period in the back-EMF regime) */
+      b->err_fresh = 0u;
       b->going_up = 1u;
       b->t_cond_s = 0.0f;
     }

@@ -7,8 +7,7 @@
  *   fault   input checks (fw_fault_check_inputs), latch (fw_fault_latch_update)
  *   mon     offset compensation; with the power stage off: offsets, current sum
  *   inj     extraction and demodulation of the HF response (fw_inj_update)
- *   obs     angle error, PLL, position, filtered speed (fw_obs_update);
- *           the adaptive SOGI gain back to inj (fw_inj_adapt)
+ *   obs     angle error, PLL, filtered speed (fw_obs_update_pll)
  *   foc     Park of the fundamental current (fw_foc_measure)
  *   bemf    back-EMF observer and handover (closed loop)
  *   start   polarity pulses / flying-start observation / saliency check;
@@ -20,10 +19,14 @@
  *   foc     modulation (fw_foc_output)
  * and writes the snapshot, which nothing reads back. That is fw_step_into,
  * the control half: ADC to duties. fw_supervise, the supervision half, then
- * runs the integrity monitor (fw_mon_update) and the protections
- * (fw_protect_update) on the staged inputs; a hard fault there switches the
- * duties just computed off before they take effect (docs/firmware.md,
- * "the two interrupts").
+ * writes the current loop's snapshot fields, does what the period left to it
+ * because nothing before the duties needs it (supervise_deferred: the
+ * observer's position, the adaptive SOGI gain back to inj (fw_inj_adapt), the
+ * back-EMF angle error, the flying-start rotation and the rest of a catch), judges
+ * a completed saliency check, and runs the integrity monitor (fw_mon_update) and
+ * the protections (fw_protect_update) on the staged inputs; a hard fault there
+ * switches the duties just computed off before they take effect
+ * (docs/firmware.md, "the two interrupts").
  */
 #include <math.h>
 #include <stddef.h>
@@ -69,7 +72,12 @@ static float pos_m_of(const fw_config_t *cfg, float pos_e) {
   return fw_units_radps_e_to_mps(cfg, pos_e);
 }
 
-static float pos_hat_m(const fw_ctrl_t *c) { return pos_m_of(&c->cfg, fw_obs_pos_e(&c->obs)); }
+/** The estimated position, m, in the supervision half (protect): fw_supervise has
+ *  added the period's move (fw_obs_pos_flush), so the parts are read as they are
+ *  (fw_obs_pos_e's pending case would put a call on that path). */
+static float pos_hat_m(const fw_ctrl_t *c) {
+  return pos_m_of(&c->cfg, fw_obs_pos_e_of(c->obs.pos_turns, c->obs.pos_unwrapped_e));
+}
 
 static void foc_param(const fw_config_t *cfg, float dt_s, fw_foc_param_t *p) {
   p->dt_s = dt_s;
@@ -403,23 +411,40 @@ static float polarity_step(fw_ctrl_t *c, float i_d) {
  * Returns FW_FAULT_NONE when caught.
  */
 static fw_fault_t fly_catch(fw_ctrl_t *c) {
-  float th, w0;
-  const fw_fault_t f = fw_start_fly_catch(&c->start, &c->cfg, c->bemf.w_on, &th, &w0);
+  float w0;
+  const fw_fault_t f = fw_start_fly_catch_speed(&c->start, &c->cfg, c->bemf.w_on, &w0);
   if (f != FW_FAULT_NONE) {
     return f; /* too slow for the back-EMF, too fast for injection */
   }
-  fw_obs_catch(&c->obs, th, w0);
+  /* what this period's loops and modulation read: the speeds, closed loop (the
+   * injection's scale, which they read too, is the full one fw_bemf_catch's reset
+   * gives: only fw_bemf_schedule changes it, in closed loop, and an enable resets
+   * it); the rest (the angle, the back-EMF observer, the monitor's restart) only
+   * from the supervision on, which completes the catch (catch_rest) */
+  fw_obs_catch_speed(&c->obs, w0);
   fw_foc_speed_clear(&c->foc);
   c->phase = FW_START_RUN;
   c->phase_time_s = 0.0f;
-  const float i0[2] = {0.0f, 0.0f};
-  fw_bemf_catch(&c->bemf, w0, i0);
-  fw_mon_run_start(&c->mon); /* no standstill saliency check: the HF witness stays off */
+  c->sup.caught = 1u;
   return FW_FAULT_NONE;
 }
 
+/** The rest of a flying start (fly_catch), in the supervision half before its
+ *  monitor update: the observer's angle (an atan2, fw_start_fly_catch_angle), the
+ *  back-EMF observer started locked, the monitor's closed-loop restart (no standstill
+ *  saliency check: the HF witness stays off). The same states as a catch done at
+ *  once. */
+static FW_NOINLINE void catch_rest(fw_ctrl_t *c) {
+  c->sup.caught = 0u;
+  const float w0 = c->obs.omega_f; /* the catch's speed (fw_obs_catch_speed), as it left it */
+  fw_obs_catch_angle(&c->obs, fw_start_fly_catch_angle(&c->start, w0));
+  const float i0[2] = {0.0f, 0.0f};
+  fw_bemf_catch(&c->bemf, w0, i0);
+  fw_mon_run_start(&c->mon);
+}
+
 /** End of the standstill saliency check: judge, then go on to the polarity test. */
-static void saliency_done(fw_ctrl_t *c) {
+static FW_NOINLINE void saliency_done(fw_ctrl_t *c) {
   float y[4];
   fw_start_saliency_means(&c->start, c->inj.n_inj, y);
   fw_fault_t f = fw_mon_saliency(&c->mon, &c->cfg, y[0], y[1], y[2], y[3],
@@ -502,15 +527,38 @@ typedef struct {
   float adapt_r;           /**< the observer's adaptation signal of this period */
 } fw_period_t;
 
-/** The adaptive SOGI's gain (fw_inj_adapt) at the end of the step, on every
- *  path that ran the extraction: nothing in the step reads the gains after the
- *  SOGI steps of stage_estimate, and the rare call to fw_inj_set_k there (a
- *  real call, which clobbers s0-s15 and r0-r3) made GCC keep the period's
- *  values in callee-saved registers and spill around it. */
+/** The adaptive SOGI's gain (fw_inj_adapt) after the step, on every path that
+ *  ran the extraction: handed to the supervision half (supervise_deferred).
+ *  Nothing in the step reads the gains after the SOGI steps of
+ *  stage_estimate, and nothing else reads them before the next period's: the
+ *  same gains in the same periods. The gain's recomputation (fw_inj_set_k, two
+ *  divisions and two calls, about 110 cycles on the Cortex-M4F whenever k moves
+ *  by more than FW_INJ_SOGI_K_STEP) was the alignment's and the injection
+ *  regime's worst period; the test alone cost the control half about ten. */
 static FW_ALWAYS_INLINE void adapt_at_end(fw_ctrl_t *c, const fw_period_t *p) {
-  if (FW_LIKELY(p->adapt)) {
-    fw_inj_adapt(&c->inj, &c->cfg.estimator, p->adapt_r);
+  c->sup.adapt_r = p->adapt_r; /* 0 when not adapting (stage_estimate) */
+  c->sup.adapt = (uint8_t)p->adapt;
+}
+
+/** What a period leaves to its supervision half because nothing before its duties
+ *  needs it, each read first in the next period or on demand (fw_supervise runs
+ *  it, also after a period with nothing staged; the control half runs it when it
+ *  finds the last supervision missed): the observer's position (fw_obs_pos_flush),
+ *  the rest of a flying start (catch_rest), the back-EMF angle error the PLL reads
+ *  next period (fw_bemf_prepare), the adaptive SOGI's gain (adapt_at_end), the
+ *  flying-start observer's rotation (fw_start_fly_flush). The same values, bit for
+ *  bit, as when the control half formed them. */
+static FW_ALWAYS_INLINE void supervise_deferred(fw_ctrl_t *c) {
+  fw_obs_pos_flush(&c->obs);
+  if (FW_UNLIKELY(c->sup.caught)) {
+    catch_rest(c); /* after the position's last move, before the back-EMF's error */
   }
+  fw_bemf_prepare(&c->bemf);
+  if (FW_LIKELY(c->sup.adapt)) { /* the default extractor, every period */
+    c->sup.adapt = 0u;
+    fw_inj_adapt(&c->inj, &c->cfg.estimator, c->sup.adapt_r);
+  }
+  fw_start_fly_flush(&c->start);
 }
 
 /** The snapshot groups written (fw_step_into's result): w, and the
@@ -546,6 +594,20 @@ static void end_off(const fw_ctrl_t *c, fw_outputs_t *out, fw_snapshot_t *snap) 
   outputs_off(out);
   snapshot_duties(snap, out);
   fill_snapshot_common(c, snap);
+}
+
+/** The last period's supervision did not run (fw_step_into finds it still due):
+ *  what that period left to it, as it would have done it (its judgements stay
+ *  undone: that is the fault), then FW_FAULT_SUPERVISION_MISSED. Out of line:
+ *  the control half's usual path only tests for it. */
+static FW_NOINLINE void supervision_missed(fw_ctrl_t *c) {
+  c->sup.due = 0u;
+  supervise_deferred(c);
+  if (c->sup.saliency) {
+    c->sup.saliency = 0u;
+    saliency_done(c);
+  }
+  latch_fault(c, FW_FAULT_SUPERVISION_MISSED);
 }
 
 /** Input checks (fault on a bad sample; NaN never enters the state), offset
@@ -643,7 +705,8 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p,
         (uint8_t)FW_LIKELY(!(!fw_inj_settled(&c->inj) || c->phase_time_s < FW_EST_SETTLE_S));
     oi.running = (uint8_t)(c->phase == FW_START_RUN);
     float adapt_r;
-    const float eps = fw_obs_update(&c->obs, &oi, &adapt_r);
+    /* the position follows in the supervision half (fw_obs_pos_flush) */
+    const float eps = fw_obs_update_pll(&c->obs, &oi, &adapt_r);
     /* the default extractor: the gain follows adapt_r at the end of the step */
     p->adapt = FW_LIKELY(ex == FW_EXTRACTOR_SOGI_ADAPTIVE);
     p->adapt_r = adapt_r;
@@ -690,7 +753,10 @@ static void stage_startup(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p)
   }
   if (c->phase == FW_START_ALIGN && c->phase_time_s >= FW_MOTION_CHECK_S &&
       fw_mon_motion(&c->mon, c->e_start_max_V) != FW_FAULT_NONE) {
-    latch_fault(c, fly_catch(c)); /* moving: catch it on the back-EMF, or refuse */
+    const fw_fault_t ff = fly_catch(c); /* moving: catch it on the back-EMF, or refuse */
+    if (FW_UNLIKELY(ff != FW_FAULT_NONE)) {
+      latch_fault(c, ff);
+    }
   }
   if (c->phase == FW_START_ALIGN &&
       fw_start_align_done(&cfg->estimator, c->phase_time_s, c->inj.inj_idx, n_inj) &&
@@ -746,8 +812,6 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
  *  the injection sign, the start-up phase) is taken now. */
 static void stage_supervision(fw_ctrl_t *c, const fw_inj_meas_t *hf, const fw_period_t *p) {
   const bool running = c->phase == FW_START_RUN;
-  const bool scale_steady =
-      c->bemf.inj_scale >= 1.0f || c->bemf.inj_scale <= c->bemf.inj_share;
   const float *u_applied = fw_foc_u_applied(&c->foc);
   fw_mon_in_t *const mi = &c->sup.mon;
   mi->i_abc_A[0] = p->i_abc[0]; /* after the offset compensation */
@@ -766,10 +830,12 @@ static void stage_supervision(fw_ctrl_t *c, const fw_inj_meas_t *hf, const fw_pe
   mi->omega_hat_radps = c->obs.pll.w_i_radps; /* saliency_done may restart the observer */
   mi->accel_dist_radps2 = c->obs.accel_dist;
   mi->running = (uint8_t)running;
-  mi->hf_valid = (uint8_t)FW_LIKELY(running && !p->pulses && scale_steady &&
-                                     fw_inj_settled(&c->inj) &&
-                                     c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S &&
-                                     fw_inj_sign_applied(&c->inj) != 0.0f);
+  /* the phase's time first: false in the periods that enter closed loop (the
+   * handover, a flying start), which then skip the rest */
+  mi->hf_valid =
+      (uint8_t)FW_LIKELY(running && c->phase_time_s >= FW_HF_SUPERVISION_DELAY_S && !p->pulses &&
+                         fw_inj_settled(&c->inj) && fw_inj_sign_applied(&c->inj) != 0.0f &&
+                         (c->bemf.inj_scale >= 1.0f || c->bemf.inj_scale <= c->bemf.inj_share));
   mi->pwm_on = 1u;
   c->sup.quick_stop = (uint8_t)p->quick_stop;
   c->sup.due = 1u;
@@ -798,13 +864,53 @@ static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_ou
 
   fw_obs_set_iq(&c->obs, p->i_dq.y);
   fw_foc_commit_ref(&c->foc, p->i_ref.y);
-  snap->i_dq_A[0] = p->i_dq.x;
-  snap->i_dq_A[1] = p->i_dq.y;
-  snap->i_dq_ref_A[0] = p->i_ref.x;
-  snap->i_dq_ref_A[1] = p->i_ref.y;
-  snap->u_dq_V[0] = u_dq.x;
-  snap->u_dq_V[1] = u_dq.y;
-  snap->u_inj_V = s * u_inj;
+  /* the current loop's snapshot fields (i_dq, references, u_dq, u_inj): written
+   * by the supervision half (snapshot_loops), from the monitor's inputs staged
+   * above and the blocks' states */
+}
+
+/** The snapshot fields of the current loop of a period that reached the modulation
+ *  (its supervision was staged: fw_supervise): the fundamental current and its
+ *  references as staged for the monitor, the voltage committed (fw_foc_commit),
+ *  the injection's signed voltage (the sign fw_inj_output gave times u_inj_V times
+ *  the injection scale): what stage_output used to store, the same values, read
+ *  where nothing changes them before the supervision. */
+static void snapshot_loops(const fw_ctrl_t *c, fw_snapshot_t *snap) {
+  const fw_mon_in_t *const mi = &c->sup.mon;
+  snap->i_dq_A[0] = mi->i_dq_A[0];
+  snap->i_dq_A[1] = mi->i_dq_A[1];
+  snap->i_dq_ref_A[0] = mi->i_dq_ref_A[0];
+  snap->i_dq_ref_A[1] = mi->i_dq_ref_A[1];
+  const float *const u_dq = fw_foc_u_applied(&c->foc); /* this period's, committed */
+  snap->u_dq_V[0] = u_dq[0];
+  snap->u_dq_V[1] = u_dq[1];
+  const float u_inj = c->cfg.estimator.u_inj_V * c->bemf.inj_scale;
+  snap->u_inj_V = c->inj.sign_hist[0] * u_inj;
+}
+
+/** The period's inputs from the ADC counts (the control interrupt's path, fw_app:
+ *  the one conversion and range check). Its own function for the cycle accounting
+ *  (benchmarks/pil.py: the interrupt's glue). */
+static FW_ALWAYS_INLINE void inputs_from_adc(fw_ctrl_t *c, const fw_adc_inputs_t *adc, float *ia,
+                                             float *ib, float *ic, float *u_dc) {
+  fw_inputs_t x;
+  if (!fw_adc_convert(&c->cfg, adc, &x)) {
+    latch_fault(c, FW_FAULT_ADC_RANGE);
+  }
+  *ia = x.i_abc_A[0];
+  *ib = x.i_abc_A[1];
+  *ic = x.i_abc_A[2];
+  *u_dc = x.u_dc_V;
+}
+
+/** The period's inputs in physical units (fw_step; the replays of benchmarks/pil.py,
+ *  which count them out of the control interrupt: its path is inputs_from_adc). */
+static FW_ALWAYS_INLINE void inputs_of(const fw_inputs_t *in, float *ia, float *ib, float *ic,
+                                       float *u_dc) {
+  *ia = in->i_abc_A[0];
+  *ib = in->i_abc_A[1];
+  *ic = in->i_abc_A[2];
+  *u_dc = in->u_dc_V;
 }
 
 unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t *adc,
@@ -816,26 +922,15 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
      a struct on the stack */
   float ia = 0.0f, ib = 0.0f, ic = 0.0f, u_dc = 0.0f;
   if (adc != NULL) {
-    fw_inputs_t x;
-    if (!fw_adc_convert(&c->cfg, adc, &x)) {
-      latch_fault(c, FW_FAULT_ADC_RANGE);
-    }
-    ia = x.i_abc_A[0];
-    ib = x.i_abc_A[1];
-    ic = x.i_abc_A[2];
-    u_dc = x.u_dc_V;
+    inputs_from_adc(c, adc, &ia, &ib, &ic, &u_dc);
   } else if (in != NULL) {
-    ia = in->i_abc_A[0];
-    ib = in->i_abc_A[1];
-    ic = in->i_abc_A[2];
-    u_dc = in->u_dc_V;
+    inputs_of(in, &ia, &ib, &ic, &u_dc);
   }
   /* outputs_off on every path that does not reach stage_output (which writes
    * every output): not stored twice in the usual period */
   c->step_count++;
   if (FW_UNLIKELY(c->sup.due)) { /* the last period's supervision did not run */
-    c->sup.due = 0u;
-    latch_fault(c, FW_FAULT_SUPERVISION_MISSED);
+    supervision_missed(c);
   }
   if (adc == NULL && in == NULL) {
     outputs_off(out);
@@ -891,11 +986,11 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   fw_foc_commit(&c->foc, p.u_dq);
   stage_output(c, &p, p.u_dc_V, out, snap);
   if (c->phase == FW_START_SALIENCY && fw_start_saliency_advance(&c->start, c->inj.n_inj)) {
-    saliency_done(c);
-    if (c->fault.hard) {
-      outputs_off(out);
-      snapshot_duties(snap, out);
-    }
+    /* the judgement (fw_mon_saliency: a square root, an atan2 and six divisions,
+     * about 300 cycles on the Cortex-M4F) in the supervision half: its
+     * decisions act from the next period on, a hard fault switches this
+     * period's outputs off there */
+    c->sup.saliency = 1u;
   }
   fill_snapshot_common(c, snap);
   adapt_at_end(c, &p);
@@ -906,13 +1001,28 @@ bool fw_supervise(fw_ctrl_t *c, fw_outputs_t *out, fw_snapshot_t *snap) {
   if (c == NULL || out == NULL || snap == NULL) {
     return false;
   }
-  /* the back-EMF angle error the PLL reads next period (also after a switch-off
-   * period, where nothing is due: its value is the same whenever it is formed) */
-  fw_bemf_prepare(&c->bemf);
-  if (!c->sup.due) {
+  /* taken at once: a control half that preempts this one sees nothing due and
+   * leaves what follows to it */
+  const bool due = c->sup.due != 0u;
+  c->sup.due = 0u;
+  if (FW_LIKELY(due)) {
+    snapshot_loops(c, snap); /* first: from the states the control half left */
+  }
+  /* the period's deferred work (also after a switch-off period, where nothing
+   * is due: its values are the same whenever they are formed) */
+  supervise_deferred(c);
+  if (!due) {
     return false;
   }
-  c->sup.due = 0u;
+  /* the standstill saliency check completed in this period: judged first, as
+   * when the control half did it (the monitor's update below neither reads nor
+   * changes what it decides; its fault latches after this one's) */
+  bool judged = false;
+  if (FW_UNLIKELY(c->sup.saliency)) {
+    c->sup.saliency = 0u;
+    saliency_done(c);
+    judged = true;
+  }
   fw_mon_in_t *const mi = &c->sup.mon;
   /* the HF witness judges the response per volt of injection: scale back (no
    * division while the injection is full, the usual case) */
@@ -926,15 +1036,16 @@ bool fw_supervise(fw_ctrl_t *c, fw_outputs_t *out, fw_snapshot_t *snap) {
     const fw_vec2_f32_t i_dq = {mi->i_dq_A[0], mi->i_dq_A[1]};
     mf = protect(c, i_dq, c->sup.quick_stop != 0u);
   }
-  if (FW_LIKELY(mf == FW_FAULT_NONE)) {
+  if (FW_LIKELY(mf == FW_FAULT_NONE && !judged)) {
     return false;
   }
-  latch_fault(c, mf);
+  latch_fault(c, mf); /* nothing for FW_FAULT_NONE */
   if (c->fault.hard) {
     end_off(c, out, snap);
     return true;
   }
-  fill_snapshot_common(c, snap); /* braking faults go on braking */
+  /* braking faults go on braking; the judgement's phase change */
+  fill_snapshot_common(c, snap);
   return false;
 }
 
@@ -1011,6 +1122,12 @@ void fw_snapshot_carry(fw_snapshot_t *snap, const fw_snapshot_t *prev, unsigned 
   }
 }
 
+/** The position parts with a move fw_supervise has not yet added (a snapshot
+ *  captured between the two halves). */
+static FW_NOINLINE void pos_pending(const fw_obs_t *o, fw_snapshot_raw_t *raw) {
+  fw_obs_pos_parts(o, &raw->pos_turns, &raw->pos_unwrapped_e);
+}
+
 void fw_snapshot_capture_state(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
                                fw_snapshot_raw_t *raw) {
   /* the blocks' present states */
@@ -1025,8 +1142,15 @@ void fw_snapshot_capture_state(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
   copy_f32(&snap->inj_scale, &ctrl->bemf.inj_scale);
   snap->bemf_active = ctrl->bemf.active;
   copy_f32(&snap->sogi_k_eff, &ctrl->inj.sogi_a.k); /* fw_inj_k */
-  raw->pos_turns = ctrl->obs.pos_turns; /* two words: the sum is the background's */
-  raw->pos_unwrapped_e = ctrl->obs.pos_unwrapped_e;
+  /* two words: the sum is the background's (after fw_supervise, the usual
+   * caller's case, the estimate's last move is in them; else it is added as
+   * fw_obs_pos_flush will, out of line) */
+  if (FW_LIKELY(!ctrl->obs.pos_due)) {
+    raw->pos_turns = ctrl->obs.pos_turns;
+    raw->pos_unwrapped_e = ctrl->obs.pos_unwrapped_e;
+  } else {
+    pos_pending(&ctrl->obs, raw);
+  }
   copy_f32(&raw->bemf_e_dq_V[0], &ctrl->bemf.e_d_f);
   copy_f32(&raw->bemf_e_dq_V[1], &ctrl->bemf.e_q_f);
   copy_f32(&raw->bemf_err_rad, &ctrl->bemf.err_rad);

@@ -29,6 +29,19 @@ void fw_inj_init(fw_inj_t *j, const fw_config_t *cfg, float dt_s) {
   const float k = reset_k(est);
   (void)fw_sogi_init_f32(&j->sogi_a, est->f_inj_Hz, k, dt_s);
   (void)fw_sogi_init_f32(&j->sogi_b, est->f_inj_Hz, k, dt_s);
+  /* the gains a reset to k gives (fw_inj_set_k: a function of k and of the
+   * filters' constants, which only this function sets), kept for fw_inj_reset */
+  fw_inj_set_k(j, k);
+  j->k_reset = k;
+  j->gain_reset[0] = j->sogi_a.k;
+  j->gain_reset[1] = j->sogi_a.p;
+  j->gain_reset[2] = j->sogi_a.q;
+  j->gain_reset[3] = j->sogi_a.r;
+  j->gain_reset[4] = j->sogi_b.k;
+  j->gain_reset[5] = j->sogi_b.p;
+  j->gain_reset[6] = j->sogi_b.q;
+  j->gain_reset[7] = j->sogi_b.r;
+  j->gd_reset = j->sogi_gd_s;
   /* once: after a reset every row is written before it is read (ring_fill) */
   memset(j->ring, 0, sizeof(j->ring));
   fw_inj_reset(j, est);
@@ -47,7 +60,19 @@ void fw_inj_reset(fw_inj_t *j, const fw_cfg_estimator_t *est) {
    * filter the configuration left uninitialised stays a zero-output one */
   fw_sogi_reset_f32(&j->sogi_a);
   fw_sogi_reset_f32(&j->sogi_b);
-  fw_inj_set_k(j, k);
+  if (k == j->k_reset) { /* the configured extractor's: what fw_inj_set_k(k) gives */
+    j->sogi_a.k = j->gain_reset[0];
+    j->sogi_a.p = j->gain_reset[1];
+    j->sogi_a.q = j->gain_reset[2];
+    j->sogi_a.r = j->gain_reset[3];
+    j->sogi_b.k = j->gain_reset[4];
+    j->sogi_b.p = j->gain_reset[5];
+    j->sogi_b.q = j->gain_reset[6];
+    j->sogi_b.r = j->gain_reset[7];
+    j->sogi_gd_s = j->gd_reset;
+  } else { /* another extractor set since (fw_inj_set_extractor), or a NaN k */
+    fw_inj_set_k(j, k);
+  }
   memset(j->h_prev_raw, 0, sizeof(j->h_prev_raw));
   memset(j->h_prev_sogi, 0, sizeof(j->h_prev_sogi));
   memset(j->sign_hist, 0, sizeof(j->sign_hist));

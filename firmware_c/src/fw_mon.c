@@ -102,6 +102,7 @@ fw_fault_t fw_mon_enable(fw_mon_t *m) {
   memcpy(m->offset_A, m->off_f, sizeof(m->offset_A));
   m->e_ref_A = 0.0f;
   m->e_d_f = m->e_q_f = m->r_d_f = m->r_q_f = m->ictrl_f = m->w_f = 0.0f;
+  m->r_mag_V = 0.0f; /* sqrtf(0) */
   m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
   m->verdict = FW_FAULT_NONE;
   m->angle_hf_rad = m->angle_bemf_rad = m->e_bemf_V = 0.0f;
@@ -154,6 +155,7 @@ void fw_mon_run_start(fw_mon_t *m) {
   m->e_d_f = m->e_ref_A;
   m->e_q_f = 0.0f;
   m->r_d_f = m->r_q_f = m->ictrl_f = m->w_f = 0.0f;
+  m->r_mag_V = 0.0f; /* sqrtf(0) */
   m->t_hf = m->t_bemf = m->t_accel = m->t_ctrl = 0.0f;
   m->verdict = FW_FAULT_NONE;
   sums_restart(m);
@@ -218,9 +220,13 @@ FW_NOINLINE void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float acce
     m->ictrl_f = lp_n(m->ictrl_f, m->s_ictrl, nr, m->a_slow_n, inv_n);
   }
   sums_clear_run(m);
+  /* the residual's magnitude: the motion check's (fw_mon_motion) and the
+   * witness's below */
+  const float e_meas = sqrtf(m->r_d_f * m->r_d_f + m->r_q_f * m->r_q_f);
+  m->r_mag_V = e_meas;
   if (!running) {
     /* start-up: the residual's magnitude is the motion check's statistic */
-    m->e_bemf_V = sqrtf(m->r_d_f * m->r_d_f + m->r_q_f * m->r_q_f);
+    m->e_bemf_V = e_meas;
     return;
   }
   /* HF angle */
@@ -234,7 +240,6 @@ FW_NOINLINE void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float acce
 
   /* back-EMF residual */
   float e_hat = fabsf(m->w_f) * m->psi_f_Wb;
-  float e_meas = sqrtf(m->r_d_f * m->r_d_f + m->r_q_f * m->r_q_f);
   m->e_bemf_V = e_meas;
   bool bad = false;
   if (e_hat > m->bemf_min_V || e_meas > m->bemf_min_V) {
@@ -261,9 +266,4 @@ FW_NOINLINE void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float acce
   /* current control */
   m->t_ctrl = persist(m->t_ctrl, m->ictrl_f > m->i_ctrl_max_A * m->i_ctrl_max_A, dte);
   m->verdict = (uint32_t)judge(m); /* the four timers change only here */
-}
-
-fw_fault_t fw_mon_motion(const fw_mon_t *m, float e_start_max_V) {
-  float e = sqrtf(m->r_d_f * m->r_d_f + m->r_q_f * m->r_q_f);
-  return e > e_start_max_V ? FW_FAULT_MOVING_AT_ENABLE : FW_FAULT_NONE;
 }

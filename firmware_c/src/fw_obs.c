@@ -14,23 +14,29 @@ static float lp_alpha(float f_Hz, float dt_s) {
   return 1.0f - expf(-FW_TWO_PI_F32 * f_Hz * dt_s);
 }
 
+void fw_obs_pos_flush_turn(fw_obs_t *o) {
+  fw_obs_pos_parts(o, &o->pos_turns, &o->pos_unwrapped_e);
+  o->theta_prev = o->pll.theta_rad;
+  o->pos_due = 0u;
+  fw_obs_pll_gains(o);
+}
+
+/** A pending move of the estimate into the position before a function of this
+ *  block moves the estimate or the position (the order of the sums is kept).
+ *  These run at commands and start-up events, where none is usually pending
+ *  (fw_supervise added it): the test inline, the move out of line. */
+static FW_ALWAYS_INLINE void flush_first(fw_obs_t *o) {
+  if (FW_UNLIKELY(o->pos_due)) {
+    fw_obs_pos_flush_turn(o);
+  }
+}
+
 /** Add d (|d| <= pi) to the unwrapped position, kept as whole electrical
  *  turns plus a remainder in [-pi, pi): a single float would lose the
- *  increments once the position is large (ulp 0.06 rad at 1e6 rad). */
-static FW_ALWAYS_INLINE void pos_add(fw_obs_t *o, float d) {
-  float x = o->pos_unwrapped_e + d;
-  /* usually in range: one test against pi (the constant the wrap before has in a
-   * register); -pi and NaN take the exact tests, which leave them as they are */
-  if (FW_UNLIKELY(!(fabsf(x) < FW_PI_F32))) {
-    if (x >= FW_PI_F32) {
-      x -= FW_TWO_PI_F32;
-      o->pos_turns++;
-    } else if (x < -FW_PI_F32) {
-      x += FW_TWO_PI_F32;
-      o->pos_turns--;
-    }
-  }
-  o->pos_unwrapped_e = x;
+ *  increments once the position is large (ulp 0.06 rad at 1e6 rad). Its
+ *  callers flushed first (flush_first). */
+static void pos_add(fw_obs_t *o, float d) {
+  o->pos_unwrapped_e = fw_obs_pos_wrap(o->pos_unwrapped_e + d, &o->pos_turns);
 }
 
 void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s) {
@@ -54,6 +60,7 @@ void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s) {
 }
 
 void fw_obs_reset(fw_obs_t *o, const fw_config_t *cfg) {
+  flush_first(o); /* the move of the estimate it restarts */
   fw_pll_init_f32(&o->pll, cfg->estimator.pll_kp, cfg->estimator.pll_ki,
                   cfg->loops.speed_max_radps_e);
   o->err_f = 0.0f;
@@ -65,27 +72,42 @@ void fw_obs_reset(fw_obs_t *o, const fw_config_t *cfg) {
 }
 
 void fw_obs_keep_position(fw_obs_t *o) {
+  flush_first(o);
   pos_add(o, -o->pll.theta_rad); /* the estimate restarts from 0: keep the position */
 }
 
 void fw_obs_set(fw_obs_t *o, float theta_rad, float w_radps) {
+  flush_first(o);
   fw_pll_reset_f32(&o->pll, theta_rad, w_radps);
   o->theta_prev = theta_rad;
 }
 
 void fw_obs_catch(fw_obs_t *o, float theta_rad, float w0_radps) {
-  fw_obs_set(o, theta_rad, w0_radps);
+  fw_obs_catch_speed(o, w0_radps);
+  fw_obs_catch_angle(o, theta_rad);
+}
+
+void fw_obs_catch_speed(fw_obs_t *o, float w0_radps) {
+  fw_pll_set_speed_f32(&o->pll, w0_radps);
   o->omega_f = w0_radps;
   o->accel_dist = 0.0f;
 }
 
+void fw_obs_catch_angle(fw_obs_t *o, float theta_rad) {
+  flush_first(o); /* the last move, from the angle before */
+  fw_pll_set_angle_f32(&o->pll, theta_rad);
+  o->theta_prev = theta_rad; /* as fw_obs_set */
+}
+
 void fw_obs_flip(fw_obs_t *o) {
+  flush_first(o);
   fw_pll_reset_f32(&o->pll, o->pll.theta_rad + FW_PI_F32, 0.0f);
   o->theta_prev = o->pll.theta_rad;
   pos_add(o, FW_PI_F32);
 }
 
 void fw_obs_rotate(fw_obs_t *o, float d_rad) {
+  flush_first(o);
   fw_pll_reset_f32(&o->pll, fw_wrap_pi_f32(o->pll.theta_rad + d_rad), 0.0f);
   o->theta_prev = o->pll.theta_rad;
   pos_add(o, d_rad);
@@ -95,7 +117,9 @@ void fw_obs_rotate(fw_obs_t *o, float d_rad) {
 
 void fw_obs_hold(fw_obs_t *o, float t_s) { o->est_hold_s = t_s; }
 
-float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
+float fw_obs_update_pll(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
+  /* the last move is added (fw_obs_pos_flush): theta_prev is the estimate it
+   * starts from */
   const float dt = o->dt_s;
   float eps = 0.0f;
   const float floor_A = 1e-6f;
@@ -129,8 +153,7 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
   const float lam = o->bw_min + o->bw_span * r;
   const float lam2 = lam * lam;
   const float kp = o->kp0 * lam;
-  o->pll.kp = kp;
-  o->pll.ki = o->ki0 * lam2;
+  o->lam = lam; /* pll.kp, pll.ki: set with the position (fw_obs_pll_gains) */
   fw_pll_f32_t *const pll = &o->pll;
   const float w_max = pll->w_max_radps;
   float w_i = pll->w_i_radps;
@@ -150,10 +173,14 @@ float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
     o->accel_dist += o->kd_dt * lam * lam * lam * eps;
   }
   pll->w_i_radps = w_i;
-  const float dth = fw_wrap_pi_f32(o->pll.theta_rad - o->theta_prev);
-  pos_add(o, dth);
-  o->theta_prev = o->pll.theta_rad;
+  o->pos_due = 1u; /* the position follows in fw_obs_pos_flush */
   o->omega_f += o->spd_alpha * (w_i - o->omega_f);
+  return eps;
+}
+
+float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
+  const float eps = fw_obs_update_pll(o, in, adapt_r);
+  fw_obs_pos_flush(o);
   return eps;
 }
 

@@ -15,11 +15,8 @@ void fw_pll_init_f32(fw_pll_f32_t *p, float kp, float ki, float w_max_radps) {
 }
 
 void fw_pll_reset_f32(fw_pll_f32_t *p, float theta_rad, float w_radps) {
-  p->theta_rad = fw_wrap_pi_f32(theta_rad); /* non-finite -> 0 */
-  p->w_i_radps = fw_isfinite_f32(w_radps)
-                     ? fw_clampf(w_radps, -p->w_max_radps, p->w_max_radps)
-                     : 0.0f;
-  p->w_hat_radps = p->w_i_radps;
+  fw_pll_set_angle_f32(p, theta_rad);
+  fw_pll_set_speed_f32(p, w_radps);
 }
 
 void fw_pll_step_f32(fw_pll_f32_t *p, float e_rad, float dt_s) {

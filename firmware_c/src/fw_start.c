@@ -14,62 +14,56 @@ void fw_start_init(fw_start_t *s, float dt_s) {
   s->inv_dt = 1.0f / dt_s;
 }
 
+/* fw_start_reset clears every field but the two configured ones, one by one: a
+ * field added to fw_start_t must be cleared there too (this size then changes). */
+_Static_assert(sizeof(fw_start_t) == 96u, "fw_start_reset: clear the new field");
+
 void fw_start_reset(fw_start_t *s) {
-  const float fly_a = s->fly_a, inv_dt = s->inv_dt;
-  memset(s, 0, sizeof(*s));
-  s->fly_a = fly_a;
-  s->inv_dt = inv_dt;
+  /* field by field, not memset (GCC turns a whole-struct clear, a compound
+   * literal included, into a call of newlib's memset: about 120 cycles on the
+   * Cortex-M4F in the control interrupt's handover to closed loop) */
+  s->pol_k = 0u;
+  s->pol_base = s->pol_ext = 0.0f;
+  s->pol_sum_pos = s->pol_sum_neg = 0.0f;
+  s->sal_acc[0] = s->sal_acc[1] = s->sal_acc[2] = s->sal_acc[3] = 0.0f;
+  s->sal_k = 0u;
+  s->u_ab_prev_V[0] = s->u_ab_prev_V[1] = 0.0f;
+  s->i_f_ab_prev_A[0] = s->i_f_ab_prev_A[1] = 0.0f;
+  s->fly_e_ab_V[0] = s->fly_e_ab_V[1] = 0.0f;
+  s->fly_rot_rad = 0.0f;
+  s->fly_cr = s->fly_dot = 0.0f;
+  s->fly_rot_margin = 0.0f; /* rotation 0: no margin */
+  s->fly_due = 0u;
+  s->flying = 0u;
+  s->sal_retries = 0u;
 }
 
 /* ---- ALIGN ---------------------------------------------------------------- */
 
-void fw_start_fly_observe(fw_start_t *s, const fw_cfg_machine_t *mach, fw_vec2_f32_t i_f_ab,
-                          float phase_time_s) {
-  const float L = 0.5f * (mach->L_d_H + mach->L_q_H);
-  const float inv_dt = s->inv_dt;
-  float ea = s->u_ab_prev_V[0] - mach->R_ohm * i_f_ab.x -
-             L * (i_f_ab.x - s->i_f_ab_prev_A[0]) * inv_dt;
-  float eb = s->u_ab_prev_V[1] - mach->R_ohm * i_f_ab.y -
-             L * (i_f_ab.y - s->i_f_ab_prev_A[1]) * inv_dt;
-  s->i_f_ab_prev_A[0] = i_f_ab.x;
-  s->i_f_ab_prev_A[1] = i_f_ab.y;
-  const float a = s->fly_a;
-  float pa = s->fly_e_ab_V[0], pb = s->fly_e_ab_V[1];
-  s->fly_e_ab_V[0] += a * (ea - pa);
-  s->fly_e_ab_V[1] += a * (eb - pb);
-  if (phase_time_s >= FW_FLY_WINDOW_S) {
-    /* angle step between successive filtered vectors (cross / dot) */
-    float cr = pa * s->fly_e_ab_V[1] - pb * s->fly_e_ab_V[0];
-    float dt = pa * s->fly_e_ab_V[0] + pb * s->fly_e_ab_V[1];
-    s->fly_rot_rad += fw_atan2_f32(cr, dt);
-  }
-}
-
-void fw_start_fly_set_u(fw_start_t *s, fw_vec2_f32_t u_f_ab) {
-  s->u_ab_prev_V[0] = u_f_ab.x;
-  s->u_ab_prev_V[1] = u_f_ab.y;
+void fw_start_fly_add(fw_start_t *s) {
+  s->fly_rot_rad += fw_atan2_f32(s->fly_cr, s->fly_dot);
+  s->fly_due = 0u;
+  /* for fw_start_fly_catch_speed: half the margin to FW_FLY_ROT_MIN_RAD, or 0
+   * (also for NaN) */
+  const float m = fabsf(s->fly_rot_rad) - FW_FLY_ROT_MIN_RAD;
+  s->fly_rot_margin = m > 1e-3f ? 0.5f * m : 0.0f;
 }
 
 fw_fault_t fw_start_fly_catch(fw_start_t *s, const fw_config_t *cfg, float bemf_w_on,
                               float *theta_rad, float *w0_radps) {
-  const float ea = s->fly_e_ab_V[0], eb = s->fly_e_ab_V[1];
-  const float E = sqrtf(ea * ea + eb * eb);
-  if (!(bemf_w_on > 0.0f) || E < cfg->estimator.bemf_e_off_V || fabsf(s->fly_rot_rad) < 0.05f) {
-    return FW_FAULT_MOVING_AT_ENABLE; /* too slow for the back-EMF, too fast for injection */
+  fw_start_fly_flush(s); /* this period's step of the rotation */
+  const fw_fault_t f = fw_start_fly_catch_speed(s, cfg, bemf_w_on, w0_radps);
+  if (f == FW_FAULT_NONE) {
+    *theta_rad = fw_start_fly_catch_angle(s, *w0_radps);
   }
-  const float w0 = (s->fly_rot_rad > 0.0f ? 1.0f : -1.0f) * E / cfg->machine.psi_f_Wb;
-  /* e_ab = w psi_f (-sin theta, cos theta); the filter lags by about w tau */
-  float th = fw_atan2_f32(-ea, eb) + (w0 < 0.0f ? FW_PI_F32 : 0.0f) + w0 * FW_FLY_TAU_S;
-  *theta_rad = fw_wrap_pi_f32(th);
-  *w0_radps = w0;
-  s->flying = 1u;
-  return FW_FAULT_NONE;
+  return f;
 }
 
-bool fw_start_align_done(const fw_cfg_estimator_t *est, float phase_time_s, uint32_t inj_idx,
-                         uint32_t n_inj) {
-  const uint32_t last_idx = n_inj / 4u > 0u ? n_inj / 4u - 1u : 0u;
-  return phase_time_s >= est->align_time_s && inj_idx == last_idx;
+float fw_start_fly_catch_angle(const fw_start_t *s, float w0) {
+  const float ea = s->fly_e_ab_V[0], eb = s->fly_e_ab_V[1];
+  /* e_ab = w psi_f (-sin theta, cos theta); the filter lags by about w tau */
+  float th = fw_atan2_f32(-ea, eb) + (w0 < 0.0f ? FW_PI_F32 : 0.0f) + w0 * FW_FLY_TAU_S;
+  return fw_wrap_pi_f32(th);
 }
 
 /* ---- SALIENCY ------------------------------------------------------------- */
@@ -115,13 +109,10 @@ float fw_start_polarity_step(fw_start_t *s, const fw_cfg_estimator_t *est, float
                              fw_pol_result_t *res) {
   const uint32_t n = est->pol_pulse_samples;
   const uint32_t per_pair = 6u * n;
-  const uint32_t pair = s->pol_k / per_pair;
-  const uint32_t j = s->pol_k % per_pair;
-  const uint32_t seg = j / n;
-  const uint32_t in_seg = j % n;
-  const float v = est->pol_pulse_V;
 
-  if (pair >= est->pol_pulse_pairs) { /* decision */
+  /* pol_k / per_pair >= pol_pulse_pairs, without the division (in 64 bits: the
+   * product does not wrap) */
+  if ((uint64_t)s->pol_k >= (uint64_t)est->pol_pulse_pairs * per_pair) { /* decision */
     const float p = s->pol_sum_pos, m = s->pol_sum_neg;
     if (p > m * (1.0f + est->pol_margin)) {
       *res = FW_POL_ALIGNED;
@@ -133,6 +124,10 @@ float fw_start_polarity_step(fw_start_t *s, const fw_cfg_estimator_t *est, float
     return 0.0f;
   }
   *res = FW_POL_BUSY;
+  const uint32_t j = s->pol_k % per_pair;
+  const uint32_t seg = j / n;
+  const uint32_t in_seg = j % n;
+  const float v = est->pol_pulse_V;
 
   /* Per pair: 0 (settle, lets the last command take effect), +V, -V, 0, -V, +V.
    * The baseline is sampled at the start of each excursion, the extreme over

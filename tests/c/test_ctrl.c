@@ -168,9 +168,14 @@ static void test_startup_polarity(void) {
     plant_init(&p, th, 0.1 * 0.012);
     fw_outputs_t out;
     enable(&c);
+    int scale_bad = 0;
     for (int k = 0; k < (int)(0.25 * 24000); k++) {
       loop_step(&c, &p, &out);
+      /* the injection's scale is full in the start-up (a flying start's catch relies
+       * on it: fly_catch) */
+      scale_bad += c.phase != FW_START_RUN && c.bemf.inj_scale != 1.0f;
     }
+    TT_CHECK(scale_bad == 0);
     TT_CHECK(c.phase == FW_START_RUN);
     TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
     TT_CHECK_NEAR(wrap(c.pll.theta_rad - th), 0.0, 0.03);
@@ -1098,6 +1103,102 @@ static void test_supervision_missed(void) {
   TT_CHECK(c.snap.fault_code == (uint16_t)FW_FAULT_SUPERVISION_MISSED);
 }
 
+/* The work a period leaves to its supervision half (the observer's position, the
+ * adaptive SOGI's gain, the back-EMF angle error): pending after the control half,
+ * done by fw_supervise; a control half that finds the supervision missed does it
+ * first, so position and gains are then those the supervision would have left. */
+static void test_supervision_deferred_work(void) {
+  static fw_ctrl_t c, t;
+  plant_t p;
+  fw_outputs_t out, out_t;
+  run_to_operation(&c, &p, &out);
+  TT_CHECK(c.phase == FW_START_RUN &&
+           c.cfg.estimator.extractor == (uint32_t)FW_EXTRACTOR_SOGI_ADAPTIVE);
+  int adapted = 0, bad = 0;
+  for (int k = 0; k < 200; k++) {
+    fw_inputs_t in;
+    plant_sample(&p, &in);
+    c.pll.w_i_radps += 0.5f; /* test set-up: keep the estimate and its error moving */
+    (void)fw_step_into(&c, &in, NULL, &out, &c.snap);
+    bad += c.obs.pos_due != 1u || c.sup.adapt != 1u;
+    t = c; /* a twin whose supervision is lost */
+    const fw_sogi_f32_t before = c.inj.sogi_a;
+    (void)fw_supervise(&c, &out, &c.snap);
+    bad += c.obs.pos_due != 0u || c.sup.adapt != 0u;
+    adapted += before.k != c.inj.sogi_a.k;
+    (void)fw_step_into(&t, &in, NULL, &out_t, &t.snap); /* finds it missed */
+    bad += fw_fault_code(&t) != FW_FAULT_SUPERVISION_MISSED || out_t.pwm_enable != 0u;
+    bad += t.obs.pos_turns != c.obs.pos_turns || t.obs.theta_prev != c.obs.theta_prev ||
+           memcmp(&t.obs.pos_unwrapped_e, &c.obs.pos_unwrapped_e, sizeof(float)) != 0;
+    bad += memcmp(&t.inj.sogi_a, &c.inj.sogi_a, sizeof c.inj.sogi_a) != 0 ||
+           memcmp(&t.inj.sogi_b, &c.inj.sogi_b, sizeof c.inj.sogi_b) != 0 ||
+           t.inj.sogi_gd_s != c.inj.sogi_gd_s;
+    plant_period(&p, 1.0 / 24000.0);
+    for (int i = 0; i < 3; i++) {
+      p.duty[i] = out.duty_abc[i];
+    }
+  }
+  printf("  200 periods, the SOGI gain recomputed in %d supervisions\n", adapted);
+  TT_CHECK(bad == 0);
+  TT_CHECK(adapted > 0);
+}
+
+/* The standstill saliency check is judged in the supervision half of the period
+ * that completes it: the control half ends it in SALIENCY, fw_supervise moves on
+ * to the polarity test, as a core running fw_step does in that period. A check
+ * that fails (the configured machine's saliency far from the plant's) switches
+ * that period's outputs off in the supervision, as fw_step's. */
+static void test_saliency_judged_in_supervision(void) {
+  for (int fail = 0; fail <= 1; fail++) {
+    fw_config_t cfg;
+    fw_config_default(&cfg);
+    if (fail) {
+      cfg.machine.L_q_H = 0.036f; /* configured saliency 2, the plant's 0.5 */
+    }
+    static fw_ctrl_t c, ref;
+    fw_init(&c, &cfg);
+    fw_set_mode(&c, FW_MODE_FORCE);
+    plant_t p;
+    plant_init(&p, 0.4, 0.1 * 0.012);
+    enable(&c);
+    ref = c;
+    int judged = 0, bad = 0;
+    for (int k = 0; k < (int)(0.15 * 24000) && !judged; k++) {
+      fw_inputs_t in;
+      plant_sample(&p, &in);
+      fw_outputs_t out, out_ref;
+      fw_step(&ref, &in, &out_ref);
+      (void)fw_step_into(&c, &in, NULL, &out, &c.snap);
+      if (c.sup.saliency) {
+        judged = 1;
+        bad += c.phase != FW_START_SALIENCY || out.pwm_enable != 1u ||
+               fw_fault_code(&c) != FW_FAULT_NONE;
+        const bool off = fw_supervise(&c, &out, &c.snap);
+        bad += c.sup.saliency != 0u || c.snap.sal_meas != ref.snap.sal_meas;
+        if (fail) {
+          bad += !off || out.pwm_enable != 0u || out.duty_abc[0] != 0.5f ||
+                 fw_fault_code(&c) != FW_FAULT_SALIENCY_MISMATCH ||
+                 c.snap.fault_code != (uint16_t)FW_FAULT_SALIENCY_MISMATCH;
+        } else {
+          bad += off || c.phase != FW_START_POLARITY || c.snap.start_phase != c.phase;
+        }
+      } else {
+        (void)fw_supervise(&c, &out, &c.snap);
+      }
+      bad += memcmp(out.duty_abc, out_ref.duty_abc, sizeof out.duty_abc) != 0 ||
+             out.pwm_enable != out_ref.pwm_enable || c.phase != ref.phase ||
+             fw_fault_code(&c) != fw_fault_code(&ref);
+      plant_period(&p, 1.0 / 24000.0);
+      for (int i = 0; i < 3; i++) {
+        p.duty[i] = out.duty_abc[i];
+      }
+      p.enabled = out.pwm_enable;
+    }
+    TT_CHECK(judged == 1);
+    TT_CHECK(bad == 0);
+  }
+}
+
 /* A hard fault the supervision finds (here the current sum of a phase sensor
  * with a 3 A offset) switches off the duties the control half has just
  * computed, in the period a core running fw_step switches off in, with the
@@ -1178,6 +1279,25 @@ static void test_bemf_prepare(void) {
   fw_bemf_update(&b, u, i0, w0, w0);
   fw_bemf_prepare(&b);
   TT_CHECK(b.err_fresh == 0u);
+  /* the handover to the back-EMF (fw_bemf_schedule): the error the PLL reads next
+   * period is left to fw_bemf_prepare too, the value of the filters of that update */
+  fw_bemf_init(&b, &cfg, dt);
+  TT_CHECK(b.w_on > 0.0f && b.active == 0u);
+  const float w_up = 1.5f * b.w_on;
+  const float u_up[2] = {-1.0f, w_up * cfg.machine.psi_f_Wb};
+  int k_on = -1;
+  for (int k = 0; k < 480 && k_on < 0; k++) {
+    fw_bemf_update(&b, u_up, i0, w_up, w_up);
+    fw_bemf_schedule(&b, w_up, 1u);
+    if (b.active) {
+      k_on = k;
+    }
+  }
+  TT_CHECK(k_on > 100 && b.err_fresh == 0u); /* after the 5 ms hold */
+  const float at_handover = fw_bemf_angle_of(&b, b.e_d_f, b.e_q_f, b.w_neg);
+  TT_CHECK(fw_bemf_error(&b) == at_handover);
+  fw_bemf_prepare(&b);
+  TT_CHECK(b.err_fresh == 1u && memcmp(&b.err_rad, &at_handover, sizeof at_handover) == 0);
   /* the core in RUN on the back-EMF: the control half leaves it to the
    * supervision half */
   static fw_ctrl_t c;
@@ -1200,6 +1320,8 @@ int main(void) {
   TT_RUN(test_step_into_slots_equals_step);
   TT_RUN(test_supervision_missed);
   TT_RUN(test_supervision_switches_off_same_period);
+  TT_RUN(test_supervision_deferred_work);
+  TT_RUN(test_saliency_judged_in_supervision);
   TT_RUN(test_demod_sogi);
   TT_RUN(test_demod_sogi_adaptive);
   TT_RUN(test_demod_pi_ambiguity);

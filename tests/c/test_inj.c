@@ -170,8 +170,46 @@ static void test_reset_equals_init(void) {
   }
 }
 
+/* A reset to the configured extractor's gain restores the gains fw_inj_init
+ * computed for it: the same, bit for bit, as fw_inj_set_k of that gain on the
+ * filters however their gain moved since; a reset to another gain (the extractor
+ * switched since the configuration) computes them. */
+static void test_reset_gains(void) {
+  for (int e = 1; e < 3; e++) {
+    const fw_extractor_t ex = e == 1 ? FW_EXTRACTOR_SOGI : FW_EXTRACTOR_SOGI_ADAPTIVE;
+    fw_config_t cfg;
+    static fw_inj_t j, ref;
+    init(&j, &cfg, ex);
+    const float k_cfg =
+        ex == FW_EXTRACTOR_SOGI ? cfg.estimator.sogi_k : cfg.estimator.sogi_k_adapt_max;
+    TT_CHECK(j.k_reset == k_cfg);
+    for (int n = 0; n < 5; n++) {
+      fw_inj_set_k(&j, 0.3f + 0.25f * (float)n); /* the adaptation moved it */
+      fw_inj_reset(&j, &cfg.estimator);
+      ref = j;
+      fw_inj_set_k(&ref, k_cfg);
+      TT_CHECK(memcmp(&j.sogi_a, &ref.sogi_a, sizeof j.sogi_a) == 0);
+      TT_CHECK(memcmp(&j.sogi_b, &ref.sogi_b, sizeof j.sogi_b) == 0);
+      TT_CHECK(memcmp(&j.sogi_gd_s, &ref.sogi_gd_s, sizeof j.sogi_gd_s) == 0);
+    }
+    /* the other extractor's gain: computed */
+    fw_cfg_estimator_t other = cfg.estimator;
+    other.extractor =
+        (uint32_t)(ex == FW_EXTRACTOR_SOGI ? FW_EXTRACTOR_SOGI_ADAPTIVE : FW_EXTRACTOR_SOGI);
+    const float k_other =
+        ex == FW_EXTRACTOR_SOGI ? cfg.estimator.sogi_k_adapt_max : cfg.estimator.sogi_k;
+    fw_inj_reset(&j, &other);
+    ref = j;
+    fw_inj_set_k(&ref, k_other);
+    TT_CHECK(j.sogi_a.k == k_other);
+    TT_CHECK(memcmp(&j.sogi_a, &ref.sogi_a, sizeof j.sogi_a) == 0 &&
+             memcmp(&j.sogi_b, &ref.sogi_b, sizeof j.sogi_b) == 0 && j.sogi_gd_s == ref.sogi_gd_s);
+  }
+}
+
 int main(void) {
   TT_RUN(test_reset_equals_init);
+  TT_RUN(test_reset_gains);
   TT_RUN(test_signs);
   TT_RUN(test_demodulation_pseudo);
   TT_RUN(test_demodulation_sogi);

@@ -174,6 +174,39 @@ static void test_bemf_residual(void) {
   TT_CHECK(f == FW_FAULT_EST_BEMF_MISMATCH);
 }
 
+/* The motion check at enable reads the residual's magnitude the block end formed
+ * (r_mag_V): after every update it is sqrtf(r_d_f^2 + r_q_f^2) bit for bit, the
+ * value the check used to compute per call, running or not, and 0 after the
+ * restarts that clear the filters. */
+static void test_motion_magnitude(void) {
+  fw_config_t cfg;
+  fw_mon_t m;
+  setup(&m, &cfg);
+  const float e_max = 2.0f;
+  int bad = 0, moving = 0;
+  for (int k = 0; k < 4800; k++) {
+    fw_mon_in_t in;
+    memset(&in, 0, sizeof in);
+    in.running = (uint8_t)(k >= 2400);
+    in.pwm_on = (uint8_t)(k % 50 != 0);
+    in.omega_hat_radps = 50.0f * sinf(0.003f * (float)k);
+    in.u_dq_V[0] = 3.0f * cosf(0.002f * (float)k);
+    in.u_dq_V[1] = 4.0f * sinf(0.0013f * (float)k);
+    in.i_dq_A[0] = 0.2f * sinf(0.01f * (float)k);
+    in.i_dq_A[1] = 1.0f;
+    (void)fw_mon_update(&m, &in);
+    const float e = sqrtf(m.r_d_f * m.r_d_f + m.r_q_f * m.r_q_f);
+    bad += memcmp(&e, &m.r_mag_V, sizeof e) != 0;
+    const fw_fault_t want = e > e_max ? FW_FAULT_MOVING_AT_ENABLE : FW_FAULT_NONE;
+    bad += fw_mon_motion(&m, e_max) != want;
+    moving += want != FW_FAULT_NONE;
+  }
+  fw_mon_run_start(&m);
+  bad += m.r_mag_V != 0.0f || fw_mon_motion(&m, 0.0f) != FW_FAULT_NONE;
+  TT_CHECK(bad == 0);
+  TT_CHECK(moving > 100 && moving < 4700); /* both outcomes */
+}
+
 static void test_offsets_and_current_sum(void) {
   fw_config_t cfg;
   fw_mon_t m;
@@ -229,5 +262,6 @@ int main(void) {
   TT_RUN(test_hf_angle_whole_range);
   TT_RUN(test_bemf_residual);
   TT_RUN(test_offsets_and_current_sum);
+  TT_RUN(test_motion_magnitude);
   return TT_SUMMARY();
 }

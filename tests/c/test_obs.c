@@ -133,6 +133,79 @@ static void test_position(void) {
            o.accel_dist == 0.0f && o.theta_prev == -2.0f);
 }
 
+/* A small deterministic generator for the tests below (xorshift32). */
+static uint32_t rng_u32(uint32_t *st) {
+  uint32_t x = *st;
+  x ^= x << 13;
+  x ^= x >> 17;
+  x ^= x << 5;
+  *st = x;
+  return x;
+}
+static float rng_f(uint32_t *st, float lo, float hi) {
+  return lo + (hi - lo) * (float)(rng_u32(st) >> 8) * (1.0f / 16777216.0f);
+}
+
+/* fw_obs_update_pll leaves the position's move to fw_obs_pos_flush (the
+ * supervision half): after the flush the observer is the one fw_obs_update
+ * leaves, bit for bit, over every electrical turn in both directions; before it
+ * the readers (fw_obs_pos_e, fw_obs_pos_parts) see the moved position already,
+ * and the functions that move the estimate add a pending move first. */
+static void test_update_pll_then_flush(void) {
+  fw_config_t cfg;
+  fw_obs_t a, b;
+  setup(&a, &cfg);
+  setup(&b, &cfg);
+  uint32_t st = 12345u;
+  int turns_max = 0, turns_min = 0, crossings = 0, bad = 0;
+  for (int k = 0; k < 60000; k++) {
+    fw_obs_in_t in = hf_in(rng_f(&st, 0.02f, 0.06f), rng_f(&st, -0.004f, 0.004f));
+    const int ph = k % 20000;
+    if (ph < 15000) { /* the back-EMF error drives it: fast, both ways */
+      in.bemf_active = 1u;
+      in.bemf_err_rad = rng_f(&st, -0.2f, 0.2f) + (ph < 5000 ? 0.9f : -0.9f);
+    }
+    in.running = (uint8_t)(ph >= 18000); /* the mechanical extension too */
+    a.i_q_ff_A = b.i_q_ff_A = rng_f(&st, -0.1f, 0.1f);
+    float ra, rb;
+    const float ea = fw_obs_update(&a, &in, &ra);
+    const float eb = fw_obs_update_pll(&b, &in, &rb);
+    bad += ea != eb || ra != rb || b.pos_due != 1u;
+    /* the pending move, read on demand */
+    int32_t t_b;
+    float x_b;
+    fw_obs_pos_parts(&b, &t_b, &x_b);
+    bad += t_b != a.pos_turns || memcmp(&x_b, &a.pos_unwrapped_e, sizeof x_b) != 0;
+    bad += fw_obs_pos_e(&b) != fw_obs_pos_e(&a);
+    crossings += t_b != b.pos_turns; /* the move crosses +-pi */
+    /* now and then a function that moves the estimate, with the move pending */
+    if (k % 997 == 0) {
+      fw_obs_rotate(&a, 0.3f);
+      fw_obs_rotate(&b, 0.3f);
+    } else if (k % 1499 == 0) {
+      fw_obs_flip(&a);
+      fw_obs_flip(&b);
+    } else if (k % 2003 == 0) {
+      const float w0 = ph < 5000 ? 200.0f : -200.0f;
+      fw_obs_catch(&a, 1.0f, w0);
+      fw_obs_catch_speed(&b, w0);
+      fw_obs_catch_angle(&b, 1.0f);
+    } else {
+      fw_obs_pos_flush(&b);
+    }
+    bad += memcmp(&a, &b, sizeof a) != 0;
+    turns_max = a.pos_turns > turns_max ? a.pos_turns : turns_max;
+    turns_min = a.pos_turns < turns_min ? a.pos_turns : turns_min;
+  }
+  printf("  60000 periods, %d moves across +-pi, position %d .. %d turns\n", crossings, turns_min,
+         turns_max);
+  TT_CHECK(bad == 0);
+  TT_CHECK(crossings > 20 && turns_max > 3 && turns_min < -3); /* the wraps, both ways */
+  /* the catch in two parts is fw_obs_catch; a hand-over's angle is kept as given */
+  fw_obs_catch_angle(&b, 5.0f);
+  TT_CHECK(b.theta_prev == 5.0f && fabsf(b.pll.theta_rad - (5.0f - 2.0f * (float)M_PI)) < 1e-6f);
+}
+
 static void test_supervise(void) {
   fw_config_t cfg;
   fw_obs_t o;
@@ -166,6 +239,7 @@ int main(void) {
   TT_RUN(test_error);
   TT_RUN(test_mechanical_extension);
   TT_RUN(test_position);
+  TT_RUN(test_update_pll_then_flush);
   TT_RUN(test_supervise);
   return TT_SUMMARY();
 }

@@ -4,6 +4,8 @@
  * decision, and the flying-start catch on a synthetic rotating back-EMF
  * (angle and speed against e_ab = w psi_f (-sin th, cos th)). */
 #include <math.h>
+#include <stddef.h>
+#include <string.h>
 
 #include "pmlsm/fw_ctrl.h"
 #include "tinytest.h"
@@ -111,6 +113,7 @@ static void test_fly_catch(void) {
     float t = 0.0f;
     for (int k = 0; k < 360; k++) { /* 15 ms at zero current: e_ab = u_ab */
       t += dt;
+      fw_start_fly_flush(&s); /* the last step of the rotation (the supervision's) */
       fw_start_fly_observe(&s, &cfg.machine, i0, t);
       th += w * (double)dt;
       const fw_vec2_f32_t u = {(float)(-w * psi * sin(th)), (float)(w * psi * cos(th))};
@@ -144,10 +147,129 @@ static void test_fly_catch(void) {
   TT_CHECK(fw_start_fly_catch(&s, &cfg, 100.0f, &th_hat, &w0) == FW_FAULT_MOVING_AT_ENABLE);
 }
 
+static uint32_t rng_u32(uint32_t *st) {
+  uint32_t x = *st;
+  x ^= x << 13;
+  x ^= x >> 17;
+  x ^= x << 5;
+  *st = x;
+  return x;
+}
+static float rng_f(uint32_t *st, float lo, float hi) {
+  return lo + (hi - lo) * (float)(rng_u32(st) >> 8) * (1.0f / 16777216.0f);
+}
+
+/* The catch in two parts: fw_start_fly_catch_speed with this period's rotation
+ * step still due decides and finds the same speed as with the step added first,
+ * bit for bit, whether it adds the step (near the 0.05 rad threshold, a step
+ * that could change the rotation's sign, a non-finite step) or leaves it to
+ * fw_start_fly_flush; the state is then the same; fw_start_fly_catch is the two
+ * parts. */
+static void test_fly_catch_parts(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  const float dt = 1.0f / cfg.sensing.f_pwm_Hz;
+  uint32_t st = 2024u;
+  int bad = 0, left_due = 0, added = 0, near = 0, caught = 0;
+  for (int t = 0; t < 200000; t++) {
+    fw_start_t a;
+    fw_start_init(&a, dt);
+    /* the rotation so far (one step from 0: fw_start_fly_add forms its margin) */
+    const float r0 = t % 4 == 0 ? rng_f(&st, -0.08f, 0.08f) : rng_f(&st, -3.1f, 3.1f);
+    near += fabsf(r0) < 0.08f;
+    a.fly_cr = sinf(r0);
+    a.fly_dot = cosf(r0);
+    fw_start_fly_add(&a);
+    /* this period's step, due: mostly small, some large, some backwards or not finite */
+    const float step = t % 7 == 0 ? rng_f(&st, -3.1f, 3.1f) : rng_f(&st, -0.06f, 0.06f);
+    const float mag = rng_f(&st, 1e-3f, 100.0f);
+    a.fly_cr = mag * sinf(step);
+    a.fly_dot = mag * cosf(step);
+    if (t % 997 == 0) {
+      a.fly_dot = NAN;
+    } else if (t % 991 == 0) {
+      a.fly_cr = INFINITY;
+    }
+    a.fly_due = 1u;
+    a.fly_e_ab_V[0] = rng_f(&st, -80.0f, 80.0f);
+    a.fly_e_ab_V[1] = rng_f(&st, -80.0f, 80.0f);
+    fw_start_t b = a, c = a;
+    float w_a = -1.0f, w_b = -1.0f, th_c = -1.0f, w_c = -1.0f;
+    fw_start_fly_flush(&a); /* the step first: the decision on the full rotation */
+    const fw_fault_t fa = fw_start_fly_catch_speed(&a, &cfg, 100.0f, &w_a);
+    const fw_fault_t fb = fw_start_fly_catch_speed(&b, &cfg, 100.0f, &w_b);
+    left_due += b.fly_due;
+    added += !b.fly_due;
+    fw_start_fly_flush(&b);
+    bad += fa != fb || memcmp(&w_a, &w_b, sizeof w_a) != 0 || memcmp(&a, &b, sizeof a) != 0;
+    const fw_fault_t fc = fw_start_fly_catch(&c, &cfg, 100.0f, &th_c, &w_c);
+    bad += fc != fa || memcmp(&c, &a, sizeof a) != 0;
+    if (fa == FW_FAULT_NONE) {
+      caught++;
+      const float th_a = fw_start_fly_catch_angle(&a, w_a);
+      bad += memcmp(&th_a, &th_c, sizeof th_a) != 0 || memcmp(&w_c, &w_a, sizeof w_a) != 0;
+    }
+  }
+  printf("  200000 catches (%d near the threshold, %d caught): step left due %d, added %d\n", near,
+         caught, left_due, added);
+  TT_CHECK(bad == 0);
+  TT_CHECK(left_due > 50000 && added > 20000 && caught > 50000);
+}
+
+/* fw_start_reset clears every field but the configured ones (field by field:
+ * compared with a fresh block, the padding aside). */
+static void test_reset_clears_all(void) {
+  fw_start_t a, b;
+  fw_start_init(&b, 1.0f / 24000.0f);
+  memset(&a, 0x5a, sizeof a);
+  a.fly_a = b.fly_a;
+  a.inv_dt = b.inv_dt;
+  fw_start_reset(&a);
+  /* the padding: after sal_retries up to fly_a, after fly_due to the end */
+  const size_t p0 = offsetof(fw_start_t, sal_retries) + 1u, p1 = offsetof(fw_start_t, fly_a);
+  const size_t p2 = offsetof(fw_start_t, fly_due) + 1u;
+  memset((char *)&a + p0, 0, p1 - p0);
+  memset((char *)&a + p2, 0, sizeof a - p2);
+  TT_CHECK(memcmp(&a, &b, sizeof a) == 0);
+}
+
+/* The polarity test's decision without the division: pulses are over exactly
+ * when pol_k / (6 n) >= pairs, up to the largest counts. */
+static void test_polarity_decision(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  const uint32_t ns[] = {1u, 7u, 12u, 1000u}, pairs[] = {1u, 3u, 4u, 64u};
+  int bad = 0, n_checked = 0;
+  for (int i = 0; i < 4; i++) {
+    for (int j = 0; j < 4; j++) {
+      cfg.estimator.pol_pulse_samples = ns[i];
+      cfg.estimator.pol_pulse_pairs = pairs[j];
+      const uint32_t per_pair = 6u * ns[i], edge = per_pair * pairs[j];
+      const uint32_t ks[] = {0u,          1u,         edge - 2u,       edge - 1u,
+                             edge,        edge + 1u,  edge + per_pair, 0x7fffffffu,
+                             0xfffffffeu, 0xffffffffu};
+      for (int q = 0; q < 10; q++) {
+        fw_start_t s;
+        fw_start_init(&s, 1.0f / 24000.0f);
+        fw_start_polarity_begin(&s);
+        s.pol_k = ks[q];
+        fw_pol_result_t res;
+        (void)fw_start_polarity_step(&s, &cfg.estimator, 0.0f, &res);
+        bad += (res != FW_POL_BUSY) != (ks[q] / per_pair >= pairs[j]);
+        n_checked++;
+      }
+    }
+  }
+  TT_CHECK(n_checked == 160 && bad == 0);
+}
+
 int main(void) {
   TT_RUN(test_align_done);
   TT_RUN(test_saliency);
   TT_RUN(test_polarity);
   TT_RUN(test_fly_catch);
+  TT_RUN(test_fly_catch_parts);
+  TT_RUN(test_reset_clears_all);
+  TT_RUN(test_polarity_decision);
   return TT_SUMMARY();
 }

@@ -241,11 +241,16 @@ typedef struct {
   fw_foc_t foc;
   fw_mon_t mon;
   /** The period's supervision (fw_supervise), staged by fw_step_into: the
-   *  integrity monitor's inputs, the quick stop, and whether they wait. */
+   *  integrity monitor's inputs, the quick stop, and whether they wait; and the
+   *  work of the period that nothing before the duties needs, left to it. */
   struct {
     fw_mon_in_t mon;
     uint8_t quick_stop;
-    uint8_t due; /**< staged and not yet judged */
+    uint8_t due;      /**< staged and not yet judged */
+    uint8_t adapt;    /**< the adaptive SOGI's gain follows adapt_r (fw_inj_adapt) */
+    uint8_t saliency; /**< the standstill saliency check is complete: judge it */
+    uint8_t caught;   /**< a flying start: its angle, back-EMF and monitor restart */
+    float adapt_r;    /**< the observer's adaptation signal of the period */
   } sup;
   fw_bemf_t bemf;
   /* last: its rings are large, the hot blocks above stay within the FPU's
@@ -365,19 +370,27 @@ uint32_t fw_fault_history(const fw_ctrl_t *ctrl, uint16_t *codes, uint32_t n);
 void fw_step(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out);
 
 /**
- * The period's supervision half: the back-EMF angle error the PLL reads next
- * period (fw_bemf_prepare, also in a period with nothing staged), then the
- * integrity monitor (fw_mon_update) and the linear-axis protections
- * (fw_protect_update) on what fw_step_into staged for them. Call it once after every fw_step_into, before the next one and
- * before the duties take effect (fw_app: the supervision interrupt, pended by
- * the control interrupt and tail-chained to it). A fault it finds latches in
- * the same period as before the split; a hard one switches the outputs off:
- * out gets duties 0.5 and pwm_enable 0, snap the duties, state and fault code,
- * and it returns true (the caller then writes the PWM again). Returns false
- * when it left out unchanged (and when out or snap is NULL: the staged inputs
- * then stay unjudged). A period whose supervision did not run before
- * the next fw_step_into is FW_FAULT_SUPERVISION_MISSED (hard): the monitors
- * did not judge it.
+ * The period's supervision half: the current loop's snapshot fields of a period
+ * that reached the modulation (i_dq, its references, u_dq, u_inj, i.e. the
+ * FW_SNAP_W_OUT and FW_SNAP_W_REF groups' values, into snap); the work of the
+ * period that nothing before its duties needs (also in a period with nothing
+ * staged): the observer's position, the rest of a flying start (the angle, the
+ * back-EMF observer, the monitor's restart), the back-EMF angle error the PLL
+ * reads next period (fw_bemf_prepare), the adaptive SOGI's gain, the flying-start
+ * rotation; the standstill saliency check's judgement when the period completed
+ * it; then the integrity monitor (fw_mon_update) and the linear-axis protections
+ * (fw_protect_update) on what fw_step_into staged for them. Call it once after
+ * every fw_step_into, before the next one and before the duties take effect
+ * (fw_app: the supervision interrupt, pended by the control interrupt and
+ * tail-chained to it). A fault it finds latches in the same period as before the
+ * split (the saliency check's first); a hard one switches the outputs off: out
+ * gets duties 0.5 and pwm_enable 0, snap the duties, state and fault code, and it
+ * returns true (the caller then writes the PWM again). Returns false when it left
+ * out unchanged (and when out or snap is NULL: the staged inputs then stay
+ * unjudged). A period whose supervision did not run before the next
+ * fw_step_into is FW_FAULT_SUPERVISION_MISSED (hard): the monitors did not judge
+ * it; that control half does the period's deferred work and the saliency
+ * judgement first (the period's current-loop snapshot fields stay unwritten).
  */
 bool fw_supervise(fw_ctrl_t *ctrl, fw_outputs_t *out, fw_snapshot_t *snap);
 
@@ -400,9 +413,10 @@ bool fw_supervise(fw_ctrl_t *ctrl, fw_outputs_t *out, fw_snapshot_t *snap);
  * fw_step_into(ctrl, in, NULL, out, &ctrl->snap)):
  * a caller that keeps snapshots (fw_app's ring) has the step write into the
  * one it hands to its consumer, instead of copying them after the step. The
- * core never reads snap. Returns the FW_SNAP_W_* groups written: the others
- * are the previous period's (fw_snapshot_carry copies them from where that one
- * was written).
+ * core never reads snap. Returns the FW_SNAP_W_* groups written (by the period:
+ * on a period that reaches the modulation fw_supervise writes the current loop's
+ * fields into the same snap): the others are the previous period's
+ * (fw_snapshot_carry copies them from where that one was written).
  */
 unsigned fw_step_into(fw_ctrl_t *ctrl, const fw_inputs_t *in, const fw_adc_inputs_t *adc,
                       fw_outputs_t *out, fw_snapshot_t *snap);

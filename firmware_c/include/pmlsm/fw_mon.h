@@ -108,6 +108,7 @@ typedef struct {
    *  timers change only at a judgement or when cleared): FW_FAULT_NONE or
    *  the fault fw_mon_update returns after the current sum's */
   uint32_t verdict;
+  float r_mag_V; /**< |(r_d_f, r_q_f)|, formed where they change (fw_mon_motion) */
 } fw_mon_t;
 
 /** Copy thresholds and parameters from the configuration; forget what was learnt. */
@@ -142,8 +143,13 @@ fw_fault_t fw_mon_saliency(fw_mon_t *m, const fw_config_t *cfg, float y_dd, floa
 /** Motion check during the alignment: |u - R i - L di/dt| (low-passed; the
  *  zero-current loop's voltage, whose back-EMF feed-forward is off until closed
  *  loop) against the back-EMF at start_speed_max_mps. Returns
- *  FW_FAULT_MOVING_AT_ENABLE or NONE. */
-fw_fault_t fw_mon_motion(const fw_mon_t *m, float e_start_max_V);
+ *  FW_FAULT_MOVING_AT_ENABLE or NONE. The magnitude is the one the block end
+ *  formed (r_mag_V: the filters change only there), not a square root per call. */
+static inline fw_fault_t fw_mon_motion(const fw_mon_t *m, float e_start_max_V) {
+  /* sqrtf(r_d_f^2 + r_q_f^2), formed by the block end (fw_mon_block) or the reset
+   * that last changed them */
+  return m->r_mag_V > e_start_max_V ? FW_FAULT_MOVING_AT_ENABLE : FW_FAULT_NONE;
+}
 
 /** Closed loop starts: forget the filtered signals of the start-up pulses. */
 void fw_mon_run_start(fw_mon_t *m);

@@ -55,7 +55,13 @@ typedef struct {
   float i_q_ff_A;         /**< fundamental i_q of the last full period (thrust feed-forward) */
   float pos_unwrapped_e;  /**< unwrapped electrical angle estimate: remainder in [-pi, pi) ... */
   int32_t pos_turns;      /**< ... plus this many whole electrical turns (2 pi) */
-  float theta_prev;
+  float theta_prev;       /**< the estimate the position last moved to */
+  /** 1: fw_obs_update_pll moved the estimate and the position has not followed yet
+   *  (fw_obs_pos_flush; fw_obs_pos_parts reads it as if it had) */
+  uint8_t pos_due;
+  /** the last update's bandwidth scale: pll.kp and pll.ki (which nothing in the
+   *  step reads: the PLL step is inline) follow with the position */
+  float lam;
 } fw_obs_t;
 
 /** Inputs of one sample. */
@@ -79,8 +85,15 @@ void fw_obs_reset(fw_obs_t *o, const fw_config_t *cfg);
 void fw_obs_keep_position(fw_obs_t *o);
 /** Estimate set to (theta, w) without moving the position (a hand-over). */
 void fw_obs_set(fw_obs_t *o, float theta_rad, float w_radps);
-/** Flying start: estimate set on a moving mover; filtered speed w0, no disturbance. */
+/** Flying start: estimate set on a moving mover; filtered speed w0, no disturbance.
+ *  fw_obs_catch_speed, then fw_obs_catch_angle. */
 void fw_obs_catch(fw_obs_t *o, float theta_rad, float w0_radps);
+/** The speed part of fw_obs_catch (the PLL's speed, the filtered speed, no
+ *  disturbance): what the period's loops read. */
+void fw_obs_catch_speed(fw_obs_t *o, float w0_radps);
+/** The angle part of fw_obs_catch (the PLL's angle, which only the next period
+ *  reads; the position follows the last move first). */
+void fw_obs_catch_angle(fw_obs_t *o, float theta_rad);
 /** Polarity: pi added to the estimate and to the position. */
 void fw_obs_flip(fw_obs_t *o);
 /** Turn the estimate by d_rad (|d_rad| <= pi/2, an angle error the standstill
@@ -96,9 +109,86 @@ static inline void fw_obs_set_iq(fw_obs_t *o, float i_q_A) { o->i_q_ff_A = i_q_A
  * One sample: error, low-pass, bandwidth scheduling, PLL step, mechanical
  * extension, position and filtered speed. Returns the error used (rad);
  * *adapt_r: |filtered error| / sogi_adapt_err_rad clamped to [0, 1], the
- * adaptation signal for the SOGI.
+ * adaptation signal for the SOGI. It is fw_obs_update_pll followed by
+ * fw_obs_pos_flush.
  */
 float fw_obs_update(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r);
+
+/**
+ * fw_obs_update without the position: the estimate's move is left for
+ * fw_obs_pos_flush (pos_due), which the control step's supervision half calls
+ * (fw_supervise): nothing before the duties reads the position, and its angle
+ * difference and wrap (two wraps and a turn once per electrical revolution) need
+ * not be in the control interrupt. The PLL's gain fields pll.kp and pll.ki, which
+ * only readers outside the step see, follow with it (fw_obs_pll_gains). Call
+ * fw_obs_pos_flush before the next fw_obs_update_pll (fw_ctrl: the supervision,
+ * or the control half that finds it missed). Every other function of this block
+ * that reads or moves the position or the estimate adds a pending move first, so
+ * the position is the same, bit for bit, as fw_obs_update's.
+ */
+float fw_obs_update_pll(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r);
+
+/** x (the position's remainder plus an increment) back into [-pi, pi), the turn
+ *  it crossed counted in *turns (increments up to pi: the estimate's move). */
+static FW_ALWAYS_INLINE float fw_obs_pos_wrap(float x, int32_t *turns) {
+  /* usually in range: one test against pi; -pi and NaN take the exact tests,
+   * which leave them as they are */
+  if (FW_UNLIKELY(!(fabsf(x) < FW_PI_F32))) {
+    if (x >= FW_PI_F32) {
+      x -= FW_TWO_PI_F32;
+      (*turns)++;
+    } else if (x < -FW_PI_F32) {
+      x += FW_TWO_PI_F32;
+      (*turns)--;
+    }
+  }
+  return x;
+}
+
+/** The position as it is once a pending move (pos_due) has been added: its
+ *  whole turns and remainder (fw_obs_pos_flush stores exactly these). */
+static FW_ALWAYS_INLINE void fw_obs_pos_parts(const fw_obs_t *o, int32_t *pos_turns,
+                                              float *pos_unwrapped_e) {
+  int32_t turns = o->pos_turns;
+  float x = o->pos_unwrapped_e;
+  if (o->pos_due) {
+    x = fw_obs_pos_wrap(x + fw_wrap_pi_f32(o->pll.theta_rad - o->theta_prev), &turns);
+  }
+  *pos_turns = turns;
+  *pos_unwrapped_e = x;
+}
+
+/** fw_obs_pos_flush for any move (out of line: the move across +-pi, once per
+ *  electrical revolution). */
+void fw_obs_pos_flush_turn(fw_obs_t *o);
+
+/** The PLL's gain fields of the last update (kp0 lam, ki0 lam^2): set with its
+ *  position (fw_obs_pos_flush), the same values fw_obs_update sets. */
+static FW_ALWAYS_INLINE void fw_obs_pll_gains(fw_obs_t *o) {
+  const float lam = o->lam;
+  o->pll.kp = o->kp0 * lam;
+  o->pll.ki = o->ki0 * (lam * lam);
+}
+
+/** The position follows the estimate's last move (fw_obs_update_pll); nothing
+ *  when none is pending. Inline for the usual move, one that wraps neither the
+ *  difference nor the remainder (there fw_wrap_pi_f32 and fw_obs_pos_wrap leave
+ *  their argument as it is): the same sum as fw_obs_pos_parts. */
+static FW_ALWAYS_INLINE void fw_obs_pos_flush(fw_obs_t *o) {
+  if (o->pos_due) {
+    const float theta = o->pll.theta_rad;
+    const float d = theta - o->theta_prev;
+    const float x = o->pos_unwrapped_e + d;
+    if (FW_LIKELY(fabsf(d) < FW_PI_F32 && fabsf(x) < FW_PI_F32)) {
+      o->pos_unwrapped_e = x;
+      o->theta_prev = theta;
+      o->pos_due = 0u;
+      fw_obs_pll_gains(o);
+    } else {
+      fw_obs_pos_flush_turn(o);
+    }
+  }
+}
 
 /** Loss of lock: HF amplitude below hf_min_A * inj_scale, or (running) the
  *  filtered error above pll_err_max_rad for longer than pll_err_time_s. */
@@ -110,9 +200,12 @@ static inline float fw_obs_pos_e_of(int32_t pos_turns, float pos_unwrapped_e) {
   return (float)pos_turns * FW_TWO_PI_F32 + pos_unwrapped_e;
 }
 
-/** Unwrapped electrical position, rad. */
+/** Unwrapped electrical position, rad (a pending move included). */
 static inline float fw_obs_pos_e(const fw_obs_t *o) {
-  return fw_obs_pos_e_of(o->pos_turns, o->pos_unwrapped_e);
+  int32_t turns;
+  float x;
+  fw_obs_pos_parts(o, &turns, &x);
+  return fw_obs_pos_e_of(turns, x);
 }
 
 #ifdef __cplusplus

@@ -31,8 +31,21 @@ typedef struct {
 
 void fw_pll_init_f32(fw_pll_f32_t *p, float kp, float ki, float w_max_radps);
 
-/** Set the state (angle wrapped to [-pi, pi)). */
+/** Set the state (angle wrapped to [-pi, pi)): fw_pll_set_angle_f32 and
+ *  fw_pll_set_speed_f32. */
 void fw_pll_reset_f32(fw_pll_f32_t *p, float theta_rad, float w_radps);
+/** The angle part of fw_pll_reset_f32 (wrapped; non-finite -> 0). Inline: a
+ *  flying start sets the speed in the control interrupt. */
+static inline void fw_pll_set_angle_f32(fw_pll_f32_t *p, float theta_rad) {
+  p->theta_rad = fw_wrap_pi_f32(theta_rad); /* non-finite -> 0 */
+}
+/** The speed part of fw_pll_reset_f32: integrator and w_hat at w (clamped to
+ *  +-w_max; non-finite -> 0). */
+static inline void fw_pll_set_speed_f32(fw_pll_f32_t *p, float w_radps) {
+  p->w_i_radps =
+      fw_isfinite_f32(w_radps) ? fw_clampf(w_radps, -p->w_max_radps, p->w_max_radps) : 0.0f;
+  p->w_hat_radps = p->w_i_radps;
+}
 
 /** Advance one sample with angle error e_rad. */
 void fw_pll_step_f32(fw_pll_f32_t *p, float e_rad, float dt_s);

@@ -25,6 +25,7 @@
 #ifndef PMLSM_FW_START_H
 #define PMLSM_FW_START_H
 
+#include <math.h>
 #include <stdbool.h>
 #include <stdint.h>
 
@@ -69,6 +70,13 @@ typedef struct {
   /* configured (fw_start_init), kept by fw_start_reset */
   float fly_a;              /**< the flying-start low-pass's coefficient 1 - exp(-T/tau) */
   float inv_dt;             /**< 1 / T, the control period's inverse (1/s) */
+  /** the last period's step of the rotation, as the cross and dot products of the
+   *  successive vectors, not yet added (fly_due; fw_start_fly_flush) */
+  float fly_cr, fly_dot;
+  /** half the margin of |fly_rot_rad| to FW_FLY_ROT_MIN_RAD when it is over 1e-3,
+   *  else 0: formed where the rotation changes (fw_start_fly_add, reset) */
+  float fly_rot_margin;
+  uint8_t fly_due;
 } fw_start_t;
 
 /** Configure for the control period dt_s (> 0) and clear everything. */
@@ -79,11 +87,54 @@ void fw_start_init(fw_start_t *s, float dt_s);
 void fw_start_reset(fw_start_t *s);
 
 /* ---- ALIGN ---- */
-/** Back-EMF observation with this period's fundamental current. */
-void fw_start_fly_observe(fw_start_t *s, const fw_cfg_machine_t *mach, fw_vec2_f32_t i_f_ab_A,
-                          float phase_time_s);
+/* The alignment's per-period functions are inline (fw_step's interrupt inlines
+ * them; the Cortex-M4F image compiles this block's source for size, and GCC
+ * does not inline across optimisation levels). */
+
+/** The rotation a catch needs (rad): less is no motion to catch. */
+#define FW_FLY_ROT_MIN_RAD 0.05f
+
+/** The rotation's step of the last observation, when not yet added (fw_start_fly_observe):
+ *  fly_rot_rad as if the observation had added it. */
+void fw_start_fly_add(fw_start_t *s);
+/** fw_start_fly_add when a step is due (one test inline). */
+static inline void fw_start_fly_flush(fw_start_t *s) {
+  if (s->fly_due) {
+    fw_start_fly_add(s);
+  }
+}
+
+/** Back-EMF observation with this period's fundamental current. The rotation's
+ *  step (an atan2) is left to fw_start_fly_flush: the control step's supervision
+ *  half adds it (fw_supervise), a catch first if it needs it. Call
+ *  fw_start_fly_flush before the next observation. */
+static inline void fw_start_fly_observe(fw_start_t *s, const fw_cfg_machine_t *mach,
+                                        fw_vec2_f32_t i_f_ab_A, float phase_time_s) {
+  const float L = 0.5f * (mach->L_d_H + mach->L_q_H);
+  const float inv_dt = s->inv_dt;
+  float ea = s->u_ab_prev_V[0] - mach->R_ohm * i_f_ab_A.x -
+             L * (i_f_ab_A.x - s->i_f_ab_prev_A[0]) * inv_dt;
+  float eb = s->u_ab_prev_V[1] - mach->R_ohm * i_f_ab_A.y -
+             L * (i_f_ab_A.y - s->i_f_ab_prev_A[1]) * inv_dt;
+  s->i_f_ab_prev_A[0] = i_f_ab_A.x;
+  s->i_f_ab_prev_A[1] = i_f_ab_A.y;
+  const float a = s->fly_a;
+  float pa = s->fly_e_ab_V[0], pb = s->fly_e_ab_V[1];
+  s->fly_e_ab_V[0] += a * (ea - pa);
+  s->fly_e_ab_V[1] += a * (eb - pb);
+  if (phase_time_s >= FW_FLY_WINDOW_S) {
+    /* angle step between successive filtered vectors (cross / dot), its atan2
+     * in fw_start_fly_add (the last one's added: fw_start_fly_flush) */
+    s->fly_cr = pa * s->fly_e_ab_V[1] - pb * s->fly_e_ab_V[0];
+    s->fly_dot = pa * s->fly_e_ab_V[0] + pb * s->fly_e_ab_V[1];
+    s->fly_due = 1u;
+  }
+}
 /** Fundamental alpha/beta voltage commanded this period (acts next period). */
-void fw_start_fly_set_u(fw_start_t *s, fw_vec2_f32_t u_f_ab_V);
+static inline void fw_start_fly_set_u(fw_start_t *s, fw_vec2_f32_t u_f_ab_V) {
+  s->u_ab_prev_V[0] = u_f_ab_V.x;
+  s->u_ab_prev_V[1] = u_f_ab_V.y;
+}
 /**
  * Motion at enable: catch the mover when its back-EMF is large enough to be
  * tracked by the back-EMF observer (bemf_w_on > 0, |e| >= bemf_e_off_V, a
@@ -93,11 +144,49 @@ void fw_start_fly_set_u(fw_start_t *s, fw_vec2_f32_t u_f_ab_V);
  */
 fw_fault_t fw_start_fly_catch(fw_start_t *s, const fw_config_t *cfg, float bemf_w_on,
                               float *theta_rad, float *w0_radps);
+/** fw_start_fly_catch in two parts. The speed: the decision and w0, what the
+ *  period of the catch needs for its duties; the rotation's step of this period is
+ *  added first only when it could change the decision (else it stays due:
+ *  fw_start_fly_flush). */
+static inline fw_fault_t fw_start_fly_catch_speed(fw_start_t *s, const fw_config_t *cfg,
+                                                  float bemf_w_on, float *w0_radps) {
+  /* the rotation with this period's step: only its sign and whether |.| >= 0.05
+   * are read; the step (an atan2) is added here only when it could change them,
+   * else fw_start_fly_flush adds it later (the same sum) */
+  float rot = s->fly_rot_rad;
+  if (s->fly_due) {
+    /* For dot > 0, |atan2(cr, dot)| <= |cr| / dot (plus fw_atan2_f32's error,
+     * FW_ATAN2_MAX_ERR): a step under half the margin m = |rot| - 0.05 leaves
+     * |rot + step| > 0.05 + m / 2 - 1e-6 and the sign of rot, whatever its
+     * rounding (m > 1e-3; fly_rot_margin = m / 2, or 0: no shortcut). NaN and
+     * infinities fail the test. */
+    const float cr = s->fly_cr, dot = s->fly_dot;
+    if (!(dot > 0.0f && fabsf(cr) < s->fly_rot_margin * dot)) {
+      fw_start_fly_add(s);
+      rot = s->fly_rot_rad;
+    }
+  }
+  const float ea = s->fly_e_ab_V[0], eb = s->fly_e_ab_V[1];
+  const float E = sqrtf(ea * ea + eb * eb);
+  if (!(bemf_w_on > 0.0f) || E < cfg->estimator.bemf_e_off_V || fabsf(rot) < FW_FLY_ROT_MIN_RAD) {
+    return FW_FAULT_MOVING_AT_ENABLE; /* too slow for the back-EMF, too fast for injection */
+  }
+  const float w0 = (rot > 0.0f ? 1.0f : -1.0f) * E / cfg->machine.psi_f_Wb;
+  *w0_radps = w0;
+  s->flying = 1u;
+  return FW_FAULT_NONE;
+}
+/** The angle of a catch fw_start_fly_catch_speed made with the speed w0_radps it
+ *  gave (an atan2; only the next period needs it): fw_start_fly_catch's theta. */
+float fw_start_fly_catch_angle(const fw_start_t *s, float w0_radps);
 /** End of the alignment: align_time_s elapsed and this period commands
  *  injection index n/4 - 1, the last + command before the HF current triangle
  *  crosses its mean (no residual HF current biases the next test). */
-bool fw_start_align_done(const fw_cfg_estimator_t *est, float phase_time_s, uint32_t inj_idx,
-                         uint32_t n_inj);
+static inline bool fw_start_align_done(const fw_cfg_estimator_t *est, float phase_time_s,
+                                       uint32_t inj_idx, uint32_t n_inj) {
+  const uint32_t last_idx = n_inj / 4u > 0u ? n_inj / 4u - 1u : 0u;
+  return phase_time_s >= est->align_time_s && inj_idx == last_idx;
+}
 
 /* ---- SALIENCY ---- */
 void fw_start_saliency_begin(fw_start_t *s);
