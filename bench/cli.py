@@ -404,10 +404,15 @@ def _quiet_thread_errors(verbose: bool) -> None:
 
 
 def _sigterm_as_interrupt() -> None:
+    """SIGTERM and SIGINT stop a run safely (the drive disabled, the run saved): SIGINT
+    gets Python's own handler even when the process was started with it ignored (a
+    background job of a non-interactive shell, a CI runner), so a runner's SIGINT is
+    never ignored while a drive moves."""
     def handler(signum: int, frame: Any) -> None:
         raise KeyboardInterrupt(f"signal {signum}")
 
     signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _emu_state(args: argparse.Namespace) -> Any:

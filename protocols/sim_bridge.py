@@ -44,18 +44,6 @@ from . import _clib
 
 log = logging.getLogger(__name__)
 
-#: fw_config_t fields taken from the simulated motor (machine, power stage,
-#: scaled gains); everything else keeps the firmware defaults.
-MOTOR_FIELDS = frozenset({
-    "f_pwm_Hz", "R_ohm", "L_d_H", "L_q_H", "psi_f_Wb", "pole_pairs", "pole_pitch_m",
-    "u_dc_min_V", "u_dc_max_V", "i_trip_A", "i_max_A", "speed_max_radps_e",
-    "cur_kp_V_per_A", "cur_ki_V_per_As", "spd_kp_A_per_radps", "spd_ki_A_per_rad",
-    "u_inj_V", "f_inj_Hz", "extractor", "pll_accel_per_A",
-    "adc_A_per_count", "adc_offset_counts", "adc_V_per_count", "adc_max_count",
-    "bemf_v_on_mps", "bemf_v_off_mps", "mon_bemf_min_mps",
-})
-
-
 class FwCanFrame(C.Structure):
     """Mirror of ``fw_can_frame_t``."""
 
@@ -215,13 +203,13 @@ class DriveBridge:
         self._flush_tx()  # boot-up message
 
     def _copy_config(self, src: C.Structure) -> None:
-        """Copy the sim's fw_config_t by field name; a field the core refuses
-        keeps the firmware default (logged), so a binding that is out of step
+        """Copy the sim's fw_config_t - every field, by name: the drive is configured as
+        the simulator API's and the emulated board's drive for the same motor
+        (``sim_fallback.drive_params``) - into this library's layout; a field the core
+        refuses keeps the firmware default (logged), so a binding that is out of step
         with the header cannot stop the bridge."""
         dflt = C.create_string_buffer(self._cfg.raw, len(self._cfg))
         for name, v in src.as_dict().items():  # flat field names (FwConfig nests in parts)
-            if name not in MOTOR_FIELDS:
-                continue
             f = self._L.fw_config_field_find(name.encode())
             if not f:
                 continue

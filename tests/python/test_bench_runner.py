@@ -91,6 +91,9 @@ def test_sigint_mid_sequence_disables_drive_before_exit(rig) -> None:
     seq = validate_sequence(HEAD + "  - enable: {}\n  - set_speed: {value: 100, unit: r/min}\n"
                             "  - wait: {duration_s: 30}\n  - disable: {}\n")
     runner = Runner(drive, UNITS)
+    # a CI runner may start the suite with SIGINT ignored (a background job of a
+    # non-interactive shell): Python's own handler, as `bench` installs it (cli.main)
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
     timer.start()
     try:
@@ -98,6 +101,7 @@ def test_sigint_mid_sequence_disables_drive_before_exit(rig) -> None:
             runner.run(seq)
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, old)
     assert fake.state == "SWITCH ON DISABLED"
     assert runner.result.aborted and runner.result.safe_state == "disabled"
     assert runner.result.duration_s < 5
