@@ -575,6 +575,30 @@ class Drive:
             raise
         return p
 
+    def set_many(self, fields: dict[str, str | float | int]) -> None:
+        """Write several parameters that the drive checks together (``pll_kd < pll_kp
+        pll_ki``, speeds below their limits, ...): in the order given, a value the drive
+        refuses as a combination (SDO abort 0x06090030) is tried again after the others,
+        so that every intermediate configuration is one the drive accepts, whichever way
+        the values move. Raises the first refusal that no order resolves."""
+        todo = list(fields.items())
+        while todo:
+            left: list[tuple[str, str | float | int]] = []
+            first: ParamError | None = None
+            for name, value in todo:
+                try:
+                    self.set(name, value)
+                except ParamError as e:
+                    cause = e.__cause__
+                    if not (isinstance(cause, SdoAbortedError) and cause.code == 0x06090030):
+                        raise
+                    left.append((name, value))
+                    first = first or e
+            if len(left) == len(todo):
+                assert first is not None
+                raise first
+            todo = left
+
     # ---- configuration backup / restore ----------------------------------------------
     def backup(self) -> dict[str, Any]:
         """Every readable ``rw`` parameter, by canonical name, with units."""

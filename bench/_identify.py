@@ -146,8 +146,7 @@ class WireProbe(Probe):
     def reconfigure(self, fields: dict[str, float]) -> None:
         self.drive.disable()
         self.run(0.01)
-        for name, value in fields.items():
-            self.drive.set(name, float(value))
+        self.drive.set_many({k: float(v) for k, v in fields.items()})
         self._enable_force()
 
     def follow_speed(self, t_s: np.ndarray, v_mps: np.ndarray) -> dict[str, np.ndarray]:
@@ -233,8 +232,7 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
         # pseudo-filter extraction, whatever the drive normally uses
         drive.set("extractor", float(extractor_id("pseudo")))
         restore = {k: float(backup["parameters"][k]["value"]) for k in IDENT_RESTORED}
-        for k, v in ident_overrides(cfg0).items():
-            drive.set(k, float(v))
+        drive.set_many({k: float(v) for k, v in ident_overrides(cfg0).items()})
         probe = WireProbe(conn, logger)
         probe.run(0.02)  # telemetry flowing
         res = run_identification(probe, cfg0, cfg0.pole_pitch_m, travel_m, n_starts,
