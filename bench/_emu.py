@@ -34,7 +34,6 @@ import contextlib
 import json
 import os
 import shutil
-import signal
 import socket
 import subprocess
 import sys
@@ -49,6 +48,7 @@ from bench._simserver import (
     process_is,
     state_dir,
     state_lock,
+    stop_process,
     write_state_file,
 )
 
@@ -404,17 +404,7 @@ def stop(timeout_s: float = 5.0) -> tuple[str, int | None]:
             with contextlib.suppress(OSError):
                 (folder / STATE_FILE).unlink()
             return "stale", st.pid
-        os.kill(st.pid, signal.SIGTERM)
-        deadline = time.monotonic() + timeout_s
-        how = "stopped"
-        while pid_is_emu(st.pid, folder):
-            if time.monotonic() > deadline:
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(st.pid, signal.SIGKILL)
-                how = "killed"
-                time.sleep(0.1)
-                break
-            time.sleep(0.05)
+        how = stop_process(st.pid, lambda pid: pid_is_emu(pid, folder), timeout_s)
         with contextlib.suppress(OSError):
             (folder / STATE_FILE).unlink()
         return how, st.pid

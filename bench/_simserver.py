@@ -183,6 +183,21 @@ def process_is(pid: int, *needles: bytes) -> bool:
         return True
 
 
+def stop_process(pid: int, alive: Any, timeout_s: float) -> str:
+    """SIGTERM, then SIGKILL after ``timeout_s``: ``"stopped"`` or ``"killed"``
+    (``alive(pid)`` tells whether it is still the process of ours)."""
+    os.kill(pid, signal.SIGTERM)
+    deadline = time.monotonic() + timeout_s
+    while alive(pid):
+        if time.monotonic() > deadline:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+            time.sleep(0.1)
+            return "killed"
+        time.sleep(0.05)
+    return "stopped"
+
+
 def pid_is_server(pid: int) -> bool:
     """Whether ``pid`` is alive and is a simulated drive server (not a reused pid)."""
     return process_is(pid, b"bench._simserver")
@@ -573,17 +588,7 @@ def _stop_locked(folder: Path, timeout_s: float) -> tuple[str, int | None]:
         with contextlib.suppress(OSError):
             (folder / STATE_FILE).unlink()
         return "stale", st.pid
-    os.kill(st.pid, signal.SIGTERM)
-    deadline = time.monotonic() + timeout_s
-    how = "stopped"
-    while pid_is_server(st.pid):
-        if time.monotonic() > deadline:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(st.pid, signal.SIGKILL)
-            how = "killed"
-            time.sleep(0.1)
-            break
-        time.sleep(0.05)
+    how = stop_process(st.pid, pid_is_server, timeout_s)
     cur = read_state(folder)
     if cur is not None and cur.pid == st.pid:
         with contextlib.suppress(OSError):
