@@ -150,6 +150,10 @@ def _tol_text(t: tuple[str, float] | None) -> str:
     return f"{t[1] * 100:g} %" if t[0] == "rel" else f"{t[1]:g}"
 
 
+def _faults_text(codes: list[int]) -> str:
+    return ", ".join(f"0x{c:04X}" for c in codes) or "none"
+
+
 def _label(run: dict[str, Any]) -> str:
     s = run["summary"]
     kind = s.get("drive", "?")
@@ -180,8 +184,7 @@ def compare(dir_a: str | Path, dir_b: str | Path, tolerances: list[str] | None =
         lines.append(f"{r.metric:40s} {r.a:11.5g} {r.b:11.5g} {r.diff:11.4g} "
                      f"{_tol_text(r.tol):>10s}  {r.status}"
                      + (f" ({r.why})" if r.status != "within" else "") + f"  [{unit}]")
-    lines.append(f"faults: A {[f'0x{c:04X}' for c in fa] or 'none'}, B "
-                 f"{[f'0x{c:04X}' for c in fb] or 'none'}: "
+    lines.append(f"faults: A {_faults_text(fa)}, B {_faults_text(fb)}: "
                  f"{'the same' if same_faults else 'DIFFERENT'}")
     ok = not beyond and same_faults
     lines.append(f"{'WITHIN TOLERANCES' if ok else 'DIFFERENT'}: "
@@ -237,7 +240,7 @@ color: {'#070' if ok else '#b00'}; }}</style>
 <h1>Two runs side by side</h1>
 <p>A: {html.escape(_label(a))}<br>B: {html.escape(_label(b))}</p>
 <p class="v">{'WITHIN TOLERANCES' if ok else 'DIFFERENT'}</p>
-<p>faults: A {[f'0x{c:04X}' for c in fa] or 'none'}, B {[f'0x{c:04X}' for c in fb] or 'none'}</p>
+<p>faults: A {_faults_text(fa)}, B {_faults_text(fb)}</p>
 <table><tr><th>metric</th><th>A</th><th>B</th><th>B - A</th><th>tolerance</th><th>result</th>
 <th>unit</th><th></th></tr>{trs}</table>
 {''.join(figs)}

@@ -36,7 +36,6 @@ import os
 import shutil
 import socket
 import subprocess
-import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -445,13 +444,3 @@ def describe(st: EmuState, measure: bool = False) -> str:
             f"{'fitted' if st.ref_sensor else 'none'}\n"
             f"  image: {st.image}\n  flash page: {st.nvm}\n  log: {st.log}")
 
-
-def main(argv: list[str] | None = None) -> int:  # pragma: no cover - a debugging aid
-    """``python -m bench._emu``: print the QEMU command line for the installed image."""
-    img = find_image(argv[0] if argv else None)
-    print(" ".join(qemu_command(img, state_dir() / BOOT_FILE, (1, 2, 3))))
-    return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main(sys.argv[1:]))

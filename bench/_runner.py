@@ -22,6 +22,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from bench._drive import DriveLost
 from bench._evidence import NO_SENSOR
 from bench._load import LoadDevice, NoLoad
 from bench._sequence import Sequence, Step
@@ -274,6 +275,7 @@ class Runner:
         self._load_N = 0.0
         #: why the drive was lost mid-run (bench._drive.DriveLost), None while it answers
         self.drive_lost: str | None = None
+        self._last_now = 0.0  # the last sequence time read (kept for a lost drive)
 
     # ---- time -------------------------------------------------------------------------
     def now(self) -> float:
@@ -287,7 +289,7 @@ class Runner:
         try:
             return self.now()
         except Exception:  # noqa: BLE001 - DriveLost: the clock stopped with the drive
-            return getattr(self, "_last_now", 0.0)
+            return self._last_now
 
     def _check_fault(self) -> None:
         """Stop the sequence when the drive announced a fault (EMCY): what follows would
@@ -538,8 +540,6 @@ class Runner:
                 yield step
             result.duration_s = self.now()
         except BaseException as e:
-            from bench._drive import DriveLost
-
             if isinstance(e, DriveLost):
                 self.drive_lost = str(e)
             result.aborted = True

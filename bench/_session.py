@@ -111,12 +111,12 @@ class Connection:
     info: dict[str, Any] = field(default_factory=dict)
     sync_period_ms: int = 10
     _hb_task: Any = None
+    _sync_on: bool = False
+    _rate_Hz: float | None = None
 
     @property
     def is_sim(self) -> bool:
         return self.sim is not None
-
-    _sync_on: bool = False
 
     @property
     def kind(self) -> str:
@@ -143,11 +143,14 @@ class Connection:
 
     def control_rate_Hz(self) -> float | None:
         """The drive's control rate (= its PWM frequency, ``f_pwm_Hz``) read from the
-        drive; the simulated drive's configuration, or None, when it cannot be read."""
-        try:
-            return float(self.drive.get("f_pwm_Hz")[0])
-        except Exception:  # noqa: BLE001 - an old firmware, a lost answer
-            return float(self.sim.sim.cfg.f_pwm_Hz) if self.sim is not None else None
+        drive once (it is read-only); the simulated drive's configuration, or None, when
+        it cannot be read."""
+        if self._rate_Hz is None:
+            try:
+                self._rate_Hz = float(self.drive.get("f_pwm_Hz")[0])
+            except Exception:  # noqa: BLE001 - an old firmware, a lost answer
+                return float(self.sim.sim.cfg.f_pwm_Hz) if self.sim is not None else None
+        return self._rate_Hz
 
     def start_heartbeat(self, period_ms: int = 100) -> None:
         """Hardware: be the supervisor the drive watches while it may move, and the SYNC producer.
@@ -333,6 +336,39 @@ def _start_drive_clock(conn: Connection, wait_s: float = 1.5) -> str:
             f"{'?' if cob is None else hex(cob)}, every SYNC; {f_pwm:g} periods/s)")
 
 
+def bus_args(interface: str | None, channel: str | None, bitrate: int | None,
+             bus_kw: dict[str, Any] | None = None) -> dict[str, Any] | None:
+    """python-can arguments for a bus (``bus_kw``: further ones, e.g. socketcand's host
+    and port); None when no interface is given nor in python-can's configuration."""
+    kw: dict[str, Any] = {}
+    if interface:
+        kw["interface"] = interface
+    if channel:
+        kw["channel"] = channel
+    if bitrate:
+        kw["bitrate"] = bitrate
+    kw.update(bus_kw or {})
+    if not interface:
+        try:
+            cfg = can.util.load_config()
+        except (can.CanError, NotImplementedError, ValueError):
+            cfg = {}
+        if not cfg.get("interface"):
+            return None
+    return kw
+
+
+def open_bus(kw: dict[str, Any]) -> tuple[can.BusABC, dict[str, Any]]:
+    """Open a python-can bus; returns it and its arguments as shown in messages.
+    Raises :class:`NoHardware` (one line) when it cannot be opened."""
+    shown = {k: v for k, v in kw.items() if k not in ("sleep_after_open",)}
+    try:
+        return can.Bus(**kw), shown
+    except (can.CanError, OSError, ImportError, ValueError, NotImplementedError,
+            TypeError) as e:
+        raise NoHardware(f"cannot open CAN bus {shown}: {' '.join(str(e).split())}") from e
+
+
 def open_hardware(interface: str | None, channel: str | None, bitrate: int | None,
                   node_id: int = 1, load_node: int | None = None, motor: str | None = None,
                   serial_url: str | None = None, probe_timeout_s: float = 0.5,
@@ -353,28 +389,11 @@ def open_hardware(interface: str | None, channel: str | None, bitrate: int | Non
         No interface configured, the bus cannot be opened, or no answer from
         node ``node_id``.
     """
-    kw: dict[str, Any] = {}
-    if interface:
-        kw["interface"] = interface
-    if channel:
-        kw["channel"] = channel
-    if bitrate:
-        kw["bitrate"] = bitrate
-    kw.update(bus_kw or {})
-    if not interface:
-        try:
-            cfg = can.util.load_config()
-        except (can.CanError, NotImplementedError, ValueError):
-            cfg = {}
-        if not cfg.get("interface"):
-            raise NoHardware("no CAN interface given (--interface) or configured "
-                             "(~/.canrc, CAN_INTERFACE)")
-    shown = {k: v for k, v in kw.items() if k not in ("sleep_after_open",)}
-    try:
-        bus = can.Bus(**kw)
-    except (can.CanError, OSError, ImportError, ValueError, NotImplementedError,
-            TypeError) as e:
-        raise NoHardware(f"cannot open CAN bus {shown}: {' '.join(str(e).split())}") from e
+    kw = bus_args(interface, channel, bitrate, bus_kw)
+    if kw is None:
+        raise NoHardware("no CAN interface given (--interface) or configured "
+                         "(~/.canrc, CAN_INTERFACE)")
+    bus, shown = open_bus(kw)
     net = canopen.Network(bus)
     net.connect()
     conn: Connection | None = None
@@ -713,9 +732,8 @@ class LiveTap:
         self.pdo = PdoRecorder(conn, None, live=feed)
         self.tel: TelemetryReader | None = None
         if conn.serial is not None:
-            f_pwm = (float(self.sim.sim.cfg.f_pwm_Hz) if self.sim is not None
-                     else conn.control_rate_Hz() or 24000.0)
-            self.tel = TelemetryReader(conn.serial, None, f_pwm, live=feed)
+            self.tel = TelemetryReader(conn.serial, None, conn.control_rate_Hz() or 24000.0,
+                                       live=feed)
             self.tel.start()
 
     def close(self) -> None:
@@ -858,7 +876,8 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
         conn.sim.sink = lambda t, v, u: [s(t, v, u) for s in sinks]
     pdo = PdoRecorder(conn, logger, live=feed)
     tel = None
-    f_pwm = float(conn.sim.sim.cfg.f_pwm_Hz) if conn.sim is not None else 24000.0
+    # one time base for the telemetry and the run (the drive's, 24 kHz when it cannot be read)
+    f_pwm = conn.control_rate_Hz() or 24000.0
     if conn.serial is not None:
         tel = TelemetryReader(conn.serial, logger, f_pwm, live=feed)
         tel.start()
@@ -900,7 +919,6 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
         if bar is not None and t - bar.n >= 0.01:
             bar.update(round(t - bar.n, 3))
 
-    f_pwm = conn.control_rate_Hz() or f_pwm
     runner = Runner(drive, conn.units, conn.load, logger, progress=prog,
                     f_pwm_Hz=f_pwm if tel is not None else None)
     interrupted: BaseException | None = None

@@ -415,19 +415,28 @@ def _sigterm_as_interrupt() -> None:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+def _bus_options(args: argparse.Namespace) -> tuple[tuple[str, Any], ...]:
+    """The options that choose a bus and its pacing, with their values."""
+    return (("--interface", args.interface), ("--channel", args.channel),
+            ("--bitrate", args.bitrate), ("--host", args.host), ("--port", args.bus_port),
+            ("--realtime", args.realtime))
+
+
+def _refuse_beside(flag: str, why: str, options: Any) -> None:
+    """``flag`` names its own drive: any of ``options`` (name, value) given is refused."""
+    for opt, val in options:
+        if val:
+            raise UserError(f"{flag} and {opt} contradict each other ({why}); drop one")
+
+
 def _emu_state(args: argparse.Namespace) -> Any:
     """The running emulated board for ``--emu`` (None without it)."""
     if not getattr(args, "emu", False):
         return None
-    for opt, val in (("--sim", args.sim), ("--sim-server", getattr(args, "sim_server", False)),
-                     ("--interface", args.interface), ("--channel", args.channel),
-                     ("--bitrate", args.bitrate), ("--host", args.host),
-                     ("--port", args.bus_port), ("--realtime", args.realtime),
-                     ("--sim-plant", getattr(args, "sim_plant", None))):
-        if val:
-            raise UserError(f"--emu and {opt} contradict each other (the emulated board is "
-                            "reached on its own ports, paced by its own clock; its motor is "
-                            "chosen by `bench emu start`); drop one")
+    _refuse_beside("--emu", "the emulated board is reached on its own ports, paced by its "
+                   "own clock; its motor is chosen by `bench emu start`",
+                   (("--sim", args.sim), ("--sim-server", getattr(args, "sim_server", False)),
+                    *_bus_options(args), ("--sim-plant", getattr(args, "sim_plant", None))))
     if args.serial:
         raise UserError(f"--emu and --serial {args.serial} contradict each other (the "
                         "emulated board's serial link is used); drop one")
@@ -447,13 +456,8 @@ def _sim_server_state(args: argparse.Namespace) -> Any:
     """The running simulated drive server for ``--sim-server`` (None without it)."""
     if not getattr(args, "sim_server", False):
         return None
-    for opt, val in (("--sim", args.sim), ("--interface", args.interface),
-                     ("--channel", args.channel), ("--bitrate", args.bitrate),
-                     ("--host", args.host), ("--port", args.bus_port),
-                     ("--realtime", args.realtime)):
-        if val:
-            raise UserError(f"--sim-server and {opt} contradict each other (the server's "
-                            "drive is paced to the wall clock on its own bus); drop one")
+    _refuse_beside("--sim-server", "the server's drive is paced to the wall clock on its "
+                   "own bus", (("--sim", args.sim), *_bus_options(args)))
     from bench._simserver import SimServerError, check_running
 
     try:
@@ -541,7 +545,6 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
             raise UserError(refusal + "; the simulated drive (fallback: no hardware found) "
                             "cannot run this motor") from None
         raise UserError(f"cannot connect: {' '.join(str(e).split())}", EXIT_DRIVE) from e
-    conn.sync_period_ms = args.sync_period_ms
     if seq is not None and not conn.is_sim and seq.x0 not in (0, 0.0):
         print(f"bench: {seq.path}: x0 {seq.x0} applies to the in-process simulated drive only; "
               "on this drive the mover starts where it is", file=sys.stderr)
@@ -1085,9 +1088,8 @@ def cmd_flash(args: argparse.Namespace) -> int:
     """``bench flash IMAGE``: :func:`bench._flash.flash`, checked over CANopen."""
     import math
 
-    import can
-
     from bench._flash import flash
+    from bench._session import NoHardware, bus_args, open_bus
 
     if not 1 <= args.node_id <= 127:
         raise UserError(f"--node-id {args.node_id}: allowed range [1, 127]")
@@ -1095,23 +1097,15 @@ def cmd_flash(args: argparse.Namespace) -> int:
         raise UserError(f"--timeout {args.timeout}: allowed range [0.1, 600] s")
     bus = None
     if not args.no_check:
-        kw = {k: v for k, v in (("interface", args.interface), ("channel", args.channel),
-                                ("bitrate", args.bitrate)) if v}
-        if not args.interface:
-            try:
-                cfg = can.util.load_config()
-            except (can.CanError, NotImplementedError, ValueError):
-                cfg = {}
-            if not cfg.get("interface"):
-                raise UserError("flash: no CAN bus to check the drive on after its reboot: "
-                                "give --interface/--channel (or python-can's configuration), "
-                                "or --no-check to program only")
+        kw = bus_args(args.interface, args.channel, args.bitrate)
+        if kw is None:
+            raise UserError("flash: no CAN bus to check the drive on after its reboot: "
+                            "give --interface/--channel (or python-can's configuration), "
+                            "or --no-check to program only")
         try:
-            bus = can.Bus(**kw)
-        except (can.CanError, OSError, ImportError, ValueError, NotImplementedError,
-                TypeError) as e:
-            raise UserError(f"flash: cannot open CAN bus {kw}: {' '.join(str(e).split())}",
-                            EXIT_DRIVE) from None
+            bus, _ = open_bus(kw)
+        except NoHardware as e:
+            raise UserError(f"flash: {e}", EXIT_DRIVE) from None
     try:
         res = flash(args.image, bus, node_id=args.node_id, tool=args.tool, probe=args.probe,
                     board=args.board, timeout_s=args.timeout)

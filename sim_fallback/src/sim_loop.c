@@ -97,7 +97,6 @@ sim_t *sim_init_in(void *mem, size_t size, const sim_plant_params_t *p) {
 }
 
 sim_t *sim_new(const sim_plant_params_t *p) {
-  if (sim_params_check(p, NULL) != 0) return NULL;
   void *mem = malloc(sizeof(sim_t));
   if (!mem) return NULL;
   sim_t *s = sim_init_in(mem, sizeof(sim_t), p);

@@ -133,19 +133,6 @@ static void test_position(void) {
            o.accel_dist == 0.0f && o.theta_prev == -2.0f);
 }
 
-/* A small deterministic generator for the tests below (xorshift32). */
-static uint32_t rng_u32(uint32_t *st) {
-  uint32_t x = *st;
-  x ^= x << 13;
-  x ^= x >> 17;
-  x ^= x << 5;
-  *st = x;
-  return x;
-}
-static float rng_f(uint32_t *st, float lo, float hi) {
-  return lo + (hi - lo) * (float)(rng_u32(st) >> 8) * (1.0f / 16777216.0f);
-}
-
 /* fw_obs_update_pll leaves the position's move to fw_obs_pos_flush (the
  * supervision half): after the flush the observer is the one fw_obs_update
  * leaves, bit for bit, over every electrical turn in both directions; before it
@@ -159,14 +146,14 @@ static void test_update_pll_then_flush(void) {
   uint32_t st = 12345u;
   int turns_max = 0, turns_min = 0, crossings = 0, bad = 0;
   for (int k = 0; k < 60000; k++) {
-    fw_obs_in_t in = hf_in(rng_f(&st, 0.02f, 0.06f), rng_f(&st, -0.004f, 0.004f));
+    fw_obs_in_t in = hf_in(tt_rng_f(&st, 0.02f, 0.06f), tt_rng_f(&st, -0.004f, 0.004f));
     const int ph = k % 20000;
     if (ph < 15000) { /* the back-EMF error drives it: fast, both ways */
       in.bemf_active = 1u;
-      in.bemf_err_rad = rng_f(&st, -0.2f, 0.2f) + (ph < 5000 ? 0.9f : -0.9f);
+      in.bemf_err_rad = tt_rng_f(&st, -0.2f, 0.2f) + (ph < 5000 ? 0.9f : -0.9f);
     }
     in.running = (uint8_t)(ph >= 18000); /* the mechanical extension too */
-    a.i_q_ff_A = b.i_q_ff_A = rng_f(&st, -0.1f, 0.1f);
+    a.i_q_ff_A = b.i_q_ff_A = tt_rng_f(&st, -0.1f, 0.1f);
     float ra, rb;
     const float ea = fw_obs_update(&a, &in, &ra);
     const float eb = fw_obs_update_pll(&b, &in, &rb);

@@ -147,18 +147,6 @@ static void test_fly_catch(void) {
   TT_CHECK(fw_start_fly_catch(&s, &cfg, 100.0f, &th_hat, &w0) == FW_FAULT_MOVING_AT_ENABLE);
 }
 
-static uint32_t rng_u32(uint32_t *st) {
-  uint32_t x = *st;
-  x ^= x << 13;
-  x ^= x >> 17;
-  x ^= x << 5;
-  *st = x;
-  return x;
-}
-static float rng_f(uint32_t *st, float lo, float hi) {
-  return lo + (hi - lo) * (float)(rng_u32(st) >> 8) * (1.0f / 16777216.0f);
-}
-
 /* The catch in two parts: fw_start_fly_catch_speed with this period's rotation
  * step still due decides and finds the same speed as with the step added first,
  * bit for bit, whether it adds the step (near the 0.05 rad threshold, a step
@@ -175,14 +163,14 @@ static void test_fly_catch_parts(void) {
     fw_start_t a;
     fw_start_init(&a, dt);
     /* the rotation so far (one step from 0: fw_start_fly_add forms its margin) */
-    const float r0 = t % 4 == 0 ? rng_f(&st, -0.08f, 0.08f) : rng_f(&st, -3.1f, 3.1f);
+    const float r0 = t % 4 == 0 ? tt_rng_f(&st, -0.08f, 0.08f) : tt_rng_f(&st, -3.1f, 3.1f);
     near += fabsf(r0) < 0.08f;
     a.fly_cr = sinf(r0);
     a.fly_dot = cosf(r0);
     fw_start_fly_add(&a);
     /* this period's step, due: mostly small, some large, some backwards or not finite */
-    const float step = t % 7 == 0 ? rng_f(&st, -3.1f, 3.1f) : rng_f(&st, -0.06f, 0.06f);
-    const float mag = rng_f(&st, 1e-3f, 100.0f);
+    const float step = t % 7 == 0 ? tt_rng_f(&st, -3.1f, 3.1f) : tt_rng_f(&st, -0.06f, 0.06f);
+    const float mag = tt_rng_f(&st, 1e-3f, 100.0f);
     a.fly_cr = mag * sinf(step);
     a.fly_dot = mag * cosf(step);
     if (t % 997 == 0) {
@@ -191,8 +179,8 @@ static void test_fly_catch_parts(void) {
       a.fly_cr = INFINITY;
     }
     a.fly_due = 1u;
-    a.fly_e_ab_V[0] = rng_f(&st, -80.0f, 80.0f);
-    a.fly_e_ab_V[1] = rng_f(&st, -80.0f, 80.0f);
+    a.fly_e_ab_V[0] = tt_rng_f(&st, -80.0f, 80.0f);
+    a.fly_e_ab_V[1] = tt_rng_f(&st, -80.0f, 80.0f);
     fw_start_t b = a, c = a;
     float w_a = -1.0f, w_b = -1.0f, th_c = -1.0f, w_c = -1.0f;
     fw_start_fly_flush(&a); /* the step first: the decision on the full rotation */

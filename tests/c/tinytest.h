@@ -7,6 +7,7 @@
 #define TINYTEST_H
 
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 
 #ifndef M_PI
@@ -49,5 +50,20 @@ static const char *tt_current_ = "";
 
 #define TT_SUMMARY()                                                            \
   (printf("%d passed, %d failed\n", tt_pass_, tt_fail_), tt_fail_ == 0 && tt_pass_ > 0 ? 0 : 1)
+
+/* A small deterministic generator for randomized checks (xorshift32; *st != 0). */
+static inline uint32_t tt_rng_u32(uint32_t *st) {
+  uint32_t x = *st;
+  x ^= x << 13;
+  x ^= x >> 17;
+  x ^= x << 5;
+  *st = x;
+  return x;
+}
+
+/* Uniform in [lo, hi) from tt_rng_u32 (24 bits). */
+static inline float tt_rng_f(uint32_t *st, float lo, float hi) {
+  return lo + (hi - lo) * (float)(tt_rng_u32(st) >> 8) * (1.0f / 16777216.0f);
+}
 
 #endif
