@@ -385,7 +385,10 @@ def eval_expr(expr: str, x: float, plant: dict[str, Any]) -> float:
     """Value of a ``set`` expression for axis value ``x`` (see :func:`parse_expr`)."""
     acc: float | None = None
     for kind, v in parse_expr(expr) or []:
-        f = float(plant[v]) if kind == "plant" else v if kind == "num" else float(x) ** v
+        try:
+            f = float(plant[v]) if kind == "plant" else v if kind == "num" else float(x) ** v
+        except OverflowError:  # x^400: not a number the drive could take (checked after)
+            return math.inf
         acc = f if acc is None else acc * f
     return float(acc if acc is not None else "nan")
 
@@ -1219,6 +1222,53 @@ def _shares_our_files(client: Any) -> bool:
     return isinstance(getattr(client, "cluster", None), LocalCluster)
 
 
+#: Campaigns of more drive time than this say how long they will take before starting
+ANNOUNCE_DRIVE_S = 600.0
+#: ... and need --yes when that is longer than this (wall s on this cluster)
+CONFIRM_WALL_S = 2 * 3600.0
+
+
+def _duration_text(s: float) -> str:
+    if s < 120:
+        return f"{s:.0f} s"
+    if s < 7200:
+        return f"{s / 60:.0f} min"
+    if s < 3 * 86400:
+        return f"{s / 3600:.1f} h"
+    return f"{s / 86400:.1f} days"
+
+
+def size_check(c: Campaign, out: Path, workers: int | None, scheduler: Any, serial: bool
+               ) -> tuple[str, bool, str] | None:
+    """How long the runs still to do will take (the line to print, whether it needs
+    --yes, the duration's text), or None for a small campaign (less than
+    :data:`ANNOUNCE_DRIVE_S` of drive time). The rate is measured here, on one short
+    run of the campaign's base (its first run, shortened), and scaled by the workers a
+    local cluster gets; for a remote scheduler, per worker."""
+    t_end = float(c.base.get("t_end", 1.0))
+    runs = c.runs()
+    try:
+        done = done_runs(results_dir(c, out))
+    except Exception:  # noqa: BLE001 - unreadable results are reported when the run starts
+        done = set()
+    n = sum(1 for r in runs if r["run"] not in done)
+    drive_s = n * t_end
+    if drive_s <= ANNOUNCE_DRIVE_S:
+        return None
+    t_cal = min(0.05, t_end)
+    row = run_one({**c.run_base(), "t_end": t_cal}, runs[0], c.metrics)
+    per_drive_s = float(row["wall_s"]) / t_cal  # wall s per drive s, one process
+    k = 1 if serial else (workers or (None if scheduler else os.cpu_count() or 1))
+    wall = drive_s * per_drive_s / (k or 1)
+    where = ("in this process" if serial else f"on {k} local workers" if k
+             else "per scheduler worker (divide by their number)")
+    text = _duration_text(wall)
+    line = (f"bench: campaign {c.name}: {n} runs x {t_end:g} s = {drive_s:.4g} s of drive "
+            f"time; about {text} {where} (measured {per_drive_s:.2f} wall s per drive s "
+            "on one run here)")
+    return line, wall > CONFIRM_WALL_S, text
+
+
 def run_campaign(c: Campaign, out: Path, scheduler: Any = None,
                  workers: int | None = None, serial: bool = False, batch: int = 64,
                  progress: Callable[[int, int, float], None] | None = None) -> Path:
@@ -1456,6 +1506,10 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--serial", action="store_true", help="no Dask: a plain loop in this process")
     p.add_argument("--out", default="runs/campaigns", help="results root (default %(default)s)")
     p.add_argument("--replay", type=int, metavar="RUN", help="rerun one run alone and print it")
+    p.add_argument("--yes", action="store_true",
+                   help="start a campaign that will take longer than "
+                        f"{CONFIRM_WALL_S / 3600:g} h on this cluster (its size is always "
+                        "said first)")
     p.add_argument("--compare", metavar="DIR", help="results folder of another campaign to "
                                                     "overlay in the report")
 
@@ -1487,6 +1541,13 @@ def cmd(args: Any) -> int:
                           for k, v in row.items() if k != "traceback"}, indent=1,
                          allow_nan=False))
         return 0 if row["error"] is None else 1
+    size = size_check(c, Path(args.out), args.workers, args.scheduler, args.serial)
+    if size:
+        print(size[0], file=sys.stderr)
+        if size[1] and not args.yes:
+            print(f"bench: campaign {c.name}: about {size[2]}; give --yes to start it",
+                  file=sys.stderr)
+            return 2
     other = Path(args.compare) if args.compare else None
     if other is not None:
         try:
@@ -1553,8 +1614,10 @@ def cmd(args: Any) -> int:
         return 3
     verdicts = judge(c, res)
     for v in verdicts:
+        lim = " and ".join(f"{w} {v[k]:g}" for k, w in (("min", ">="), ("max", "<="))
+                           if v[k] is not None)
         print(f"{'pass' if v['ok'] else 'FAIL'}  {v['stat']}({v['metric']}) = {v['value']:.4g}"
-              f"  limits [{v['min']}, {v['max']}]")
+              f"  (required {lim})")
     print(f"{len(res.get('run', []))} runs in {rdir}; report {report}")
     if interrupted:
         print("bench: interrupted; run the same command again to resume", file=sys.stderr)

@@ -77,6 +77,14 @@ def fault_text(code: int) -> str:
     return f"0x{code:04X} {FAULTS.get(code, 'unknown fault')}"
 
 
+def state_of(statusword: int) -> str:
+    """CiA 402 state name of a statusword (canopen's masks); ``UNKNOWN`` if none fits."""
+    for name, (mask, bits) in canopen.profiles.p402.State402.SW_MASK.items():
+        if statusword & mask == bits:
+            return name
+    return "UNKNOWN"
+
+
 class DriveError(RuntimeError):
     """The drive refused a command or did not reach the requested state."""
 
@@ -93,6 +101,12 @@ class DriveLost(DriveError):
     """The drive stopped answering mid-run: its time (0x2090:3) stopped, or its bus
     failed. Nothing the bench sends reaches it any more; the drive's own supervision
     (the bench's heartbeat it watches, 0x1016) switches its power stage off."""
+
+
+class DriveLeftState(DriveError):
+    """The drive left the state the bench put it in (OPERATION ENABLED) without a fault:
+    another master on the bus (a second bench, a shell left open) or a local stop
+    switched it. A run that went on would judge a drive that no longer follows it."""
 
 
 class ParamError(DriveError):
@@ -212,6 +226,8 @@ def explain_abort(err: SdoAbortedError, p: Param | None = None, value: Any = Non
             msg += f"; allowed range [{p.min}, {p.max}] {p.unit}".rstrip()
             if value is not None:
                 msg += f", got {value}"
+    if code == 0x08000022:  # e.g. a motor parameter written while the PWM is on
+        msg += "; disable the drive first (it takes this only with the power stage off)"
     return msg
 
 
@@ -256,6 +272,13 @@ class Drive:
         self._params: dict[str, Param] | None = None
         self.enabled = False
         self.mode = "speed"
+        #: the watch (:meth:`check`): the state the bench put the drive in and expects it
+        #: to stay in (None: none), and the statusword TPDOs received since
+        self._expect: str | None = None
+        self._sw_seen = 0  # statusword TPDOs received (the callback's count)
+        self._sw_mark = 0  # ... when the expectation was set
+        self._sw_last = 0
+        self._hb_period_s: float | None = None
 
     # ---- identity ---------------------------------------------------------------------
     def identity(self) -> dict[str, Any]:
@@ -333,6 +356,9 @@ class Drive:
             self.node.tpdo.read(from_od=True)
             self.node.rpdo.read(from_od=True)
         self.node.setup_pdos(upload=False)
+        sw = self.node.tpdo_pointers.get(od.STATUSWORD.index)
+        if sw is not None:  # the watch's view of the state machine, no bus traffic
+            sw.pdo_parent.add_callback(self._on_status_pdo)
         if operational:
             self.node.nmt.state = "OPERATIONAL"
 
@@ -345,11 +371,87 @@ class Drive:
     @property
     def state(self) -> str:
         """CiA 402 state name, from a fresh SDO read of the statusword."""
-        sw = self.statusword
-        for name, (mask, bits) in canopen.profiles.p402.State402.SW_MASK.items():
-            if sw & mask == bits:
-                return name
-        return "UNKNOWN"
+        return state_of(self.statusword)
+
+    # ---- the watch --------------------------------------------------------------------
+    def _on_status_pdo(self, pdo_map: Any) -> None:
+        v = self.node.tpdo_values.get(od.STATUSWORD.index)
+        if v is not None:
+            self._sw_last = int(v)
+            self._sw_seen += 1
+
+    def _expect_state(self, state: str | None) -> None:
+        self._expect = state
+        self._sw_mark = self._sw_seen
+
+    def check(self) -> None:
+        """The bench's one watch over its drive while a command runs (``bench run``,
+        ``live``, ``identify``, the shell): cheap (no bus traffic unless something looks
+        wrong), called once per wait slice. Raises
+
+        - :class:`DriveLost`: its time stopped (the clock's consumer: no TPDO4 for
+          ``lost_s``) or its bus failed; on a drive without published time, its CiA 301
+          heartbeat (0x1017) is missing for three periods;
+        - :class:`DriveFault`: it announced a fault (EMCY), or its statusword shows one;
+        - :class:`DriveLeftState`: it left OPERATION ENABLED without a fault (another
+          master, a local stop); the statusword TPDO raises the suspicion, an SDO read
+          confirms it (a TPDO sent before the transition cannot cause a false abort).
+        """
+        lost = getattr(self.clock, "lost", None)
+        why = lost() if lost is not None else self._heartbeat_lost()
+        if why:
+            raise DriveLost(why)
+        code = self.active_fault()
+        if code:
+            raise DriveFault(f"drive fault {fault_text(code)}", code)
+        if self._expect is None or self._sw_seen == self._sw_mark:
+            return
+        if state_of(self._sw_last) == self._expect:
+            return
+        sw = self.statusword  # confirm by SDO
+        state = state_of(sw)
+        if state == self._expect:
+            self._sw_mark = self._sw_seen
+            return
+        if state in ("FAULT", "FAULT REACTION ACTIVE"):
+            code = self.active_fault() or self.fault_code()
+            raise DriveFault(f"drive fault {fault_text(code)}", code)
+        expected, self._expect = self._expect, None
+        self.enabled = False
+        raise DriveLeftState(
+            f"the drive left {expected} without a fault: statusword 0x{sw:04X} ({state}); "
+            "another master on the bus (a second bench or shell) or a local stop switched it")
+
+    def _heartbeat_lost(self) -> str | None:
+        """A CiA 301 heartbeat consumer for a drive that publishes no time (the host's
+        clock): None while its heartbeat comes (or it sends none)."""
+        if getattr(self.clock, "exact_steps", False):
+            return None  # the in-process simulated drive: its time is the bench's steps
+        if self._hb_period_s is None:
+            try:
+                self._hb_period_s = float(self.read(od.PRODUCER_HEARTBEAT_TIME)) / 1000.0
+            except Exception:  # noqa: BLE001 - no heartbeat to consume
+                self._hb_period_s = 0.0
+        last = self.node.nmt.timestamp
+        if not self._hb_period_s or last is None:
+            return None
+        age = time.time() - float(last)
+        if age > 3 * self._hb_period_s + 0.1:
+            return (f"drive node {self.node_id} lost: no heartbeat for {age:.2f} s "
+                    f"(0x1017 = {self._hb_period_s * 1000:.0f} ms; its bus or its process is "
+                    "gone)")
+        return None
+
+    def wait_until(self, t_s: float, slice_s: float | None = None) -> None:
+        """Sleep on the drive's clock until ``t_s``, watching the drive (:meth:`check`)
+        every slice (the clock's ``slice_s``, 10 ms on a bus)."""
+        step = slice_s or getattr(self.clock, "slice_s", 0.01)
+        while True:
+            self.check()
+            now = self.clock.now()
+            if now >= t_s - 1e-9:
+                return
+            self.clock.sleep_until(min(t_s, now + step))
 
     def _goto(self, target: str, timeout_s: float) -> None:
         """Walk the CiA 402 state machine to ``target`` with confirmed steps.
@@ -411,8 +513,10 @@ class Drive:
         self.write(od.TARGET_TORQUE, 0)
         self._sync_rpdo_cache(od.TARGET_TORQUE, 0)
         self.set_mode(mode)
+        self._expect_state(None)
         self._goto("OPERATION ENABLED", timeout_s)
         self.enabled = True
+        self._expect_state("OPERATION ENABLED")
 
     def disable(self, timeout_s: float = 1.0) -> None:
         """Zero the references and go to SWITCH ON DISABLED (PWM off).
@@ -421,6 +525,7 @@ class Drive:
         fails, and raises :class:`DriveError` only when the drive still reports
         OPERATION ENABLED afterwards.
         """
+        self._expect_state(None)
         for ref in (od.TARGET_VELOCITY, od.TARGET_TORQUE):
             try:
                 self._sync_rpdo_cache(ref, 0)
@@ -444,6 +549,7 @@ class Drive:
 
     def quick_stop(self) -> None:
         """Controlword QUICK STOP (0x0002): decelerate, then PWM off."""
+        self._expect_state(None)
         self.var(od.CONTROLWORD).raw = 0x0002
 
     # ---- references -------------------------------------------------------------------

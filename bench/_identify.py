@@ -103,12 +103,15 @@ class WireProbe(Probe):
                                 "s (frames lost on the serial link)")
         codes = out["fault_code"][out["fault_code"] != 0]
         if codes.size:
-            raise IdentifyError(f"drive fault 0x{int(codes[0]):04X} during identification")
+            from bench._drive import DriveFault, fault_text
+
+            raise DriveFault(f"drive fault {fault_text(int(codes[0]))} during "
+                             "identification", int(codes[0]))
         return out
 
     def run(self, seconds: float) -> dict[str, np.ndarray]:
         t0 = self._t_last()
-        self.clock.sleep_until(self.clock.now() + seconds)
+        self.drive.wait_until(self.clock.now() + seconds)
         self._await(t0 + seconds)
         return self._window(t0, t0 + seconds)
 
@@ -158,7 +161,7 @@ class WireProbe(Probe):
         c0 = self.clock.now()
         for k in range(len(t_s) - 1):
             d.set_speed_mps(float(v_mps[k]))
-            self.clock.sleep_until(c0 + float(t_s[k + 1]))
+            d.wait_until(c0 + float(t_s[k + 1]))
         T = float(t_s[-1])
         self._await(t0_tel + T)
         return self._window(t0_tel, t0_tel + T)
@@ -168,7 +171,7 @@ class WireProbe(Probe):
         c0 = self.clock.now()
         for k in range(1, n + 1):
             self.drive.set_speed_mps(v_from + (v_to - v_from) * k / n)
-            self.clock.sleep_until(c0 + seconds * k / n)
+            self.drive.wait_until(c0 + seconds * k / n)
 
 
 @dataclass
@@ -181,6 +184,8 @@ class IdentifyOutput:
     truth: dict[str, float] | None = None
     files: dict[str, str] = field(default_factory=dict)
     interrupted: bool = False
+    #: the drive stopped it (a fault, lost, switched by another master): exit 3, not 1
+    drive_error: bool = False
 
 
 def _cfg_view(drive: Any) -> SimpleNamespace:
@@ -198,7 +203,7 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
     """Run the identification on a connected drive; write the run folder (motor file,
     drive configuration, report, summary, logs). The drive's configuration is restored
     at the end unless ``apply`` (then the identified configuration stays)."""
-    from bench._drive import DriveError
+    from bench._drive import DriveError, DriveLost
     from bench._logging import RunLogger, run_dir_for
     from bench._session import TelemetryReader
     from protocols.serial_link import signal_names
@@ -220,6 +225,7 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
     tel.start()
     conn.start_heartbeat()
     keep = backup
+    lost = False
     try:
         names = signal_names()
         ids = [names.index(s) for s in TEL_SIGNALS]
@@ -240,21 +246,27 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
         out.result = res
     except (IdentifyError, DriveError, RuntimeError) as e:
         out.error = " ".join(str(e).split())
+        out.drive_error = isinstance(e, DriveError)
+        lost = isinstance(e, DriveLost)
     except KeyboardInterrupt:
         out.interrupted = True
         out.error = "interrupted"
     finally:
-        try:
-            drive.disable()
-        except Exception as e:  # noqa: BLE001 - reported; the restore below still runs
-            out.error = (out.error + "; " if out.error else "") + f"disable failed: {e}"
-        if out.result is not None and apply:
-            keep = identified_config(backup, out.result)
-        try:
-            drive.restore(keep)
-        except Exception as e:  # noqa: BLE001 - one line in the result
-            out.error = (out.error + "; " if out.error else "") + (
-                f"restoring the drive configuration failed: {e}")
+        if lost:  # nothing sent reaches it; its heartbeat consumer switches it off
+            out.error = (out.error or "") + "; drive not disabled and configuration NOT " \
+                "restored (the drive is lost)"
+        else:
+            try:
+                drive.disable()
+            except Exception as e:  # noqa: BLE001 - reported; the restore below still runs
+                out.error = (out.error + "; " if out.error else "") + f"disable failed: {e}"
+            if out.result is not None and apply:
+                keep = identified_config(backup, out.result)
+            try:
+                drive.restore(keep)
+            except Exception as e:  # noqa: BLE001 - one line in the result
+                out.error = (out.error + "; " if out.error else "") + (
+                    f"restoring the drive configuration failed: {e}")
         tel.stop()
         logstats = logger.close()
         logger.write_meta({"identify": {"travel_m": travel_m, "apply": apply,

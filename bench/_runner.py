@@ -22,7 +22,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from bench._drive import DriveLost
+from bench._drive import DriveFault, DriveLeftState, DriveLost
 from bench._evidence import NO_SENSOR
 from bench._load import LoadDevice, NoLoad
 from bench._sequence import Sequence, Step
@@ -50,6 +50,7 @@ class DriveLike(Protocol):
     def set_mode(self, mode: str) -> None: ...
     def set_speed_mps(self, v_mps: float) -> None: ...
     def set_force_N(self, force_N: float) -> None: ...
+    def check(self) -> None: ...
 
 
 class Recorder(Protocol):
@@ -291,17 +292,22 @@ class Runner:
         except Exception:  # noqa: BLE001 - DriveLost: the clock stopped with the drive
             return self._last_now
 
-    def _check_fault(self) -> None:
-        """Stop the sequence when the drive announced a fault (EMCY): what follows would
-        run on a drive that has switched its power stage off, and every figure after it
-        would measure a coasting mover, not the estimator."""
-        active = getattr(self.drive, "active_fault", None)
-        code = active() if active is not None else 0
-        if code:
-            from bench._drive import DriveFault, fault_text
-
-            raise DriveFault(f"drive fault {fault_text(code)} at t = {self.now():.3f} s",
-                             code)
+    def _check_drive(self) -> None:
+        """Stop the sequence when the drive is no longer doing what the run asked
+        (:meth:`bench.Drive.check`, the bench's one watch): a fault (EMCY or statusword),
+        the drive leaving OPERATION ENABLED without one (another master), its time
+        stopped. What follows would run on a drive that has switched its power stage off,
+        and every figure after it would measure a coasting mover, not the estimator."""
+        check = getattr(self.drive, "check", None)
+        if check is None:
+            return
+        try:
+            check()
+        except (DriveFault, DriveLeftState) as e:
+            at = f" at t = {self._now_or_last():.3f} s"
+            if isinstance(e, DriveFault):
+                raise DriveFault(f"{e}{at}", e.code) from None
+            raise DriveLeftState(f"{e}{at}") from None
 
     def _sleep_until(self, t_seq: float, total: float) -> None:
         """Sleep in slices so progress updates, Ctrl-C and a drive fault stay responsive."""
@@ -309,7 +315,7 @@ class Runner:
             now = self.now()
             if self.progress:
                 self.progress(min(now, total), total)
-            self._check_fault()
+            self._check_drive()
             if now >= t_seq - 1e-9:  # clocks advance in steps; avoid float ties
                 return
             # slices of the clock's choice (10 ms on hardware): a fault stops the
@@ -533,7 +539,7 @@ class Runner:
             self.rec.event(0.0, "start", {"sequence": seq.name})
             for step in seq.steps:
                 if step.kind != "enable":  # a fault before enable is enable's to report
-                    self._check_fault()
+                    self._check_drive()
                 self.rec.event(self.now(), "step", {"index": step.index, "step": step.kind,
                                                     "params": step.params})
                 self._do(step, seq, result)

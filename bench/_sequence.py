@@ -611,6 +611,7 @@ def validate_sequence(text: str, file: str = "<string>") -> Sequence:
         seen: set[str] = set()
         uniq = [i for i in issues if not (str(i) in seen or seen.add(str(i)))]
         raise SequenceError(uniq)
+    doc["motor"] = motor_beside(doc["motor"], file)
     t_issues, starts, total = _check_timing(doc, file, marks)
     t_issues += _check_values(doc, file, marks, starts, total)
     if t_issues:
@@ -625,6 +626,19 @@ def validate_sequence(text: str, file: str = "<string>") -> Sequence:
                     description=doc.get("description", ""),
                     settle_s=float(doc.get("settle_s", 0.15)), x0=doc.get("x0", 0.0),
                     duration_s=total, raw=doc)
+
+
+def motor_beside(motor: str, file: str) -> str:
+    """A sequence's ``motor:``: a motor name as it is; a relative path to a motor file
+    (``my_lin.toml``, ``motors/x.toml``) is relative to the sequence file's folder, as an
+    include is, not to the directory the bench was started in."""
+    p = Path(motor)
+    if p.is_absolute() or (p.suffix != ".toml" and len(p.parts) < 2):
+        return motor
+    seq = Path(file)
+    if file.startswith("<") or not seq.parent.is_dir():
+        return motor  # text without a file (validate_sequence(text))
+    return str(seq.parent / p)
 
 
 def load_sequence(path: str | Path) -> Sequence:

@@ -785,7 +785,7 @@ def run_live(conn: Connection, spec: Any, speed_mps: float, duration_s: float = 
     """
     from pathlib import Path
 
-    from bench._drive import fault_text
+    from bench._drive import DriveFault, DriveLeftState, DriveLost
     from bench._live import recording_only
 
     run_dir = None if spec.path is not None else run_dir_for("live", runs_root)
@@ -799,7 +799,7 @@ def run_live(conn: Connection, spec: Any, speed_mps: float, duration_s: float = 
     if conn.sim is not None:
         conn.sim.set_realtime(True)
     d = conn.drive
-    interrupted = False
+    interrupted = lost = False
     fault = None
     t0 = t_end = d.clock.now()
     conn.start_heartbeat()
@@ -810,22 +810,26 @@ def run_live(conn: Connection, spec: Any, speed_mps: float, duration_s: float = 
         live.open()
         _say("bench: live; Ctrl-C to stop (the drive is disabled on exit)")
         while duration_s <= 0 or d.clock.now() - t0 < duration_s:
-            now = d.clock.now()
-            d.clock.sleep_until(min(now + 0.1, t0 + duration_s) if duration_s > 0
-                                else now + 0.1)
-            if d.state == "FAULT":
-                fault = fault_text(d.fault_code())
-                _say(f"bench: drive FAULT {fault}")
-                break
+            now = d.clock.now()  # the drive is watched every slice (Drive.check)
+            d.wait_until(min(now + 0.1, t0 + duration_s) if duration_s > 0 else now + 0.1)
     except KeyboardInterrupt:
         interrupted = True
+    except (DriveFault, DriveLeftState, DriveLost) as e:
+        fault = str(e)
+        lost = isinstance(e, DriveLost)
+        _say(f"bench: live stopped: {e}")
     finally:
-        t_end = d.clock.now()
-        try:
-            d.disable()
-            _say("bench: drive disabled")
-        except Exception as e:  # noqa: BLE001
-            _say(f"bench: SAFE STATE FAILED: {e}")
+        with contextlib.suppress(DriveLost):
+            t_end = d.clock.now()
+        if lost:
+            _say("bench: SAFE STATE NOT CONFIRMED: the drive is lost; its heartbeat consumer "
+                 "(0x1016) switches its PWM off without the bench's heartbeat")
+        else:
+            try:
+                d.disable()
+                _say("bench: drive disabled")
+            except Exception as e:  # noqa: BLE001
+                _say(f"bench: SAFE STATE FAILED: {e}")
         tap.close()
         drive_time = max(0.0, t_end - t0)
         stats = close_live(live, drive_time_s=drive_time)

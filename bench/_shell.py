@@ -108,6 +108,13 @@ class Params:
                 "documentation, print(drive.p.table('inj')) for a list>")
 
 
+class _Speed(float):
+    """A speed in m/s that says so when shown (``drive.speed(100, "r/min")`` -> 0.32 m/s)."""
+
+    def __repr__(self) -> str:
+        return f"{float(self):.6g} m/s"
+
+
 class Shell:
     """The ``drive`` object of ``bench shell`` (see the module documentation)."""
 
@@ -120,15 +127,36 @@ class Shell:
         self.last_result: Any = None
         self._live: Any = None
         self._tap: Any = None
+        self._said = ""
+
+    def _watch(self) -> str:
+        """What happened to the drive since the last command (Drive.check, the bench's
+        one watch: a fault, switched off by another master, lost), said once on stderr."""
+        import sys
+
+        from bench._drive import DriveError
+
+        try:
+            self.d.check()
+        except DriveError as e:
+            msg = " ".join(str(e).split())
+            if msg != self._said:
+                print(f"bench: {msg}", file=sys.stderr)
+                self._said = msg
+            return msg
+        self._said = ""
+        return ""
 
     # ---- state and set-points ----------------------------------------------------------
     @property
     def state(self) -> str:
         """CiA 402 state (from the statusword)."""
+        self._watch()
         return self.d.state
 
     def enable(self, mode: str = "speed") -> str:
         """Enable the power stage in ``speed`` or ``force`` mode."""
+        self._watch()
         self.d.enable(mode)
         return self.d.state
 
@@ -137,17 +165,26 @@ class Shell:
         return self.d.state
 
     def speed(self, value: float, unit: str = "m/s") -> float:
-        """Speed set-point in ``unit`` (m/s, mm/s, r/min); returns it in m/s."""
+        """Speed set-point in ``unit`` (m/s by default; mm/s, r/min); returns what was
+        sent, in m/s (shown with its unit)."""
+        import math
+
+        if not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+            raise ValueError(f"drive.speed({value!r}): not a finite number (a speed in "
+                             f"{unit})")
         v = self.units.speed_to_mps(float(value), unit)
+        self._watch()
         self.d.set_speed_mps(v)
-        return v
+        return _Speed(v)
 
     def force(self, force_N: float) -> None:
         """Force set-point (N, force mode)."""
+        self._watch()
         self.d.set_force_N(float(force_N))
 
     def actual(self) -> dict[str, float]:
         """Estimated position, speed, force (what the drive reports)."""
+        self._watch()
         return self.d.actual()
 
     def faults(self) -> dict[str, Any]:
@@ -216,8 +253,13 @@ class Shell:
 
     def close(self) -> None:
         """Safe state, end live telemetry, close the connection."""
+        import sys
+
         try:
             self.d.disable()
+            print("bench: drive disabled", file=sys.stderr)
+        except Exception as e:  # noqa: BLE001 - said, then the connection still closes
+            print(f"bench: SAFE STATE FAILED: {' '.join(str(e).split())}", file=sys.stderr)
         finally:
             try:
                 self.live_stop()
@@ -237,6 +279,29 @@ BANNER = """bench shell: `drive` is connected ({desc}).
 Leaving the shell (exit) disables the drive."""
 
 
+def _user_errors() -> tuple[type[BaseException], ...]:
+    from canopen.sdo.exceptions import SdoError
+
+    from bench._drive import DriveError
+    from bench._sequence import SequenceError
+
+    return (DriveError, SdoError, SequenceError, ValueError)
+
+
+#: what the shell shows as one line (its message) instead of a traceback
+USER_ERRORS = _user_errors()
+
+
+def one_line_error(shell: Any, etype: type, value: BaseException, tb: Any,
+                   tb_offset: Any = None) -> None:
+    """IPython's handler for :data:`USER_ERRORS`: ``bench: <message>`` on one line."""
+    import sys
+
+    msg = " ".join(str(value).split()) or etype.__name__
+    print(f"bench: {msg}", file=sys.stderr)
+    return None
+
+
 def namespace(conn: Any, runs_root: str = "runs") -> dict[str, Any]:
     """The session's names (also what the tests use)."""
     sh = Shell(conn, runs_root)
@@ -254,6 +319,11 @@ def start(conn: Any, runs_root: str = "runs") -> int:
     cfg.TerminalInteractiveShell.banner1 = BANNER.format(desc=conn.description)
     cfg.TerminalInteractiveShell.confirm_exit = False
     cfg.HistoryManager.enabled = False  # no sqlite history file in the user's home
+    # a user's mistake (a value out of range, a unit, a refused command) is one line, not
+    # a traceback through canopen's internals
+    ns["_bench_one_line"] = (USER_ERRORS, one_line_error)
+    cfg.InteractiveShellApp.exec_lines = [
+        "get_ipython().set_custom_exc(*_bench_one_line); del _bench_one_line"]
     try:
         IPython.start_ipython(argv=["--no-autoindent"], user_ns=ns, config=cfg)
     finally:

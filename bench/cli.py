@@ -403,6 +403,53 @@ def _quiet_thread_errors(verbose: bool) -> None:
     threading.excepthook = hook
 
 
+class _Console:
+    """stdout or stderr that a closed pipe or a hung-up terminal cannot stop
+    (``bench run ... | head -1``, ``bench live | tee log`` and Ctrl-C): the first failed
+    write points the file descriptor at /dev/null and every later write succeeds, so
+    console output never decides whether the drive is made safe, the run's files are
+    written or which exit code the command ends with."""
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+        self.broken = False
+
+    def _broke(self) -> None:
+        self.broken = True
+        try:
+            fd = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(fd, self._stream.fileno())  # the interpreter's exit flush succeeds too
+            os.close(fd)
+        except (OSError, ValueError, AttributeError):
+            pass
+
+    def write(self, text: str) -> int:
+        if not self.broken:
+            try:
+                return self._stream.write(text)
+            except OSError:  # EPIPE, EIO of a closed terminal
+                self._broke()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.broken:
+            try:
+                self._stream.flush()
+            except OSError:
+                self._broke()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
+def _guard_console() -> None:
+    """Install :class:`_Console` on sys.stdout and sys.stderr (the console script only)."""
+    for name in ("stdout", "stderr"):
+        s = getattr(sys, name)
+        if s is not None and not isinstance(s, _Console):
+            setattr(sys, name, _Console(s))
+
+
 def _sigterm_as_interrupt() -> None:
     """SIGTERM and SIGINT stop a run safely (the drive disabled, the run saved): SIGINT
     gets Python's own handler even when the process was started with it ignored (a
@@ -754,8 +801,10 @@ def _print_result(r: Any, out: Any, kind: dict[str, Any] | None = None) -> None:
         if e.paper is not None:
             paper = f"; paper {e.paper:g}: {'reproduced' if e.paper_met else 'NOT reproduced'}"
         print(f"  [{e.status}] {e.name}: {m} (required {e.criterion}{paper})")
-    lost = out.logstats.get("lost_frames", {})
-    print(f"  CAN frames logged: {out.logstats.get('frames_logged')}, lost frames: {lost}")
+    lost = out.logstats.get("lost_frames", {}) or {}
+    lost_text = ", ".join(f"{k}: {v}" for k, v in lost.items()) if lost else "none"
+    print(f"  CAN frames logged: {out.logstats.get('frames_logged')}, lost frames: "
+          f"{lost_text}")
     if out.logstats.get("receive_errors"):
         print(f"  receive-thread errors: {out.logstats['receive_errors']}")
     print(f"  run folder: {out.run_dir}")
@@ -855,10 +904,11 @@ def cmd_identify(args: argparse.Namespace) -> int:
         print("bench: interrupted; drive disabled, configuration restored", file=sys.stderr)
         return EXIT_INTERRUPT
     if out.error is not None:
-        print(f"bench: identify: {out.error}; drive disabled, configuration "
-              f"{'restored' if 'restoring' not in out.error else 'NOT restored'} "
-              f"({out.run_dir})", file=sys.stderr)
-        return EXIT_FAIL
+        tail = "" if "NOT restored" in out.error else (
+            "; drive disabled, configuration " + (
+                "restored" if "restoring" not in out.error else "NOT restored"))
+        print(f"bench: identify: {out.error}{tail} ({out.run_dir})", file=sys.stderr)
+        return EXIT_DRIVE if out.drive_error else EXIT_FAIL
     return EXIT_OK
 
 
@@ -1187,22 +1237,49 @@ def main(argv: list[str] | None = None) -> int:
                 "shell": cmd_shell}
     try:
         return handlers[args.cmd](args)
+    except Exception as e:  # noqa: BLE001 - every exit code is decided in exit_code_for
+        code, line = exit_code_for(e)
+        if code == EXIT_INTERNAL:
+            return _internal_error(e, getattr(args, "runs", "runs"))
+        print(f"bench: {line}", file=sys.stderr)
+        return code
     except KeyboardInterrupt:
         print("bench: interrupted", file=sys.stderr)
         return EXIT_INTERRUPT
-    except UserError as e:
-        print(f"bench: {e}", file=sys.stderr)
-        return e.code
-    except Exception as e:  # noqa: BLE001 - last resort: one line, traceback kept
-        return _internal_error(e, getattr(args, "runs", "runs"))
+
+
+def exit_code_for(e: BaseException) -> tuple[int, str]:
+    """The one place an exception that ends a command becomes its exit code and line
+    (the table in docs/bench.md): a :class:`UserError` carries its code; the drive or its
+    bus failing (a refused command, a fault, a lost drive, the drive switched by another
+    master, a CAN or SDO error, a refused connection) is 3; Ctrl-C / SIGTERM is 130;
+    anything else is a bug, 4."""
+    if isinstance(e, KeyboardInterrupt):
+        return EXIT_INTERRUPT, "interrupted"
+    if isinstance(e, UserError):
+        return e.code, str(e)
+    drv = sys.modules.get("bench._drive")
+    if drv is not None and isinstance(e, drv.ParamInputError):  # a parameter the user gave
+        return EXIT_USAGE, str(e)
+    drive_errors: list[type[BaseException]] = [ConnectionError]
+    for mod, names in (("bench._drive", ("DriveError",)),
+                       ("canopen.sdo.exceptions", ("SdoError",)),
+                       ("can", ("CanError",))):
+        m = sys.modules.get(mod)  # what was never imported cannot have been raised
+        drive_errors += [getattr(m, n) for n in names if m is not None and hasattr(m, n)]
+    if isinstance(e, tuple(drive_errors)):
+        return EXIT_DRIVE, " ".join(str(e).split()) or type(e).__name__
+    return EXIT_INTERNAL, " ".join(f"{type(e).__name__}: {e}".split())
 
 
 def console_main() -> int:
     """The ``bench`` console script and ``python -m bench``: :func:`main`, then the
     process ends, so what is left needs no collection (the interpreter's final
     collection of a run's objects costs 50-100 ms). Not for in-process callers."""
+    _guard_console()
     rc = main()
     gc.freeze()
+    sys.stdout.flush()
     return rc
 
 

@@ -147,3 +147,38 @@ def test_each_missing_top_level_key_named_once(tmp_path) -> None:
         load_sequence(p)
     fields = sorted(i.field for i in ei.value.issues)
     assert fields == ["extractor", "motor", "seed"]
+
+
+def test_a_relative_motor_file_is_beside_the_sequence(tmp_path: Path) -> None:
+    """`cd /tmp && bench validate /path/seq/s.yaml` with `motor: my_lin.toml` beside the
+    sequence (before: "No such file or directory: 'my_lin.toml'", the current directory's)."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    seqdir, elsewhere = tmp_path / "seq", tmp_path / "elsewhere"
+    (seqdir / "motors").mkdir(parents=True)
+    elsewhere.mkdir()
+    src = root / "sim_fallback" / "motors" / "iron_core_linear.toml"
+    shutil.copy(src, seqdir / "my_lin.toml")
+    shutil.copy(src, seqdir / "motors" / "lin2.toml")
+    body = ("extractor: sogi_adaptive\nseed: 0\nsteps:\n  - enable: {}\n"
+            "  - set_speed: {value: 0.1, unit: m/s}\n  - wait: {duration_s: 0.2}\n"
+            "  - disable: {}\n")
+    (seqdir / "a.yaml").write_text("name: a\nmotor: my_lin.toml\n" + body)
+    (seqdir / "b.yaml").write_text("name: b\nmotor: motors/lin2.toml\n" + body)
+    (seqdir / "c.yaml").write_text("name: c\nmotor: missing.toml\n" + body)
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    r = subprocess.run([sys.executable, "-m", "bench", "validate", str(seqdir / "a.yaml"),
+                        str(seqdir / "b.yaml")], cwd=elsewhere, env=env, capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run([sys.executable, "-m", "bench", "validate", str(seqdir / "c.yaml")],
+                       cwd=elsewhere, env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2
+    assert str(seqdir / "missing.toml") in r.stderr  # says where it looked
+    seq = load_sequence(seqdir / "a.yaml")
+    assert Path(seq.motor) == seqdir / "my_lin.toml"
+    assert validate_sequence("name: t\nmotor: paper_salient\n" + body).motor == "paper_salient"

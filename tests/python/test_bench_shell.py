@@ -131,3 +131,61 @@ def test_live_in_the_shell_streams_pdo_serial_and_truth_and_detaches(ns, tmp_pat
             assert name in got, (name, sorted(got))
             t, _ = got[name]
             assert t.size >= 12 and t[-1] - t[0] > 0.25, (name, t.size)
+
+
+def test_the_shell_says_once_when_another_master_switched_the_drive_off(ns, capsys):
+    """The shell's commands go through the bench's one watch (Drive.check): a drive
+    switched off by a second master is said on stderr, once, naming the statusword."""
+    import can
+
+    drive, conn = ns["drive"], ns["conn"]
+    drive.enable()
+    bus2 = can.Bus(interface="virtual", channel=conn.info["channel"])
+    try:  # an SDO download of controlword 0 from another master
+        bus2.send(can.Message(arbitration_id=0x601, is_extended_id=False,
+                              data=[0x2B, 0x40, 0x60, 0, 0, 0, 0, 0]))
+    finally:
+        bus2.shutdown()
+    # the simulated drive answers the intruder while the bench has no SDO of its own
+    # pending (two SDO clients on one SDO channel would race: a real bus's problem too)
+    clock = conn.drive.clock
+    clock.sleep_until(clock.now() + 0.02)
+    err = ""
+    for _ in range(100):
+        drive.actual()
+        err += capsys.readouterr().err
+        if "left OPERATION ENABLED" in err:
+            break
+    assert "bench: the drive left OPERATION ENABLED without a fault: statusword 0x" in err
+    for _ in range(5):
+        drive.actual()
+    err += capsys.readouterr().err
+    assert err.count("left OPERATION ENABLED") == 1
+    assert drive.state == "SWITCH ON DISABLED"
+
+
+def test_user_mistakes_in_the_shell_are_one_line(tmp_path):
+    """The issue's cases, typed into `bench shell`: a value with a wrong unit, a NaN speed,
+    a refused write while enabled: one `bench:` line each, no traceback through canopen;
+    a speed echoes its unit."""
+    script = ("drive.p.u_inj_V = '5000 V'\n"
+              "drive.speed(float('nan'))\n"
+              "print('SPD=', repr(drive.speed(100, 'r/min')))\n"
+              "drive.enable()\n"
+              "drive.p.pole_pitch_m = 0.03\n"
+              "print('STILL=', drive.state)\n"
+              "exit\n")
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    p = subprocess.run([sys.executable, "-m", "bench", "shell", "--sim", "--runs",
+                        str(tmp_path)], input=script, capture_output=True, text=True,
+                       cwd=REPO, env=env, timeout=120)
+    out = p.stdout + p.stderr
+    assert p.returncode == 0, out
+    assert "Traceback" not in out and "canopen" not in out, out
+    lines = [ln for ln in p.stderr.splitlines() if ln.startswith("bench: ")]
+    assert any("u_inj_V" in ln and "allowed range [1" in ln for ln in lines), lines
+    assert any("drive.speed(nan): not a finite number" in ln for ln in lines), lines
+    assert any("pole_pitch_m" in ln and "disable the drive first" in ln for ln in lines), lines
+    assert "SPD= 0.32 m/s" in p.stdout
+    assert "STILL= OPERATION ENABLED" in p.stdout
+    assert p.stderr.rstrip().endswith("bench: drive disabled")  # exit confirms it
