@@ -769,7 +769,7 @@ class LiveOutput:
 
 
 def run_live(conn: Connection, spec: Any, speed_mps: float, duration_s: float = 0.0,
-             runs_root: str = "runs") -> LiveOutput:
+             runs_root: str = "runs", scope: Any = None) -> LiveOutput:
     """``bench live``: enable the drive in speed mode, stream the decoded wire telemetry
     (TPDOs, serial telemetry; the simulated drive's truth beside) to rerun until
     ``duration_s`` of drive time after the enable (0: until Ctrl-C); the drive is disabled
@@ -782,20 +782,26 @@ def run_live(conn: Connection, spec: Any, speed_mps: float, duration_s: float = 
     opened before the drive is enabled. A recording only (save, spawn without a display)
     opens while the drive already runs (its ~0.6 s of imports and blueprint would otherwise
     come before the first sample); the samples meanwhile wait in the feed's queue.
+
+    ``spec`` None with a ``scope`` (:class:`bench._scope.TerminalScope`, ``bench live
+    --tui``): no rerun, the scope drawn in the terminal every 0.1 s of drive time.
     """
     from pathlib import Path
 
     from bench._drive import DriveFault, DriveLeftState, DriveLost
     from bench._live import recording_only
 
-    run_dir = None if spec.path is not None else run_dir_for("live", runs_root)
-    try:
-        live = open_live(spec, conn, run_dir, "live", lazy=recording_only(spec))
-    except BaseException:  # the viewer did not start: nothing moved, leave no empty folder
-        if run_dir is not None and Path(run_dir).is_dir() and not any(Path(run_dir).iterdir()):
-            Path(run_dir).rmdir()
-        raise
-    tap = LiveTap(conn, live.feed, truth_decimation=12)  # truth at 2 kHz
+    live = tap = run_dir = None
+    if spec is not None:
+        run_dir = None if spec.path is not None else run_dir_for("live", runs_root)
+        try:
+            live = open_live(spec, conn, run_dir, "live", lazy=recording_only(spec))
+        except BaseException:  # the viewer did not start: nothing moved, no empty folder
+            if run_dir is not None and Path(run_dir).is_dir() and \
+                    not any(Path(run_dir).iterdir()):
+                Path(run_dir).rmdir()
+            raise
+        tap = LiveTap(conn, live.feed, truth_decimation=12)  # truth at 2 kHz
     if conn.sim is not None:
         conn.sim.set_realtime(True)
     d = conn.drive
@@ -807,11 +813,18 @@ def run_live(conn: Connection, spec: Any, speed_mps: float, duration_s: float = 
         d.enable("speed")
         d.set_speed_mps(speed_mps)
         t0 = d.clock.now()
-        live.open()
+        if live is not None:
+            live.open()
         _say("bench: live; Ctrl-C to stop (the drive is disabled on exit)")
+        if scope is not None:
+            scope.speed_ref_mps = speed_mps
+            scope.start()
         while duration_s <= 0 or d.clock.now() - t0 < duration_s:
             now = d.clock.now()  # the drive is watched every slice (Drive.check)
             d.wait_until(min(now + 0.1, t0 + duration_s) if duration_s > 0 else now + 0.1)
+            if scope is not None:
+                scope.sample(d.clock.now() - t0)
+                scope.draw()
     except KeyboardInterrupt:
         interrupted = True
     except (DriveFault, DriveLeftState, DriveLost) as e:
@@ -830,10 +843,15 @@ def run_live(conn: Connection, spec: Any, speed_mps: float, duration_s: float = 
                 _say("bench: drive disabled")
             except Exception as e:  # noqa: BLE001
                 _say(f"bench: SAFE STATE FAILED: {e}")
-        tap.close()
         drive_time = max(0.0, t_end - t0)
-        stats = close_live(live, drive_time_s=drive_time)
-    out_dir = Path(run_dir) if run_dir is not None else Path(spec.path).parent
+        stats: dict[str, Any] = {}
+        if scope is not None:
+            scope.close()
+        if live is not None:
+            tap.close()
+            stats = close_live(live, drive_time_s=drive_time)
+    out_dir = (Path(run_dir) if run_dir is not None else
+               Path(spec.path).parent if spec is not None else Path("."))
     return LiveOutput(out_dir, stats, drive_time, fault, interrupted)
 
 

@@ -128,6 +128,7 @@ class Shell:
         self._live: Any = None
         self._tap: Any = None
         self._said = ""
+        self._speed_mps = 0.0
 
     def _watch(self) -> str:
         """What happened to the drive since the last command (Drive.check, the bench's
@@ -175,7 +176,31 @@ class Shell:
         v = self.units.speed_to_mps(float(value), unit)
         self._watch()
         self.d.set_speed_mps(v)
+        self._speed_mps = v
         return _Speed(v)
+
+    def scope(self, seconds: float = 10.0) -> str:
+        """The terminal scope of ``bench live --tui`` for ``seconds`` of drive time (Ctrl-C
+        ends it sooner): state, fault, speed against its reference, position, thrust and
+        the estimate against the reference sensor, from the TPDOs; the drive runs on as it
+        is."""
+        from bench._scope import TerminalScope
+
+        sc = TerminalScope(self.d, self.units.pole_pitch_m)
+        sc.speed_ref_mps = self._speed_mps
+        clock = self.d.clock
+        t0 = clock.now()
+        sc.start()
+        try:
+            while clock.now() - t0 < seconds:
+                self.d.wait_until(clock.now() + 0.1)
+                sc.sample(clock.now() - t0)
+                sc.draw()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            sc.close()
+        return sc.status()
 
     def force(self, force_N: float) -> None:
         """Force set-point (N, force mode)."""
@@ -275,6 +300,7 @@ BANNER = """bench shell: `drive` is connected ({desc}).
   drive.p.<TAB>  parameters (drive.p.u_inj_V, drive.p.u_inj_V = 25, drive.p.u_inj_V?)
   drive.enable(); drive.speed(0.1); drive.actual(); drive.disable(); drive.faults()
   drive.live()   telemetry to rerun while you type; drive.live_stop()
+  drive.scope(5) a scope in this terminal for 5 s (no display needed)
   steps = drive.stepper("sequences/paper_load_step.yaml"); next(steps)
 Leaving the shell (exit) disables the drive."""
 

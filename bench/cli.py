@@ -160,6 +160,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="unit of --speed")
     p.add_argument("--duration", type=float, default=0.0,
                    help="stop after this many seconds of drive time (0 = until Ctrl-C)")
+    p.add_argument("--tui", action="store_true",
+                   help="a scope in this terminal instead of rerun (no display needed: ssh, "
+                        "CI logs): state, fault, speed, position, thrust and the estimate "
+                        "against the reference sensor, from the TPDOs")
 
     p = sub.add_parser("identify", help="measure the motor: R, L_d(i_d), L_q, psi_f, mass, "
                        "friction; write a motor file and the drive configuration",
@@ -825,7 +829,10 @@ def cmd_live(args: argparse.Namespace) -> int:
         raise UserError(f"--speed {args.speed}: not a finite number")
     if not (math.isfinite(args.duration) and 0 <= args.duration <= 86400):
         raise UserError(f"--duration {args.duration}: allowed range [0, 86400] s")
-    spec = _make_rerun(args.rerun or ["spawn"])  # bad --rerun: exit 2 before connecting
+    if args.tui and args.rerun:
+        raise UserError("--tui with --rerun: choose one view (the terminal scope or rerun)")
+    # bad --rerun: exit 2 before connecting
+    spec = None if args.tui else _make_rerun(args.rerun or ["spawn"])
     lim = None
     try:
         from bench._sequence import drive_envelope
@@ -843,8 +850,13 @@ def cmd_live(args: argparse.Namespace) -> int:
         args.realtime = True  # live: the in-process simulated drive is paced to the wall clock
     conn = _connect(args)
     try:
+        scope = None
+        if args.tui:
+            from bench._scope import TerminalScope
+
+            scope = TerminalScope(conn.drive, conn.units.pole_pitch_m)
         out = run_live(conn, spec, conn.units.speed_to_mps(args.speed, args.unit),
-                       duration_s=args.duration)
+                       duration_s=args.duration, scope=scope)
     except RerunStartError as e:  # the viewer/server did not start; the drive is disabled
         raise UserError(f"--rerun {spec.mode}: {e}", EXIT_DRIVE) from None
     finally:

@@ -189,3 +189,20 @@ def test_user_mistakes_in_the_shell_are_one_line(tmp_path):
     assert "SPD= 0.32 m/s" in p.stdout
     assert "STILL= OPERATION ENABLED" in p.stdout
     assert p.stderr.rstrip().endswith("bench: drive disabled")  # exit confirms it
+
+
+def test_scope_in_the_shell(tmp_path):
+    """drive.scope(s): the terminal scope while the shell's drive runs (here in a pipe:
+    plain lines); it returns the state line."""
+    script = ("drive.enable(); drive.speed(0.1)\n"
+              "print('END=', drive.scope(1.5))\n"
+              "exit\n")
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    p = subprocess.run([sys.executable, "-m", "bench", "shell", "--sim", "--runs",
+                        str(tmp_path)], input=script, capture_output=True, text=True,
+                       cwd=REPO, env=env, timeout=120)
+    assert p.returncode == 0, p.stderr
+    lines = [ln for ln in p.stdout.splitlines() if "drive time" in ln and "speed=" in ln]
+    assert lines, p.stdout
+    assert "speed_ref=0.1 m/s" in lines[-1]
+    assert "END= drive time" in p.stdout and "OPERATION ENABLED" in p.stdout
