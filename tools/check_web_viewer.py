@@ -50,6 +50,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import _project_env  # noqa: F401 - first: one line, not a traceback, outside the venv
+
 ROOT = Path(__file__).resolve().parents[1]
 URL_RE = re.compile(r"web viewer: (http://127\.0\.0\.1:\d+/\?url=\S+)")
 

@@ -18,6 +18,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import _project_env  # noqa: F401 - first: one line, not a traceback, outside the venv
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 

@@ -19,6 +19,8 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+import _project_env  # noqa: F401 - first: one line, not a traceback, outside the venv
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from protocols.units import force_constant_N_per_A  # noqa: E402

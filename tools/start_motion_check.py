@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import _project_env  # noqa: F401 - first: one line, not a traceback, outside the venv
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))

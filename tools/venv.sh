@@ -35,10 +35,26 @@ spec="."; [ -n "$EXTRAS" ] && spec=".[$EXTRAS]"
 stamp="$VENV/.pmlsm-installed"
 want="$spec $(cd "$ROOT" && git rev-parse HEAD 2>/dev/null || echo nogit) $(cd "$ROOT" && git status --porcelain -- firmware_c sim_fallback protocols bench CMakeLists.txt pyproject.toml 2>/dev/null | md5sum | cut -c1-8)"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-  echo "venv: installing the package into $VENV (builds the C firmware and simulator)" >&2
+  echo "venv: installing the package into $VENV (builds the C firmware and simulator; about a minute the first time)" >&2
   "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --upgrade pip >/dev/null
-  (cd "$ROOT" && "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check "$spec") \
-    || { echo "venv: pip install $spec failed (see the output above)" >&2; exit 2; }
+  log="$VENV/.pmlsm-install.log"
+  (cd "$ROOT" && "$VENV/bin/python" -m pip install --disable-pip-version-check "$spec") >"$log" 2>&1 &
+  pip_pid=$!
+  t0=$SECONDS
+  # a line every 10 s, so a first build is never silent (the step pip is at, from its log)
+  while kill -0 "$pip_pid" 2>/dev/null; do
+    for _ in 1 2 3 4 5 6 7 8 9 10; do kill -0 "$pip_pid" 2>/dev/null && sleep 1; done
+    if kill -0 "$pip_pid" 2>/dev/null; then
+      step=$(grep -E '^(Collecting|Building|Installing|  Building|  Running|  Preparing)' "$log" | tail -1 | cut -c1-70 || true)
+      echo "venv: still installing ($((SECONDS - t0)) s${step:+: $step})" >&2
+    fi
+  done
+  if ! wait "$pip_pid"; then
+    tail -n 30 "$log" >&2
+    echo "venv: pip install $spec failed (the end of its log is above; all of it in $log)" >&2
+    exit 2
+  fi
+  echo "venv: installed in $((SECONDS - t0)) s" >&2
   echo "$want" > "$stamp"
 fi
 
