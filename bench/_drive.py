@@ -205,7 +205,9 @@ def param_table() -> dict[str, Param]:
             hi = cfg[e.fw_config].get("max", hi)
         dotted = e.name if e.kind == "var" else f"{e.object_name}.{e.name}"
         canon = e.fw_config or dotted
-        p = Param(canon, e.index, e.sub, e.unit or "", e.type, e.access, lo, hi, e.doc,
+        # the object's own text, else the firmware field's (od.yaml fw_config section)
+        doc = e.doc or str(cfg.get(e.fw_config or "", {}).get("doc", "") or "")
+        p = Param(canon, e.index, e.sub, e.unit or "", e.type, e.access, lo, hi, doc,
                   e.command)
         for key in {canon, dotted, f"0x{e.index:04X}:{e.sub}", f"0x{e.index:04x}:{e.sub}"}:
             out.setdefault(key, p)

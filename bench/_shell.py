@@ -97,10 +97,23 @@ class Params:
         self._drive.set(p.address, value)
 
     def table(self, pattern: str = "") -> str:
-        """Every parameter matching ``pattern`` (case-insensitive) with unit and range."""
-        rows = [f"{k:<34} {p.address:>9}  {p.unit:<8} {p.access:<5} "
-                f"[{'' if p.min is None else p.min}, {'' if p.max is None else p.max}]"
-                for k, p in sorted(self._by.items()) if pattern.lower() in k.lower()]
+        """Every parameter matching ``pattern`` (case-insensitive) with its present value
+        (read from the drive), unit, access and range."""
+        rows = []
+        for k, p in sorted(self._by.items()):
+            if pattern.lower() not in k.lower():
+                continue
+            if "r" in p.access or p.access == "const":
+                try:
+                    v = self._drive.read_raw(p.index, p.sub)
+                    val = f"{v:.6g}" if isinstance(v, float) else str(v)
+                except Exception:  # noqa: BLE001 - shown as unreadable, the table goes on
+                    val = "(unreadable)"
+            else:
+                val = "(write-only)"
+            rng = ("" if p.min is None and p.max is None else
+                   f"[{'' if p.min is None else p.min}, {'' if p.max is None else p.max}]")
+            rows.append(f"{k:<34} {p.address:>9}  {val:>12} {p.unit:<8} {p.access:<5} {rng}")
         return "\n".join(rows)
 
     def __repr__(self) -> str:
@@ -207,6 +220,25 @@ class Shell:
         self._watch()
         self.d.set_force_N(float(force_N))
 
+    def load(self, force_N: float) -> str:
+        """The load machine's force (N; the simulated drive's plant load, or a load drive
+        on the bus given with ``--load-node``); 0 removes it. Leaving the shell removes it
+        too."""
+        import math
+
+        if not isinstance(force_N, (int, float)) or not math.isfinite(float(force_N)):
+            raise ValueError(f"drive.load({force_N!r}): not a finite number (a force in N)")
+        ld = self.conn.load
+        if getattr(ld, "name", "none") == "none":
+            raise ValueError("drive.load: no load machine on this connection (the in-process "
+                             "simulated drive has one, --sim; a rig's load drive: "
+                             "--load-node N)")
+        self._watch()
+        if force_N:
+            ld.enable()
+        ld.set_force_N(float(force_N))
+        return f"load {float(force_N):g} N ({ld.name})"
+
     def actual(self) -> dict[str, float]:
         """Estimated position, speed, force (what the drive reports)."""
         self._watch()
@@ -281,6 +313,11 @@ class Shell:
         import sys
 
         try:
+            try:
+                self.conn.load.set_force_N(0.0)
+                self.conn.load.disable()
+            except Exception as e:  # noqa: BLE001 - said; the drive is disabled regardless
+                print(f"bench: load not removed: {' '.join(str(e).split())}", file=sys.stderr)
             self.d.disable()
             print("bench: drive disabled", file=sys.stderr)
         except Exception as e:  # noqa: BLE001 - said, then the connection still closes
@@ -301,8 +338,10 @@ BANNER = """bench shell: `drive` is connected ({desc}).
   drive.enable(); drive.speed(0.1); drive.actual(); drive.disable(); drive.faults()
   drive.live()   telemetry to rerun while you type; drive.live_stop()
   drive.scope(5) a scope in this terminal for 5 s (no display needed)
+  drive.load(20) the load machine's force in N (simulated drive, --load-node)
   steps = drive.stepper("sequences/paper_load_step.yaml"); next(steps)
-Leaving the shell (exit) disables the drive."""
+Leaving the shell (exit) disables the drive.
+"""
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:

@@ -206,3 +206,38 @@ def test_scope_in_the_shell(tmp_path):
     assert lines, p.stdout
     assert "speed_ref=0.1 m/s" in lines[-1]
     assert "END= drive time" in p.stdout and "OPERATION ENABLED" in p.stdout
+
+
+def test_parameter_help_and_table_show_text_and_values(ns):
+    """`drive.p.u_inj_V?` shows the parameter's documentation (od.yaml's fw_config text
+    when the object has none) and `table()` the drive's present values."""
+    import re
+
+    drive = ns["drive"]
+    doc = type(drive.p.u_inj_V).__doc__
+    assert "range [1.0, 400.0]" in doc and "square-wave amplitude" in doc
+    drive.p.u_inj_V = 31
+    row = next(r for r in drive.p.table("inj").splitlines() if r.startswith("u_inj_V "))
+    m = re.search(r"0x2010:1\s+([\d.]+) V\s+rw\s+\[1\.0, 400\.0\]", row)
+    assert m and float(m.group(1)) == 31.0, row
+
+
+def test_load_control_in_the_shell(ns):
+    """drive.load(F) puts F on the simulated plant: the drive holding speed 0 needs a
+    thrust current against it (the plant's truth), and none once it is removed; NaN is a
+    one-line error."""
+    drive, conn = ns["drive"], ns["conn"]
+    clock = conn.drive.clock
+    drive.enable()
+    drive.speed(0.0)
+    clock.sleep_until(clock.now() + 0.2)
+    i0 = abs(conn.sim.truth_state()["i_q_A"])
+    assert drive.load(200).startswith("load 200 N")  # beyond the static friction
+    clock.sleep_until(clock.now() + 0.3)
+    i1 = abs(conn.sim.truth_state()["i_q_A"])
+    assert i1 > i0 + 2.0, (i0, i1)
+    with pytest.raises(ValueError, match=r"drive.load\(nan\): not a finite number"):
+        drive.load(float("nan"))
+    drive.load(0)
+    clock.sleep_until(clock.now() + 0.3)
+    assert abs(conn.sim.truth_state()["i_q_A"]) < i1 / 2
