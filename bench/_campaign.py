@@ -905,23 +905,24 @@ def _motor_and_config(motor: str, extractor: str) -> tuple[Any, Any]:
     return mot, fw_config(mot, extractor)
 
 
-def _simulate(base: dict[str, Any], params: dict[str, Any],
-              metrics: list[str]) -> dict[str, Any]:
-    from sim_fallback import paper_scenario
+@dataclass
+class ResolvedRun:
+    """What one campaign run simulates: the motor, extractor, seed and the absolute plant
+    and firmware values its axes give (scale axes times the nominal ones)."""
 
-    seed = int(params.get("seed", 0))
+    motor_name: str
+    motor: Any
+    nominal_fw: Any
+    extractor: str
+    seed: int
+    plant: dict[str, Any]
+    fw: dict[str, float]
+    rest: dict[str, Any]
+
+
+def resolve_run(base: dict[str, Any], params: dict[str, Any]) -> ResolvedRun:
+    """One run's parameters resolved (the campaign's run and its full replay share it)."""
     scales = base.get("_scales", {})
-    if base.get("scenario") == "fault_case":
-        from sim_fallback._faults import CASES, run_case
-        name = params.get("case", base.get("case"))
-        case = next(c for c in CASES if c.name == name)
-        r = run_case(case, seed)
-        out = {k: r[k] for k in ("case", "doc", "fault_name", "why")}
-        out.update(fault=int(r["fault"] or 0), verdict_ok=float(bool(r["verdict"])))
-        for m in FAULT_CASE_METRICS:
-            if m != "verdict_ok":
-                out[m] = float(r[m]) if r.get(m) is not None else float("nan")
-        return out
     motor_name = str(params.get("motor", base.get("motor", BASE_MOTOR)))
     motor, _ = _motor_and_config(motor_name, BASE_EXTRACTOR)
     plant, fw, rest = _split(_expand(base, params, motor.plant))
@@ -935,6 +936,29 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
     for k, v in plant_abs.items():  # integer plant fields (adc_bits, n_sub) from a float axis
         if isinstance(motor.plant.get(k), int) and float(v).is_integer():
             plant_abs[k] = int(v)
+    return ResolvedRun(motor_name, motor, nominal_fw, extractor, int(params.get("seed", 0)),
+                       plant_abs, fw_abs, rest)
+
+
+def _simulate(base: dict[str, Any], params: dict[str, Any],
+              metrics: list[str]) -> dict[str, Any]:
+    from sim_fallback import paper_scenario
+
+    seed = int(params.get("seed", 0))
+    if base.get("scenario") == "fault_case":
+        from sim_fallback._faults import CASES, run_case
+        name = params.get("case", base.get("case"))
+        case = next(c for c in CASES if c.name == name)
+        r = run_case(case, seed)
+        out = {k: r[k] for k in ("case", "doc", "fault_name", "why")}
+        out.update(fault=int(r["fault"] or 0), verdict_ok=float(bool(r["verdict"])))
+        for m in FAULT_CASE_METRICS:
+            if m != "verdict_ok":
+                out[m] = float(r[m]) if r.get(m) is not None else float("nan")
+        return out
+    rr = resolve_run(base, params)
+    motor, nominal_fw, extractor = rr.motor, rr.nominal_fw, rr.extractor
+    plant_abs, fw_abs, rest = rr.plant, rr.fw, rr.rest
     windows = base.get("windows", {})
     analysis = SM.needs_analysis(metrics, windows)
     tr = base.get("trace")
@@ -1506,6 +1530,12 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--serial", action="store_true", help="no Dask: a plain loop in this process")
     p.add_argument("--out", default="runs/campaigns", help="results root (default %(default)s)")
     p.add_argument("--replay", type=int, metavar="RUN", help="rerun one run alone and print it")
+    p.add_argument("--full", action="store_true",
+                   help="with --replay: also run it as a bench run on the simulated drive "
+                        "(sequence, report, waveforms, CAN log under --runs) and show its "
+                        "metrics beside the campaign's")
+    p.add_argument("--runs", default="runs", metavar="DIR",
+                   help="where --replay --full writes its run folder (default %(default)s)")
     p.add_argument("--yes", action="store_true",
                    help="start a campaign that will take longer than "
                         f"{CONFIRM_WALL_S / 3600:g} h on this cluster (its size is always "
@@ -1536,11 +1566,27 @@ def cmd(args: Any) -> int:
                   f"{len(runs) - 1}", file=sys.stderr)
             return 2
         row = run_one(c.run_base(), runs[args.replay], c.metrics)
-        # strict JSON (jq and others refuse NaN): a metric the run has not is null
-        print(json.dumps({k: None if isinstance(v, float) and not math.isfinite(v) else v
-                          for k, v in row.items() if k != "traceback"}, indent=1,
-                         allow_nan=False))
-        return 0 if row["error"] is None else 1
+        # strict JSON (jq and others refuse NaN): a metric the run has not is null; the
+        # run's parameters as an object, not a JSON string inside JSON
+        shown = {k: None if isinstance(v, float) and not math.isfinite(v) else v
+                 for k, v in row.items() if k != "traceback"}
+        shown["params"] = json.loads(row["params"])
+        print(json.dumps(shown, indent=1, allow_nan=False))
+        if not args.full:
+            return 0 if row["error"] is None else 1
+        from bench._replay import ReplayError, comparison, replay_full
+        try:
+            rep = replay_full(c, runs[args.replay], args.runs)
+        except ReplayError as e:
+            print(f"bench: --replay {args.replay} --full: {e}", file=sys.stderr)
+            return 2
+        for line in comparison(row, rep, c.metrics):
+            print(line, file=sys.stderr)
+        print(f"bench: run {args.replay} of {c.name} replayed as a bench run "
+              f"({'PASSED' if rep.passed else 'FAILED'}"
+              f"{': ' + rep.error if rep.error else ''}): {rep.run_dir}"
+              + (f"; report {rep.report}" if rep.report else ""), file=sys.stderr)
+        return 0 if row["error"] is None and rep.error is None else 1
     size = size_check(c, Path(args.out), args.workers, args.scheduler, args.serial)
     if size:
         print(size[0], file=sys.stderr)

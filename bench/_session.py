@@ -223,19 +223,21 @@ def _say(msg: str) -> None:
 def open_sim(motor: str = "paper_salient", extractor: str = "sogi_adaptive", seed: int = 0,
              x0: float | str = 0.0, realtime: bool = False, node_id: int = 1,
              record_decimation: int = 1, read_pdos: bool = True,
-             chunk_s: float = 1e-3, plant: dict[str, Any] | None = None) -> Connection:
+             chunk_s: float = 1e-3, plant: dict[str, Any] | None = None,
+             noise: float = 1.0) -> Connection:
     """Start the simulated drive on a fresh ``virtual`` channel and connect to it.
 
     ``chunk_s`` is the simulated time per C call, which is also the SYNC period (s).
     ``plant``: plant overrides, a motor other than the configured ``motor`` (e.g.
-    ``sim_fallback._motors.machine_params(other)``).
+    ``sim_fallback._motors.machine_params(other)``). ``noise``: scale of the motor file's
+    ADC noise and offsets (``sim_fallback.Sim``'s).
     """
     from bench._simdrive import SimDrive, SimLoad
 
     channel = f"pmlsm-sim-{uuid.uuid4().hex[:8]}-vcan"  # no trailing digits (BLF channel)
     sim = SimDrive(channel, motor=motor, extractor=extractor, seed=seed, x0=x0,
                    node_id=node_id, realtime=False, chunk_s=chunk_s,
-                   record_decimation=record_decimation, plant=plant).start()
+                   record_decimation=record_decimation, plant=plant, noise=noise).start()
     try:
         bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         net = canopen.Network(bus)

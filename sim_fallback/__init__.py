@@ -26,6 +26,7 @@ from ._motors import (
 )
 from ._sim import (
     CHANNELS,
+    PAPER_SCENARIO_ARGS,
     PAPER_SCENARIOS,
     SIM_REF_FORCE,
     SIM_REF_LOAD,
@@ -41,7 +42,7 @@ from .metrics import METRIC_DEFS, METRIC_NAMES, METRICS, compute_metrics, run_me
 __all__ = [
     "CHANNELS", "ConfigError", "EMU_BLOB_ADDR", "drive_params", "emu_boot_blob",
     "write_emu_boot_blob", "RefError", "config_error", "METRIC_DEFS", "METRIC_NAMES",
-    "METRICS", "MOTOR_DIR", "PAPER_SCENARIOS",
+    "METRICS", "MOTOR_DIR", "PAPER_SCENARIO_ARGS", "PAPER_SCENARIOS",
     "SIM_REF_FORCE", "SIM_REF_LOAD", "SIM_REF_SPEED", "Firmware", "FwConfig", "FwSnapshot",
     "Motor", "MotorFileError", "Result", "Sim", "SimPlantParams", "compute_metrics",
     "firmware_check", "firmware_field_ranges", "fw_config", "load_motor", "lib_path",
