@@ -204,7 +204,11 @@ def param_table() -> dict[str, Param]:
             lo = cfg[e.fw_config].get("min", lo)
             hi = cfg[e.fw_config].get("max", hi)
         dotted = e.name if e.kind == "var" else f"{e.object_name}.{e.name}"
-        canon = e.fw_config or dotted
+        # the firmware field's name only where the object carries it in the field's own
+        # unit: 0x607D:2 (um) is not pos_limit_max_m (m, 0x2051:3), whose name it was too
+        same = bool(e.fw_config) and getattr(e, "scale", 1.0) == 1.0 and \
+            cfg.get(e.fw_config, {}).get("unit", e.unit) == e.unit
+        canon = e.fw_config if same else dotted
         # the object's own text, else the firmware field's (od.yaml fw_config section)
         doc = e.doc or str(cfg.get(e.fw_config or "", {}).get("doc", "") or "")
         p = Param(canon, e.index, e.sub, e.unit or "", e.type, e.access, lo, hi, doc,

@@ -91,3 +91,19 @@ def test_wire_units_agree_with_od_yaml_scales():
     assert si_to_wire(od.TARGET_VELOCITY, 0.25) == 250_000      # m/s -> um/s
     assert wire_to_si(od.POSITION_ACTUAL_VALUE, -1_500) == -1.5e-3  # um -> m
     assert si_to_wire(od.TARGET_TORQUE, 0.2) == 200              # fraction -> per mille
+
+
+def test_a_parameter_name_means_one_unit() -> None:
+    """`pos_limit_max_m` named both 0x2051:3 (m) and 0x607D:2 (um): a name shared by two
+    objects must mean the same quantity in the same unit (the fw_config field's), else the
+    object in another unit is known by its own name."""
+    from bench._drive import param_table
+
+    by_name: dict[str, set[tuple[str, str]]] = {}
+    for p in {id(p): p for p in param_table().values()}.values():
+        by_name.setdefault(p.name, set()).add((p.unit, p.type))
+    mixed = {n: u for n, u in by_name.items() if len({unit for unit, _ in u}) > 1}
+    assert not mixed, mixed
+    t = param_table()
+    assert (t["pos_limit_max_m"].address, t["pos_limit_max_m"].unit) == ("0x2051:3", "m")
+    assert t["0x607D:2"].name == "Software position limit.Max position limit"
