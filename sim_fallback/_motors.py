@@ -56,6 +56,21 @@ class MotorFileError(ValueError):
         super().__init__(f"{where}: {field or '<file>'}: {message}")
 
 
+class MotorFileErrors(MotorFileError):
+    """Several problems in one motor file, all reported at once (as a sequence's are):
+    ``str()`` is one line per problem, ``errors`` the single errors. The first problem's
+    ``field``, ``line`` and ``message`` are this error's."""
+
+    def __init__(self, errors: list[MotorFileError]) -> None:
+        first = errors[0]
+        super().__init__(first.path, first.field, first.message, first.line)
+        self.errors = errors
+        self.args = ("\n".join(str(e) for e in errors),)
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
 _FW_NAMES = {"R_ohm", "L_d_H", "L_q_H", "psi_f_Wb", "pole_pitch_m", "pole_pairs", "f_pwm_Hz",
              "i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz", "bemf_v_on_mps",
              "bemf_v_off_mps", "mon_bemf_min_mps"}
@@ -412,6 +427,10 @@ def load_motor(motor: str | Path) -> Motor:
                                  "the firmware refuses the configuration derived from this "
                                  f"file: {msg}")
         return mot
+    except MotorFileErrors as e:
+        raise MotorFileErrors([x if x.line or not x.field else
+                               MotorFileError(path, x.field, x.message, _line_of(text, x.field))
+                               for x in e.errors]) from None
     except MotorFileError as e:
         if e.line or not e.field:
             raise
@@ -421,18 +440,32 @@ def load_motor(motor: str | Path) -> Motor:
 def _build(path: Path, doc: dict[str, Any]) -> Motor:
     # unknown sections / fields (typos) are errors
     known_secs = {s for s, _ in _SCHEMA} | {"motor"}
+    errs: list[MotorFileError] = []  # every field's problem at once, as for sequences
     for sec, body in doc.items():
         if sec not in known_secs or not isinstance(body, dict):
-            raise _err(path, sec, f"unknown section; allowed: {sorted(known_secs)}")
+            errs.append(_err(path, sec, f"unknown section; allowed: {sorted(known_secs)}"))
+            continue
         for key in body:
             if (sec, key) not in _SCHEMA and (sec, key) not in _TEXT_FIELDS:
                 allowed = sorted(k for s, k in list(_SCHEMA) + list(_TEXT_FIELDS) if s == sec)
-                raise _err(path, f"{sec}.{key}", f"unknown field; allowed: {allowed}")
+                errs.append(_err(path, f"{sec}.{key}", f"unknown field; allowed: {allowed}"))
     m = doc.get("motor", {})
-    param = m.get("parameterization", "linear")
+    param = m.get("parameterization", "linear") if isinstance(m, dict) else "linear"
     if param not in ("linear", "rotary"):
-        raise _err(path, "motor.parameterization", f"{param!r}; allowed: 'linear', 'rotary'")
-    g = {k: _get(path, doc, s, k) for (s, k) in _SCHEMA}
+        errs.append(_err(path, "motor.parameterization",
+                         f"{param!r}; allowed: 'linear', 'rotary'"))
+    g: dict[str, Any] = {}
+    for s, k in _SCHEMA:
+        if not isinstance(doc.get(s, {}), dict):
+            continue  # a section that is not a table: reported above
+        try:
+            g[k] = _get(path, doc, s, k)
+        except MotorFileError as e:
+            errs.append(e)
+    if len(errs) == 1:
+        raise errs[0]
+    if errs:
+        raise MotorFileErrors(errs)
 
     tau = float(g["pole_pitch_m"])
     L_d, L_q = float(g["L_d_H"]), float(g["L_q_H"])

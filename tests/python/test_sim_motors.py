@@ -157,3 +157,31 @@ def test_fw_config_all_motors_valid_except_table1():
         issue = _lib.FwConfigIssue()
         assert _lib.lib().fw_config_check(fw_config(load_motor(name)), issue) == 0, (
             name, issue.field)
+
+
+def test_every_problem_of_a_motor_file_is_reported_at_once(tmp_path) -> None:
+    """Three mistakes, three lines (each file:line: field: message), as for sequences
+    (was: the first one only, then the next after fixing it)."""
+    from pathlib import Path
+
+    import pytest
+
+    from sim_fallback import MotorFileError, load_motor
+
+    src = Path(__file__).resolve().parents[2] / "sim_fallback/motors/iron_core_linear.toml"
+    lines = src.read_text().splitlines()
+    lines = ["R_ohm = -1.0" if ln.startswith("R_ohm =") else
+             'mass_kg = "heavy"' if ln.startswith("mass_kg =") else ln for ln in lines]
+    f = tmp_path / "bad.toml"
+    f.write_text("\n".join(lines + ["bogus = 3"]) + "\n")
+    with pytest.raises(MotorFileError) as ei:
+        load_motor(f)
+    got = str(ei.value).splitlines()
+    assert len(got) == 3, got
+    r_line = next(i for i, ln in enumerate(lines, 1) if ln.startswith("R_ohm"))
+    assert f"bad.toml:{r_line}: electrical.R_ohm: -1.0 outside allowed range" in "\n".join(got)
+    assert any("mechanical.mass_kg: 'heavy' is not a finite number" in g for g in got)
+    assert any(g.endswith("unknown field; allowed: ['bemf_v_off_mps', 'bemf_v_on_mps', "
+                          "'f_inj_Hz', 'i_max_A', 'i_rated_A', 'i_trip_A', "
+                          "'mon_bemf_min_mps', 'speed_bw_radps', 'u_inj_V']") for g in got)
+    assert all(g.startswith(str(f) + ":") for g in got)
