@@ -145,17 +145,18 @@ def firmware_check(cfg: _lib.FwConfig) -> tuple[int, str]:
                f"{issue.max:g}]" + (f" {unit}" if unit else "")
 
 
-# (section, key) -> (required, lo, hi, unit, default); lists are checked per element.
-_SCHEMA: dict[tuple[str, str], tuple[bool, float, float, str, Any]] = {
-    ("electrical", "R_ohm"): (True, 1e-3, 100.0, "ohm", None),
-    ("electrical", "L_d_H"): (True, 1e-5, 1.0, "H", None),
-    ("electrical", "L_q_H"): (True, 1e-5, 1.0, "H", None),
-    ("electrical", "psi_f_Wb"): (True, 1e-4, 10.0, "Wb", None),
+# (section, key) -> (required, lo, hi, unit, default); lists are checked per element. lo, hi
+# None: a field the firmware configuration shares, whose range is the firmware's (field_range).
+_SCHEMA: dict[tuple[str, str], tuple[bool, float | None, float | None, str, Any]] = {
+    ("electrical", "R_ohm"): (True, None, None, "ohm", None),
+    ("electrical", "L_d_H"): (True, None, None, "H", None),
+    ("electrical", "L_q_H"): (True, None, None, "H", None),
+    ("electrical", "psi_f_Wb"): (True, None, None, "Wb", None),
     ("electrical", "dL_sat_H"): (False, 0.0, 0.5, "H (< L_d_H)", 0.0),
     ("electrical", "I_sat_A"): (False, 0.01, 1000.0, "A", 5.0),
     # mechanical, both parameterizations
-    ("mechanical", "pole_pitch_m"): (True, 1e-3, 1.0, "m", None),
-    ("mechanical", "pole_pairs"): (False, 1, 500, "", None),
+    ("mechanical", "pole_pitch_m"): (True, None, None, "m", None),
+    ("mechanical", "pole_pairs"): (False, None, None, "", None),
     # rotary
     ("mechanical", "inertia_kgm2"): (False, 1e-7, 1e3, "kg m^2", None),
     ("mechanical", "viscous_Nms_per_rad"): (False, 0.0, 1e3, "N m s/rad", 0.0),
@@ -173,7 +174,7 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float, float, str, Any]] = {
     ("mechanical", "cogging_phase_rad"): (False, -10.0, 10.0, "rad", 0.0),
     # inverter
     ("inverter", "u_dc_V"): (False, 10.0, 1000.0, "V", 300.0),
-    ("inverter", "f_pwm_Hz"): (False, 4000.0, 100000.0, "Hz", 24000.0),
+    ("inverter", "f_pwm_Hz"): (False, None, None, "Hz", 24000.0),
     ("inverter", "dead_time_s"): (False, 0.0, 5e-6, "s", 0.0),
     ("inverter", "dead_band_A"): (False, 0.0, 10.0, "A", 0.05),
     ("inverter", "n_sub"): (False, 1, 1024, "", 1),
@@ -187,15 +188,15 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float, float, str, Any]] = {
     ("sensing", "udc_noise_V"): (False, 0.0, 50.0, "V", 0.5),
     # controller (gains are derived; these tune the derivation and limits)
     ("controller", "speed_bw_radps"): (False, 1.0, 1000.0, "rad/s", 35.0),
-    ("controller", "i_max_A"): (False, 0.05, 400.0, "A", 20.0),
-    ("controller", "i_rated_A"): (False, 0.01, 400.0, "A", 10.0),
-    ("controller", "i_trip_A"): (False, 0.1, 500.0, "A", 24.0),
-    ("controller", "u_inj_V"): (False, 0.0, 400.0, "V", 50.0),
-    ("controller", "f_inj_Hz"): (False, 100.0, 20000.0, "Hz", 3000.0),
+    ("controller", "i_max_A"): (False, None, None, "A", 20.0),
+    ("controller", "i_rated_A"): (False, None, None, "A", 10.0),
+    ("controller", "i_trip_A"): (False, None, None, "A", 24.0),
+    ("controller", "u_inj_V"): (False, None, None, "V", 50.0),
+    ("controller", "f_inj_Hz"): (False, None, None, "Hz", 3000.0),
     # back-EMF handover and witness speeds (docs/bemf.md); not given: the firmware default
-    ("controller", "bemf_v_on_mps"): (False, 0.0, 100.0, "m/s", None),
-    ("controller", "bemf_v_off_mps"): (False, 0.0, 100.0, "m/s", None),
-    ("controller", "mon_bemf_min_mps"): (False, 0.001, 1000.0, "m/s", None),
+    ("controller", "bemf_v_on_mps"): (False, None, None, "m/s", None),
+    ("controller", "bemf_v_off_mps"): (False, None, None, "m/s", None),
+    ("controller", "mon_bemf_min_mps"): (False, None, None, "m/s", None),
     # the rig's reference position sensor (a quadrature scale), modelled as the true
     # position quantised to its resolution; 0 = no sensor fitted
     ("reference_sensor", "resolution_m"): (False, 0.0, 0.01, "m (0: none)", 1e-6),
@@ -279,11 +280,19 @@ def _line_of(text: str, field: str) -> int:
 
 def field_range(sec: str, key: str) -> tuple[float, float, str]:
     """A motor-file field's allowed range ``(lo, hi, unit)``, inclusive: :data:`_SCHEMA`'s,
-    or for a field the firmware configuration shares, the firmware's own
-    (:func:`firmware_field_ranges`)."""
+    or for a field the firmware configuration shares (``None`` there: never a copy), the
+    firmware's own (:func:`firmware_field_ranges`, its ``fw_config_field()`` table), else,
+    without the simulator library, the same table's source, od.yaml's ``fw_config``."""
     _, lo, hi, unit, _ = _SCHEMA[(sec, key)]
-    if key in _FW_NAMES and key in firmware_field_ranges():
-        lo, hi, fw_unit = firmware_field_ranges()[key]  # the firmware's own limits
+    if key in _FW_NAMES:
+        fw = firmware_field_ranges()
+        if key in fw:
+            lo, hi, fw_unit = fw[key]  # the firmware's own limits
+        else:
+            from protocols import _od
+
+            c = _od.load().fw_config[key]
+            lo, hi, fw_unit = float(c["min"]), float(c["max"]), str(c.get("unit") or "")
         unit = fw_unit or unit
     return lo, hi, unit
 

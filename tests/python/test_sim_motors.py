@@ -185,3 +185,22 @@ def test_every_problem_of_a_motor_file_is_reported_at_once(tmp_path) -> None:
                           "'f_inj_Hz', 'i_max_A', 'i_rated_A', 'i_trip_A', "
                           "'mon_bemf_min_mps', 'speed_bw_radps', 'u_inj_V']") for g in got)
     assert all(g.startswith(str(f) + ":") for g in got)
+
+
+def test_firmware_shared_ranges_are_never_a_copy(monkeypatch) -> None:
+    """The motor-file ranges of fields the firmware configuration shares come from the
+    firmware's table, or without the simulator library from its source, od.yaml (a copy
+    in _motors.py had drifted: u_inj_V [0, 400] V there, [1, 400] V in the drive)."""
+    from protocols import _od
+    from sim_fallback import _motors as M
+
+    cfg = _od.load().fw_config
+    with_lib = {k: M.field_range(s, k) for s, k in M._SCHEMA if k in M._FW_NAMES}
+    monkeypatch.setattr(M, "firmware_field_ranges", lambda: {})
+    for (s, k), spec in M._SCHEMA.items():
+        if k not in M._FW_NAMES:
+            continue
+        assert spec[1] is None and spec[2] is None, k  # no literal range to drift
+        lo, hi, _ = M.field_range(s, k)
+        assert (lo, hi) == (float(cfg[k]["min"]), float(cfg[k]["max"])) == with_lib[k][:2]
+    assert M.field_range("controller", "u_inj_V") == (1.0, 400.0, "V")
