@@ -4,8 +4,9 @@ A linear motor's electrical angle follows its position with the pole pitch tau
 (``pole_pitch_m``): ``theta_e = pi x / tau``. The paper describes its motor in
 rotary-equivalent units (r/min, N m); with the pole-pair count p (``pole_pairs``)
 the equivalent radius ``r = p tau / pi`` gives ``theta_e = p theta_m``, ``v = w_m r``
-and ``F = T / r``. The firmware's C equivalents are in ``fw_units.h``
-(``fw_units_mps_to_radps_e``, ``fw_units_force_per_A``, ...); the bench, the
+and ``F = T / r``. The firmware's C equivalents are declared in
+``firmware_c/include/pmlsm/fw_ctrl.h`` (``fw_units_mps_to_radps_e``,
+``fw_units_force_per_A``, ...); the bench, the
 simulator, identification and the tools use these functions, never their own
 ``pi / tau``.
 """
