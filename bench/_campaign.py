@@ -171,7 +171,9 @@ class Campaign:
                                                                          strict=True)})
         for k, r in enumerate(out):
             r["run"] = k
-            r.setdefault("seed", float(k))
+            # a seed is an integer (what the run uses: int(seed)), shown as one: 96707,
+            # not 96707.0 or 9.671e+04
+            r["seed"] = int(r.get("seed", k))
         return out
 
 

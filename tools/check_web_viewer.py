@@ -50,7 +50,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-import _project_env  # noqa: F401 - first: one line, not a traceback, outside the venv
+try:  # first: one line, not a traceback, outside the venv (not when loaded as a module)
+    import _project_env  # noqa: F401
+except ModuleNotFoundError:
+    pass
 
 ROOT = Path(__file__).resolve().parents[1]
 URL_RE = re.compile(r"web viewer: (http://127\.0\.0\.1:\d+/\?url=\S+)")

@@ -18,7 +18,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-import _project_env  # noqa: F401 - first: one line, not a traceback, outside the venv
+try:  # first: one line, not a traceback, outside the venv (not when loaded as a module)
+    import _project_env  # noqa: F401
+except ModuleNotFoundError:
+    pass
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))

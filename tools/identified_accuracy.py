@@ -19,7 +19,10 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-import _project_env  # noqa: F401 - first: one line, not a traceback, outside the venv
+try:  # first: one line, not a traceback, outside the venv (not when loaded as a module)
+    import _project_env  # noqa: F401
+except ModuleNotFoundError:
+    pass
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 

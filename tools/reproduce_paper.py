@@ -33,7 +33,10 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import _project_env  # noqa: F401 - first: one line, not a traceback, outside the venv
+try:  # first: one line, not a traceback, outside the venv (not when loaded as a module)
+    import _project_env  # noqa: F401
+except ModuleNotFoundError:
+    pass
 
 REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:

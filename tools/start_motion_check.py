@@ -24,7 +24,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import _project_env  # noqa: F401 - first: one line, not a traceback, outside the venv
+try:  # first: one line, not a traceback, outside the venv (not when loaded as a module)
+    import _project_env  # noqa: F401
+except ModuleNotFoundError:
+    pass
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))

@@ -411,3 +411,17 @@ metrics: [valid, steady.pos_rms, steady.ripple_d, t_est_back_s]
         assert res["valid"][k] == 1.0
         assert 0.0 < float(res["t_est_back_s"][k]) < 0.2
         assert 0.1 < float(res["steady.ripple_d"][k]) < 0.5  # 50 V / 3 kHz on 12 mH: ~0.2 A
+
+
+def test_seeds_are_integers_as_the_runs_use_them(tmp_path) -> None:
+    """A seed axis over a range gave 96707.0 / 9.671e+04 in the outputs; a run used
+    int(seed): the run list now holds that integer."""
+    from bench._campaign import load_campaign
+
+    f = tmp_path / "c.yaml"
+    f.write_text("name: s\nbase: {scenario: load_step, t_end: 0.3}\n"
+                 "sampling: {method: lhs, n: 4, seed: 3}\naxes:\n"
+                 "  seed: {range: [0, 100000]}\nmetrics: [position_error_rms_rad]\n")
+    runs = load_campaign(f).runs()
+    assert all(type(r["seed"]) is int for r in runs)
+    assert len({r["seed"] for r in runs}) == 4 and all(0 <= r["seed"] < 100000 for r in runs)

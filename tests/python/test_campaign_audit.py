@@ -710,13 +710,14 @@ def test_replay_full_is_a_bench_run_of_the_same_case(tmp_path):
     assert rc == 0, err
     row = json.loads(out)
     assert row["params"] == {"fw.spd_filter_Hz": 150.0, "plant.adc_noise_counts": 1.5,
-                             "seed": 8.0, "run": 1}
+                             "seed": 8, "run": 1}
+    assert '"seed": 8,' in out  # an integer, not 8.0
     (run_dir,) = list((tmp_path / "runs").iterdir())
     for name in ("report.html", "summary.json", "can.blf", "campaign_run.json"):
         assert (run_dir / name).stat().st_size > 0, name
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["simulated"] is True
-    assert json.loads((run_dir / "campaign_run.json").read_text())["params"]["seed"] == 8.0
+    assert json.loads((run_dir / "campaign_run.json").read_text())["params"]["seed"] == 8
     cmp = {ln.split()[0]: ln.split()[1:] for ln in err.splitlines()
            if ln.startswith("position_error")}
     for m in ("position_error_rms_rad", "position_error_max_rad"):
