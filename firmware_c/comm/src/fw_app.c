@@ -679,7 +679,8 @@ static co_abort_t fw_app_write_locked(fw_app_t *app, uint16_t index, uint8_t sub
  *  "disable voltage" (OPERATION ENABLED, QUICK STOP ACTIVE -> SWITCH ON
  *  DISABLED), applied before this period's fw_step. A controlword received
  *  earlier in the same batch is dropped. A running fault reaction keeps its
- *  bounded braking (fault_brake_time_s). */
+ *  bounded braking (0x605E: at most fault_brake_time_s for -1, the default; to
+ *  standstill within the ramp's bound for 1 and 2). */
 static void fw_app_power_off(fw_app_t *app) {
   app->cw_pending = 0u;
   (void)fw_controlword(&app->ctrl, 0x0000u);
