@@ -41,6 +41,21 @@ INT_RANGE = {
 
 NODEID_RE = re.compile(r"^\$NODEID\+(0x[0-9A-Fa-f]+|\d+)$")
 
+#: ``min:`` / ``max:`` of an entry that holds a signal id (telemetry, trace): the
+#: highest id of the ``signals:`` list, so the limit follows the list
+SIGNAL_ID_MAX = "signals.last_id"
+
+#: C storage of a fw_config field: od.yaml ``u32: true`` (uint32_t), ``i32: true``
+#: (int32_t, e.g. option codes with manufacturer-specific negative values), else float
+FW_CONFIG_KINDS = ("f32", "u32", "i32")
+
+
+def fw_config_kind(field: dict[str, Any]) -> str:
+    """``f32``, ``u32`` or ``i32``: how a ``fw_config:`` field is stored."""
+    if field.get("u32") and field.get("i32"):
+        raise OdError("a fw_config field is u32 or i32, not both")
+    return "u32" if field.get("u32") else "i32" if field.get("i32") else "f32"
+
 
 class OdError(ValueError):
     """od.yaml is malformed; the message names the object and field."""
@@ -86,6 +101,11 @@ class OdEntry:
         fw_config_t field in wire units, e.g. 1e6 for m/s -> um/s); 1 otherwise.
     doc : str
         Description.
+    live : bool
+        The value is the drive's own, not configuration: a measurement, a state,
+        a capability or an identity the port or the build sets (od.yaml ``live:
+        true``; every read-only PDO-mappable entry is live). Its default is only
+        the value before the drive writes it.
     """
 
     index: int
@@ -106,6 +126,7 @@ class OdEntry:
     fw_config: str | None = None
     scale: float = 1.0
     doc: str = ""
+    live: bool = False
 
     @property
     def type_code(self) -> int:
@@ -199,10 +220,16 @@ def _parse_default(where: str, typ: str, raw: Any) -> tuple[int | float | str, b
 
 
 def _entry(obj: dict[str, Any], sub: dict[str, Any], kind: str,
-           fw_limits: dict[str, dict[str, float]]) -> OdEntry:
+           fw_limits: dict[str, dict[str, float]], signal_id_max: int) -> OdEntry:
     index = int(obj["index"])
     sub_i = int(sub.get("sub", 0))
     where = f"od.yaml 0x{index:04X}:{sub_i}"
+    for key in ("min", "max"):
+        v = sub.get(key)
+        if isinstance(v, str):
+            if v != SIGNAL_ID_MAX:
+                raise OdError(f"{where}: {key} {v!r}, expected a number or {SIGNAL_ID_MAX!r}")
+            sub = {**sub, key: signal_id_max}
     typ = sub.get("type")
     if typ not in TYPES:
         raise OdError(f"{where}: unknown type {typ!r}")
@@ -250,12 +277,19 @@ def _entry(obj: dict[str, Any], sub: dict[str, Any], kind: str,
     if typ == "VISIBLE_STRING":
         size = int(sub.get("size", 0)) or 0
     name = str(sub.get("name", obj["name"]))
+    pdo = bool(sub.get("pdo", False))
+    live = bool(sub.get("live", False))
+    if live and access not in ("ro", "rw"):
+        raise OdError(f"{where}: live needs access ro or rw, not {access}")
+    if live and fwc is not None:
+        raise OdError(f"{where}: live and fw_config exclude each other (configuration is "
+                      "not live)")
     return OdEntry(
         index=index, sub=sub_i, name=name, object_name=str(obj["name"]), kind=kind,
         type=typ, access=access, unit=str(sub.get("unit", "") or ""), min=mn, max=mx,
-        default=default, nodeid_relative=rel, pdo=bool(sub.get("pdo", False)),
+        default=default, nodeid_relative=rel, pdo=pdo,
         command=bool(sub.get("command", False)), size=size, fw_config=fwc, scale=scale,
-        doc=str(sub.get("doc", "") or ""),
+        doc=str(sub.get("doc", "") or ""), live=live or (access == "ro" and pdo),
     )
 
 
@@ -422,6 +456,19 @@ def _load(path: Path) -> ObjectDictionary:
     data = _parse(path)
     dev = _device(data["device"])
     fw_limits = data.get("fw_config", {}) or {}
+    for name, lim in fw_limits.items():
+        try:
+            kind = fw_config_kind(lim)
+        except OdError as e:
+            raise OdError(f"od.yaml fw_config {name}: {e}") from None
+        if kind != "f32" and not all(isinstance(lim.get(k), int)
+                                     for k in ("min", "max", "default")):
+            raise OdError(f"od.yaml fw_config {name}: a {kind} field needs integer min, max "
+                          "and default")
+        if kind == "u32" and int(lim["min"]) < 0:
+            raise OdError(f"od.yaml fw_config {name}: min {lim['min']} of a u32 field is "
+                          "negative (use i32)")
+    signal_id_max = len(data.get("signals", []) or []) - 1
     objs = ([_with_device_refs(o, dev) for o in data["objects"]]
             + _pdo_objects(data.get("pdos", {}) or {}))
     max_string = int(data["device"].get("max_string", 24))
@@ -430,7 +477,7 @@ def _load(path: Path) -> ObjectDictionary:
     for obj in objs:
         kind = obj.get("kind", "var")
         if kind == "var":
-            e = _entry(obj, obj, "var", fw_limits)
+            e = _entry(obj, obj, "var", fw_limits, signal_id_max)
             if e.type == "VISIBLE_STRING" and e.size == 0:
                 e = OdEntry(**{**e.__dict__, "size": max_string})
             items = [e]
@@ -445,7 +492,7 @@ def _load(path: Path) -> ObjectDictionary:
                     size=1, default=highest))
             for s in subs:
                 s2 = dict(s)
-                e = _entry(obj, s2, kind, fw_limits)
+                e = _entry(obj, s2, kind, fw_limits, signal_id_max)
                 if e.type == "VISIBLE_STRING" and e.size == 0:
                     e = OdEntry(**{**e.__dict__, "size": max_string})
                 items.append(e)
@@ -496,8 +543,9 @@ def _enums(raw: list[dict[str, Any]]) -> list[Enum]:
             for j, v in enumerate(e["values"]):
                 w = f"{where}.values[{j}]"
                 ev = EnumValue(str(v["name"]), int(v["value"]), str(v["key"]), str(v["text"]))
-                if not re.fullmatch(r"[A-Z][A-Z0-9_]*", ev.name) or not 0 <= ev.value <= 255:
-                    raise OdError(f"{w}: name {ev.name!r} (A-Z0-9_) / value {ev.value} (0..255)")
+                if not re.fullmatch(r"[A-Z][A-Z0-9_]*", ev.name) or not -128 <= ev.value <= 255:
+                    raise OdError(f"{w}: name {ev.name!r} (A-Z0-9_) / value {ev.value} "
+                                  "(-128..255; negative: manufacturer-specific codes)")
                 if ev.key != ev.name.lower():
                     raise OdError(f"{w}: key {ev.key!r} must be {ev.name.lower()!r}")
                 if any(u.name == ev.name or u.value == ev.value for u in vals):

@@ -15,12 +15,15 @@
  * advice) and of the defaults (last argument), which fw_config_default() below
  * applies. */
 #define F32(part, name, unit, lo, hi, dflt) \
-  {#name, unit, offsetof(fw_config_t, part.name), 0u, lo, hi},
+  {#name, unit, offsetof(fw_config_t, part.name), 0u, 0u, lo, hi},
 #define U32(part, name, unit, lo, hi, dflt) \
-  {#name, unit, offsetof(fw_config_t, part.name), 1u, lo, hi},
-static const fw_config_field_t k_fields[] = {FW_CONFIG_FIELDS(F32, U32)};
+  {#name, unit, offsetof(fw_config_t, part.name), 1u, 0u, lo, hi},
+#define I32(part, name, unit, lo, hi, dflt) \
+  {#name, unit, offsetof(fw_config_t, part.name), 1u, 1u, lo, hi},
+static const fw_config_field_t k_fields[] = {FW_CONFIG_FIELDS(F32, U32, I32)};
 #undef F32
 #undef U32
+#undef I32
 
 /* Observer design point of fw_config_derive (docs/tuning.md): a load step of this
  * fraction of the peak thrust K_F i_max leaves at most this angle error. */
@@ -39,9 +42,11 @@ void fw_config_default(fw_config_t *cfg) {
      field's doc): the paper's motor and loops, this drive class's protections */
 #define F32(part, name, unit, lo, hi, dflt) cfg->part.name = (dflt);
 #define U32(part, name, unit, lo, hi, dflt) cfg->part.name = (dflt);
-  FW_CONFIG_FIELDS(F32, U32)
+#define I32(part, name, unit, lo, hi, dflt) cfg->part.name = (dflt);
+  FW_CONFIG_FIELDS(F32, U32, I32)
 #undef F32
 #undef U32
+#undef I32
   fw_config_derive(cfg); /* the back-EMF levels of the speeds above */
 }
 
@@ -99,7 +104,12 @@ const fw_config_field_t *fw_config_field_find(const char *name) {
 
 static float field_value(const fw_config_t *cfg, const fw_config_field_t *f) {
   const uint8_t *base = (const uint8_t *)cfg + f->offset;
-  if (f->is_u32) {
+  if (f->is_int && f->is_signed) {
+    int32_t i;
+    memcpy(&i, base, sizeof(i));
+    return (float)i;
+  }
+  if (f->is_int) {
     uint32_t u;
     memcpy(&u, base, sizeof(u));
     return (float)u;

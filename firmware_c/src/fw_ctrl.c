@@ -48,9 +48,18 @@
 
 /* ---- helpers ------------------------------------------------------------ */
 
+/** A quick stop or a fault reaction brakes from now on: the time it may take
+ *  (option: its fw_reaction_t; the speed: the filtered estimate's). */
+static void brake_start(fw_ctrl_t *c, int32_t option) {
+  c->qs_left_s = fw_fault_brake_time_max_s(&c->cfg, option,
+                                           fw_units_radps_e_to_mps(&c->cfg, c->obs.omega_f));
+  c->qs_still_s = 0.0f;
+}
+
 /** Latch a fault and take the CiA 402 consequences: FAULT REACTION ACTIVE
- *  (braking first only for faults fw_fault_brakes_first allows), or, for a
- *  hard fault while braking, the end of the reaction (PWM off). */
+ *  (braking first only for faults fw_fault_brakes_first allows, bounded as
+ *  fw_fault_brake_time_max_s says), or, for a hard fault while braking, the end
+ *  of the reaction (PWM off). */
 static void latch_fault(fw_ctrl_t *c, fw_fault_t code) {
   if (code == FW_FAULT_NONE) {
     return;
@@ -61,8 +70,7 @@ static void latch_fault(fw_ctrl_t *c, fw_fault_t code) {
   } else if (c->sm.state != FW_CIA402_FAULT &&
              c->sm.state != FW_CIA402_FAULT_REACTION_ACTIVE) {
     fw_cia402_fault(&c->sm);
-    c->qs_time_s = 0.0f; /* braking (if any) is timed like a quick stop */
-    c->qs_still_s = 0.0f;
+    brake_start(c, c->cfg.protection.fault_reaction_option); /* used if it brakes */
   }
 }
 
@@ -107,7 +115,7 @@ static void reset_dynamics(fw_ctrl_t *c) {
   fw_obs_reset(&c->obs, cfg);
   c->phase = FW_START_IDLE;
   c->phase_time_s = 0.0f;
-  c->qs_time_s = 0.0f;
+  c->qs_left_s = 0.0f;
   c->qs_still_s = 0.0f;
   fw_protect_reset(&c->prot);
   fw_bemf_reset(&c->bemf);
@@ -292,9 +300,8 @@ uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
     }
   }
   if (after == FW_CIA402_QUICK_STOP_ACTIVE && before != FW_CIA402_QUICK_STOP_ACTIVE) {
-    ctrl->qs_time_s = 0.0f;
-    ctrl->qs_still_s = 0.0f;
-    if (ctrl->cfg.protection.quick_stop_option == (uint32_t)FW_REACT_SWITCH_OFF) {
+    brake_start(ctrl, ctrl->cfg.protection.quick_stop_option);
+    if (ctrl->cfg.protection.quick_stop_option == (int32_t)FW_REACT_SWITCH_OFF) {
       fw_cia402_quick_stop_done(&ctrl->sm); /* 0x605A = 0: disable drive at once */
       ctrl->phase = FW_START_IDLE;
     }
@@ -771,9 +778,12 @@ static void stage_startup(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p)
 }
 
 /** Current references (speed loop or FORCE), quick stop and fault braking
- *  timing. Returns false when the braking has ended (PWM off). */
+ *  timing: the braking ends at standstill (in speed mode the filtered estimate
+ *  below FW_QS_STILL_RADPS for FW_QS_STILL_TIME_S; in force mode the force is
+ *  zero at once), or when the time brake_start allowed it is up (0x605E -1:
+ *  fault_brake_time_s; the ramps: |speed| / deceleration + quick_stop_time_s).
+ *  Returns false when the braking has ended (PWM off). */
 static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
-  const fw_config_t *cfg = &c->cfg;
   const float dt = c->dt_s;
   p->i_ref.x = p->i_ref.y = 0.0f;
   if (FW_LIKELY(c->phase == FW_START_RUN)) {
@@ -786,15 +796,11 @@ static bool stage_references(fw_ctrl_t *c, fw_period_t *p) {
     }
   }
   if (FW_UNLIKELY(p->quick_stop)) {
-    c->qs_time_s += dt;
+    c->qs_left_s -= dt;
     const bool still = c->mode == FW_MODE_FORCE || fabsf(c->obs.omega_f) < FW_QS_STILL_RADPS ||
                        c->phase != FW_START_RUN;
     c->qs_still_s = still ? c->qs_still_s + dt : 0.0f;
-    /* braking after a fault is bounded by fault_brake_time_s: a lost
-     * supervisor must see the power stage off soon, at any speed */
-    const float t_max = p->braking ? cfg->protection.fault_brake_time_s
-                                   : cfg->protection.quick_stop_time_s;
-    if (c->qs_still_s >= FW_QS_STILL_TIME_S || c->qs_time_s >= t_max) {
+    if (c->qs_still_s >= FW_QS_STILL_TIME_S || c->qs_left_s <= 0.0f) {
       if (p->braking) {
         fw_cia402_fault_reaction_done(&c->sm); /* stopped: PWM off, FAULT */
       } else {

@@ -9,8 +9,8 @@
 
 void fw_fault_latch_init(fw_fault_latch_t *f) { memset(f, 0, sizeof(*f)); }
 
-bool fw_fault_brakes_first(uint32_t fault_reaction_option, fw_fault_t code) {
-  if (fault_reaction_option == (uint32_t)FW_REACT_SWITCH_OFF) {
+bool fw_fault_brakes_first(int32_t fault_reaction_option, fw_fault_t code) {
+  if (fault_reaction_option == (int32_t)FW_REACT_SWITCH_OFF) {
     return false; /* 0x605E = 0: switch off for every fault */
   }
   /* faults that leave the estimate and the measurements trustworthy */
@@ -28,7 +28,24 @@ static void hist_push(fw_fault_latch_t *f, fw_fault_t code) {
   }
 }
 
-void fw_fault_latch_update(fw_fault_latch_t *f, fw_fault_t code, uint32_t fault_reaction_option) {
+float fw_fault_brake_time_max_s(const fw_config_t *cfg, int32_t option, float speed_mps) {
+  switch (option) {
+  case (int32_t)FW_REACT_BRAKE_TIMED:
+    return cfg->protection.fault_brake_time_s;
+  case (int32_t)FW_REACT_RAMP:
+  case (int32_t)FW_REACT_QUICK_RAMP: {
+    /* K_F i_max / m > 0 for every accepted configuration (fw_config_check) */
+    const float a_mps2 = fw_units_force_per_A(cfg) * cfg->loops.i_max_A / cfg->machine.mass_kg;
+    const float t_stop = fabsf(speed_mps) / a_mps2;
+    /* NaN (never from the core's estimate) counts as no time: the margin alone */
+    return (t_stop >= 0.0f ? t_stop : 0.0f) + cfg->protection.quick_stop_time_s;
+  }
+  default:
+    return 0.0f; /* FW_REACT_SWITCH_OFF */
+  }
+}
+
+void fw_fault_latch_update(fw_fault_latch_t *f, fw_fault_t code, int32_t fault_reaction_option) {
   if (code == FW_FAULT_NONE) {
     return;
   }

@@ -51,7 +51,8 @@ static void sums_clear_run(fw_mon_t *m) {
 }
 
 /** Closed loop (re)starts: the block's running sums restart; the residual's
- *  L di/dt restarts from the last current. */
+ *  L di/dt restarts from the last current the power stage drove (zero once it
+ *  has been off for a block: fw_mon_block). */
 static void sums_restart(fw_mon_t *m) {
   sums_clear_run(m);
   m->i_prev_A[0] = m->i_last_A[0];
@@ -210,6 +211,18 @@ FW_NOINLINE void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float acce
     m->r_d_f = lp_n(m->r_d_f, sd, np, m->a_slow_n, inv_n);
     m->r_q_f = lp_n(m->r_q_f, sq, np, m->a_slow_n, inv_n);
     m->w_f = lp_n(m->w_f, m->s_w, np, m->a_slow_n, inv_n);
+  }
+  if (!pwm_on) {
+    /* The power stage is off: the current it drove (a braking current of 20 A,
+     * say) decays through the freewheeling diodes within L i / u_dc, about a
+     * millisecond, and is no start for the L di/dt of the next switch-on: from
+     * zero, the current the bridge then starts from. Otherwise the first block
+     * after an enable reads L di/dt = L i / T (thousands of volts) as a
+     * residual, which the motion check sees 15 ms later as a moving mover. A
+     * switch-off shorter than a block keeps the last current, which is then
+     * still flowing. */
+    m->i_prev_A[0] = m->i_prev_A[1] = 0.0f;
+    m->i_last_A[0] = m->i_last_A[1] = 0.0f;
   }
   const uint32_t nh = MON_EVAL_STEPS - m->miss_hf, nr = MON_EVAL_STEPS - m->miss_run;
   if (nh > 0u) {

@@ -50,18 +50,18 @@ FAULTS: dict[int, tuple[str, str]] = {
 FAULT_REACTIONS: dict[int, str] = {
     0x2310: 'PWM off at once',
     0x2320: 'PWM off at once (already off in hardware)',
-    0x2350: 'brakes (0x605E), PWM off within fault_brake_time_s',
+    0x2350: 'brakes first as 0x605E says (default -1: PWM off within fault_brake_time_s)',
     0x3210: 'PWM off at once',
     0x3220: 'PWM off at once',
     0x5210: 'PWM off at once',
     0x5220: 'PWM off at once',
     0x6320: 'enable refused, PWM stays off',
     0x6100: 'PWM off at once',
-    0x8130: 'brakes (0x605E), PWM off within fault_brake_time_s',
+    0x8130: 'brakes first as 0x605E says (default -1: PWM off within fault_brake_time_s)',
     0x8250: 'PWM off at once',
     0x8400: 'PWM off at once',
     0x8611: 'PWM off at once',
-    0x8612: 'brakes (0x605E), PWM off within fault_brake_time_s',
+    0x8612: 'brakes first as 0x605E says (default -1: PWM off within fault_brake_time_s)',
     0xFF01: 'PWM off at once',
     0xFF02: 'PWM off at once',
     0xFF03: 'enable refused, PWM stays off',
@@ -124,11 +124,12 @@ class StartPhase(IntEnum):
 
 
 class Reaction(IntEnum):
-    """Reaction option codes (CiA 402 0x605A quick stop, 0x605E fault reaction) (fw_reaction_t); ``.key`` is the bench's lower-case name."""
+    """Reaction option codes (CiA 402 0x605A quick stop, 0x605E fault reaction; negative: manufacturer-specific) (fw_reaction_t); ``.key`` is the bench's lower-case name."""
 
+    BRAKE_TIMED = -1  # manufacturer-specific (0x605E only): brake on the quick-stop ramp for at most fault_brake_time_s, then PWM off whatever the speed
     SWITCH_OFF = 0  # PWM off at once (disable drive function)
-    RAMP = 1  # brake under control, then PWM off (time-bounded)
-    QUICK_RAMP = 2  # same as RAMP with the quick-stop time bound
+    RAMP = 1  # slow down on the slow-down ramp, at standstill PWM off (bounded by |speed| / deceleration + quick_stop_time_s)
+    QUICK_RAMP = 2  # slow down on the quick-stop ramp, at standstill PWM off (same bound); this drive's two ramps are one
 
     @property
     def key(self) -> str:
@@ -164,8 +165,9 @@ class RefStatus(IntEnum):
 
 #: fw_config_t's parts in struct order (od.yaml fw_config_parts:)
 FW_CONFIG_PARTS: tuple[str, ...] = ('machine', 'sensing', 'loops', 'estimator', 'protection')
-#: every fw_config_t field as (name, part, uint32_t?) in the firmware's field-table
-#: order (od.yaml fw_config:; within a part, the struct's order)
+#: every fw_config_t field as (name, part, integer?) in the firmware's field-table
+#: order (od.yaml fw_config:; within a part, the struct's order); integer: a
+#: 32-bit integer field, uint32_t, or int32_t when in FW_CONFIG_SIGNED (else float)
 FW_CONFIG_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ('f_pwm_Hz', 'sensing', False),
     ('R_ohm', 'machine', False),
@@ -242,6 +244,8 @@ FW_CONFIG_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ('bemf_e_off_V', 'estimator', False),
     ('mon_bemf_min_V', 'protection', False),
 )
+#: the fw_config_t fields stored as int32_t (od.yaml i32: true): option codes
+FW_CONFIG_SIGNED: frozenset[str] = frozenset(['fault_reaction_option', 'quick_stop_option'])
 
 INDEX_DEVICE_TYPE = 0x1000
 INDEX_ERROR_REGISTER = 0x1001

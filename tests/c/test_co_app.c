@@ -365,6 +365,45 @@ static void test_error_register_after_nmt_reset(void) {
   TT_CHECK((sdo_read(0x6041, 0) & 0x4Fu) == 0x40u); /* switch on disabled */
 }
 
+/* The identification's d-axis current reference (0x2080:1) takes its whole EDS
+ * range, -1000..1000 A (issue 34: the limits describe what the drive accepts; it
+ * refused everything beyond +-i_max_A with 0x06090030), and the core clamps it to
+ * +-i_max_A, as the target velocity to the speed limit (outside OPERATION ENABLED
+ * the application sets it back to 0). NaN and what lies beyond the limits are
+ * refused. */
+static void test_id_reference_range(void) {
+  setup();
+  const fw_ctrl_t *ctrl = fw_app_ctrl(&g_app);
+  const float vals[] = {-1000.0f, 1000.0f, 3.5f};
+  for (int k = 0; k < 3; k++) {
+    uint32_t raw;
+    memcpy(&raw, &vals[k], sizeof raw);
+    TT_CHECK(sdo_write(0x2080, 1, raw, 4) == 0);
+  }
+  const float bad[] = {1000.001f, -1000.001f, NAN};
+  const uint32_t code[] = {0x06090031u, 0x06090032u, 0x06090030u};
+  for (int k = 0; k < 3; k++) {
+    uint32_t raw;
+    memcpy(&raw, &bad[k], sizeof raw);
+    TT_CHECK(sdo_write(0x2080, 1, raw, 4) == code[k]);
+  }
+  /* enabled: the reference written is the core's, clamped to i_max_A */
+  sdo_write(0x6040, 0, 0x06, 2);
+  sdo_write(0x6040, 0, 0x07, 2);
+  sdo_write(0x6040, 0, 0x0F, 2);
+  step_n(10);
+  TT_CHECK(fw_state(ctrl) == FW_CIA402_OPERATION_ENABLED);
+  const float want[] = {-20.0f, 20.0f, 3.5f}; /* i_max_A 20 A by default */
+  for (int k = 0; k < 3; k++) {
+    uint32_t raw;
+    memcpy(&raw, &vals[k], sizeof raw);
+    TT_CHECK(sdo_write(0x2080, 1, raw, 4) == 0);
+    TT_CHECK(ctrl->i_d_ref_A == want[k]);
+  }
+  sdo_write(0x6040, 0, 0x00, 2);
+  step_n(2);
+}
+
 /* CiA 402 objects shown in wire units are views of fw_config fields: the
  * conversion, the SI mirror (0x2051) and the refusals. */
 static void test_cia402_protection_objects(void) {
@@ -392,20 +431,29 @@ static void test_cia402_protection_objects(void) {
   TT_CHECK_NEAR(c->protection.pos_limit_min_m, -0.15, 1e-7);
   TT_CHECK_NEAR(c->protection.pos_limit_max_m, 2.5, 1e-7);
   TT_CHECK(sdo_read(0x607D, 1) == (uint32_t)-150000);
-  /* option codes: 0..2 taken, CiA 402 codes not supported (3..8, 5/6 "stay in
-   * quick stop") and negative (manufacturer) codes refused as invalid values */
+  /* option codes: 0x605A 0..2 taken, CiA 402 codes not supported (3..8, 5/6 "stay
+   * in quick stop") and negative (manufacturer) codes refused outside the EDS
+   * limits (value too high / too low); 0x605E -1..2, -1 the manufacturer-specific
+   * time-bounded braking (the default), shown as -1 by 0x2051:9 (INTEGER32) too */
   TT_CHECK(sdo_read(0x605A, 0) == 2u);
   TT_CHECK(sdo_write(0x605A, 0, 0u, 2) == 0);
-  TT_CHECK(c->protection.quick_stop_option == 0u);
-  TT_CHECK(sdo_write(0x605A, 0, 5u, 2) == 0x06090030u);
-  TT_CHECK(sdo_write(0x605A, 0, 6u, 2) == 0x06090030u);
-  TT_CHECK(sdo_write(0x605A, 0, 0xFFFFu, 2) == 0x06090030u); /* -1 */
-  TT_CHECK(c->protection.quick_stop_option == 0u);
+  TT_CHECK(c->protection.quick_stop_option == 0);
+  TT_CHECK(sdo_write(0x605A, 0, 5u, 2) == 0x06090031u);
+  TT_CHECK(sdo_write(0x605A, 0, 6u, 2) == 0x06090031u);
+  TT_CHECK(sdo_write(0x605A, 0, 0xFFFFu, 2) == 0x06090032u); /* -1 */
+  TT_CHECK(c->protection.quick_stop_option == 0);
   TT_CHECK(sdo_read(0x2051, 8) == 0u);
+  TT_CHECK(sdo_read(0x605E, 0) == 0xFFFFu && sdo_read(0x2051, 9) == 0xFFFFFFFFu); /* -1 */
+  TT_CHECK(c->protection.fault_reaction_option == (int32_t)FW_REACT_BRAKE_TIMED);
   TT_CHECK(sdo_write(0x605E, 0, 1u, 2) == 0);
-  TT_CHECK(c->protection.fault_reaction_option == 1u && sdo_read(0x2051, 9) == 1u);
-  TT_CHECK(sdo_write(0x605E, 0, 3u, 2) == 0x06090030u);
+  TT_CHECK(c->protection.fault_reaction_option == 1 && sdo_read(0x2051, 9) == 1u);
+  TT_CHECK(sdo_write(0x605E, 0, 3u, 2) == 0x06090031u);
+  TT_CHECK(sdo_write(0x605E, 0, 0xFFFEu, 2) == 0x06090032u); /* -2 */
   TT_CHECK(sdo_read(0x605E, 0) == 1u);
+  TT_CHECK(sdo_write(0x2051, 9, 0xFFFFFFFFu, 4) == 0); /* -1 through the SI object */
+  TT_CHECK(c->protection.fault_reaction_option == -1 && sdo_read(0x605E, 0) == 0xFFFFu);
+  TT_CHECK(sdo_write(0x2051, 9, 0xFFFFFFFEu, 4) == 0x06090032u);
+  TT_CHECK(sdo_write(0x605E, 0, 1u, 2) == 0);
   /* refused while the power stage is on */
   sdo_write(0x6040, 0, 0x06, 2);
   sdo_write(0x6040, 0, 0x07, 2);
@@ -445,6 +493,7 @@ int main(void) {
   TT_RUN(test_time_base_survives_step_wrap);
   TT_RUN(test_error_register_after_nmt_reset);
   TT_RUN(test_cia402_protection_objects);
+  TT_RUN(test_id_reference_range);
   TT_RUN(test_nmt_stop_switches_off);
   TT_RUN(test_telemetry_config_write);
   TT_RUN(test_round_matches_lrintf);

@@ -22,7 +22,12 @@
 
 static float cfg_value(const fw_config_t *cfg, const fw_config_field_t *f) {
   const unsigned char *p = (const unsigned char *)cfg + f->offset;
-  if (f->is_u32) {
+  if (f->is_int && f->is_signed) {
+    int32_t v;
+    memcpy(&v, p, sizeof v);
+    return (float)v;
+  }
+  if (f->is_int) {
     uint32_t v;
     memcpy(&v, p, sizeof v);
     return (float)v;
@@ -52,7 +57,7 @@ static void test_generated_table_and_defaults(void) {
 #define F32(part_, name_, unit_, lo_, hi_, dflt_)                                         \
   do {                                                                                    \
     const fw_config_field_t *f = fw_config_field(i++);                                    \
-    TT_CHECK(f != NULL && strcmp(f->name, #name_) == 0 && !f->is_u32);                    \
+    TT_CHECK(f != NULL && strcmp(f->name, #name_) == 0 && !f->is_int && !f->is_signed);   \
     TT_CHECK(f != NULL && f->offset == offsetof(fw_config_t, part_.name_));               \
     TT_CHECK(f != NULL && f->min == (lo_) && f->max == (hi_) && strcmp(f->unit, unit_) == 0); \
     if (cfg.part_.name_ != (dflt_)) {                                                     \
@@ -64,7 +69,7 @@ static void test_generated_table_and_defaults(void) {
 #define U32(part_, name_, unit_, lo_, hi_, dflt_)                                         \
   do {                                                                                    \
     const fw_config_field_t *f = fw_config_field(i++);                                    \
-    TT_CHECK(f != NULL && strcmp(f->name, #name_) == 0 && f->is_u32);                     \
+    TT_CHECK(f != NULL && strcmp(f->name, #name_) == 0 && f->is_int && !f->is_signed);    \
     TT_CHECK(f != NULL && f->min == (lo_) && f->max == (hi_));                            \
     if (cfg.part_.name_ != (dflt_)) {                                                     \
       printf("  drift: od.yaml fw_config.%s default %u, fw_config_default() %u\n",        \
@@ -72,9 +77,23 @@ static void test_generated_table_and_defaults(void) {
     }                                                                                     \
     TT_CHECK(cfg.part_.name_ == (dflt_));                                                 \
   } while (0);
-  FW_CONFIG_FIELDS(F32, U32)
+#define I32(part_, name_, unit_, lo_, hi_, dflt_)                                         \
+  do {                                                                                    \
+    const fw_config_field_t *f = fw_config_field(i++);                                    \
+    TT_CHECK(f != NULL && strcmp(f->name, #name_) == 0 && f->is_int && f->is_signed);     \
+    TT_CHECK(f != NULL && f->min == (lo_) && f->max == (hi_));                            \
+    TT_CHECK(f != NULL && f->offset == offsetof(fw_config_t, part_.name_));               \
+    TT_CHECK(_Generic(cfg.part_.name_, int32_t: 1, default: 0));                          \
+    if (cfg.part_.name_ != (dflt_)) {                                                     \
+      printf("  drift: od.yaml fw_config.%s default %d, fw_config_default() %d\n",        \
+             #name_, (int)(dflt_), (int)cfg.part_.name_);                                 \
+    }                                                                                     \
+    TT_CHECK(cfg.part_.name_ == (dflt_));                                                 \
+  } while (0);
+  FW_CONFIG_FIELDS(F32, U32, I32)
 #undef F32
 #undef U32
+#undef I32
   /* the SOGI's own clamp and the configuration range are one range */
   TT_CHECK(fw_config_field_find("sogi_k")->min == FW_SOGI_K_MIN);
   TT_CHECK(fw_config_field_find("sogi_k")->max == FW_SOGI_K_MAX);
@@ -99,15 +118,16 @@ static void test_limits_and_defaults(void) {
     }
     float dflt = cfg_value(&cfg, f);
     if (e->type == CO_TYPE_REAL32) {
-      TT_CHECK(!f->is_u32);
+      TT_CHECK(!f->is_int);
       TT_CHECK_NEAR(e->min_f, f->min, 0.0);
       TT_CHECK_NEAR(e->max_f, f->max, 0.0);
       TT_CHECK_NEAR(e->def_f, dflt, 0.0);
       if (e->min_f != f->min || e->max_f != f->max || e->def_f != dflt) {
         printf("  drift: 0x%04X:%u %s\n", e->index, e->sub, l->field);
       }
-    } else if (l->scale == 1.0f && f->is_u32 && e->min_i >= 0) {
-      /* an integer field shown as is (e.g. 0x2000 extractor) */
+    } else if (l->scale == 1.0f && f->is_int) {
+      /* an integer field shown as is (e.g. 0x2000 extractor, 0x605E option code): the
+         entry's limits are the field's (od.yaml gives them once, for both) */
       TT_CHECK_NEAR((double)e->min_i, f->min, 0.0);
       TT_CHECK_NEAR((double)e->max_i, f->max, 0.0);
       TT_CHECK_NEAR((double)e->def_i, dflt, 0.0);
@@ -137,9 +157,8 @@ static float to_field(int64_t n, float scale) { return (float)n / scale; }
  * A CiA 402 object that shows a field in wire units (value x scale, e.g.
  * 0x6080 um/s for v_max_mps): its limits hold exactly the wire values whose
  * field value the core accepts: the limit maps inside the field's range and
- * the next integer outside, unless the limit is the type's own (then the core
- * refuses with 0x06090030; used for 0x605A/0x605E, whose reserved codes are
- * "invalid value" rather than "too high"). The default is the field default.
+ * the next integer outside, unless the limit is the type's own (the field's range
+ * reaches beyond the type, e.g. 0x607D in um). The default is the field default.
  */
 static void check_scaled(const co_od_cfg_link_t *l, const co_od_entry_t *e,
                          const fw_config_field_t *f, float dflt) {

@@ -581,6 +581,93 @@ static void test_external_fault_and_quick_stop(void) {
   TT_CHECK(fw_fault_history(&c, hist, 2u) == 2u && hist[0] == (uint16_t)FW_FAULT_OVERCURRENT);
 }
 
+/* Periods with the PWM on after fw_raise_fault(HEARTBEAT_LOST) (or, quick_stop,
+ * after a quick-stop controlword) in speed mode at reference 0 on the standstill
+ * plant, whose angle turns at w_true el. rad/s (a mover the braking cannot slow:
+ * the plant has no mechanics); -1 when it never goes off within 2 s. */
+static int periods_to_off(const fw_config_t *cfg, double w_true, bool quick_stop,
+                          fw_cia402_state_t *end) {
+  static fw_ctrl_t c;
+  plant_t p;
+  fw_outputs_t out;
+  run_to_operation_cfg(&c, &p, &out, cfg, 0.4, 0.2);
+  fw_set_mode(&c, FW_MODE_SPEED);
+  fw_set_speed_ref(&c, (float)w_true);
+  for (int k = 0; k < (int)(0.3 * 24000); k++) {
+    p.theta += w_true / 24000.0;
+    loop_step(&c, &p, &out);
+  }
+  TT_CHECK(fw_state(&c) == FW_CIA402_OPERATION_ENABLED && out.pwm_enable == 1u);
+  TT_CHECK(fabs(c.obs.omega_f - w_true) < 0.2 * fabs(w_true) + 2.0); /* tracking */
+  if (quick_stop) {
+    fw_controlword(&c, FW_CW_QUICK_STOP);
+  } else {
+    fw_raise_fault(&c, FW_FAULT_HEARTBEAT_LOST);
+  }
+  int n = 0;
+  for (; n < 2 * 24000; n++) {
+    p.theta += w_true / 24000.0;
+    loop_step(&c, &p, &out);
+    if (out.pwm_enable == 0u) {
+      break;
+    }
+  }
+  *end = fw_state(&c);
+  return n < 2 * 24000 ? n : -1;
+}
+
+/* 0x605E / 0x605A as CiA 402 says (issue 34): 0 switches off at once; 1 and 2
+ * brake until standstill (here: the 20 ms the estimate must stay below 2 rad/s),
+ * not a time, so a short fault_brake_time_s does not cut them; -1 (the
+ * manufacturer-specific default) brakes for at most fault_brake_time_s; and a
+ * mover that does not slow down (the plant's angle keeps turning) still sees the
+ * PWM off at |speed| / (K_F i_max / m) + quick_stop_time_s. */
+static void test_reaction_option_codes(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  cfg.protection.fault_brake_time_s = 0.005f; /* far below the standstill time */
+  cfg.protection.quick_stop_time_s = 0.05f;
+  TT_CHECK(cfg.protection.fault_reaction_option == (int32_t)FW_REACT_BRAKE_TIMED); /* default */
+  fw_cia402_state_t end;
+  const int still = (int)(0.020 * 24000); /* FW_QS_STILL_TIME_S */
+  int n = periods_to_off(&cfg, 0.0, false, &end);
+  TT_CHECK(end == FW_CIA402_FAULT && n >= 0 && n <= (int)(0.005 * 24000) + 1); /* -1: time */
+  cfg.protection.fault_reaction_option = FW_REACT_SWITCH_OFF;
+  n = periods_to_off(&cfg, 0.0, false, &end);
+  TT_CHECK(end == FW_CIA402_FAULT && n == 0);
+  const int32_t ramps[] = {(int32_t)FW_REACT_RAMP, (int32_t)FW_REACT_QUICK_RAMP};
+  for (size_t i = 0; i < 2; i++) {
+    cfg.protection.fault_reaction_option = ramps[i];
+    n = periods_to_off(&cfg, 0.0, false, &end);
+    TT_CHECK(end == FW_CIA402_FAULT && n >= still - 1 && n <= still + 2); /* at standstill */
+    cfg.protection.quick_stop_option = ramps[i];
+    n = periods_to_off(&cfg, 0.0, true, &end);
+    TT_CHECK(end == FW_CIA402_SWITCH_ON_DISABLED && n >= still - 1 && n <= still + 2);
+  }
+  cfg.protection.quick_stop_option = FW_REACT_SWITCH_OFF;
+  n = periods_to_off(&cfg, 0.0, true, &end);
+  TT_CHECK(end == FW_CIA402_SWITCH_ON_DISABLED && n == 0);
+  /* a mover that keeps turning at 20 el. rad/s (0.153 m/s): the ramp's bound,
+   * computed here from the paper motor's numbers, ends it (never brakes forever) */
+  const double w = 20.0, v = w * 0.024 / M_PI;
+  const double a = 1.5 * M_PI / 0.024 * 0.1827 * 20.0 / 32.13; /* K_F i_max / m */
+  for (size_t i = 0; i < 2; i++) {
+    cfg.protection.fault_reaction_option = ramps[i];
+    n = periods_to_off(&cfg, w, false, &end);
+    printf("  ramp %d on a mover at %.3f m/s: PWM off after %d periods (bound %.1f)\n",
+           (int)ramps[i], v, n, (v / a + 0.05) * 24000.0);
+    TT_CHECK(end == FW_CIA402_FAULT);
+    TT_CHECK(fabs(n - (v / a + 0.05) * 24000.0) <= 0.15 * v / a * 24000.0 + 2.0);
+    cfg.protection.quick_stop_option = ramps[i];
+    n = periods_to_off(&cfg, w, true, &end);
+    TT_CHECK(end == FW_CIA402_SWITCH_ON_DISABLED);
+    TT_CHECK(fabs(n - (v / a + 0.05) * 24000.0) <= 0.15 * v / a * 24000.0 + 2.0);
+  }
+  cfg.protection.fault_reaction_option = FW_REACT_BRAKE_TIMED; /* -1 on that mover */
+  n = periods_to_off(&cfg, w, false, &end);
+  TT_CHECK(end == FW_CIA402_FAULT && n >= 0 && n <= (int)(0.005 * 24000) + 1);
+}
+
 static void test_units_and_refs(void) {
   fw_config_t cfg;
   fw_config_default(&cfg);
@@ -1342,6 +1429,7 @@ int main(void) {
   TT_RUN(test_fault_pll_error);
   TT_RUN(test_fault_pll_error_supervision_alone);
   TT_RUN(test_external_fault_and_quick_stop);
+  TT_RUN(test_reaction_option_codes);
   TT_RUN(test_units_and_refs);
   TT_RUN(test_pos_unwrapped_precision);
   TT_RUN(test_pos_continuous_over_reenable);

@@ -12,7 +12,7 @@
 static void test_latch_first_cause_and_history(void) {
   fw_fault_latch_t f;
   fw_fault_latch_init(&f);
-  const uint32_t ramp = (uint32_t)FW_REACT_RAMP;
+  const int32_t ramp = (int32_t)FW_REACT_RAMP;
   TT_CHECK(fw_fault_latch_code(&f) == FW_FAULT_NONE);
   fw_fault_latch_update(&f, FW_FAULT_NONE, ramp); /* ignored */
   TT_CHECK(f.hist_count == 0u);
@@ -43,16 +43,56 @@ static void test_latch_first_cause_and_history(void) {
 }
 
 static void test_reaction(void) {
-  const uint32_t off = (uint32_t)FW_REACT_SWITCH_OFF, ramp = (uint32_t)FW_REACT_RAMP;
-  TT_CHECK(fw_fault_brakes_first(ramp, FW_FAULT_HEARTBEAT_LOST));
-  TT_CHECK(fw_fault_brakes_first(ramp, FW_FAULT_POSITION_LIMIT));
-  TT_CHECK(fw_fault_brakes_first(ramp, FW_FAULT_I2T));
-  TT_CHECK(!fw_fault_brakes_first(ramp, FW_FAULT_EST_PLL_ERROR));
+  const int32_t off = (int32_t)FW_REACT_SWITCH_OFF;
+  /* every braking code (CiA 402 1, 2 and the manufacturer-specific -1) brakes first
+     for the faults that leave the estimate trustworthy, and only for those */
+  const int32_t braking[] = {(int32_t)FW_REACT_RAMP, (int32_t)FW_REACT_QUICK_RAMP,
+                             (int32_t)FW_REACT_BRAKE_TIMED};
+  for (size_t i = 0; i < sizeof braking / sizeof braking[0]; i++) {
+    TT_CHECK(fw_fault_brakes_first(braking[i], FW_FAULT_HEARTBEAT_LOST));
+    TT_CHECK(fw_fault_brakes_first(braking[i], FW_FAULT_POSITION_LIMIT));
+    TT_CHECK(fw_fault_brakes_first(braking[i], FW_FAULT_I2T));
+    TT_CHECK(!fw_fault_brakes_first(braking[i], FW_FAULT_EST_PLL_ERROR));
+    TT_CHECK(!fw_fault_brakes_first(braking[i], FW_FAULT_EST_BEMF_MISMATCH));
+    TT_CHECK(!fw_fault_brakes_first(braking[i], FW_FAULT_OVERCURRENT));
+  }
   TT_CHECK(!fw_fault_brakes_first(off, FW_FAULT_HEARTBEAT_LOST));
+  TT_CHECK(FW_REACT_BRAKE_TIMED < 0); /* manufacturer-specific: negative (CiA 402) */
   fw_fault_latch_t f;
   fw_fault_latch_init(&f);
   fw_fault_latch_update(&f, FW_FAULT_HEARTBEAT_LOST, off);
   TT_CHECK(f.hard == 1u);
+}
+
+/* How long each reaction may brake: -1 the configured time at any speed; the
+ * CiA 402 ramps the time the current limit needs to stop the configured mass
+ * (computed here in double from the paper motor's numbers: K_F = 1.5 (pi / tau)
+ * psi_f) plus the margin, so they reach standstill first; 0 none. */
+static void test_brake_time_bound(void) {
+  fw_config_t cfg;
+  fw_config_default(&cfg);
+  const double k_f = 1.5 * M_PI / 0.024 * 0.1827;    /* N/A, 35.87 */
+  const double a = k_f * 20.0 / 32.13;               /* m/s^2 at i_max 20 A, 32.13 kg */
+  TT_CHECK_NEAR(a, 22.33, 0.01);
+  const float speeds[] = {0.0f, 0.5f, -1.0f, 2.0f, 3.6f};
+  for (size_t i = 0; i < sizeof speeds / sizeof speeds[0]; i++) {
+    const double v = fabs((double)speeds[i]);
+    TT_CHECK_NEAR(fw_fault_brake_time_max_s(&cfg, FW_REACT_BRAKE_TIMED, speeds[i]), 0.08, 1e-7);
+    TT_CHECK_NEAR(fw_fault_brake_time_max_s(&cfg, FW_REACT_RAMP, speeds[i]), v / a + 0.5, 1e-5);
+    TT_CHECK_NEAR(fw_fault_brake_time_max_s(&cfg, FW_REACT_QUICK_RAMP, speeds[i]), v / a + 0.5,
+                  1e-5);
+    TT_CHECK(fw_fault_brake_time_max_s(&cfg, FW_REACT_SWITCH_OFF, speeds[i]) == 0.0f);
+    TT_CHECK(fw_fault_brake_time_max_s(&cfg, 7, speeds[i]) == 0.0f); /* not a code */
+  }
+  /* a heavier axis takes longer, a stronger current limit less */
+  fw_config_t heavy = cfg;
+  heavy.machine.mass_kg = 4.0f * cfg.machine.mass_kg;
+  TT_CHECK_NEAR(fw_fault_brake_time_max_s(&heavy, FW_REACT_QUICK_RAMP, 2.0f),
+                2.0 / (a / 4.0) + 0.5, 1e-4);
+  /* the margin is quick_stop_time_s; a NaN speed leaves the margin alone */
+  cfg.protection.quick_stop_time_s = 0.1f;
+  TT_CHECK_NEAR(fw_fault_brake_time_max_s(&cfg, FW_REACT_RAMP, 1.0f), 1.0 / a + 0.1, 1e-5);
+  TT_CHECK_NEAR(fw_fault_brake_time_max_s(&cfg, FW_REACT_RAMP, NAN), 0.1, 1e-7);
 }
 
 static void test_inputs(void) {
@@ -186,6 +226,7 @@ static void test_speed_position_follow(void) {
 int main(void) {
   TT_RUN(test_latch_first_cause_and_history);
   TT_RUN(test_reaction);
+  TT_RUN(test_brake_time_bound);
   TT_RUN(test_inputs);
   TT_RUN(test_i2t);
   TT_RUN(test_speed_position_follow);

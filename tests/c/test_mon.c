@@ -207,6 +207,62 @@ static void test_motion_magnitude(void) {
   TT_CHECK(moving > 100 && moving < 4700); /* both outcomes */
 }
 
+/* The motion check after a braking fault (issue 34): the power stage braked at
+ * -20 A, switched off, the mover came to rest; at the next enable the residual
+ * must read the mover at rest (zero current, zero voltage), not the braking
+ * current's step L (0 - i) / T as a back-EMF. And after the same history a mover
+ * that truly moves (its back-EMF held by the zero-current loop) is still refused. */
+static void motion_after_switch_off(double e_true_V, float *r_max_V, fw_fault_t *f_check) {
+  fw_config_t cfg;
+  fw_mon_t m;
+  setup(&m, &cfg);
+  fw_mon_run_start(&m);
+  const double R = cfg.machine.R_ohm, psi = cfg.machine.psi_f_Wb;
+  const double w = M_PI * 0.4 / cfg.machine.pole_pitch_m; /* 0.4 m/s at the switch-off */
+  fw_mon_in_t in;
+  memset(&in, 0, sizeof in);
+  in.running = 1u;
+  in.pwm_on = 1u;
+  in.omega_hat_radps = (float)w;
+  in.i_dq_A[1] = in.i_dq_ref_A[1] = -20.0f; /* braking at the current limit */
+  in.u_dq_V[0] = (float)(-w * cfg.machine.L_q_H * -20.0);
+  in.u_dq_V[1] = (float)(R * -20.0 + w * psi);
+  for (int k = 0; k < 2403; k++) { /* 100 ms, ending mid-block */
+    (void)fw_mon_update(&m, &in);
+  }
+  memset(&in, 0, sizeof in); /* PWM off (fw_ctrl's stage_off): 50 ms */
+  for (int k = 0; k < 1200; k++) {
+    (void)fw_mon_update(&m, &in);
+  }
+  TT_CHECK(fw_mon_enable(&m) == FW_FAULT_NONE);
+  /* the alignment: zero-current loop, PWM on, not running */
+  in.pwm_on = 1u;
+  in.u_dq_V[1] = (float)e_true_V;
+  *r_max_V = 0.0f;
+  *f_check = FW_FAULT_NONE;
+  const float e_start_max = fw_units_bemf_V(&cfg, cfg.protection.start_speed_max_mps);
+  for (int k = 0; k < (int)(0.03 * 24000); k++) {
+    (void)fw_mon_update(&m, &in);
+    *r_max_V = fmaxf(*r_max_V, m.r_mag_V);
+    if (k >= (int)(0.015 * 24000) && *f_check == FW_FAULT_NONE) { /* FW_MOTION_CHECK_S */
+      *f_check = fw_mon_motion(&m, e_start_max);
+    }
+  }
+}
+
+static void test_motion_after_braking_switch_off(void) {
+  float r_max;
+  fw_fault_t f;
+  motion_after_switch_off(0.0, &r_max, &f); /* at rest */
+  printf("  motion statistic at rest after a braking switch-off: max %.4g V\n", (double)r_max);
+  TT_CHECK(f == FW_FAULT_NONE);
+  TT_CHECK(r_max < 1e-3f); /* the residual of a mover at rest with no current: 0 */
+  const double e_02 = 0.1827 * M_PI * 0.2 / 0.024; /* back-EMF at 0.2 m/s, 4.8 V */
+  motion_after_switch_off(e_02, &r_max, &f);
+  TT_CHECK(f == FW_FAULT_MOVING_AT_ENABLE);
+  TT_CHECK(r_max <= (float)e_02 * 1.001f); /* it reads the back-EMF, not more */
+}
+
 static void test_offsets_and_current_sum(void) {
   fw_config_t cfg;
   fw_mon_t m;
@@ -263,5 +319,6 @@ int main(void) {
   TT_RUN(test_bemf_residual);
   TT_RUN(test_offsets_and_current_sum);
   TT_RUN(test_motion_magnitude);
+  TT_RUN(test_motion_after_braking_switch_off);
   return TT_SUMMARY();
 }

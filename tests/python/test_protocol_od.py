@@ -156,10 +156,64 @@ def test_cia402_views_in_wire_units(od, index, sub, field, scale):
 
 
 def test_option_codes_are_cia402_int16(od):
-    for index, field in ((0x605A, "quick_stop_option"), (0x605E, "fault_reaction_option")):
+    """0x605A / 0x605E: INTEGER16 views of signed (int32_t) fields; the quick stop
+    defaults to the quick-stop ramp (2), the fault reaction to the manufacturer-specific
+    time-bounded braking (-1: a lost supervisor sees the PWM off within its consumer
+    time + fault_brake_time_s at any speed)."""
+    from protocols.generated import od_names
+
+    want = {0x605A: ("quick_stop_option", 2, (0, 2)),
+            0x605E: ("fault_reaction_option", -1, (-1, 2))}
+    for index, (field, default, limits) in want.items():
         e = od.find(index)
         assert (e.type, e.access, e.fw_config) == ("INTEGER16", "rw", field)
-        assert e.default == od.fw_config[field]["default"] == 2  # quick stop ramp
+        assert e.default == od.fw_config[field]["default"] == default
+        assert (e.min, e.max) == limits == (od.fw_config[field]["min"],
+                                            od.fw_config[field]["max"])
+        assert field in od_names.FW_CONFIG_SIGNED
+    assert od_names.Reaction(-1).key == "brake_timed"
+
+
+def _eds_int(text: str) -> int:
+    return int(text.replace("$NODEID+", ""), 0)
+
+
+def test_eds_limits_are_the_accepted_ranges(od):
+    """Issue 34: the EDS's LowLimit/HighLimit say what the drive accepts. Read from the
+    EDS text itself (not the loader): every entry that shows a fw_config field as it is
+    (scale 1) declares exactly the field's range of od.yaml's fw_config section (the
+    range the firmware's table is generated from, tests/c/test_co_od_config.c), the
+    option codes among them; every signal id entry the ids of the signals list."""
+    raw = yaml.safe_load(Path(generate.ROOT, "protocols", "od.yaml").read_text())
+    eds = configparser.ConfigParser()
+    eds.optionxform = str
+    eds.read(EDS)
+
+    def section(e):
+        return f"{e.index:04X}" if e.kind == "var" else f"{e.index:04X}sub{e.sub:X}"
+
+    checked = 0
+    for e in od.entries:
+        if not e.fw_config or e.scale != 1.0:
+            continue
+        lim = raw["fw_config"][e.fw_config]
+        sec = eds[section(e)]
+        if e.type == "REAL32":
+            got = (float(sec["LowLimit"]), float(sec["HighLimit"]))
+            assert got == (_f32(lim["min"]), _f32(lim["max"])), (section(e), got)
+        else:
+            got = (_eds_int(sec["LowLimit"]), _eds_int(sec["HighLimit"]))
+            assert got == (lim["min"], lim["max"]), (section(e), got, lim)
+        checked += 1
+    assert checked >= 60
+    for index in (0x605A, 0x605E):
+        assert _eds_int(eds[f"{index:04X}"]["LowLimit"]) > INT_RANGE["INTEGER16"][0]
+    ids = [s for s in eds.sections()
+           if eds[s].get("ParameterName", "").startswith(("Signal ", "Trigger signal"))
+           and eds[s].get("ParameterName") != "Signal count"]
+    assert len(ids) == 17
+    for s in ids:
+        assert _eds_int(eds[s]["HighLimit"]) == len(raw["signals"]) - 1, s
 
 
 def _c_fault_enum() -> dict[int, str]:
@@ -256,7 +310,7 @@ def test_enums_are_one_list_for_c_and_python(od):
     from protocols.generated import od_names
 
     h = Path(generate.ROOT, "firmware_c", "include", "pmlsm", "fw_enums.h").read_text()
-    c = {m.group(1): int(m.group(2)) for m in re.finditer(r"\b(FW_[A-Z0-9_]+) = (\d+)", h)}
+    c = {m.group(1): int(m.group(2)) for m in re.finditer(r"\b(FW_[A-Z0-9_]+) = (-?\d+)", h)}
     seen = 0
     for en in od.enums:
         cls = getattr(od_names, "".join(w.capitalize() for w in en.name.split("_")))
@@ -294,6 +348,36 @@ def _expect_od_error(tmp_path, old: str, new: str, match: str) -> None:
 ])
 def test_bad_enum_is_reported_with_its_place(tmp_path, old, new, match):
     _expect_od_error(tmp_path, old, new, match)
+
+
+@pytest.mark.parametrize("old, new, match", [
+    ("fault_reaction_option: {group: protection, i32: true,",
+     "fault_reaction_option: {group: protection, i32: true, u32: true,",
+     r"fw_config fault_reaction_option: a fw_config field is u32 or i32, not both"),
+    ("fault_reaction_option: {group: protection, i32: true,",
+     "fault_reaction_option: {group: protection, u32: true,",
+     r"fw_config fault_reaction_option: min -1 of a u32 field is negative \(use i32\)"),
+    ("quick_stop_option:     {group: protection, i32: true, min: 0, max: 2,",
+     "quick_stop_option:     {group: protection, i32: true, min: 0, max: 2.5,",
+     r"fw_config quick_stop_option: a i32 field needs integer min, max and default"),
+    ("max: signals.last_id, default: 11}", "max: signals.last, default: 11}",
+     r"0x2060:6: max 'signals.last', expected a number or 'signals.last_id'"),
+    ("access: ro, default: 0, live: true,", "access: const, default: 0, live: true,",
+     r"live needs access ro or rw, not const"),
+])
+def test_bad_field_kind_limit_or_live_is_a_one_line_error(tmp_path, old, new, match):
+    _expect_od_error(tmp_path, old, new, match)
+
+
+def test_live_entries(od):
+    """Live entries (the drive's own values: measurements, states, capabilities, the
+    port's and the build's identity) are marked in od.yaml or are read-only and PDO
+    mappable; configuration never is."""
+    live = {(e.index, e.sub) for e in od.entries if e.live}
+    assert {(0x6041, 0), (0x6064, 0), (0x2020, 1), (0x2090, 1), (0x2090, 2), (0x2041, 0),
+            (0x2030, 1), (0x2080, 2), (0x1010, 1)} <= live
+    assert not any(e.fw_config for e in od.entries if e.live)
+    assert {(0x1000, 0), (0x2040, 0), (0x1018, 2), (0x2050, 1), (0x6060, 0)}.isdisjoint(live)
 
 
 def test_firmware_version_is_written_once(od):
@@ -364,4 +448,4 @@ def test_defaults_derived_from_the_paper_motor(od):
     names = {e.name: {v.value: v.key for v in e.values} for e in od.enums}
     assert names["extractor"][d["extractor"]] == "sogi_adaptive"
     assert names["reaction"][d["quick_stop_option"]] == "quick_ramp"
-    assert names["reaction"][d["fault_reaction_option"]] == "quick_ramp"
+    assert names["reaction"][d["fault_reaction_option"]] == "brake_timed"

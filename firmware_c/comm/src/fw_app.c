@@ -164,10 +164,15 @@ static const co_od_cfg_link_t *fw_app_cfg_link(uint16_t index, uint8_t sub) {
   return NULL;
 }
 
-/** Field value as float (uint32 fields converted). */
+/** Field value as float (integer fields converted). */
 static float fw_app_field_get(const fw_config_t *cfg, const fw_config_field_t *f) {
   const uint8_t *base = (const uint8_t *)cfg + f->offset;
-  if (f->is_u32) {
+  if (f->is_int && f->is_signed) {
+    int32_t i;
+    memcpy(&i, base, sizeof i);
+    return (float)i;
+  }
+  if (f->is_int) {
     uint32_t u;
     memcpy(&u, base, sizeof u);
     return (float)u;
@@ -196,7 +201,9 @@ static void fw_app_sync_cfg_to_od(fw_app_t *app) {
       co_node_set_f32(&app->node, l->pos, fw_app_field_get(cfg, f));
       continue;
     }
-    if (f->is_u32 && l->scale == 1.0f) {
+    if (f->is_int && l->scale == 1.0f) {
+      /* the 32 bits as they are: a narrower entry keeps its low bytes, which are
+         the value's two's complement for a signed field in the entry's range */
       uint32_t u;
       memcpy(&u, (const uint8_t *)cfg + f->offset, sizeof u);
       co_node_set_u32(&app->node, l->pos, u);
@@ -321,7 +328,7 @@ static uint32_t fw_app_nvm_layout(void) {
     }
     crc = fw_app_crc32_feed(crc, (const uint8_t *)f->name, strlen(f->name) + 1u);
     co_le_put(w, 4u, (uint32_t)f->offset);
-    w[4] = f->is_u32;
+    w[4] = (uint8_t)(f->is_int | (uint8_t)(f->is_signed << 1)); /* float 0, u32 1, i32 3 */
     crc = fw_app_crc32_feed(crc, w, sizeof w);
   }
   co_le_put(w, 4u, (uint32_t)sizeof(fw_config_t));
@@ -610,7 +617,10 @@ static co_abort_t fw_app_write_locked(fw_app_t *app, uint16_t index, uint8_t sub
   if (index == 0x2080u && sub == 1u) { /* identification: d-axis current reference */
     float x;
     memcpy(&x, &v, sizeof x);
-    return fw_app_status_abort(fw_set_id_ref(&app->ctrl, x));
+    /* a reference, accepted in the object's whole range (the EDS limits) and clamped
+       by the core to +-i_max_A, as the target velocity to the speed limit */
+    const fw_status_t st = fw_set_id_ref(&app->ctrl, x);
+    return fw_app_status_abort(st == FW_ERR_RANGE ? FW_OK : st);
   }
   const co_od_cfg_link_t *link = fw_app_cfg_link(index, sub);
   if (link != NULL) {
@@ -625,7 +635,7 @@ static co_abort_t fw_app_write_locked(fw_app_t *app, uint16_t index, uint8_t sub
     if (e->type == CO_TYPE_REAL32) {
       float x;
       memcpy(&x, &v, sizeof x);
-      if (f->is_u32) {
+      if (f->is_int) {
         return CO_ABORT_APP; /* no such link is generated */
       }
       memcpy(base, &x, sizeof x);
@@ -637,10 +647,12 @@ static co_abort_t fw_app_write_locked(fw_app_t *app, uint16_t index, uint8_t sub
       if (negative && e->size < 4u) {
         v |= ~((1u << (8u * e->size)) - 1u); /* sign-extend to 32 bits */
       }
-      if (f->is_u32) {
-        if (negative || link->scale != 1.0f) {
-          return CO_ABORT_VALUE_RANGE; /* e.g. a negative (manufacturer) option code */
+      if (f->is_int) {
+        if ((negative && !f->is_signed) || link->scale != 1.0f) {
+          return CO_ABORT_VALUE_RANGE; /* a negative value for a uint32_t field */
         }
+        /* v holds the value's 32 bits (sign-extended above): int32_t and uint32_t
+           fields take them as they are; fw_set_config checks the range */
         memcpy(base, &v, sizeof v);
       } else {
         float w = is_signed ? (float)(int32_t)v : (float)v;
@@ -667,7 +679,8 @@ static co_abort_t fw_app_write_locked(fw_app_t *app, uint16_t index, uint8_t sub
  *  "disable voltage" (OPERATION ENABLED, QUICK STOP ACTIVE -> SWITCH ON
  *  DISABLED), applied before this period's fw_step. A controlword received
  *  earlier in the same batch is dropped. A running fault reaction keeps its
- *  bounded braking (fault_brake_time_s). */
+ *  bounded braking (0x605E: at most fault_brake_time_s for -1, the default; to
+ *  standstill within the ramp's bound for 1 and 2). */
 static void fw_app_power_off(fw_app_t *app) {
   app->cw_pending = 0u;
   (void)fw_controlword(&app->ctrl, 0x0000u);

@@ -15,7 +15,8 @@
  * Field names are unique across the parts: the object dictionary, the field
  * table and the Python side use the flat name ("R_ohm"), C code the path
  * (cfg->machine.R_ohm). fw_config.c builds fw_config_field() from
- * FW_CONFIG_FIELDS(F32, U32) with F32/U32(part, name, unit, min, max, default),
+ * FW_CONFIG_FIELDS(F32, U32, I32) with F32/U32/I32(part, name, unit, min, max,
+ * default) for float, uint32_t and int32_t fields,
  * in od.yaml's order (the order fw_config_check() tests them in), and
  * fw_config_default() applies the last argument (the default) of each.
  */
@@ -88,34 +89,34 @@ typedef struct {
 
 /** Configuration part protection: trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h). */
 typedef struct {
-  float u_dc_min_V;               /**< undervoltage trip (while enabled) [V] */
-  float u_dc_max_V;               /**< overvoltage trip [V] */
-  float i_trip_A;                 /**< overcurrent trip, any phase [A] */
-  float saliency_min;             /**< min |Lq-Ld|/Ld for injection (default 0.10) */
-  float hf_min_ratio;             /**< HF amplitude below ratio*Ts*u_inj/L_q -> fault */
-  float pll_err_max_rad;          /**< |filtered PLL error| limit [rad] */
-  float pll_err_time_s;           /**< ... for longer than this -> fault [s] */
-  float quick_stop_time_s;        /**< max time in QUICK STOP ACTIVE before PWM off [s] */
-  float v_max_mps;                /**< limit of the speed target (CiA 402 0x6080); OVERSPEED trips at v_max_mps x overspeed_margin [m/s] */
-  float overspeed_margin;         /**< FW_FAULT_OVERSPEED when |estimated speed| > v_max_mps x this: room for the speed loop's overshoot and the estimate's ripple at a target on the limit (1.0: trip at the limit itself) */
-  float pos_limit_min_m;          /**< software limit on the estimated position (min >= max: off) [m] */
-  float pos_limit_max_m;          /**< upper software limit [m] */
-  float follow_err_mps;           /**< speed following-error window [m/s] */
-  float follow_err_time_s;        /**< ... exceeded for longer than this -> FOLLOWING_ERROR [s] */
-  float i_rated_A;                /**< continuous current for i2t (>= i_max_A: i2t off) [A] */
-  float i2t_time_s;               /**< time at i_max_A from cold before FW_FAULT_I2T [s] */
-  uint32_t quick_stop_option;     /**< fw_reaction_t for QUICK STOP (0x605A) */
-  uint32_t fault_reaction_option; /**< fw_reaction_t for heartbeat-type faults (0x605E) */
-  float fault_brake_time_s;       /**< longest controlled braking after a fault, then PWM off (heartbeat loss: PWM off within the consumer time + this) [s] */
-  float mon_angle_max_rad;        /**< HF-derived |angle error| limit [rad] */
-  float mon_detect_time_s;        /**< a witness must exceed its limit this long to fault [s] */
-  float mon_sal_tol;              /**< measured saliency within a factor (1 + tol) of the configured (default: a factor 2) */
-  float mon_bemf_max_rad;         /**< back-EMF residual angle limit [rad] */
-  float mon_bemf_min_mps;         /**< back-EMF witness active above the back-EMF of this speed (default: 5.0 V on the paper's motor) [m/s] */
-  float i_sum_max_A;              /**< limit on the filtered |i_a + i_b + i_c|, plus 3 % of |i_a| + |i_b| + |i_c| (fw_mon.c) [A] */
-  float i_offset_max_A;           /**< limit on each standstill offset [A] */
-  float start_speed_max_mps;      /**< refuse to enable above this mover speed [m/s] */
-  float mon_bemf_min_V;           /**< back-EMF at mon_bemf_min_mps (derived by fw_config_derive: w psi_f at that speed; read-only in the object dictionary) [V] */
+  float u_dc_min_V;              /**< undervoltage trip (while enabled) [V] */
+  float u_dc_max_V;              /**< overvoltage trip [V] */
+  float i_trip_A;                /**< overcurrent trip, any phase [A] */
+  float saliency_min;            /**< min |Lq-Ld|/Ld for injection (default 0.10) */
+  float hf_min_ratio;            /**< HF amplitude below ratio*Ts*u_inj/L_q -> fault */
+  float pll_err_max_rad;         /**< |filtered PLL error| limit [rad] */
+  float pll_err_time_s;          /**< ... for longer than this -> fault [s] */
+  float quick_stop_time_s;       /**< margin of the ramps' time bound: a quick stop or fault reaction on a ramp (0x605A / 0x605E 1, 2) not at standstill after |speed| / (K_F i_max_A / mass_kg) + this switches the PWM off (it never brakes forever) [s] */
+  float v_max_mps;               /**< limit of the speed target (CiA 402 0x6080); OVERSPEED trips at v_max_mps x overspeed_margin [m/s] */
+  float overspeed_margin;        /**< FW_FAULT_OVERSPEED when |estimated speed| > v_max_mps x this: room for the speed loop's overshoot and the estimate's ripple at a target on the limit (1.0: trip at the limit itself) */
+  float pos_limit_min_m;         /**< software limit on the estimated position (min >= max: off) [m] */
+  float pos_limit_max_m;         /**< upper software limit [m] */
+  float follow_err_mps;          /**< speed following-error window [m/s] */
+  float follow_err_time_s;       /**< ... exceeded for longer than this -> FOLLOWING_ERROR [s] */
+  float i_rated_A;               /**< continuous current for i2t (>= i_max_A: i2t off) [A] */
+  float i2t_time_s;              /**< time at i_max_A from cold before FW_FAULT_I2T [s] */
+  int32_t quick_stop_option;     /**< fw_reaction_t for QUICK STOP (0x605A): 0, 1, 2 */
+  int32_t fault_reaction_option; /**< fw_reaction_t for heartbeat-type faults (0x605E): -1, 0, 1, 2; default -1 (BRAKE_TIMED): PWM off within fault_brake_time_s of the fault at any speed */
+  float fault_brake_time_s;      /**< fault reaction -1 (BRAKE_TIMED): longest braking after a fault, then PWM off whatever the speed (heartbeat loss: PWM off within the consumer time + this) [s] */
+  float mon_angle_max_rad;       /**< HF-derived |angle error| limit [rad] */
+  float mon_detect_time_s;       /**< a witness must exceed its limit this long to fault [s] */
+  float mon_sal_tol;             /**< measured saliency within a factor (1 + tol) of the configured (default: a factor 2) */
+  float mon_bemf_max_rad;        /**< back-EMF residual angle limit [rad] */
+  float mon_bemf_min_mps;        /**< back-EMF witness active above the back-EMF of this speed (default: 5.0 V on the paper's motor) [m/s] */
+  float i_sum_max_A;             /**< limit on the filtered |i_a + i_b + i_c|, plus 3 % of |i_a| + |i_b| + |i_c| (fw_mon.c) [A] */
+  float i_offset_max_A;          /**< limit on each standstill offset [A] */
+  float start_speed_max_mps;     /**< refuse to enable above this mover speed [m/s] */
+  float mon_bemf_min_V;          /**< back-EMF at mon_bemf_min_mps (derived by fw_config_derive: w psi_f at that speed; read-only in the object dictionary) [V] */
 } fw_cfg_protection_t;
 
 /**
@@ -132,7 +133,7 @@ typedef struct {
 } fw_config_t;
 
 /* clang-format off */
-#define FW_CONFIG_FIELDS(F32, U32) \
+#define FW_CONFIG_FIELDS(F32, U32, I32) \
   F32(sensing, f_pwm_Hz, "Hz", 4000.0f, 100000.0f, 24000.0f) \
   F32(machine, R_ohm, "ohm", 0.001f, 100.0f, 0.958f) \
   F32(machine, L_d_H, "H", 1.0e-05f, 1.0f, 0.012f) \
@@ -184,8 +185,8 @@ typedef struct {
   F32(protection, follow_err_time_s, "s", 0.001f, 10.0f, 0.5f) \
   F32(protection, i_rated_A, "A", 0.01f, 400.0f, 10.0f) \
   F32(protection, i2t_time_s, "s", 0.01f, 1000.0f, 2.0f) \
-  U32(protection, quick_stop_option, "", 0.0f, 2.0f, 2u) \
-  U32(protection, fault_reaction_option, "", 0.0f, 2.0f, 2u) \
+  I32(protection, quick_stop_option, "", 0.0f, 2.0f, 2) \
+  I32(protection, fault_reaction_option, "", -1.0f, 2.0f, -1) \
   F32(protection, fault_brake_time_s, "s", 0.0f, 1.0f, 0.08f) \
   F32(protection, mon_angle_max_rad, "rad", 0.05f, 1.5f, 0.5f) \
   F32(protection, mon_detect_time_s, "s", 0.001f, 0.1f, 0.01f) \

@@ -85,7 +85,9 @@ typedef struct {
   const char *name; /**< field name as in fw_config_t */
   const char *unit; /**< SI unit, "" for dimensionless */
   size_t offset;    /**< offsetof(fw_config_t, part.name) */
-  uint8_t is_u32;   /**< 1: uint32_t field, 0: float field */
+  uint8_t is_int;   /**< 1: a 32-bit integer field (uint32_t, int32_t when is_signed);
+                         0: float field */
+  uint8_t is_signed; /**< with is_int: int32_t (signed option codes) */
   float min;        /**< inclusive */
   float max;        /**< inclusive */
 } fw_config_field_t;
@@ -219,7 +221,8 @@ typedef struct {
   fw_start_phase_t phase;
   float phase_time_s;
   uint8_t polarity_flipped; /**< 1 when start-up added pi to the estimate */
-  float qs_time_s;        /**< time in quick stop / fault braking */
+  float qs_left_s;        /**< quick stop / fault braking: time left before PWM off
+                               (fw_fault_brake_time_max_s at its start) */
   float qs_still_s;       /**< time at standstill during quick stop */
   float theta_k;          /**< estimate at this step's sampling instant */
   float u_dc_V;           /**< DC link of the last step (statusword warning) */

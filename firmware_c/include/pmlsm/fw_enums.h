@@ -30,11 +30,12 @@ typedef enum {
   FW_START_SALIENCY = 4 /**< after ALIGN: square wave on d^, then on q^: measured saliency */
 } fw_start_phase_t;
 
-/** Reaction option codes (CiA 402 0x605A quick stop, 0x605E fault reaction) */
+/** Reaction option codes (CiA 402 0x605A quick stop, 0x605E fault reaction; negative: manufacturer-specific) */
 typedef enum {
+  FW_REACT_BRAKE_TIMED = -1, /**< manufacturer-specific (0x605E only): brake on the quick-stop ramp for at most fault_brake_time_s, then PWM off whatever the speed */
   FW_REACT_SWITCH_OFF = 0, /**< PWM off at once (disable drive function) */
-  FW_REACT_RAMP = 1, /**< brake under control, then PWM off (time-bounded) */
-  FW_REACT_QUICK_RAMP = 2 /**< same as RAMP with the quick-stop time bound */
+  FW_REACT_RAMP = 1, /**< slow down on the slow-down ramp, at standstill PWM off (bounded by |speed| / deceleration + quick_stop_time_s) */
+  FW_REACT_QUICK_RAMP = 2 /**< slow down on the quick-stop ramp, at standstill PWM off (same bound); this drive's two ramps are one */
 } fw_reaction_t;
 
 /** What a port makes of the drive (0x2090:1): set by the port, read by the bench to label every result */

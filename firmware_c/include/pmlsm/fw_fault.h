@@ -42,7 +42,7 @@ void fw_fault_latch_init(fw_fault_latch_t *f);
  * the history (once while it repeats), a cause that does not brake first
  * (fw_fault_brakes_first) makes the latch hard. FW_FAULT_NONE is ignored.
  */
-void fw_fault_latch_update(fw_fault_latch_t *f, fw_fault_t code, uint32_t fault_reaction_option);
+void fw_fault_latch_update(fw_fault_latch_t *f, fw_fault_t code, int32_t fault_reaction_option);
 /** Fault reset: cause and hard flag cleared, history kept. */
 void fw_fault_latch_reset(fw_fault_latch_t *f);
 /** Latched cause (FW_FAULT_NONE if none). */
@@ -56,7 +56,23 @@ uint32_t fw_fault_latch_history(const fw_fault_latch_t *f, uint16_t *codes, uint
  * measurements trustworthy do (heartbeat lost, position limit, i2t); with
  * option FW_REACT_SWITCH_OFF none does.
  */
-bool fw_fault_brakes_first(uint32_t fault_reaction_option, fw_fault_t code);
+bool fw_fault_brakes_first(int32_t fault_reaction_option, fw_fault_t code);
+
+/**
+ * Longest braking of a reaction (fw_reaction_t `option`: 0x605A quick stop,
+ * 0x605E fault reaction) that starts at |speed_mps|, s; the drive switches the
+ * PWM off at standstill or at this bound, whichever comes first:
+ *   FW_REACT_BRAKE_TIMED      fault_brake_time_s, whatever the speed (the mover
+ *                             coasts from the speed it has then);
+ *   FW_REACT_RAMP, QUICK_RAMP |speed| / a + quick_stop_time_s, a = K_F i_max_A /
+ *                             mass_kg the deceleration the current limit gives
+ *                             the configured mass (friction, which helps, aside):
+ *                             the ramp reaches standstill inside it unless the
+ *                             mass or the thrust is misconfigured, and never
+ *                             brakes forever;
+ *   FW_REACT_SWITCH_OFF, other 0 (PWM off at once).
+ */
+float fw_fault_brake_time_max_s(const fw_config_t *cfg, int32_t option, float speed_mps);
 
 /**
  * Checks on one period's sampled inputs: NaN/inf, overcurrent on any phase,

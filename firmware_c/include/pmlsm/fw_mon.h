@@ -81,7 +81,8 @@ typedef struct {
   float r_d_f, r_q_f;
   float w_f;          /**< |w^| through the residual's low-pass (like compared with like) */
   float i_prev_A[2];  /**< fundamental current at the end of the last block (for L di/dt) */
-  float i_last_A[2];  /**< last fundamental current with PWM on */
+  float i_last_A[2];  /**< last fundamental current with PWM on; 0 after a block with
+                           the PWM off (the current has decayed: fw_mon_block) */
   /* sums over the present block of MON_EVAL_STEPS periods */
   float s_isum, s_imag;       /**< |i_a + i_b + i_c|, |i_a| + |i_b| + |i_c| (every period) */
   float s_rd, s_rq, s_w;      /**< residual without L di/dt, speed (PWM on) */
