@@ -63,7 +63,8 @@ class FwConfigField(C.Structure):
     """Mirror of ``fw_config_field_t``."""
 
     _fields_ = [("name", C.c_char_p), ("unit", C.c_char_p), ("offset", C.c_size_t),
-                ("is_u32", C.c_uint8), ("min", C.c_float), ("max", C.c_float)]
+                ("is_int", C.c_uint8), ("is_signed", C.c_uint8), ("min", C.c_float),
+                ("max", C.c_float)]
 
 
 class FwConfigIssue(C.Structure):
@@ -214,7 +215,7 @@ class DriveBridge:
             if not f:
                 continue
             off = f.contents.offset
-            if f.contents.is_u32:
+            if f.contents.is_int:  # int32_t or uint32_t: the same 32 bits
                 C.c_uint32.from_buffer(self._cfg, off).value = int(v) & 0xFFFFFFFF
             else:
                 C.c_float.from_buffer(self._cfg, off).value = float(v)

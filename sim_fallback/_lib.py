@@ -34,7 +34,8 @@ _u32 = C.c_uint32
 #: flat names: FwConfig has a property per field (``cfg.R_ohm`` is ``cfg.machine.R_ohm``).
 FW_CONFIG_PARTS: tuple[str, ...] = _od_names.FW_CONFIG_PARTS
 FW_CONFIG_FIELDS: list[tuple[str, str, type]] = [
-    (name, part, _u32 if is_u32 else _f) for name, part, is_u32 in _od_names.FW_CONFIG_FIELDS]
+    (name, part, (C.c_int32 if name in _od_names.FW_CONFIG_SIGNED else _u32) if is_int else _f)
+    for name, part, is_int in _od_names.FW_CONFIG_FIELDS]
 
 
 @functools.cache
@@ -262,7 +263,7 @@ class FwConfigField(C.Structure):
     """Mirror of ``fw_config_field_t``."""
 
     _fields_ = [("name", C.c_char_p), ("unit", C.c_char_p), ("offset", C.c_size_t),
-                ("is_u32", _u8), ("min", _f), ("max", _f)]
+                ("is_int", _u8), ("is_signed", _u8), ("min", _f), ("max", _f)]
 
 
 # ---- loading -------------------------------------------------------------

@@ -168,7 +168,7 @@ class ConfigProbe:
 
     def _put(self, buf: Any, field: str, value: float) -> None:
         f = self._L.fw_config_field_find(field.encode()).contents
-        if f.is_u32:  # a 32-bit integer field (uint32_t or int32_t): its 32 bits
+        if f.is_int:  # a 32-bit integer field (uint32_t or int32_t): its 32 bits
             C.c_uint32.from_buffer(buf, f.offset).value = int(value) & 0xFFFFFFFF
         else:
             C.c_float.from_buffer(buf, f.offset).value = float(value)

@@ -32,6 +32,8 @@ from pathlib import Path
 
 import pytest
 
+from protocols.generated.od_names import FW_VERSION_STRING
+
 ROOT = Path(__file__).resolve().parents[2]
 EDS = ROOT / "protocols" / "generated" / "pmlsm_drive.eds"
 BOARD = "mps2_an386"
@@ -323,13 +325,16 @@ def _patched(blob: bytes, off: int, data: bytes, crc: bool = True) -> bytes:
     return bytes(b)
 
 
+_FW_U32 = int.from_bytes(bytes(int(x) for x in FW_VERSION_STRING.split(".")), "big")
+
 BAD_BLOCKS = {
     "sizeof_config": (lambda b: _patched(b, 20, struct.pack("<I", 292)),
                       "emu boot block: sizeof(fw_config_t) 292, this image 296"),
     "sizeof_plant": (lambda b: _patched(b, 16, struct.pack("<I", 280)),
                      "emu boot block: sizeof(sim_plant_params_t) 280, this image 288"),
     "version": (lambda b: _patched(b, 24, struct.pack("<I", 0x000200)),
-                "emu boot block: firmware version 0x000200, this image 0x000300 (0.3.0)"),
+                f"emu boot block: firmware version 0x000200, this image 0x{_FW_U32:06X} "
+                f"({FW_VERSION_STRING})"),
     "node_id": (lambda b: _patched(b, 28, b"\x00"), "emu boot block: node id 0, allowed 1..127"),
     "crc": (lambda b: _patched(b, 200, b"\x55", crc=False), "emu boot block: CRC-32 0x"),
     "magic": (lambda b: _patched(b, 0, b"XXXX", crc=False), "emu boot block: magic 0x58585858"),

@@ -51,8 +51,8 @@ def test_fw_config_field_table_matches_mirror():
     names = {}
     for i in range(n):
         f = L.fw_config_field(i).contents
-        names[f.name.decode()] = (f.offset, f.is_u32)
-    mirror = {name: (off, int(t is C.c_uint32))
+        names[f.name.decode()] = (f.offset, f.is_int, f.is_signed)
+    mirror = {name: (off, int(t in (C.c_uint32, C.c_int32)), int(t is C.c_int32))
               for name, (_, off, t) in _lib.FwConfig.leaves().items()}
     assert names == mirror
     assert [L.fw_config_field(i).contents.name.decode() for i in range(n)] == list(
