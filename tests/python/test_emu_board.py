@@ -123,6 +123,8 @@ class Emu:
         self.folder = folder
         self.can_port, self.tel_port, self.load_port = _free_ports(3)
         self.log = folder / "qemu.log"
+        # a second board in the same folder appends: its console starts here
+        self._log_start = self.log.stat().st_size if self.log.exists() else 0
         self._logf = open(self.log, "ab")
         self.proc = subprocess.Popen(
             qemu_command(elf, boot, [self.can_port, self.tel_port, self.load_port]),
@@ -142,8 +144,21 @@ class Emu:
                 time.sleep(0.05)
 
     def console(self) -> str:
-        self._logf.flush()
-        return self.log.read_text(errors="replace")
+        """This board's console output so far (not an earlier board's in the folder)."""
+        if not self._logf.closed:
+            self._logf.flush()
+        return self.log.read_bytes()[self._log_start:].decode(errors="replace")
+
+    def wait_console(self, text: str, timeout_s: float = 20.0) -> str:
+        """The console once it shows ``text``: QEMU listens on its sockets before the
+        firmware has printed its boot line, so a test that reads the console at once
+        after connecting can read it before the line is there."""
+        deadline = time.monotonic() + timeout_s
+        while text not in (out := self.console()):
+            assert self.proc.poll() is None and time.monotonic() < deadline, \
+                f"no {text!r} on the console: {out!r}"
+            time.sleep(0.05)
+        return out
 
     def load(self, line: str) -> str:
         """One line to the virtual load machine (UART2), its reply."""
@@ -372,7 +387,7 @@ def test_good_boot_block_boots(make_emu, tmp_path: Path) -> None:
     _boot(tmp_path)
     emu = make_emu(tmp_path)
     assert emu.status()["periods"] > 0
-    assert "mps2_an386: drive node 1, firmware" in emu.console()
+    assert "mps2_an386: drive node 1, firmware" in emu.wait_console("mps2_an386: drive node")
 
 
 # ---- the drive over CANopen ------------------------------------------------------------
@@ -493,7 +508,7 @@ def test_config_saved_survives_restart_and_kill_closes_sockets(make_emu,
     n = struct.unpack_from("<I", flash.read_bytes())[0]
     assert 300 < n < 2048  # the header's block length: a block is stored
     emu = make_emu(tmp_path)
-    assert "stored block state 2" in emu.console()  # FW_APP_NVM_LOADED
+    assert "stored block state 2" in emu.wait_console("stored block state")  # LOADED
     m = Master(emu)
     try:
         assert m.sdo(0x2050, 10).raw == pytest.approx(17.5)
