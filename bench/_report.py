@@ -626,13 +626,17 @@ def make_plots(logger: Any, result: RunResult, units: MotorUnits, out_dir: Path
 def _write_compare_js(out_dir: Path, result: RunResult, en: tuple[float, float] | None,
                       series: dict[str, Any]) -> None:
     """``compare.js``: the key signals of this run for the runs index (a script, not JSON,
-    so that the index can load it from file:// where browsers refuse fetch())."""
+    so that the index can load it from file:// where browsers refuse fetch()). It files
+    them under the name of the folder it is loaded from (a run folder copied or renamed
+    still compares), else under the run folder's name when written."""
     doc = {"sequence": result.sequence, "enabled_s": list(en) if en else None,
            "series": series}
     key = json.dumps(Path(out_dir).name)
     (Path(out_dir) / "compare.js").write_text(
         "window.BENCH_RUNS = window.BENCH_RUNS || {};\n"
-        f"window.BENCH_RUNS[{key}] = {json.dumps(doc, separators=(',', ':'))};\n",
+        "(function (s) { var p = s && s.src ? decodeURI(s.src).split(/[\\/\\\\]/) : [];\n"
+        f"  window.BENCH_RUNS[p.length > 1 ? p[p.length - 2] : {key}] = "
+        f"{json.dumps(doc, separators=(',', ':'))};\n}})(document.currentScript);\n",
         encoding="utf-8")
 
 
