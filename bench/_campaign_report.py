@@ -1,7 +1,7 @@
 """Campaign report: distributions, worst cases per axis, limits, comparison.
 
-One HTML file (plotly.js: the results root's one copy, ``<out>/_assets/``, as for run
-reports; it works offline when copied with that folder): the limits
+One HTML file (plotly.js: the results root's one copy, ``<out>/plotly-<version>.min.js``,
+as for run reports; it works offline when copied with that file): the limits
 with their measured statistics, a histogram per metric, the metric against
 each axis, the worst runs with the command that replays each, and, given a
 second campaign, both distributions overlaid with their statistics side by
@@ -175,8 +175,8 @@ def render(c: Campaign, rdir: Path, other: Path | None = None, worst: int = 10) 
     from bench._report import _plotly_page_parts
 
     head, notice, footer = _plotly_page_parts(
-        Path(rdir) / "report.html", fix="copy it together with the folder <code>_assets/"
-                                        "</code> beside its campaign folder")
+        Path(rdir) / "report.html", fix="copy it together with the plotly-*.min.js "
+                                        "beside its campaign folder")
     return (f"<!doctype html><html><head><meta charset='utf-8'><title>campaign "
             f"{html.escape(c.name)}</title>{style}{head}</head><body>{notice}{''.join(parts)}"
             f"{footer}</body></html>")

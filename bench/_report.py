@@ -1,7 +1,8 @@
 """Run reports: HTML with interactive plotly plots, the runs index, JUnit XML, summary JSON.
 
-plotly.js is kept once per runs folder (``<runs>/_assets/plotly-<version>.min.js``, written
-once and checked by its content hash) and referenced relatively by every report, the runs
+plotly.js is kept once per runs folder (``<runs>/plotly-<version>.min.js``, a file beside
+the run folders: every folder in a runs root stays a run; written once and checked by its
+content hash) and referenced relatively by every report, the runs
 index and the comparison pages; ``bench report --standalone RUN_DIR`` writes a copy of a
 report with the library embedded (one file that works offline on its own).
 """
@@ -160,8 +161,6 @@ def write_junit(path: str | Path, results: list[RunResult],
 
 # ---- plotly.js: one copy per runs folder ---------------------------------------------
 
-#: the folder beside the run folders that holds the shared plotly.js
-ASSETS_DIR = "_assets"
 _PLOTLY: dict[str, str] = {}
 
 
@@ -180,11 +179,11 @@ def plotly_asset_name() -> str:
 
 
 def write_plotly_asset(runs_root: str | Path) -> Path:
-    """``<runs_root>/_assets/plotly-<version>.min.js``: written when missing or when its
+    """``<runs_root>/plotly-<version>.min.js``: written when missing or when its
     content is not the library's (checked by SHA-256; written to a temporary file and
     renamed, so a reader never sees half a file). Returns its path."""
     text = plotly_js()[1].encode("utf-8")
-    out = Path(runs_root) / ASSETS_DIR / plotly_asset_name()
+    out = Path(runs_root) / plotly_asset_name()
     try:
         if hashlib.sha256(out.read_bytes()).digest() == hashlib.sha256(text).digest():
             return out
@@ -202,7 +201,8 @@ def _plotly_page_parts(page: Path, runs_root: Path | None = None,
                                   "--standalone RUN_DIR</code>") -> tuple[str, str, str]:
     """``(head, notice, footer)`` of a page at ``page`` that loads the runs folder's
     plotly.js (``runs_root``, by default the folder that holds the page's folder:
-    ``<runs>/<run>/report.html`` -> ``<runs>/_assets``; written if needed). The notice says,
+    ``<runs>/<run>/report.html`` -> ``<runs>/plotly-<version>.min.js``; written if
+    needed). The notice says,
     in one line of the page, that the library is missing when the page was copied without
     it and ``fix`` (HTML: what to do); it removes itself when the library loaded. The
     footer says where the library comes from, and ``fix``."""
@@ -213,7 +213,7 @@ def _plotly_page_parts(page: Path, runs_root: Path | None = None,
     head = f'<script src="{src}" data-plotly-asset="{html.escape(asset.name)}"></script>'
     notice = ('<p id="plotly-missing" style="background:#fee;border:2px solid #b00;'
               'padding:0.3em 0.8em;font-weight:bold">No plots: plotly.js is missing '
-              f'({src}: copied without the runs folder\'s {ASSETS_DIR}/); {fix}</p>\n'
+              f'({src}: copied without it); {fix}</p>\n'
               '<script>if (window.Plotly) document.getElementById("plotly-missing").remove();'
               '</script>')
     footer = (f'<footer class="libnote" id="plotly-footer">Plots drawn by plotly.js '
@@ -749,7 +749,8 @@ def write_html(path: Path, result: RunResult, plots: list[tuple[str, str]],
                meta: dict[str, Any], logstats: dict[str, Any],
                units: MotorUnits | None = None) -> None:
     """One HTML file: tables, interactive plots; plotly.js is the runs folder's one copy
-    (``<runs>/_assets``, :func:`write_plotly_asset`): a page copied without it says so
+    (``<runs>/plotly-<version>.min.js``, :func:`write_plotly_asset`): a page copied without
+    it says so
     (:func:`write_standalone` embeds it). Linear motors are reported in m/s, mm and N,
     rotary-equivalent ones in r/min and N·m (:func:`bench._units.run_units`)."""
     ok = result.passed
@@ -918,7 +919,7 @@ def write_index(runs_root: str | Path) -> Path:
     """Write ``<runs_root>/index.html``: every run (newest first) with sequence, date,
     verdict and key metrics, and a comparison of the runs ticked (metrics side by side,
     position error and speed overlaid). plotly.js is the runs folder's one copy
-    (``_assets/``, :func:`write_plotly_asset`); each run's signals come from its
+    (:func:`write_plotly_asset`); each run's signals come from its
     ``compare.js`` (loaded by a script tag, so it works from file://). The table wraps to
     the window's width (no clipping). A linear motor's runs show their m/s metrics, a
     rotary-equivalent one's r/min (the twin of each column's metric).

@@ -332,8 +332,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "report index` (RUNS/index.html), or `bench report --standalone "
                        "RUN_DIR` (a copy of the run's report.html with plotly.js embedded: "
                        "one file that works offline when copied alone; a report in a run "
-                       "folder loads the runs folder's one copy of the library from "
-                       "RUNS/_assets/).")
+                       "folder loads the runs folder's one copy of the library, "
+                       "RUNS/plotly-<version>.min.js).")
     p.add_argument("--standalone", metavar="RUN_DIR",
                    help="write RUN_DIR/report_standalone.html (or --out): the run's report "
                         "with plotly.js embedded")

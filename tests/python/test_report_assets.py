@@ -72,7 +72,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("light") / "runs"
     assert main(["run", str(ROOT / "sequences" / "paper_load_step.yaml"), "--sim",
                  "--runs", str(root), "--no-progress"]) == 0
-    (run,) = [d for d in root.iterdir() if d.is_dir() and d.name != "_assets"]
+    (run,) = [d for d in root.iterdir() if d.is_dir()]
     for k in (1, 2):
         shutil.copytree(run, root / run.name.replace("Z_", f"{k}Z_", 1))
     main(["report", "index", "--runs", str(root)])
@@ -86,8 +86,9 @@ def _runs(root: Path) -> list[Path]:
 def test_one_plotly_per_runs_folder_referenced_relatively(runs: Path) -> None:
     from plotly.offline import get_plotlyjs, get_plotlyjs_version
 
-    asset = runs / "_assets" / f"plotly-{get_plotlyjs_version()}.min.js"
-    assert [p.name for p in (runs / "_assets").iterdir()] == [asset.name]
+    asset = runs / f"plotly-{get_plotlyjs_version()}.min.js"
+    assert [p.name for p in runs.glob("*.js")] == [asset.name]
+    assert all(d.is_dir() for d in runs.iterdir() if d != asset and d.suffix != ".html")
     assert asset.read_bytes() == get_plotlyjs().encode("utf-8")
     for page in [d / "report.html" for d in _runs(runs)] + [runs / "index.html"]:
         html = page.read_text(encoding="utf-8")
@@ -100,7 +101,7 @@ def test_one_plotly_per_runs_folder_referenced_relatively(runs: Path) -> None:
 def test_the_library_is_written_once_and_repaired_by_its_hash(runs: Path) -> None:
     from bench._report import write_index, write_plotly_asset
 
-    asset = next((runs / "_assets").iterdir())
+    (asset,) = runs.glob("plotly-*.min.js")
     before = asset.stat().st_mtime_ns, asset.stat().st_ino
     write_index(runs)
     assert (asset.stat().st_mtime_ns, asset.stat().st_ino) == before  # not written again
@@ -108,7 +109,7 @@ def test_the_library_is_written_once_and_repaired_by_its_hash(runs: Path) -> Non
     asset.write_bytes(asset.read_bytes()[:1000])                     # a broken copy
     assert write_plotly_asset(runs) == asset
     assert hashlib.sha256(asset.read_bytes()).hexdigest() == good
-    assert not list((runs / "_assets").glob("*.tmp"))
+    assert not list(runs.glob("*.tmp"))
 
 
 def test_sizes_report_of_a_1_s_run_and_index_under_1_mb(runs: Path) -> None:
@@ -174,7 +175,7 @@ def test_standalone_copy_alone_draws_and_a_bare_copy_says_what_is_missing(
     alone = tmp_path / "elsewhere"
     alone.mkdir()
     shutil.copy(run / "report_standalone.html", alone / "r.html")
-    shutil.copy(run / "report.html", alone / "bare.html")           # without _assets/
+    shutil.copy(run / "report.html", alone / "bare.html")           # without the library
     img = screenshot(alone / "r.html", tmp_path / "r.png")
     assert count(img, (44, 160, 44)) > 500 and count(img, (31, 119, 180)) > 300
     dom = rendered_dom(alone / "bare.html")

@@ -43,7 +43,7 @@ def test_report_is_interactive_and_loads_only_the_runs_folders_plotly(report: Pa
     assert "<img" not in html                           # no fixed images
     # nothing fetched from a network: the one script loaded is the runs folder's plotly.js
     srcs = re.findall(r"<script[^>]+src=\"([^\"]+)\"", html)
-    assert len(srcs) == 1 and srcs[0].startswith("../_assets/plotly-")
+    assert len(srcs) == 1 and srcs[0].startswith("../plotly-")
     assert (report.parent / srcs[0]).is_file()
     assert html.count("Plotly.newPlot") >= 3            # overview, internals, PDOs (+ trace)
     assert len(html) < 1_000_000                        # plotly.js is not embedded
@@ -163,7 +163,7 @@ def test_runs_index_lists_every_run_with_verdict_metrics_and_units(tmp_path: Pat
     assert "None" not in table and "{'" not in table and "nan" not in table.lower()
     # offline: the one script loaded is the runs folder's plotly.js, beside the index
     srcs = re.findall(r"<script[^>]+src=\"([^\"]+)\"", html)
-    assert len(srcs) == 1 and srcs[0].startswith("_assets/plotly-")
+    assert len(srcs) == 1 and srcs[0].startswith("plotly-")
     assert (tmp_path / srcs[0]).is_file()
 
 

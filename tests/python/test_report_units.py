@@ -70,8 +70,9 @@ def rotary(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
 def figures(html: str) -> dict[str, dict]:
     """Each plot's plotly JSON (data, layout) by its div id."""
     out = {}
-    for div, fig in re.findall(r'<div id="([^"]+)" class="plot"[^>]*></div>\s*<script>\(function'
-                               r'\(\)\{var f=(\{.*?\});(?:if\(window\.Plotly\))?Plotly', html, re.S):
+    pat = (r'<div id="([^"]+)" class="plot"[^>]*></div>\s*<script>\(function'
+           r'\(\)\{var f=(\{.*?\});(?:if\(window\.Plotly\))?Plotly')
+    for div, fig in re.findall(pat, html, re.S):
         out[div] = json.loads(fig)
     assert out, "no plot in the report"
     return out
