@@ -24,7 +24,14 @@ import numpy as np
 
 from bench._runner import RunResult
 from bench._units import MotorUnits, run_units
-from sim_fallback.metrics import METRIC_DEFS, definitions_rows, metric_system, metric_twin, wrap_pi
+from sim_fallback.metrics import (
+    METRIC_DEFS,
+    definitions_rows,
+    metric_base,
+    metric_system,
+    metric_twin,
+    wrap_pi,
+)
 
 
 def _clean(x: Any) -> Any:
@@ -308,13 +315,22 @@ CIA402_STATES = ("NOT READY TO SWITCH ON", "SWITCH ON DISABLED", "READY TO SWITC
 PLOT_POINTS = 2400
 
 
+def _state_names(statusword: np.ndarray) -> np.ndarray:
+    """The CiA 402 state name of each statusword (``bench._drive.state_of``)."""
+    from bench._drive import state_of
+
+    sw = np.asarray(statusword).astype(np.int64).ravel()
+    names = {int(x): state_of(int(x)) for x in np.unique(sw)}
+    return np.array([names[int(x)] for x in sw], dtype=object)
+
+
 def _enabled_window(logger: Any) -> tuple[float, float] | None:
-    """Sequence time from the first to the last statusword saying OPERATION ENABLED
-    (0x6041 & 0x6F == 0x27); None when the statusword was not recorded."""
+    """Sequence time from the first to the last statusword saying OPERATION ENABLED;
+    None when the statusword was not recorded."""
     t, v = logger.channel("pdo.statusword")
     if t.size == 0:
         return None
-    on = (v.astype(np.int64) & 0x6F) == 0x27
+    on = _state_names(v) == "OPERATION ENABLED"
     if not np.any(on):
         return None
     tt = t[on] - logger.t_origin_s
@@ -418,15 +434,11 @@ class _Figure:
     def states(self, row: int, t: np.ndarray, statusword: np.ndarray, name: str) -> None:
         """A statusword as its CiA 402 state names (a category axis in the profile's order,
         the states the run went through), a step line through the changes."""
-        from bench._drive import state_of
-
-        sw = np.asarray(statusword).astype(np.int64).ravel()
+        lab = _state_names(statusword)
         t = np.asarray(t)
-        if sw.size == 0:
+        if lab.size == 0:
             return
-        names_of = {int(x): state_of(int(x)) for x in np.unique(sw)}
-        lab = np.array([names_of[int(x)] for x in sw], dtype=object)
-        keep = np.ones(sw.size, bool)
+        keep = np.ones(lab.size, bool)
         keep[1:] = lab[1:] != lab[:-1]
         keep[-1] = True
         k = self.axis(row)
@@ -435,7 +447,7 @@ class _Figure:
             "y": [str(x) for x in lab[keep]], "name": name, "xaxis": f"x{k}", "yaxis": f"y{k}",
             "line": {"width": 1.6, "shape": "hv", "color": self._pick(name, None)},
             "marker": {"size": 4}, "showlegend": True})
-        present = set(names_of.values())
+        present = set(lab)
         self.layout[f"yaxis{k}"].update({
             "type": "category", "categoryorder": "array", "automargin": True,
             "tickfont": {"size": 10},
@@ -738,6 +750,16 @@ def value_text(units: MotorUnits, metric: str, value: float) -> str:
     return text
 
 
+def _by_statistic(names: Any) -> list[str]:
+    """Metric names in their order, each statistic's twins in other units right after it
+    (``position_error_rms_rad``, ``position_error_rms_mm``, ...)."""
+    names = list(names)
+    first = {}
+    for i, k in enumerate(names):
+        first.setdefault(metric_base(k)[0], i)
+    return sorted(names, key=lambda k: (first[metric_base(k)[0]], names.index(k)))
+
+
 def shown_metrics(units: MotorUnits, names: Any) -> list[str]:
     """The metrics of ``names`` a report of this motor shows: those in its units (a
     linear motor's m/s and mm, a rotary-equivalent one's r/min) and those of no particular
@@ -787,10 +809,11 @@ def write_html(path: Path, result: RunResult, plots: list[tuple[str, str]],
 
     keep = set(shown_metrics(units, list(METRIC_DEFS) + list(result.metrics)))
     metrics = "\n".join(
-        f"<tr><td>{_fmt(k)}</td><td>{_fmt(v)}</td>"
+        f"<tr><td>{_fmt(k)}</td><td>{_fmt(result.metrics[k])}</td>"
         f"<td>{_fmt(METRIC_DEFS[k].unit if k in METRIC_DEFS else '')}</td><td>{win(k)}</td></tr>"
-        for k, v in result.metrics.items() if k in keep)
-    defs = [r for r in definitions_rows() if r["metric"] in keep]
+        for k in _by_statistic(result.metrics) if k in keep)
+    rows_by = {r["metric"]: r for r in definitions_rows()}
+    defs = [rows_by[k] for k in _by_statistic(rows_by) if k in keep]
     defs_html = ("<tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in defs[0]) + "</tr>\n"
                  + "\n".join("<tr>" + "".join(f"<td>{html.escape(v)}</td>" for v in r.values())
                               + "</tr>" for r in defs))
