@@ -211,6 +211,7 @@ def _write_page(path: Path, a: dict[str, Any], b: dict[str, Any], rows: list[Row
     figs = []
     for title, cands in _PLOTS:
         traces = []
+        units: set[str] = set()
         for name, run, sig in (("A", a, sig_a), ("B", b, sig_b)):
             if not sig:
                 continue
@@ -218,6 +219,7 @@ def _write_page(path: Path, a: dict[str, Any], b: dict[str, Any], rows: list[Row
             if ch is None:
                 continue
             t, v, unit = sig[ch]
+            units.add(str(unit or "-"))
             v = np.asarray(v, dtype=float)
             if v.ndim == 2:
                 v = v[:, -1]
@@ -228,10 +230,12 @@ def _write_page(path: Path, a: dict[str, Any], b: dict[str, Any], rows: list[Row
                            "name": f"{name}: {ch}", "mode": "lines"})
         if traces:
             div = f"p{len(figs)}"
-            figs.append(f"<h3>{html.escape(title)}</h3><div id='{div}' style='height:320px'>"
+            layout = {"margin": {"t": 10}, "legend": {"orientation": "h", "y": -0.25},
+                      "xaxis": {"title": {"text": "sequence time (s)"}},
+                      "yaxis": {"title": {"text": f"{title} ({' or '.join(sorted(units))})"}}}
+            figs.append(f"<h3>{html.escape(title)}</h3><div id='{div}' style='height:340px'>"
                         f"</div><script>if (window.Plotly) Plotly.newPlot('{div}', "
-                        f"{json.dumps(traces)}, "
-                        "{margin: {t: 10}, xaxis: {title: 'sequence time (s)'}});</script>")
+                        f"{json.dumps(traces)}, {json.dumps(layout)});</script>")
     trs = "\n".join(
         f"<tr class='{'bad' if r.status == 'BEYOND' else ''}'><td>{r.metric}</td>"
         f"<td>{r.a:.5g}</td><td>{r.b:.5g}</td><td>{r.diff:.4g}</td>"
