@@ -1,6 +1,7 @@
 """Campaign report: distributions, worst cases per axis, limits, comparison.
 
-One self-contained HTML file (plotly.js embedded, works offline): the limits
+One HTML file (plotly.js: the results root's one copy, ``<out>/plotly-<version>.min.js``,
+as for run reports; it works offline when copied with that file): the limits
 with their measured statistics, a histogram per metric, the metric against
 each axis, the worst runs with the command that replays each, and, given a
 second campaign, both distributions overlaid with their statistics side by
@@ -121,7 +122,6 @@ def render(c: Campaign, rdir: Path, other: Path | None = None, worst: int = 10) 
             parts.append(f"<p class='fail'>{html.escape(str(other))} has no "
                          f"{html.escape(', '.join(missing))}: compared on the other metrics "
                          "only.</p>")
-    first = True
     for m in c.metrics:
         vals = np.asarray(res.get(m, []), dtype=float)
         fig = go.Figure(go.Histogram(x=vals[np.isfinite(vals)], name=c.name, opacity=0.7))
@@ -132,8 +132,7 @@ def render(c: Campaign, rdir: Path, other: Path | None = None, worst: int = 10) 
             fig.update_layout(barmode="overlay")
         fig.update_layout(title=f"{m}: distribution", xaxis_title=m, yaxis_title="runs",
                           height=360)
-        parts.append(to_html(fig, full_html=False, include_plotlyjs=first))
-        first = False
+        parts.append(to_html(fig, full_html=False, include_plotlyjs=False))
         for ax in c.axes:
             x = [p.get(ax.target) for p in params]  # numbers, or case names
             fails = [k in bad for k in range(n)]
@@ -170,9 +169,17 @@ def render(c: Campaign, rdir: Path, other: Path | None = None, worst: int = 10) 
     style = ("<style>body{font-family:sans-serif;margin:2em;max-width:1100px}"
              "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;"
              "padding:3px 8px}.pass{color:#176e17;font-weight:bold}"
-             ".fail{color:#b00;font-weight:bold}tr.beyond td{background:#fde2e2}</style>")
+             ".fail{color:#b00;font-weight:bold}tr.beyond td{background:#fde2e2}"
+             ".libnote{color:#555;font-size:12px;border-top:1px solid #ccc;margin-top:2em}"
+             "</style>")
+    from bench._report import _plotly_page_parts
+
+    head, notice, footer = _plotly_page_parts(
+        Path(rdir) / "report.html", fix="copy it together with the plotly-*.min.js "
+                                        "beside its campaign folder")
     return (f"<!doctype html><html><head><meta charset='utf-8'><title>campaign "
-            f"{html.escape(c.name)}</title>{style}</head><body>{''.join(parts)}</body></html>")
+            f"{html.escape(c.name)}</title>{style}{head}</head><body>{notice}{''.join(parts)}"
+            f"{footer}</body></html>")
 
 
 def write_report(c: Campaign, rdir: Path, other: Path | None = None) -> Path:

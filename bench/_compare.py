@@ -198,7 +198,12 @@ def compare(dir_a: str | Path, dir_b: str | Path, tolerances: list[str] | None =
 
 def _write_page(path: Path, a: dict[str, Any], b: dict[str, Any], rows: list[Row],
                 fa: list[int], fb: list[int], ok: bool, sig_a: Any, sig_b: Any) -> None:
-    from plotly.offline import get_plotlyjs
+    from bench._report import _decimate, _plotly_page_parts
+
+    lib_head, lib_notice, lib_footer = _plotly_page_parts(
+        path, b["dir"].resolve().parent,
+        fix=f"<code>bench compare {html.escape(str(a['dir']))} {html.escape(str(b['dir']))}"
+            "</code> writes it again")
 
     def t0(run: dict[str, Any]) -> float:
         return float((run["meta"] or {}).get("time_origin_s", 0.0))
@@ -206,6 +211,7 @@ def _write_page(path: Path, a: dict[str, Any], b: dict[str, Any], rows: list[Row
     figs = []
     for title, cands in _PLOTS:
         traces = []
+        units: set[str] = set()
         for name, run, sig in (("A", a, sig_a), ("B", b, sig_b)):
             if not sig:
                 continue
@@ -213,17 +219,23 @@ def _write_page(path: Path, a: dict[str, Any], b: dict[str, Any], rows: list[Row
             if ch is None:
                 continue
             t, v, unit = sig[ch]
+            units.add(str(unit or "-"))
             v = np.asarray(v, dtype=float)
             if v.ndim == 2:
                 v = v[:, -1]
-            n = max(1, t.size // 4000)
-            traces.append({"x": (np.asarray(t)[::n] - t0(run)).tolist(), "y": v[::n].tolist(),
+            # min/max envelope: a one-sample spike survives (plain striding hid it)
+            x, y = _decimate(np.asarray(t, dtype=float) - t0(run), v, 4000)
+            traces.append({"x": x.tolist(), "y": [None if not np.isfinite(q) else float(q)
+                                                  for q in y],
                            "name": f"{name}: {ch}", "mode": "lines"})
         if traces:
             div = f"p{len(figs)}"
-            figs.append(f"<h3>{html.escape(title)}</h3><div id='{div}' style='height:320px'>"
-                        f"</div><script>Plotly.newPlot('{div}', {json.dumps(traces)}, "
-                        "{margin: {t: 10}, xaxis: {title: 'sequence time (s)'}});</script>")
+            layout = {"margin": {"t": 10}, "legend": {"orientation": "h", "y": -0.25},
+                      "xaxis": {"title": {"text": "sequence time (s)"}},
+                      "yaxis": {"title": {"text": f"{title} ({' or '.join(sorted(units))})"}}}
+            figs.append(f"<h3>{html.escape(title)}</h3><div id='{div}' style='height:340px'>"
+                        f"</div><script>if (window.Plotly) Plotly.newPlot('{div}', "
+                        f"{json.dumps(traces)}, {json.dumps(layout)});</script>")
     trs = "\n".join(
         f"<tr class='{'bad' if r.status == 'BEYOND' else ''}'><td>{r.metric}</td>"
         f"<td>{r.a:.5g}</td><td>{r.b:.5g}</td><td>{r.diff:.4g}</td>"
@@ -236,7 +248,8 @@ def _write_page(path: Path, a: dict[str, Any], b: dict[str, Any], rows: list[Row
 td, th {{ border: 1px solid #ccc; padding: 3px 8px; font-size: 14px; }}
 tr.bad td {{ background: #fee; }} .v {{ font-size: 1.3em; font-weight: bold;
 color: {'#070' if ok else '#b00'}; }}</style>
-<script>{get_plotlyjs()}</script></head><body>
+{lib_head}</head><body>
+{lib_notice}
 <h1>Two runs side by side</h1>
 <p>A: {html.escape(_label(a))}<br>B: {html.escape(_label(b))}</p>
 <p class="v">{'WITHIN TOLERANCES' if ok else 'DIFFERENT'}</p>
@@ -244,5 +257,6 @@ color: {'#070' if ok else '#b00'}; }}</style>
 <table><tr><th>metric</th><th>A</th><th>B</th><th>B - A</th><th>tolerance</th><th>result</th>
 <th>unit</th><th></th></tr>{trs}</table>
 {''.join(figs)}
+{lib_footer}
 </body></html>"""
     path.write_text(doc, encoding="utf-8")

@@ -331,9 +331,18 @@ def build_parser() -> argparse.ArgumentParser:
                                    "and EMCY messages; --reset sends a fault reset.")
     p.add_argument("--reset", action="store_true", help="fault reset (controlword bit 7)")
     _conn_args(p)
-    p = sub.add_parser("report", help="reports: the runs index",
-                       description="Regenerate report pages from the run folders.")
-    rsub = p.add_subparsers(dest="report_cmd", metavar="WHAT", required=True)
+    p = sub.add_parser("report", help="reports: the runs index, a standalone report",
+                       description="Regenerate report pages from the run folders: `bench "
+                       "report index` (RUNS/index.html), or `bench report --standalone "
+                       "RUN_DIR` (a copy of the run's report.html with plotly.js embedded: "
+                       "one file that works offline when copied alone; a report in a run "
+                       "folder loads the runs folder's one copy of the library, "
+                       "RUNS/plotly-<version>.min.js).")
+    p.add_argument("--standalone", metavar="RUN_DIR",
+                   help="write RUN_DIR/report_standalone.html (or --out): the run's report "
+                        "with plotly.js embedded")
+    p.add_argument("--out", metavar="FILE", help="with --standalone: where to write it")
+    rsub = p.add_subparsers(dest="report_cmd", metavar="WHAT")
     ri = rsub.add_parser("index", help="write RUNS/index.html listing all runs",
                          description="Write RUNS/index.html: every run folder (sequence, "
                          "date, verdict, key metrics, link to its report) and a comparison "
@@ -772,8 +781,28 @@ def _update_index(runs_root: str) -> None:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from bench._report import write_index
+    from bench._report import write_index, write_standalone
 
+    standalone = getattr(args, "standalone", None)
+    if standalone is not None and args.report_cmd is not None:
+        raise UserError(f"bench report {args.report_cmd} --standalone {standalone}: give one "
+                        "of them (`bench report index` or `bench report --standalone "
+                        "RUN_DIR`)")
+    if standalone is not None:
+        if args.out is not None and not Path(args.out).parent.is_dir():
+            raise UserError(f"--out {args.out}: no such folder {Path(args.out).parent}")
+        try:
+            out = write_standalone(standalone, args.out)
+        except (FileNotFoundError, ValueError) as e:
+            raise UserError(f"--standalone {standalone}: {str(e).split(': ', 1)[-1]}"
+                            ) from None
+        print(f"{out} (standalone: plotly.js embedded, {out.stat().st_size / 1e6:.1f} MB)")
+        return EXIT_OK
+    if args.out is not None:
+        raise UserError(f"--out {args.out}: only with --standalone RUN_DIR")
+    if args.report_cmd is None:
+        raise UserError("bench report: give what to write: `index` (RUNS/index.html) or "
+                        "--standalone RUN_DIR")
     try:
         out = write_index(args.runs)
     except FileNotFoundError:
@@ -785,8 +814,17 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def _print_result(r: Any, out: Any, kind: dict[str, Any] | None = None) -> None:
+    """The verdict lines of a run: each measured value with its unit, in the motor's
+    units (a linear motor's m/s beside an expectation written in r/min)."""
+    from bench._report import value_text
     from bench._session import KIND_LABEL
+    from bench._units import run_units
 
+    try:
+        meta = json.loads((Path(out.run_dir) / "meta.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError, TypeError):
+        meta = {}
+    units = run_units(meta if isinstance(meta, dict) else {})
     sim = ""
     if kind:
         sim = f" [{KIND_LABEL.get(kind.get('drive', 'unknown'), 'UNKNOWN')} drive" + (
@@ -797,7 +835,7 @@ def _print_result(r: Any, out: Any, kind: dict[str, Any] | None = None) -> None:
     if ev.get("description"):
         print(f"  judged on: {ev['description']}")
     for e in r.expectations:
-        m = "n/a" if e.measured != e.measured else f"{e.measured:.5g}"
+        m = value_text(units, e.metric, e.measured)
         if not e.judged:
             print(f"  [NOT JUDGED] {e.name}: {e.message}")
             continue

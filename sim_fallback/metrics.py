@@ -87,44 +87,46 @@ _EST = ("omega_e_radps", "omega_hat_radps")
 _FILT = ("omega_e_radps", "omega_f_radps")
 _TRK = ("omega_e_radps", "speed_ref_radps_e")
 
-#: The metric definitions (the order is the order of every result dict).
+# the signals, written once for a metric and its twins in other units
+_E = ("e = wrap(theta_e - theta_hat): true minus estimated electrical angle, "
+      "wrapped to [-pi, pi)")
+_E_MM = "e (true minus estimated electrical angle, wrapped) as mover displacement e tau / pi"
+_S_EST = ("omega_hat - omega_e: the PLL's speed estimate (the drive reports it as "
+          "velocity actual value 0x606C) minus the true speed")
+_S_FILT = ("omega_f - omega_e: the low-pass filtered speed estimate the speed loop "
+           "regulates on minus the true speed")
+_S_TRK = ("omega_e - omega_ref: true speed minus the drive's speed reference "
+          "(speed mode; includes the transient after each reference change)")
+_S_TRK_EST = ("omega_f - omega_ref: the drive's filtered speed estimate minus its speed "
+              "reference (no truth needed: the drive's own view of its tracking)")
+_RPM, _MPS, _LIN = "r/min (rotary equivalent)", "m/s", ", as linear speed"
+_EST_CH = ("omega_f_radps", "speed_ref_radps_e")
+
+#: The metric definitions (the order is the order of every result dict). A metric with a
+#: unit suffix (:data:`UNIT_SUFFIXES`) has twins of the same statistic in other units
+#: (``..._rpm`` / ``..._mps``, ``..._rad`` / ``..._mm``), computed by the same code.
 METRICS: tuple[MetricDef, ...] = (
-    MetricDef("position_error_rms_rad",
-              "e = wrap(theta_e - theta_hat): true minus estimated electrical angle, "
-              "wrapped to [-pi, pi)", "RMS of e", "rad (electrical)", "settled", _POS),
+    MetricDef("position_error_rms_rad", _E, "RMS of e", "rad (electrical)", "settled", _POS),
     MetricDef("position_error_max_rad", "e as above", "max |e|", "rad (electrical)",
               "settled", _POS),
-    MetricDef("position_error_rms_mm", "e as above, as mover displacement e tau / pi",
-              "RMS", "mm", "settled", _POS),
+    MetricDef("position_error_rms_mm", _E_MM, "RMS", "mm", "settled", _POS),
     MetricDef("position_error_mean_rad", "e as above", "mean of e (the bias)",
               "rad (electrical)", "settled", _POS),
-    MetricDef("speed_estimate_error_max_rpm",
-              "omega_hat - omega_e: the PLL's speed estimate (the drive reports it as "
-              "velocity actual value 0x606C) minus the true speed",
-              "max |.|", "r/min (rotary equivalent)", "settled", _EST),
-    MetricDef("speed_estimate_error_max_mps", "omega_hat - omega_e as above, as linear speed",
-              "max |.|", "m/s", "settled", _EST),
-    MetricDef("speed_filtered_estimate_error_max_rpm",
-              "omega_f - omega_e: the low-pass filtered speed estimate the speed loop "
-              "regulates on minus the true speed", "max |.|", "r/min (rotary equivalent)",
-              "settled", _FILT),
+    MetricDef("speed_estimate_error_max_rpm", _S_EST, "max |.|", _RPM, "settled", _EST),
+    MetricDef("speed_estimate_error_max_mps", _S_EST + _LIN, "max |.|", _MPS, "settled", _EST),
+    MetricDef("speed_filtered_estimate_error_max_rpm", _S_FILT, "max |.|", _RPM, "settled",
+              _FILT),
     MetricDef("speed_filtered_estimate_error_rms_rpm", "omega_f - omega_e as above",
-              "RMS", "r/min (rotary equivalent)", "settled", _FILT),
-    MetricDef("speed_tracking_error_max_rpm",
-              "omega_e - omega_ref: true speed minus the drive's speed reference "
-              "(speed mode; includes the transient after each reference change)",
-              "max |.|", "r/min (rotary equivalent)", "settled", _TRK),
+              "RMS", _RPM, "settled", _FILT),
+    MetricDef("speed_tracking_error_max_rpm", _S_TRK, "max |.|", _RPM, "settled", _TRK),
     MetricDef("settling_time_s",
               f"|e| averaged over {SETTLE_AVG_S * 1e3:g} ms (centred moving average)",
               f"time from the window start until it enters {SETTLE_BAND_RAD:g} rad and "
               f"stays there to the window end; NaN if it never does or stays less than "
               f"{SETTLE_HOLD_S * 1e3:g} ms", "s", "whole run", _POS),
     # judged without truth: what the drive says about itself
-    MetricDef("speed_tracking_estimate_error_max_rpm",
-              "omega_f - omega_ref: the drive's filtered speed estimate minus its speed "
-              "reference (no truth needed: the drive's own view of its tracking)",
-              "max |.|", "r/min (rotary equivalent)", "settled",
-              ("omega_f_radps", "speed_ref_radps_e")),
+    MetricDef("speed_tracking_estimate_error_max_rpm", _S_TRK_EST, "max |.|", _RPM,
+              "settled", _EST_CH),
     MetricDef("estimate_settling_time_s",
               f"|PLL error| (the drive's own angle-error signal) averaged over "
               f"{SETTLE_AVG_S * 1e3:g} ms",
@@ -134,12 +136,56 @@ METRICS: tuple[MetricDef, ...] = (
     MetricDef("current_q_max_A",
               "i_q: the drive's measured thrust current (estimated frame)", "max |i_q|", "A",
               "settled", ("i_dq_hat_A",)),
+    # the linear twins of the metrics above (a linear motor is reported in m/s and mm)
+    MetricDef("position_error_max_mm", _E_MM, "max |.|", "mm", "settled", _POS),
+    MetricDef("position_error_mean_mm", _E_MM, "mean (the bias)", "mm", "settled", _POS),
+    MetricDef("speed_filtered_estimate_error_max_mps", _S_FILT + _LIN, "max |.|", _MPS,
+              "settled", _FILT),
+    MetricDef("speed_filtered_estimate_error_rms_mps", _S_FILT + _LIN, "RMS", _MPS,
+              "settled", _FILT),
+    MetricDef("speed_tracking_error_max_mps", _S_TRK + _LIN, "max |.|", _MPS, "settled", _TRK),
+    MetricDef("speed_tracking_estimate_error_max_mps", _S_TRK_EST + _LIN, "max |.|", _MPS,
+              "settled", _EST_CH),
 )
 
 #: Metric names in result order.
 METRIC_NAMES: tuple[str, ...] = tuple(m.name for m in METRICS)
 #: Definitions by name.
 METRIC_DEFS: dict[str, MetricDef] = {m.name: m for m in METRICS}
+
+#: The unit suffixes of metric names: a metric is ``<statistic>_<suffix>``; metrics of one
+#: statistic in different units (``speed_estimate_error_max_rpm`` / ``_mps``) are twins,
+#: computed by the same code (:func:`compute_metrics`) in another unit.
+UNIT_SUFFIXES: tuple[str, ...] = ("rad", "mm", "rpm", "mps")
+#: Which units a rotary-equivalent and a linear motor are reported in: ``rad`` (electrical)
+#: is both's, ``rpm`` only a rotary-equivalent motor's, ``mm`` and ``mps`` a linear one's
+#: (the bench shows these; every metric is computed for every run).
+SUFFIX_SYSTEM: dict[str, str] = {"rad": "", "mm": "linear", "rpm": "rotary", "mps": "linear"}
+
+
+def metric_base(name: str) -> tuple[str, str]:
+    """``(statistic, unit suffix)`` of a metric name (suffix "" for s, A, ... metrics)."""
+    base, _, suffix = name.rpartition("_")
+    return (base, suffix) if suffix in UNIT_SUFFIXES else (name, "")
+
+
+def metric_system(name: str) -> str:
+    """"rotary" for a rotary-equivalent-only metric (r/min), "linear" for a linear-only
+    one (m/s, mm), "" for a metric both kinds of motor report (rad, s, A)."""
+    return SUFFIX_SYSTEM.get(metric_base(name)[1], "")
+
+
+def metric_twin(name: str, system: str) -> str | None:
+    """The metric of the same statistic in the units of ``system`` ("linear" or
+    "rotary"): ``speed_estimate_error_max_rpm`` -> ``speed_estimate_error_max_mps`` for
+    "linear"; the name itself when it already suits (or has no unit of either kind); None
+    when the statistic has no metric in that system's units."""
+    if metric_system(name) in ("", system):
+        return name
+    base, suffix = metric_base(name)
+    want = {"linear": {"rpm": "mps", "rad": "mm"}, "rotary": {"mps": "rpm", "mm": "rad"}}
+    other = f"{base}_{want.get(system, {}).get(suffix, suffix)}"
+    return other if other in METRIC_DEFS else None
 #: Every channel some metric needs, ``t_s`` first (s, rad, rad/s electrical).
 TRUTH_CHANNELS: tuple[str, ...] = ("t_s",) + tuple(dict.fromkeys(
     c for m in METRICS for c in m.channels))
@@ -279,14 +325,27 @@ def compute_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pa
         t0, t1 = float(window_s[0]), float(window_s[1])
     m = window_mask(t, t0, t1)
     tw = t[m]
+    # the unit of each suffix, from electrical rad (rad/s): the twins differ only by it
     rpm_per_radps = radps_e_to_rpm(1.0, pole_pairs)
     mps_per_radps = m_per_electrical_rad(pole_pitch_m)
+
+    def in_unit(v: float, suffix: str) -> float:
+        if suffix == "rpm":
+            return v * rpm_per_radps
+        if suffix == "mps":
+            return v * mps_per_radps
+        if suffix == "mm":
+            return v * mps_per_radps * 1e3
+        return v
 
     def sig(a: str, b: str) -> np.ndarray:
         return np.asarray(data[a], dtype=float)[m] - np.asarray(data[b], dtype=float)[m]
 
     def absmax(x: np.ndarray) -> float:
         return float(np.max(np.abs(x)))
+
+    def rms(x: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(x**2)))
 
     out: dict[str, float] = {}
     e: np.ndarray | None = None
@@ -297,27 +356,23 @@ def compute_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pa
             continue
         if d.channels == _POS and e is None:
             e = wrap_pi(sig("theta_e_rad", "theta_hat_rad"))
-        if name == "position_error_rms_rad":
-            v = float(np.sqrt(np.mean(e**2)))
-        elif name == "position_error_max_rad":
+        base, suffix = metric_base(name)
+        if base == "position_error_rms":
+            v = rms(e)
+        elif base == "position_error_max":
             v = absmax(e)
-        elif name == "position_error_mean_rad":
+        elif base == "position_error_mean":
             v = float(np.mean(e))
-        elif name == "position_error_rms_mm":
-            v = float(np.sqrt(np.mean(e**2))) * mps_per_radps * 1e3
-        elif name == "speed_estimate_error_max_rpm":
-            v = absmax(sig("omega_hat_radps", "omega_e_radps")) * rpm_per_radps
-        elif name == "speed_estimate_error_max_mps":
-            v = absmax(sig("omega_hat_radps", "omega_e_radps")) * mps_per_radps
-        elif name == "speed_filtered_estimate_error_max_rpm":
-            v = absmax(sig("omega_f_radps", "omega_e_radps")) * rpm_per_radps
-        elif name == "speed_filtered_estimate_error_rms_rpm":
-            v = float(np.sqrt(np.mean(sig("omega_f_radps", "omega_e_radps") ** 2))) \
-                * rpm_per_radps
-        elif name == "speed_tracking_error_max_rpm":
-            v = absmax(sig("omega_e_radps", "speed_ref_radps_e")) * rpm_per_radps
-        elif name == "speed_tracking_estimate_error_max_rpm":
-            v = absmax(sig("omega_f_radps", "speed_ref_radps_e")) * rpm_per_radps
+        elif base == "speed_estimate_error_max":
+            v = absmax(sig("omega_hat_radps", "omega_e_radps"))
+        elif base == "speed_filtered_estimate_error_max":
+            v = absmax(sig("omega_f_radps", "omega_e_radps"))
+        elif base == "speed_filtered_estimate_error_rms":
+            v = rms(sig("omega_f_radps", "omega_e_radps"))
+        elif base == "speed_tracking_error_max":
+            v = absmax(sig("omega_e_radps", "speed_ref_radps_e"))
+        elif base == "speed_tracking_estimate_error_max":
+            v = absmax(sig("omega_f_radps", "speed_ref_radps_e"))
         elif name == "estimate_settling_time_s":
             v = _settling_time(tw, np.asarray(data["pll_err_rad"], dtype=float)[m], t0)
         elif name == "current_q_max_A":
@@ -326,7 +381,7 @@ def compute_metrics(data: Mapping[str, np.ndarray], pole_pitch_m: float, pole_pa
             v = absmax(iq[m])
         else:  # settling_time_s
             v = _settling_time(tw, e, t0)
-        out[name] = v
+        out[name] = in_unit(v, suffix)
     return out
 
 

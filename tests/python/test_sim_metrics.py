@@ -73,6 +73,18 @@ def _reference(d, t0, t1, tau=TAU, p=P):
         "speed_tracking_error_max_rpm":
             np.max(np.abs(d["omega_e_radps"] - d["speed_ref_radps_e"])[k]) * rpm,
         "settling_time_s": ts,
+        # the linear twins (m/s, mm) of the metrics above
+        "position_error_max_mm": np.max(np.abs(e[k])) * tau / math.pi * 1e3,
+        "position_error_mean_mm": np.mean(e[k]) * tau / math.pi * 1e3,
+        "speed_filtered_estimate_error_max_mps":
+            np.max(np.abs(d["omega_f_radps"] - d["omega_e_radps"])[k]) * tau / math.pi,
+        "speed_filtered_estimate_error_rms_mps":
+            math.sqrt(np.mean(((d["omega_f_radps"] - d["omega_e_radps"])[k]) ** 2))
+            * tau / math.pi,
+        "speed_tracking_error_max_mps":
+            np.max(np.abs(d["omega_e_radps"] - d["speed_ref_radps_e"])[k]) * tau / math.pi,
+        "speed_tracking_estimate_error_max_mps":
+            np.max(np.abs(d["omega_f_radps"] - d["speed_ref_radps_e"])[k]) * tau / math.pi,
     }
 
 
