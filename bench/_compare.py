@@ -44,6 +44,13 @@ TOLERANCES: dict[str, tuple[str, float]] = {
     "speed_tracking_estimate_error_max_rpm": ("rel", 0.35),
     "estimate_settling_time_s": ("abs", 0.03),
     "current_q_max_A": ("rel", 0.15),
+    # the linear twins (m/s, mm) of the figures above: the same tolerance as their twin
+    "position_error_max_mm": ("rel", 0.35),
+    "position_error_mean_mm": ("abs", 0.04),  # 0.005 rad el. at the paper motor's 24 mm
+    "speed_filtered_estimate_error_max_mps": ("rel", 0.35),
+    "speed_filtered_estimate_error_rms_mps": ("rel", 0.25),
+    "speed_tracking_error_max_mps": ("rel", 0.35),
+    "speed_tracking_estimate_error_max_mps": ("rel", 0.35),
 }
 
 #: signals overlaid in compare.html: (title, [(channel candidates in order), unit])

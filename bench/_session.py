@@ -38,7 +38,7 @@ from bench._logging import RunLogger, run_dir_for
 from bench._report import make_plots, write_html, write_junit, write_summary_json
 from bench._runner import InterruptGuard, Runner, RunResult
 from bench._sequence import Sequence
-from bench._units import WIRE_UNITS, MotorUnits, motor_units, wire_unit
+from bench._units import WIRE_UNITS, MotorUnits, motor_units, units_of, wire_unit
 from protocols.generated import od_names as od
 
 log = logging.getLogger("bench.session")
@@ -255,7 +255,7 @@ def open_sim(motor: str = "paper_salient", extractor: str = "sogi_adaptive", see
     except Exception:
         sim.close()
         raise
-    units = MotorUnits(pole_pitch_m=sim.motor.tau_m, pole_pairs=float(sim.motor.pole_pairs))
+    units = units_of(sim.motor)  # geometry, and linear or rotary from the motor file
     other = (f", simulating another motor than configured ({len(plant)} plant parameters "
              "overridden)") if plant else ""
     desc = (f"{KIND_LABEL.get(kind, kind)} drive (motor {sim.motor.name}{other}, extractor "
@@ -917,7 +917,8 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
                      "extractor": seq.extractor, "seed": seq.seed,
                      "description": seq.description, "document": seq.raw},
         "seed": seq.seed, "units": {"pole_pitch_m": conn.units.pole_pitch_m,
-                                    "pole_pairs": conn.units.pole_pairs},
+                                    "pole_pairs": conn.units.pole_pairs,
+                                    "linear": conn.units.linear},
         "evidence": evidence.to_dict(), "clock": conn.info.get("clock", "simulation clock"),
     }
     try:
@@ -1000,11 +1001,11 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
         if report:
             plots = make_plots(logger, result, conn.units, run_dir)
             rep = run_dir / "report.html"
-            write_html(rep, result, plots, logger.meta, logstats)
-        write_summary_json(run_dir / "summary.json", result, extra)
+            write_html(rep, result, plots, logger.meta, logstats, units=conn.units)
+        write_summary_json(run_dir / "summary.json", result, extra, units=conn.units)
         write_junit(run_dir / "junit.xml", [result], drive_kind(conn))
         if summary_json:
-            write_summary_json(summary_json, result, extra)
+            write_summary_json(summary_json, result, extra, units=conn.units)
         if junit:
             write_junit(junit, [result], drive_kind(conn))
         logger.sync_files(logstats)

@@ -217,3 +217,12 @@ def test_truth_from_a_reference_sensor():
     exact = k * (v0 + a * t)
     assert np.max(np.abs(w[inner] - exact[inner])) <= k * res / 2e-3 * 1.01
     assert np.max(np.abs(w[[0, -1]] - exact[[0, -1]])) <= k * (res / 1e-3 + a * 1e-3)
+
+
+def test_the_docs_metric_table_is_the_generated_one() -> None:
+    """docs/simulator.md says its metric table is generated from METRICS: it must be
+    (it had 8 of the metrics, with older texts)."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "simulator.md").read_text()
+    assert M.definitions_markdown().strip() in text
