@@ -195,15 +195,19 @@ def junit_properties(record: Mapping[str, Any]) -> list[tuple[str, str]]:
 
 
 def add_junit_properties(path: str | Path, records: list[Mapping[str, Any]]) -> None:
-    """Add each run's test-record properties to its testsuite (in order) of the JUnit
-    file ``path`` (written by :func:`bench._report.write_junit`)."""
+    """Add each run's test-record properties to the ``run`` testcase of its testsuite (in
+    order) of the JUnit file ``path`` (written by :func:`bench._report.write_junit`; the
+    testsuite's own properties stay what it writes: drive, simulated, fallback, board)."""
     tree = ET.parse(path)
     suites = tree.getroot().findall("testsuite")
     for suite, rec in zip(suites, records, strict=False):
-        props = suite.find("properties")
+        run = next((c for c in suite.findall("testcase") if c.get("name") == "run"), None)
+        if run is None:
+            continue
+        props = run.find("properties")
         if props is None:
             props = ET.Element("properties")
-            suite.insert(0, props)
+            run.insert(0, props)
         have = {p.get("name") for p in props}
         for k, v in junit_properties(rec):
             if k not in have:

@@ -93,11 +93,15 @@ def test_junit_carries_the_record(fake_run: tuple[Path, dict]) -> None:
     tmp, doc = fake_run
     for path in (tmp / "j.xml", Path(doc["run_dir"]) / "junit.xml"):
         suite = ET.parse(path).getroot().find("testsuite")
-        props = {p.get("name"): p.get("value") for p in suite.find("properties")}
+        # the suite's own properties: what the drive is (as written by bench._report)
+        assert {p.get("name"): p.get("value") for p in suite.find("properties")} == {
+            "drive": "no_io", "simulated": "true", "fallback": "false", "board": ""}
+        (run,) = [c for c in suite.findall("testcase") if c.get("name") == "run"]
+        props = {p.get("name"): p.get("value") for p in run.find("properties")}
         assert props["serial_number"] == str(SERIAL) and props["build_id"] == BUILD
         assert props["product_code"] == f"0x{doc['dut']['product_code']:08X}"
         assert props["operator"] == "Ada Lovelace" and props["station"] == "rig 3"
-        assert props["fixture"] == "F-7" and props["drive"] == "no_io"
+        assert props["fixture"] == "F-7" and props["device_name"] == doc["dut"]["device_name"]
         assert props["sequence_sha256"] == doc["record"]["sequence_sha256"]
         assert props["started_utc"] == doc["record"]["started_utc"]
 
