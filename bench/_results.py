@@ -267,8 +267,9 @@ def _busy(e: BaseException) -> bool:
 
 
 def _connect(path: Path, create: bool, timeout_s: float = 30.0) -> sqlite3.Connection:
-    """A connection in WAL mode, autocommit (transactions are explicit). Without
-    ``create``, a missing file is a :class:`StoreError` (never created by a query)."""
+    """A connection, autocommit (transactions are explicit); with ``create`` (writers) the
+    store is switched to WAL mode. Without ``create`` (queries), a missing file is a
+    :class:`StoreError` (never created by a query) and nothing in the file is changed."""
     if not create and not path.is_file():
         what = "no such file" if not path.exists() else "not a file"
         raise StoreError(f"{path}: no results store ({what}); it is written by every "
@@ -278,7 +279,7 @@ def _connect(path: Path, create: bool, timeout_s: float = 30.0) -> sqlite3.Conne
     con = sqlite3.connect(uri, uri=True, timeout=timeout_s, isolation_level=None)
     try:
         con.execute(f"PRAGMA busy_timeout = {int(timeout_s * 1000)}")
-        if con.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
+        if con.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal" and create:
             con.execute("PRAGMA journal_mode = WAL")
         con.execute("PRAGMA foreign_keys = ON")
     except BaseException:

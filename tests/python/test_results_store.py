@@ -326,6 +326,9 @@ def test_missing_corrupt_or_foreign_store_is_one_line_exit_3(tmp_path: Path) -> 
     con.close()
     rc, out, err = bench("results", "--runs", str(other), cwd=tmp_path)
     assert rc == 3 and len(err) == 1 and "not a results store" in err[0], err
+    con = sqlite3.connect(other / "results.sqlite")  # a query left the file as it was
+    assert con.execute("PRAGMA journal_mode").fetchone()[0] == "delete"
+    con.close()
 
 
 def test_rebuild_recovers_a_deleted_or_corrupt_store(store: Path) -> None:
