@@ -35,7 +35,7 @@ import numpy as np
 from bench._drive import Drive
 from bench._load import CanopenLoad, LoadDevice, NoLoad
 from bench._logging import RunLogger, run_dir_for
-from bench._report import make_plots, write_html, write_junit, write_summary_json
+from bench._report import make_plots, summary, write_html, write_junit, write_summary_json
 from bench._runner import InterruptGuard, Runner, RunResult
 from bench._sequence import Sequence
 from bench._units import WIRE_UNITS, MotorUnits, motor_units, units_of, wire_unit
@@ -869,12 +869,15 @@ class RunOutput:
     logstats: dict[str, Any]
     report: Any
     interrupted: BaseException | None = None
+    #: the test record: ``{"dut": ..., "record": ...}`` as in summary.json
+    record: dict[str, Any] = field(default_factory=dict)
 
 
 def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
                  summary_json: str | None = None, junit: str | None = None,
                  progress: bool = True, rerun: Any = None, trace_format: str = "blf",
-                 report: bool = True) -> RunOutput:
+                 report: bool = True, station_info: dict[str, str] | None = None
+                 ) -> RunOutput:
     """Run ``seq`` on an open connection: log, evaluate, report.
 
     ``rerun`` (a :class:`bench._live.RerunSpec`) streams the decoded wire telemetry (and
@@ -884,7 +887,30 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
     KeyboardInterrupt is caught after the safe state, recorded as an aborted
     run and returned in ``interrupted`` (the report and JUnit are still
     written), so the caller can exit with 130.
+
+    The test record (:mod:`bench._results`): the drive's identity as it answers,
+    ``station_info`` (operator, station, fixture; by default from the environment,
+    :func:`bench._results.station_fields`), times and verdict go into summary.json,
+    meta.json and junit.xml; then the run is added to ``runs_root/results.sqlite``. A
+    store that cannot be written is one line on stderr, never the run's result.
     """
+    from datetime import datetime, timezone
+    from pathlib import Path
+
+    from bench import __version__
+    from bench._results import (
+        add_junit_properties,
+        dut_fields,
+        record_run,
+        station_fields,
+        store_path,
+        utc_stamp,
+        verdict_of,
+    )
+
+    who = dict(station_info) if station_info is not None else station_fields()
+    started = datetime.now(timezone.utc)
+    wall0 = time.monotonic()
     run_dir = run_dir_for(seq.name, runs_root)
     if conn.sim is not None:
         conn.sim.wait_idle()
@@ -915,7 +941,8 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
         "connection": conn.description, "connection_info": conn.info,
         "sequence": {"name": seq.name, "file": str(seq.path), "motor": seq.motor,
                      "extractor": seq.extractor, "seed": seq.seed,
-                     "description": seq.description, "document": seq.raw},
+                     "description": seq.description, "document": seq.raw,
+                     "params": seq.params, "overrides": seq.overrides, "sha256": seq.sha256},
         "seed": seq.seed, "units": {"pole_pitch_m": conn.units.pole_pitch_m,
                                     "pole_pairs": conn.units.pole_pairs,
                                     "linear": conn.units.linear},
@@ -928,6 +955,16 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
         meta["drive_config"] = drive.backup()
     except Exception as e:  # noqa: BLE001 - metadata must not stop a run
         meta["drive_error"] = str(e)
+    # the device under test as the drive answered (never typed), who tested it, where
+    dut = dut_fields(meta.get("drive"), drive_kind(conn),
+                     None if "drive" in meta else meta.get("drive_error"))
+    seq_file = Path(seq.path).resolve() if Path(seq.path).is_file() else seq.path
+    rec: dict[str, Any] = {**who, "started_utc": utc_stamp(started), "sequence_name": seq.name,
+                           "sequence_file": str(seq_file), "sequence_sha256": seq.sha256,
+                           "params": dict(seq.params), "overrides": dict(seq.overrides),
+                           "motor": seq.motor, "bench_version": __version__}
+    meta["dut"] = dut
+    meta["record"] = rec
     logger.write_meta(meta)
 
     bar = None
@@ -991,29 +1028,43 @@ def run_sequence(seq: Sequence, conn: Connection, runs_root: str = "runs",
             logstats["sim_frames_to_bus"] = sent
         if logstats["receive_errors"]:
             _say("bench: CAN receive-thread errors: " + "; ".join(logstats["receive_errors"]))
+        verdict, reason, code = verdict_of(result, interrupted)
+        finished = datetime.now(timezone.utc)
+        rec.update(finished_utc=utc_stamp(finished), duration_s=time.monotonic() - wall0,
+                   sequence_s=result.duration_s, verdict=verdict, exit_reason=reason,
+                   exit_code=code)
+        record = {"dut": dut, "record": rec}
         logger.write_meta({"result": {"passed": result.passed, "error": result.error,
                                       "safe_state": result.safe_state},
-                           "logging": logstats})
+                           "logging": logstats, "record": rec})
         rep = None
         extra = {"run_dir": str(run_dir), "lost_frames": logstats["lost_frames"],
                  "receive_errors": logstats["receive_errors"], **drive_kind(conn),
-                 "evidence": evidence.to_dict()}
+                 "evidence": evidence.to_dict(), **record}
         if report:
             plots = make_plots(logger, result, conn.units, run_dir)
             rep = run_dir / "report.html"
             write_html(rep, result, plots, logger.meta, logstats, units=conn.units)
         write_summary_json(run_dir / "summary.json", result, extra, units=conn.units)
         write_junit(run_dir / "junit.xml", [result], drive_kind(conn))
+        add_junit_properties(run_dir / "junit.xml", [record])
         if summary_json:
             write_summary_json(summary_json, result, extra, units=conn.units)
         if junit:
             write_junit(junit, [result], drive_kind(conn))
+            add_junit_properties(junit, [record])
         logger.sync_files(logstats)
         if logstats["mf4_errors"]:
             _say("bench: signals not written: " + "; ".join(logstats["mf4_errors"]))
         if logstats["mf4_errors"] or logstats["mf4_written_in_bench"]:
             logger.write_meta({"logging": logstats})
-    return RunOutput(result, run_dir, logstats, rep, interrupted)
+        try:  # after summary.json: the store can always be rebuilt from the run folders
+            record_run(runs_root, run_dir, summary(result, extra), logger.meta)
+        except Exception as e:  # noqa: BLE001 - the run's own files and verdict stand
+            _say(f"bench: warning: results store {store_path(runs_root)} not updated: "
+                 f"{' '.join(str(e).split())}; the run's files are complete ('bench results "
+                 "--rebuild' recovers the store)")
+    return RunOutput(result, run_dir, logstats, rep, interrupted, record)
 
 
 def _collect_trace(runner: Runner, drive: Drive, tel: TelemetryReader, logger: RunLogger,

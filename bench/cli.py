@@ -143,6 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="raw CAN trace format")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     _rerun_arg(p)
+    _record_args(p)
 
     p = sub.add_parser("validate", help="validate sequence files only",
                        description="Check sequence files against the schema; errors name the "
@@ -350,6 +351,8 @@ def build_parser() -> argparse.ArgumentParser:
     ri.add_argument("--runs", default="runs", metavar="DIR", help="run folder root (default "
                                                                   "runs/)")
 
+    _results_parser(sub)
+
     p = sub.add_parser("flash", help="program a board's image and check the drive after "
                        "its reboot", description="Program a board's firmware image with the "
                        "board's debug probe (openocd or pyocd, the first installed unless "
@@ -395,6 +398,49 @@ def build_parser() -> argparse.ArgumentParser:
     from bench import _campaign
     _campaign.add_parser(sub)
     return ap
+
+
+def _record_args(p: argparse.ArgumentParser) -> None:
+    """``bench run``'s test-record options and sequence parameters."""
+    g = p.add_argument_group("test record (summary.json, meta.json, JUnit, RUNS/results.sqlite)")
+    g.add_argument("--operator", help="who runs the test (default: $BENCH_OPERATOR, else the "
+                                      "login name)")
+    g.add_argument("--station", help="the test station (default: $BENCH_STATION, else the "
+                                     "host name)")
+    g.add_argument("--fixture", help="the fixture the drive is in (default: $BENCH_FIXTURE, "
+                                     "else none)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", dest="set_",
+                   help="a value for the sequence's parameter NAME (its params:), e.g. --set "
+                        "speed=150; repeatable")
+
+
+def _results_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "results", help="the results store: runs across time, by motor, serial, sequence",
+        description="List the runs recorded in RUNS/results.sqlite (written at the end of "
+                    "every 'bench run'), newest first, or export them (--csv, --json with "
+                    "their expectations). --rebuild re-creates the store from the run "
+                    "folders' summary.json. Exit 2 for a bad filter, 3 when the store is "
+                    "missing or unreadable.")
+    p.add_argument("--runs", default="runs", metavar="DIR", help="run folder root (default "
+                                                                 "runs/)")
+    p.add_argument("--motor", metavar="M", help="only runs of this motor")
+    p.add_argument("--serial", metavar="N", help="only this drive's runs (its serial number, "
+                                                 "0x1018:4; decimal or 0x-hex)")
+    p.add_argument("--sequence", metavar="S", help="only runs of this sequence (its name)")
+    p.add_argument("--since", metavar="DATE", help="runs started at or after DATE (YYYY-MM-DD "
+                                                   "or YYYY-MM-DDTHH:MM, UTC)")
+    p.add_argument("--until", metavar="DATE", help="runs started at or before DATE (a day: "
+                                                   "through its end)")
+    p.add_argument("--verdict", metavar="V", help="passed, failed or aborted")
+    p.add_argument("--limit", metavar="N", help="at most N runs (the newest)")
+    out = p.add_mutually_exclusive_group()
+    out.add_argument("--csv", metavar="FILE", help="write the runs as CSV to FILE ('-': "
+                                                   "stdout)")
+    out.add_argument("--json", action="store_true", help="print the runs and their "
+                                                         "expectations as JSON")
+    p.add_argument("--rebuild", action="store_true",
+                   help="re-create the store from the run folders' summary.json first")
 
 
 def _quiet_thread_errors(verbose: bool) -> None:
@@ -710,11 +756,18 @@ def cmd_run(args: argparse.Namespace) -> int:
     if rerun is not None and rerun.path is not None and len(args.sequences) > 1:
         raise UserError(f"--rerun save {rerun.path}: one file for {len(args.sequences)} "
                         "sequences; give no PATH (each run folder gets its telemetry.rrd)")
+    from bench._results import RecordFieldError, add_junit_properties, station_fields
+
+    try:
+        who = station_fields(args.operator, args.station, args.fixture)
+    except RecordFieldError as e:
+        raise UserError(str(e)) from None
+    overrides = _parse_sets(args.set_)
     seqs = []
     bad = False
     for f in args.sequences:  # validate everything before anything moves
         try:
-            seqs.append(load_sequence(f))
+            seqs.append(load_sequence(f, overrides))
         except SequenceError as e:
             _print_issues(e)
             bad = True
@@ -724,13 +777,14 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     results = []
     summaries = []
+    records: list[dict[str, Any]] = []
     kinds: list[dict[str, Any]] = []
     rc = EXIT_OK
     for seq in seqs:
         conn = _connect(args, seq)
         try:  # rerun: telemetry.rrd in the run folder (or the 'save PATH.rrd' given)
             out = run_sequence(seq, conn, runs_root=args.runs, progress=not args.no_progress,
-                               rerun=rerun, trace_format=args.trace_format)
+                               rerun=rerun, trace_format=args.trace_format, station_info=who)
         except RerunStartError as e:  # before the sequence started: nothing moved
             raise UserError(f"--rerun {rerun.mode}: {e}", EXIT_DRIVE) from None
         except (DriveError, SdoCommunicationError, can.CanError, OSError) as e:
@@ -745,7 +799,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         kind = drive_kind(conn)
         kinds.append(kind)
         extra = {"run_dir": str(out.run_dir), "lost_frames": out.logstats["lost_frames"],
-                 **kind}
+                 **kind, **out.record}
+        records.append(out.record)
         summaries.append(summary(r, extra))
         _print_result(r, out, kind)
         if out.interrupted is not None:
@@ -767,7 +822,100 @@ def cmd_run(args: argparse.Namespace) -> int:
         Path(args.summary_json).write_text(json.dumps(doc, indent=2) + "\n")
     if args.junit:
         write_junit(args.junit, results, kinds[0] if kinds else None)
+        add_junit_properties(args.junit, records)
     return rc
+
+
+def _parse_sets(items: list[str]) -> dict[str, float]:
+    """``--set NAME=VALUE`` options: each a parameter name and a finite number, once."""
+    from bench._sequence import PARAM_NAME, SequenceLoader
+
+    out: dict[str, float] = {}
+    for item in items:
+        name, eq, text = item.partition("=")
+        name = name.strip()
+        if not eq or not re.match(PARAM_NAME, name):
+            raise UserError(f"--set {item}: give NAME=VALUE with NAME a parameter of the "
+                            "sequence (its params:), e.g. --set speed=150")
+        if name in out:
+            raise UserError(f"--set {name}: given twice")
+        try:
+            import yaml
+
+            v = yaml.load(text.strip() or "~", Loader=SequenceLoader)  # noqa: S506 - safe
+        except Exception:  # noqa: BLE001 - any text that is not a YAML scalar
+            v = None
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or v != v or \
+                v in (float("inf"), float("-inf")):
+            raise UserError(f"--set {name}={text}: not a number (parameters are numbers, "
+                            f"e.g. --set {name}=150)")
+        out[name] = v
+    return out
+
+
+def cmd_results(args: argparse.Namespace) -> int:
+    from bench import _results as R
+
+    def check(opt: str, text: str | None, parse: Any) -> Any:
+        try:
+            return None if text is None else parse(text)
+        except ValueError as e:
+            raise UserError(f"{opt} {e}") from None
+
+    # every filter is checked before the store is opened
+    serial = check("--serial", args.serial, R.parse_serial)
+    since = check("--since", args.since, R.parse_when)
+    until = check("--until", args.until, lambda t: R.parse_when(t, end=True))
+    if args.verdict is not None and args.verdict not in R.VERDICTS:
+        raise UserError(f"--verdict {args.verdict!r}: allowed: {', '.join(R.VERDICTS)}")
+    if since is not None and until is not None and since > until:
+        raise UserError(f"--since {args.since} is after --until {args.until}")
+    limit = None
+    if args.limit is not None:
+        if not args.limit.isdigit() or int(args.limit) < 1:
+            raise UserError(f"--limit {args.limit!r}: a whole number of runs, at least 1")
+        limit = int(args.limit)
+    if args.rebuild:
+        try:
+            n, skipped, moved = R.rebuild(args.runs)
+        except FileNotFoundError:
+            raise UserError(f"--runs {args.runs}: no such folder") from None
+        except (OSError, R.sqlite3.Error, R.StoreError) as e:
+            raise UserError(f"{R.store_path(args.runs)}: cannot be rebuilt: "
+                            f"{' '.join(str(e).split())}", EXIT_DRIVE) from None
+        if moved is not None:
+            print(f"bench: the unreadable store was moved to {moved}", file=sys.stderr)
+        for why in skipped:
+            print(f"bench: skipped {why}", file=sys.stderr)
+        print(f"bench: rebuilt {R.store_path(args.runs)}: {n} run(s) from the run folders"
+              + (f", {len(skipped)} skipped" if skipped else ""), file=sys.stderr)
+    try:
+        rows = R.query(args.runs, motor=args.motor, serial=serial, sequence=args.sequence,
+                       since=since, until=until, verdict=args.verdict, limit=limit,
+                       expectations=bool(args.json))
+    except R.StoreError as e:
+        raise UserError(str(e), EXIT_DRIVE) from None
+    except (OSError, R.sqlite3.Error) as e:
+        raise UserError(f"{R.store_path(args.runs)}: {' '.join(str(e).split())}",
+                        EXIT_DRIVE) from None
+    if args.json:
+        sys.stdout.write(R.to_json(rows))
+    elif args.csv:
+        text = R.to_csv(rows)
+        if args.csv == "-":
+            sys.stdout.write(text)
+        else:
+            try:
+                Path(args.csv).write_text(text, encoding="utf-8")
+            except OSError as e:
+                raise UserError(f"--csv {args.csv}: cannot write: {e.strerror}",
+                                EXIT_DRIVE) from None
+            print(f"{args.csv}: {len(rows)} run(s)")
+    elif rows:
+        print(R.table(rows))
+    else:
+        print(f"no runs in {R.store_path(args.runs)} match")
+    return EXIT_OK
 
 
 def _update_index(runs_root: str) -> None:
@@ -1284,7 +1432,7 @@ def main(argv: list[str] | None = None) -> int:
                 "param": cmd_param, "config": cmd_config, "faults": cmd_faults,
                 "campaign": _campaign_cmd, "report": cmd_report, "sim": cmd_sim,
                 "emu": cmd_emu, "compare": cmd_compare, "flash": cmd_flash,
-                "shell": cmd_shell}
+                "shell": cmd_shell, "results": cmd_results}
     try:
         return handlers[args.cmd](args)
     except Exception as e:  # noqa: BLE001 - every exit code is decided in exit_code_for

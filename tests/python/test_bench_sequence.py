@@ -182,3 +182,19 @@ def test_a_relative_motor_file_is_beside_the_sequence(tmp_path: Path) -> None:
     seq = load_sequence(seqdir / "a.yaml")
     assert Path(seq.motor) == seqdir / "my_lin.toml"
     assert validate_sequence("name: t\nmotor: paper_salient\n" + body).motor == "paper_salient"
+
+
+def test_a_file_without_params_or_repeat_is_as_written() -> None:
+    """Parameters and loops change nothing for a plain file: no parameters, no loop
+    values, steps and positions as written, the file's hash recorded."""
+    import hashlib
+
+    s = validate_sequence(GOOD, "seq.yaml")
+    assert s.params == {} and s.overrides == {}
+    assert all(st.loop == {} for st in s.steps)
+    assert [st.index for st in s.steps] == list(range(len(s.steps)))
+    assert s.expectations[0].params == {"metric": "position_error_rms_rad", "op": "<=",
+                                        "limit": 0.01, "window_s": [0.15, 0.8]}
+    assert s.sha256 == hashlib.sha256(GOOD.encode()).hexdigest()
+    with pytest.raises(SequenceError, match=r"--set x: no such parameter; defined: none"):
+        validate_sequence(GOOD, "seq.yaml", overrides={"x": 1})
