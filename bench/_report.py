@@ -828,10 +828,32 @@ def write_html(path: Path, result: RunResult, plots: list[tuple[str, str]],
         "extractor": meta.get("sequence", {}).get("extractor"),
         "seed": meta.get("sequence", {}).get("seed"), "bench": meta.get("bench_version"),
         "CAN frames logged": logstats.get("frames_logged"),
-        "lost frames": logstats.get("lost_frames"),
+        "lost frames": ", ".join(f"{k}: {v}" for k, v in
+                                 (logstats.get("lost_frames") or {}).items()) or "none",
         "receive-thread errors": len(logstats.get("receive_errors", [])),
         "safe state": result.safe_state, "error": result.error,
         "sequence time (s)": result.duration_s, "wall time (s)": result.wall_s}.items())
+    dut = meta.get("dut") or {}
+    rec = meta.get("record") or {}
+
+    def hexid(v: Any) -> Any:
+        return f"0x{v:08X}" if isinstance(v, int) and not isinstance(v, bool) else v
+
+    record_rows = "\n".join(
+        f"<tr><td>{_fmt(k)}</td><td>{_fmt(v)}</td></tr>" for k, v in {
+            "drive serial number (0x1018:4)": hexid(dut.get("serial")),
+            "vendor / product / revision (0x1018)": " / ".join(
+                str(hexid(dut.get(k))) for k in ("vendor_id", "product_code", "revision")),
+            "device": dut.get("device_name"), "firmware (0x2040)": dut.get("firmware_version"),
+            "drive kind, board (0x2090)": f"{dut.get('kind', '')} {dut.get('board', '')}",
+            "operator": rec.get("operator"), "station": rec.get("station"),
+            "fixture": rec.get("fixture"), "started (UTC)": rec.get("started_utc"),
+            "parameters": rec.get("params"),
+            "identity not read": dut.get("error")}.items() if v not in (None, "", {}))
+    record_html = (f"<h2>Test record</h2>\n<p class='cite'>What was tested, read from the "
+                   f"drive; who and where, from --operator, --station, --fixture (also in "
+                   f"summary.json and the results store: <code>bench results</code>).</p>"
+                   f"\n<table>{record_rows}</table>") if record_rows else ""
     doc = f"""<!doctype html>
 <html><head><meta charset="utf-8"><title>{html.escape(result.sequence)} - bench report</title>
 <style>
@@ -875,6 +897,7 @@ starts cut to the time the drive was enabled.</p>
 {metrics}</table>
 <h2>Metric definitions</h2>
 <table>{defs_html}</table>
+{record_html}
 <h2>Run</h2>
 <table>{info}</table>
 {lib_footer}

@@ -89,6 +89,20 @@ def test_the_identity_is_what_the_drive_answers(fake_run: tuple[Path, dict]) -> 
     assert row == (SERIAL, BUILD, "no_io", "Ada Lovelace", "rig 3", "F-7", "passed")
 
 
+def test_the_report_shows_the_record(fake_run: tuple[Path, dict]) -> None:
+    """report.html carries the test record: the drive's serial as it answered, who,
+    where, on which fixture."""
+    import html as h
+    import re
+
+    _, doc = fake_run
+    text = h.unescape(re.sub(r"<[^>]+>", " ", (Path(doc["run_dir"]) / "report.html")
+                             .read_text(encoding="utf-8")))
+    sec = " ".join(text[text.index("Test record"):text.index(" Run ")].split())
+    assert f"drive serial number (0x1018:4) 0x{SERIAL:08X}" in sec
+    assert "operator Ada Lovelace" in sec and "station rig 3" in sec and "fixture F-7" in sec
+
+
 def test_junit_carries_the_record(fake_run: tuple[Path, dict]) -> None:
     tmp, doc = fake_run
     for path in (tmp / "j.xml", Path(doc["run_dir"]) / "junit.xml"):
