@@ -360,10 +360,11 @@ def bus_args(interface: str | None, channel: str | None, bitrate: int | None,
     return kw
 
 
-def open_bus(kw: dict[str, Any]) -> tuple[can.BusABC, dict[str, Any]]:
-    """Open a python-can bus; returns it and its arguments as shown in messages.
-    Raises :class:`NoHardware` (one line) when it cannot be opened."""
-    shown = {k: v for k, v in kw.items() if k not in ("sleep_after_open",)}
+def open_bus(kw: dict[str, Any]) -> tuple[can.BusABC, str]:
+    """Open a python-can bus; returns it and its arguments as shown in messages
+    (``interface=pcan channel=PCAN_USBBUS1``). Raises :class:`NoHardware` (one line) when
+    it cannot be opened."""
+    shown = " ".join(f"{k}={v}" for k, v in kw.items() if k not in ("sleep_after_open",))
     try:
         return can.Bus(**kw), shown
     except (can.CanError, OSError, ImportError, ValueError, NotImplementedError,
