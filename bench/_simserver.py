@@ -730,7 +730,8 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
     vchan = f"pmlsm-simserver-{os.getpid()}-vcan"  # no trailing digits (BLF channel names)
     nvm.parent.mkdir(parents=True, exist_ok=True)
     sim = SimDrive(vchan, motor=motor, extractor=extractor, seed=seed, node_id=node_id,
-                   realtime=True, nvm_path=nvm)  # boots from the file
+                   realtime=True, nvm_path=nvm,  # boots from the file
+                   max_lag_s=SimDrive.MAX_LAG_S)  # a stopped process pauses its clock
     server = None
     bus = None
     try:
@@ -749,7 +750,7 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
         _write_state(folder, st)
         log.warning("socketcand server on %s:%d, bus '%s' (pid %d), client queues of %d "
                     "bytes", HOST, server.port, channel, os.getpid(), server.queue_bytes)
-        stalls, written = 0, time.monotonic()
+        stalls, written, unwritable = 0, time.monotonic(), False
         while not stop.wait(0.2):
             if sim.error is not None:
                 log.error("simulated drive stopped: %s", sim.error)
@@ -766,7 +767,12 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
             if _events(stats) != _events(st.stats) or (
                     stats != st.stats and time.monotonic() - written > 5.0):
                 st.stats, written = stats, time.monotonic()
-                _write_state(folder, st)
+                try:
+                    _write_state(folder, st)
+                except OSError as e:  # the folder went away: serve on, say it once
+                    if not unwritable:
+                        log.warning("cannot update %s: %s", folder / STATE_FILE, e)
+                    unwritable = True
         log.warning("stopping (signal); frames from clients %d, to clients %d, refused %d; "
                     "clients dropped %d; drive clock stalls %d (%.3f s)",
                     server.frames_from_clients, server.frames_to_clients,
