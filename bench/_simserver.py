@@ -795,14 +795,16 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
 
 def motor_key(motor: str) -> str:
     """What a simulated drive's NVM file is named after: the motor's readable name (file
-    stem) and a short hash of its parsed parameters (plant, controller, geometry), so that
-    two motors of one file name (every `bench identify` writes a motor.toml) never share
-    a stored configuration, and an edited motor file starts from the defaults."""
+    stem) and a short hash of its parameters as the motor file gives them (parsed: every
+    section but the name and description; not the values the simulator derives from
+    them, so that a new bench version does not re-key a motor), so that two motors of one
+    file name (every `bench identify` writes a motor.toml) never share a stored
+    configuration, and an edited motor starts from the defaults."""
     from sim_fallback import load_motor
 
     m = load_motor(motor)
-    doc = {"plant": m.plant, "controller": m.controller, "pole_pairs": m.pole_pairs,
-           "radius_m": m.radius_m}
+    doc = {sec: body for sec, body in m.raw.items() if sec != "motor"}
+    doc["parameterization"] = m.parameterization
     digest = hashlib.sha256(json.dumps(doc, sort_keys=True, default=repr).encode()).hexdigest()
     return f"{_motor_stem(motor)}_{digest[:10]}"
 
@@ -901,8 +903,8 @@ def _start_locked(folder: Path, motor: str, extractor: str, seed: int, node_id: 
 
 def _note_unkeyed_nvm(folder: Path, motor: str, nvm_file: Path, say: Any) -> None:
     """An NVM file named after the motor file alone (before the NVM was keyed by the
-    motor's content) is not loaded: it may hold another motor's configuration. Say so
-    once, with how to keep it, when this motor has no file of its own yet."""
+    motor's content) is not loaded: it may hold another motor's configuration. Say so,
+    with how to keep it, while this motor has no file of its own."""
     old = folder / f"nvm_{_motor_stem(motor)}.bin"
     if old.is_file() and not nvm_file.exists() and nvm_file.parent == folder:
         say(f"bench: {old} (named after the motor file only, perhaps another motor's "
