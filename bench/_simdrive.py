@@ -35,9 +35,19 @@ Pacing
     chunk that answered it has published its end (``t_s``).
     Runs go as fast as the CPU allows.
     ``realtime=True`` (live): the simulated clock follows the wall clock and
-    every pending frame enters at the next chunk.
+    every pending frame enters at the next chunk. A lag behind the wall clock
+    is made up at full speed; with ``max_lag_s`` set (the simulated drive
+    server, whose process can be stopped), a drive that finds itself further
+    behind than that (its process was stopped, SIGSTOP or a suspended machine,
+    or starved of CPU) does not run the lost time: its clock pauses for it, as
+    the bus it sees stood still too (no heartbeat could reach it), and the
+    stall is counted (:attr:`SimDrive.stalls`, :attr:`SimDrive.stalled_s`).
+    Running it would make a second of a frozen bus a second of silence for
+    the drive: its heartbeat consumer faults (0x8130) on a supervisor that was
+    alive.
 
-Frame timestamps on the bus are ``epoch + simulated time`` (s).
+Frame timestamps on the bus are ``epoch + simulated time`` (s); a stall moves
+``epoch`` on by the paused time, so that they stay on the wall clock.
 """
 
 from __future__ import annotations
@@ -161,7 +171,18 @@ class SimDrive(DriveBridge):
     plant : dict, optional
         Plant overrides (``sim_fallback.Sim``'s ``plant``): the motor actually simulated
         differs from ``motor``, from which the drive is configured.
+    max_lag_s : float, optional
+        Paced only: a lag behind the wall clock beyond this (s) is a stall; the clock
+        pauses for it instead of running it at full speed (module docstring, Pacing).
+        None (default): every lag is made up (an in-process drive, whose frame
+        timestamps the bench maps back to its time through ``epoch``).
     """
+
+    #: ``max_lag_s`` of the simulated drive server: 50 chunks of 1 ms. Above a thread's
+    #: scheduling jitter on a loaded machine (a few ms), and well below any heartbeat
+    #: consumer time the bench uses (500 ms), so that the lag made up at full speed
+    #: never faults the drive
+    MAX_LAG_S = 0.05
 
     def __init__(self, channel: str, motor: str = "paper_salient",
                  extractor: str = "sogi_adaptive", seed: int = 0, x0: float | str = 0.0,
@@ -170,7 +191,7 @@ class SimDrive(DriveBridge):
                  sink: Callable[[np.ndarray, dict[str, np.ndarray], dict[str, str]], None]
                  | None = None, noise: float = 1.0,
                  plant: dict[str, Any] | None = None, nvm_path: Any = None,
-                 background_every: int = 1) -> None:
+                 background_every: int = 1, max_lag_s: float | None = None) -> None:
         from sim_fallback import load_motor
 
         #: plant overrides: the motor actually simulated, when it is not the configured one
@@ -187,6 +208,10 @@ class SimDrive(DriveBridge):
         self.syncs_sent = 0
         self.sent_by_id: dict[int, int] = {}
         self.cpu_s = 0.0  # CPU time of the simulation thread while stepping (s)
+        self.max_lag_s = max_lag_s
+        self.stalls = 0  # paced: times the clock paused (lag beyond max_lag_s)
+        self.stalled_s = 0.0  # ... and the wall-clock time it paused for in all (s)
+        self.last_stall_s = 0.0
         self.serial = SimSerial()
         self.epoch = time.time()
         self.peer_bus: Any = None  # the bench's bus on the virtual channel (attach_peer)
@@ -400,6 +425,19 @@ class SimDrive(DriveBridge):
                 self.sim.set_schedule(SIM_REF_LOAD, {"t_s": [t, t + args[1]],
                                                      "value": [now, args[0]], "ramp": True})
 
+    def _keep_pace(self, max_lag_s: float) -> None:
+        """Paced: a lag beyond ``max_lag_s`` pauses the clock for the lost time (a stall,
+        counted) instead of being run at full speed."""
+        lag = time.monotonic() - self._wall0 - self._t
+        if lag > max_lag_s:
+            self._wall0 += lag
+            self.epoch += lag  # frame timestamps stay on the wall clock
+            self.stalls += 1
+            self.stalled_s += lag
+            self.last_stall_s = lag
+            log.info("simulated drive %s: %.3f s behind the wall clock (its process was "
+                     "stopped or starved): its clock paused for it", self.channel, lag)
+
     def _want_run(self) -> bool:
         if self.paced:
             return self._t < time.monotonic() - self._wall0
@@ -441,6 +479,8 @@ class SimDrive(DriveBridge):
         pending: list[dict[str, np.ndarray]] = []
         try:
             while not self._stop.is_set():
+                if self.paced and self.max_lag_s is not None:
+                    self._keep_pace(self.max_lag_s)
                 if not self._want_run():
                     self._idle.set()
                     # idle: block briefly for a frame from the bench (held for the next

@@ -20,31 +20,63 @@ socketcand protocol (the subset python-can's client uses, rawmode)::
 A frame sent by one client goes to the simulated drive and to every other
 client (as on a real bus; the sender does not get its own frame back).
 
+The server survives its clients:
+
+* Queues. Each client has its own writer thread and a bounded send queue
+  (:data:`CLIENT_QUEUE_BYTES`, 1 MiB, or ``$BENCH_SIM_CLIENT_QUEUE`` bytes at
+  ``bench sim start``): the bus and the drive never wait for a client. A
+  client that stops reading (a script that only sends, a process stopped with
+  Ctrl-Z) fills its queue once the kernel's socket buffers are full, and is
+  then dropped: its connection closed, counted and logged with its address and
+  why. A client that disconnects is not a drop.
+* Refusals. Each ``send`` is checked before it goes anywhere
+  (:func:`parse_send`: an id of 1-3 hex digits up to 7FF or 8 up to 1FFFFFFF,
+  a dlc 0-8 and exactly that many bytes of 1-2 hex digits): a malformed one is
+  answered ``< error ... >``, counted and never reaches the drive or another
+  client (the first few per client are logged).
+* Stalls. The drive's clock is paced to the wall clock; when the server
+  process was stopped (SIGSTOP, a suspended machine) or starved, the drive
+  finds itself behind the wall clock and pauses for the lost time instead of
+  running it at full speed (:class:`bench._simdrive.SimDrive`, ``max_lag_s``):
+  its bus stood still too, and a second of a frozen bus run at once would be a
+  second without its supervisor's heartbeat (0x8130). Each stall is logged and
+  counted.
+
 State (``state_dir()``: ``$BENCH_SIM_DIR``, else ``$XDG_STATE_HOME/pmlsm-bench``,
 else ``~/.local/state/pmlsm-bench``): ``simserver.json`` (pid, host, port,
-channel, motor, ... written once the server listens, removed when it stops),
-``simserver.log`` (the server's output) and the non-volatile memory of the
-simulated drive, ``nvm_<motor>.bin`` (CiA 301 0x1010 'save'; read at start,
-so a saved configuration survives ``bench sim stop`` / ``start``). A state file
-whose process is gone (SIGKILL, reboot) is *stale*: ``bench sim status`` and
-``stop`` say so and remove it; connecting to it fails with exit 3.
+channel, motor, ... written once the server listens, with the counters above
+updated while it runs, removed when it stops), ``simserver.log`` (the server's
+output) and the non-volatile memory of the simulated drive,
+``nvm_<motor>_<hash>.bin`` (CiA 301 0x1010 'save'; read at start, so a saved
+configuration survives ``bench sim stop`` / ``start``), keyed by the motor's
+file stem and a hash of its parsed parameters (:func:`motor_key`): two motors
+of one file name never share a stored configuration. A state file whose
+process is gone (SIGKILL, reboot) is *stale*: ``bench sim status`` and
+``stop`` say so and remove it; connecting to it fails with exit 3. A state
+folder that cannot be one (a regular file on its path, a folder where a state
+file must be) is one line naming it (:class:`SetupError`, exit 2; exit 3 when
+the system refuses it: permissions, a read-only file system).
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
+import hashlib
 import json
 import logging
 import os
+import re
 import signal
 import socket
 import subprocess
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -73,6 +105,18 @@ class AlreadyRunning(SimServerError):
     """``start`` while a server runs: the user's mistake (exit 2), nothing started."""
 
 
+class SetupError(SimServerError):
+    """The state folder (or a file in it) or a setting cannot be used: one line naming it
+    and what is wrong. ``exit_code`` 2 when the path or setting itself is wrong (a regular
+    file where a folder must be, a folder where a state file must be, a malformed
+    number: the user's input), 3 when the system refuses it (permissions, a read-only or
+    full file system: the environment)."""
+
+    def __init__(self, message: str, exit_code: int) -> None:
+        super().__init__(message)
+        self.exit_code = exit_code
+
+
 def state_dir() -> Path:
     """Folder of the state file, the log and the NVM files (created on demand)."""
     env = os.environ.get("BENCH_SIM_DIR")
@@ -80,6 +124,49 @@ def state_dir() -> Path:
         return Path(env)
     base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
     return Path(base) / "pmlsm-bench"
+
+
+def _state_dir_origin() -> str:
+    if os.environ.get("BENCH_SIM_DIR"):
+        return "BENCH_SIM_DIR"
+    return "$XDG_STATE_HOME/pmlsm-bench" if os.environ.get("XDG_STATE_HOME") else \
+        "the default ~/.local/state/pmlsm-bench; set BENCH_SIM_DIR to use another"
+
+
+def check_state_dir(folder: Path | None = None, create: bool = False) -> Path:
+    """The state folder, checked (and created with ``create``); raises :class:`SetupError`
+    when it cannot be one: a regular file on its path (exit 2), or the system refuses to
+    create it (exit 3)."""
+    folder = folder or state_dir()
+    for p in (folder, *folder.parents):  # the deepest part that exists must be a folder
+        if p.exists():
+            if not p.is_dir():
+                which = "it is" if p == folder else f"{p} is"
+                raise SetupError(f"state folder {folder} ({_state_dir_origin()}): {which} "
+                                 "not a folder (a regular file)", 2)
+            break
+    if create:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise state_error(folder, folder, e) from None
+    return folder
+
+
+def state_error(folder: Path, path: Path, e: OSError) -> SetupError:
+    """An OSError on the state folder or on ``path`` in it, as one line: exit 2 for a path
+    of the wrong kind, 3 when the system refuses (:class:`SetupError`)."""
+    if e.errno == errno.ENOTDIR:
+        try:
+            check_state_dir(folder)
+        except SetupError as se:
+            return se
+    if e.errno in (errno.ENOTDIR, errno.EISDIR):
+        kind = "a folder where a file of the server belongs; remove it" \
+            if e.errno == errno.EISDIR else "not a folder"
+        return SetupError(f"{path} (state folder {folder}, {_state_dir_origin()}): {kind}", 2)
+    return SetupError(f"{path} (state folder {folder}, {_state_dir_origin()}): "
+                      f"{e.strerror or e}", 3)
 
 
 @dataclass
@@ -99,6 +186,10 @@ class ServerState:
     log: str
     started: float
     bench_version: str
+    #: bound of each client's send queue (bytes)
+    queue_bytes: int = 0
+    #: counters the running server updates (SocketcandServer.stats, the drive's stalls)
+    stats: dict[str, Any] = field(default_factory=dict)
 
     @property
     def address(self) -> str:
@@ -119,14 +210,19 @@ class ServerState:
 
 
 def read_state(folder: Path | None = None) -> ServerState | None:
-    """The state file, or None when there is none (or it is unreadable: stale)."""
-    f = (folder or state_dir()) / STATE_FILE
+    """The state file, or None when there is none (or it is unreadable: stale); raises
+    :class:`SetupError` when the state folder or file cannot be read (not a folder, a
+    folder where the file should be, permissions)."""
+    folder = folder or state_dir()
+    f = folder / STATE_FILE
     try:
         doc = json.loads(f.read_text(encoding="utf-8"))
         return ServerState(**doc)
     except FileNotFoundError:
         return None
-    except (OSError, ValueError, TypeError):  # half-written or foreign: treat as stale
+    except OSError as e:
+        raise state_error(folder, f, e) from None
+    except (ValueError, TypeError):  # half-written or foreign: treat as stale
         return ServerState(pid=-1, host=HOST, port=0, channel=CAN_CHANNEL, motor="?",
                            extractor="?", seed=0, node_id=1, nvm="", nvm_state="", log="",
                            started=0.0, bench_version="?")
@@ -138,8 +234,12 @@ def state_lock(folder: Path, name: str) -> Iterator[None]:
     on ``folder/name``): two concurrent starts leave one process, never an orphan."""
     import fcntl
 
-    folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / name, "a+") as f:
+    check_state_dir(folder, create=True)
+    try:
+        f = open(folder / name, "a+")
+    except OSError as e:
+        raise state_error(folder, folder / name, e) from None
+    with f:
         fcntl.flock(f.fileno(), fcntl.LOCK_EX)
         try:
             yield
@@ -153,6 +253,18 @@ def write_state_file(folder: Path, name: str, doc: dict[str, Any]) -> None:
     tmp = folder / f".{name}.{os.getpid()}.tmp"
     tmp.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
     os.replace(tmp, folder / name)
+
+
+def remove_state_file(folder: Path, name: str = STATE_FILE) -> bool:
+    """Remove a state file: True when it was there and is gone; raises
+    :class:`SetupError` when it cannot be removed."""
+    try:
+        (folder / name).unlink()
+    except FileNotFoundError:
+        return False
+    except OSError as e:
+        raise state_error(folder, folder / name, e) from None
+    return True
 
 
 def _write_state(folder: Path, st: ServerState) -> None:
@@ -243,51 +355,144 @@ def frame_text(msg: Any) -> bytes:
     return f"< frame {ident} {ts:.6f} {bytes(msg.data).hex().upper()} >".encode("ascii")
 
 
+_HEX_ID = re.compile(r"[0-9A-Fa-f]{1,3}|[0-9A-Fa-f]{8}")
+_HEX_BYTE = re.compile(r"[0-9A-Fa-f]{1,2}")
+
+
 def parse_send(body: str) -> Any:
-    """``send ID DLC B0 B1 ...`` (hex) -> can.Message; ValueError when malformed."""
+    """``send ID DLC B0 B1 ...`` (hex) -> can.Message; ValueError (why, one line) when
+    malformed: the id is 1-3 hex digits (11-bit, at most 7FF) or 8 (29-bit, at most
+    1FFFFFFF), the dlc 0-8, and exactly dlc data bytes of 1-2 hex digits each follow.
+    Nothing else (signs, ``0x``, ``_``, other digits) is a frame."""
     import can
 
     parts = body.split()
     if len(parts) < 3 or parts[0] != "send":
-        raise ValueError(f"not a send command: {body!r}")
-    ident, dlc = int(parts[1], 16), int(parts[2], 16)
-    data = bytes(int(b, 16) for b in parts[3:])
-    ext = len(parts[1]) > 3
-    if not 0 <= dlc <= 8 or len(data) != dlc or ident > (0x1FFFFFFF if ext else 0x7FF):
-        raise ValueError(f"bad frame: {body!r}")
-    return can.Message(arbitration_id=ident, is_extended_id=ext, data=data,
-                       timestamp=time.time())
+        raise ValueError("expected 'send ID DLC DATA...'")
+    ident_s, dlc_s, data_s = parts[1], parts[2], parts[3:]
+    if not _HEX_ID.fullmatch(ident_s):
+        raise ValueError(f"id '{ident_s}': 1-3 hex digits (11-bit) or 8 (29-bit)")
+    ext = len(ident_s) == 8
+    ident = int(ident_s, 16)
+    if ident > (0x1FFFFFFF if ext else 0x7FF):
+        raise ValueError(f"id {ident_s} above {'1FFFFFFF' if ext else '7FF'}")
+    if not _HEX_BYTE.fullmatch(dlc_s) or int(dlc_s, 16) > 8:
+        raise ValueError(f"dlc '{dlc_s}': 0-8")
+    dlc = int(dlc_s, 16)
+    if len(data_s) != dlc:
+        raise ValueError(f"dlc {dlc} but {len(data_s)} data bytes")
+    bad = next((b for b in data_s if not _HEX_BYTE.fullmatch(b)), None)
+    if bad is not None:
+        raise ValueError(f"data byte '{bad}': 1-2 hex digits")
+    return can.Message(arbitration_id=ident, is_extended_id=ext,
+                       data=bytes(int(b, 16) for b in data_s), timestamp=time.time())
+
+
+def _quoted(text: str, limit: int = 60) -> str:
+    """A client's text, safe inside a socketcand message and a log line."""
+    t = "".join(ch if " " <= ch <= "~" and ch not in "<>" else "?" for ch in text)
+    return t if len(t) <= limit else t[:limit] + "..."
 
 
 class _Client:
-    def __init__(self, sock: socket.socket, addr: Any) -> None:
+    """One TCP client: a reader thread (its commands in: :meth:`SocketcandServer._serve`)
+    and a writer thread draining a bounded queue (the bus out), so that a client that
+    stops reading blocks its own writer only; the server drops it when its queue would
+    exceed ``queue_bytes``.
+
+    ``on_full(client, why)`` is called (outside the client's lock) when :meth:`send`
+    finds the queue full.
+    """
+
+    def __init__(self, sock: socket.socket, addr: Any, queue_bytes: int,
+                 on_full: Any) -> None:
         self.sock = sock
-        self.addr = addr
+        self.name = f"{addr[0]}:{addr[1]}"
         self.raw = False  # in rawmode: receives the bus
-        self.lock = threading.Lock()
         self.alive = True
+        self.dropped = False
+        self.refused = 0
+        self.queue_bytes = queue_bytes
+        self._on_full = on_full
+        self._q: deque[bytes] = deque()
+        self._pending = 0  # bytes queued or being written
+        self._cond = threading.Condition()
+        self.writer = threading.Thread(target=self._write_loop, daemon=True,
+                                       name=f"simserver-write-{addr[1]}")
 
     def send(self, data: bytes) -> bool:
-        with self.lock:
+        """Queue ``data``, never blocking: False when the client is gone or its queue is
+        full (a queue holds at least one item, however large: a batch of frames)."""
+        with self._cond:
             if not self.alive:
                 return False
-            try:
-                self.sock.sendall(data)
+            if self._pending and self._pending + len(data) > self.queue_bytes:
+                why = (f"not reading: {self._pending} bytes waiting for it, "
+                       f"{len(data)} more would exceed its queue of {self.queue_bytes}")
+            else:
+                self._q.append(data)
+                self._pending += len(data)
+                self._cond.notify_all()
                 return True
-            except OSError:
-                self.alive = False
-                return False
+        self._on_full(self, why)
+        return False
 
-    def close(self) -> None:
-        self.alive = False
+    def flush(self, timeout_s: float) -> bool:
+        """Wait until everything queued is written (False: not within ``timeout_s``)."""
+        with self._cond:
+            return self._cond.wait_for(lambda: not self.alive or not self._pending,
+                                       timeout_s) and self.alive
+
+    def _write_loop(self) -> None:
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._q or not self.alive)
+                if not self.alive:
+                    return
+                data = b"".join(self._q)
+                self._q.clear()
+            try:
+                self.sock.sendall(data)  # blocks this client's writer only
+            except OSError:  # it disconnected, or was dropped (socket shut down)
+                self.shutdown()
+                return
+            with self._cond:
+                self._pending -= len(data)
+                self._cond.notify_all()
+
+    def shutdown(self) -> None:
+        """Stop serving it: queue dropped, both directions shut down (wakes its reader and
+        writer; its reader thread closes the socket when both are done)."""
+        with self._cond:
+            self.alive = False
+            self._q.clear()
+            self._cond.notify_all()
         with contextlib.suppress(OSError):
             self.sock.shutdown(socket.SHUT_RDWR)
-        with contextlib.suppress(OSError):
-            self.sock.close()
+
+
+#: bytes queued for one client at most (``BENCH_SIM_CLIENT_QUEUE`` overrides): beyond the
+#: kernel's socket buffers, ~30 s of the idle drive's bus traffic (SYNC and TPDOs, ~35
+#: kB/s). A client that has not read them is dropped: it is stopped, hung, or a script
+#: that only sends
+CLIENT_QUEUE_BYTES = 1 << 20
+#: the kernel's send buffer of a client's socket (fixed: not grown by the kernel up to
+#: megabytes, which would hold minutes of traffic for a client that does not read before
+#: its queue even starts to fill)
+SOCKET_SNDBUF = 64 << 10
+#: refusals logged per client; the others are counted only
+REFUSALS_LOGGED = 3
 
 
 class SocketcandServer:
     """Bridges a python-can bus (the simulated drive's) to socketcand TCP clients.
+
+    Nothing a client does (stop reading, send garbage) blocks the bus, the drive or the
+    other clients: each client has its own writer thread and a bounded queue (a client
+    whose queue is full is dropped: counted in :attr:`clients_dropped`, logged with its
+    address and why), and each ``send`` is checked (:func:`parse_send`) before it goes
+    anywhere (a malformed one is answered ``< error ... >`` and counted in
+    :attr:`frames_refused`).
 
     Parameters
     ----------
@@ -297,18 +502,28 @@ class SocketcandServer:
         TCP port on 127.0.0.1 (0: any free port; see :attr:`port`).
     channel : str
         Bus name clients must ``open``.
+    queue_bytes : int
+        Bound of each client's send queue (bytes).
     """
 
-    def __init__(self, bus: Any, port: int = 0, channel: str = CAN_CHANNEL) -> None:
+    def __init__(self, bus: Any, port: int = 0, channel: str = CAN_CHANNEL,
+                 queue_bytes: int = CLIENT_QUEUE_BYTES) -> None:
         self.bus = bus
         self.channel = channel
+        self.queue_bytes = int(queue_bytes)
         self.listener = socket.create_server((HOST, port))
         self.port = int(self.listener.getsockname()[1])
-        self.clients: list[_Client] = []
+        self.clients: list[_Client] = []  # in rawmode: receive the bus
+        self._all: set[_Client] = set()  # connected
         self._lock = threading.Lock()
         self.stop_event = threading.Event()
         self.frames_from_clients = 0
         self.frames_to_clients = 0
+        self.frames_refused = 0
+        self.commands_refused = 0
+        self.clients_dropped = 0
+        self.last_drop = ""
+        self.last_refusal = ""
         self._threads = [threading.Thread(target=self._accept_loop, name="simserver-accept",
                                           daemon=True),
                          threading.Thread(target=self._bus_loop, name="simserver-bus",
@@ -324,11 +539,35 @@ class SocketcandServer:
         with contextlib.suppress(OSError):
             self.listener.close()
         with self._lock:
-            clients, self.clients = self.clients, []
+            clients = list(self._all)
+            self.clients = []
         for c in clients:
-            c.close()
+            c.shutdown()
         for t in self._threads:
             t.join(timeout=2.0)
+
+    def stats(self) -> dict[str, Any]:
+        """Counters for the state file (``bench sim status``)."""
+        with self._lock:
+            connected = len(self._all)
+        return {"clients_connected": connected, "clients_dropped": self.clients_dropped,
+                "last_drop": self.last_drop, "frames_from_clients": self.frames_from_clients,
+                "frames_to_clients": self.frames_to_clients,
+                "frames_refused": self.frames_refused,
+                "commands_refused": self.commands_refused, "last_refusal": self.last_refusal}
+
+    def drop(self, c: _Client, why: str) -> None:
+        """Stop serving a client that cannot be served (counted, logged)."""
+        with self._lock:
+            if c.dropped or not c.alive:
+                return
+            c.dropped = True
+            if c in self.clients:
+                self.clients.remove(c)
+            self.clients_dropped += 1
+            self.last_drop = f"{c.name} at {time.strftime('%H:%M:%S')}: {why}"
+        log.warning("dropped client %s: %s", c.name, why)
+        c.shutdown()
 
     # ---- threads ----------------------------------------------------------------------
     def _accept_loop(self) -> None:
@@ -340,41 +579,70 @@ class SocketcandServer:
                 continue
             except OSError:
                 return
+            sock.settimeout(None)
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            c = _Client(sock, addr)
-            threading.Thread(target=self._client_loop, args=(c,), daemon=True,
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SOCKET_SNDBUF)
+            c = _Client(sock, addr, self.queue_bytes, self.drop)
+            with self._lock:
+                self._all.add(c)
+            c.writer.start()
+            threading.Thread(target=self._serve, args=(c,), daemon=True,
                              name=f"simserver-client-{addr[1]}").start()
 
-    def _client_loop(self, c: _Client) -> None:
-        """Handshake, then frames from this client onto the bus (and to the others)."""
-        buf = b""
+    def _serve(self, c: _Client) -> None:
+        """A client's reader thread: the handshake, then its commands; at its end (the
+        client left or was dropped) the socket is closed."""
         try:
-            c.sock.settimeout(None)
-            if not c.send(b"< hi >"):
-                return
-            while not self.stop_event.is_set():
-                data = c.sock.recv(4096)
-                if not data:
-                    return
-                buf += data
-                while True:
-                    start = buf.find(b"<")
-                    end = buf.find(b">", start + 1)
-                    if start < 0 or end < 0:
-                        buf = buf[start:] if start >= 0 else b""
-                        if len(buf) > 4096:  # garbage without an end: drop the client
-                            return
-                        break
-                    body = buf[start + 1:end].decode("ascii", "replace").strip()
-                    buf = buf[end + 1:]
-                    self._command(c, body)
-        except OSError:
-            return
+            if c.send(b"< hi >"):
+                self._read_loop(c)
         finally:
             with self._lock:
+                self._all.discard(c)
                 if c in self.clients:
                     self.clients.remove(c)
-            c.close()
+            c.shutdown()
+            c.writer.join(timeout=2.0)
+            with contextlib.suppress(OSError):
+                c.sock.close()
+
+    def _read_loop(self, c: _Client) -> None:
+        buf = b""
+        while not self.stop_event.is_set() and c.alive:
+            try:
+                data = c.sock.recv(4096)
+            except OSError:
+                return
+            if not data:
+                return
+            buf += data
+            while True:
+                start = buf.find(b"<")
+                end = buf.find(b">", start + 1)
+                if start < 0 or end < 0:
+                    buf = buf[start:] if start >= 0 else b""
+                    if len(buf) > 4096:
+                        self.drop(c, f"{len(buf)} bytes without a command's end '>'")
+                        return
+                    break
+                body = buf[start + 1:end].decode("ascii", "replace").strip()
+                buf = buf[end + 1:]
+                self._command(c, body)
+
+    def _refuse(self, c: _Client, body: str, why: str, frame: bool) -> None:
+        """Answer a bad command ``< error ... >``; counted, the first ones logged."""
+        text = f"'{_quoted(body)}': {_quoted(why, 120)}"
+        with self._lock:
+            if frame:
+                self.frames_refused += 1
+            else:
+                self.commands_refused += 1
+            self.last_refusal = f"{c.name} at {time.strftime('%H:%M:%S')}: {text}"
+        c.refused += 1
+        if c.refused <= REFUSALS_LOGGED:
+            log.warning("refused from %s: %s%s", c.name, text,
+                        " (further refusals from it are counted, not logged)"
+                        if c.refused == REFUSALS_LOGGED else "")
+        c.send(f"< error {text} >".encode("ascii", "replace"))
 
     def _command(self, c: _Client, body: str) -> None:
         word = body.split(" ", 1)[0]
@@ -382,38 +650,41 @@ class SocketcandServer:
             try:
                 msg = parse_send(body)
             except ValueError as e:
-                c.send(f"< error {e} >".encode("ascii", "replace"))
+                self._refuse(c, body, f"bad frame: {e}", frame=True)
                 return
-            self.frames_from_clients += 1
             self.bus.send(msg)
             text = frame_text(msg)
             with self._lock:
+                self.frames_from_clients += 1
                 others = [o for o in self.clients if o is not c]
             for o in others:
                 o.send(text)
         elif word == "open":
             name = body.split()[1] if len(body.split()) > 1 else ""
             if name != self.channel:
-                c.send(f"< error could not open bus '{name}': this server offers "
-                       f"'{self.channel}' >".encode("ascii", "replace"))
+                self._refuse(c, body, f"could not open bus '{name}': this server offers "
+                             f"'{self.channel}'", frame=False)
             else:
                 c.send(b"< ok >")
         elif word == "rawmode":
             c.send(b"< ok >")
             # python-can's client reads the '< ok >' with one recv(): frames sent right
             # behind it would arrive glued to it and fail its handshake check
+            c.flush(2.0)
             time.sleep(0.05)
             c.raw = True
             with self._lock:
-                self.clients.append(c)
+                if c.alive:
+                    self.clients.append(c)
         elif word == "echo":
             c.send(b"< echo >")
         else:
-            c.send(f"< error unsupported command '{word}' (rawmode only) >".encode(
-                "ascii", "replace"))
+            self._refuse(c, body, f"unsupported command '{word}' (rawmode only)",
+                         frame=False)
 
     def _bus_loop(self) -> None:
-        """Frames of the simulated drive -> every client in rawmode (batched)."""
+        """Frames of the simulated drive -> every client in rawmode (batched; queued, so
+        this loop never waits for a client)."""
         while not self.stop_event.is_set():
             msg = self.bus.recv(0.05)
             if msg is None:
@@ -427,15 +698,22 @@ class SocketcandServer:
             for c in clients:
                 if c.send(data):
                     self.frames_to_clients += len(batch)
-                else:
-                    with self._lock:
-                        if c in self.clients:
-                            self.clients.remove(c)
-                    c.close()
+
+
+def _stall_stats(sim: Any) -> dict[str, Any]:
+    return {"stalls": sim.stalls, "stalled_s": round(sim.stalled_s, 3),
+            "last_stall_s": round(sim.last_stall_s, 3)}
+
+
+def _events(stats: dict[str, Any]) -> dict[str, Any]:
+    """The counters but the traffic ones (which change with every frame)."""
+    return {k: v for k, v in stats.items()
+            if k not in ("frames_from_clients", "frames_to_clients")}
 
 
 def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, port: int,
-          nvm: Path, channel: str = CAN_CHANNEL) -> int:
+          nvm: Path, channel: str = CAN_CHANNEL,
+          queue_bytes: int = CLIENT_QUEUE_BYTES) -> int:
     """Run the simulated drive and its server until SIGTERM/SIGINT (this process)."""
     import can
 
@@ -452,7 +730,8 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
     vchan = f"pmlsm-simserver-{os.getpid()}-vcan"  # no trailing digits (BLF channel names)
     nvm.parent.mkdir(parents=True, exist_ok=True)
     sim = SimDrive(vchan, motor=motor, extractor=extractor, seed=seed, node_id=node_id,
-                   realtime=True, nvm_path=nvm)  # boots from the file
+                   realtime=True, nvm_path=nvm,  # boots from the file
+                   max_lag_s=SimDrive.MAX_LAG_S)  # a stopped process pauses its clock
     server = None
     bus = None
     try:
@@ -460,27 +739,50 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
         log.warning("simulated drive: motor %s, extractor %s, seed %d, node %d; NVM %s: %s",
                     sim.motor.name, extractor, seed, node_id, nvm, nvm_state)
         bus = can.Bus(interface="virtual", channel=vchan, receive_own_messages=False)
-        server = SocketcandServer(bus, port, channel).start()
+        server = SocketcandServer(bus, port, channel, queue_bytes).start()
         sim.start()
         st = ServerState(pid=os.getpid(), host=HOST, port=server.port, channel=channel,
                          motor=motor, extractor=extractor, seed=seed, node_id=node_id,
                          nvm=str(nvm), nvm_state=nvm_state, log=str(folder / LOG_FILE),
-                         started=time.time(), bench_version=__version__)
+                         started=time.time(), bench_version=__version__,
+                         queue_bytes=server.queue_bytes,
+                         stats={**server.stats(), **_stall_stats(sim)})
         _write_state(folder, st)
-        log.warning("socketcand server on %s:%d, bus '%s' (pid %d)", HOST, server.port,
-                    channel, os.getpid())
+        log.warning("socketcand server on %s:%d, bus '%s' (pid %d), client queues of %d "
+                    "bytes", HOST, server.port, channel, os.getpid(), server.queue_bytes)
+        stalls, written, unwritable = 0, time.monotonic(), False
         while not stop.wait(0.2):
             if sim.error is not None:
                 log.error("simulated drive stopped: %s", sim.error)
                 return 1
-        log.warning("stopping (signal); frames from clients %d, to clients %d",
-                    server.frames_from_clients, server.frames_to_clients)
+            if sim.stalls != stalls:
+                n, stalls = sim.stalls - stalls, sim.stalls
+                log.warning("drive clock paused %.3f s%s: the server process was stopped or "
+                            "starved (%d stalls, %.3f s in all); the drive's time resumed "
+                            "where it stopped", sim.last_stall_s,
+                            f" (and {n - 1} more)" if n > 1 else "", stalls, sim.stalled_s)
+            # for `bench sim status`: at once when a client comes, goes, is dropped or
+            # refused, or the clock stalled; the traffic counters every 5 s at most
+            stats = {**server.stats(), **_stall_stats(sim)}
+            if _events(stats) != _events(st.stats) or (
+                    stats != st.stats and time.monotonic() - written > 5.0):
+                st.stats, written = stats, time.monotonic()
+                try:
+                    _write_state(folder, st)
+                except OSError as e:  # the folder went away: serve on, say it once
+                    if not unwritable:
+                        log.warning("cannot update %s: %s", folder / STATE_FILE, e)
+                    unwritable = True
+        log.warning("stopping (signal); frames from clients %d, to clients %d, refused %d; "
+                    "clients dropped %d; drive clock stalls %d (%.3f s)",
+                    server.frames_from_clients, server.frames_to_clients,
+                    server.frames_refused, server.clients_dropped, sim.stalls, sim.stalled_s)
         return 0
     finally:
-        cur = read_state(folder)
-        if cur is not None and cur.pid == os.getpid():
-            with contextlib.suppress(OSError):
-                (folder / STATE_FILE).unlink()
+        with contextlib.suppress(SimServerError):
+            cur = read_state(folder)
+            if cur is not None and cur.pid == os.getpid():
+                remove_state_file(folder)
         if server is not None:
             server.close()
         sim.close()
@@ -491,12 +793,49 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
 # ---- bench sim start / stop / status ---------------------------------------------------
 
 
-def nvm_path(folder: Path, motor: str) -> Path:
-    """Default NVM file of a simulated drive: one per motor (a block stores the motor's
-    parameters, which must not leak into a simulation of another motor)."""
+def motor_key(motor: str) -> str:
+    """What a simulated drive's NVM file is named after: the motor's readable name (file
+    stem) and a short hash of its parameters as the motor file gives them (parsed: every
+    section but the name and description; not the values the simulator derives from
+    them, so that a new bench version does not re-key a motor), so that two motors of one
+    file name (every `bench identify` writes a motor.toml) never share a stored
+    configuration, and an edited motor starts from the defaults."""
+    from sim_fallback import load_motor
+
+    m = load_motor(motor)
+    doc = {sec: body for sec, body in m.raw.items() if sec != "motor"}
+    doc["parameterization"] = m.parameterization
+    digest = hashlib.sha256(json.dumps(doc, sort_keys=True, default=repr).encode()).hexdigest()
+    return f"{_motor_stem(motor)}_{digest[:10]}"
+
+
+def _motor_stem(motor: str) -> str:
+    """A motor's name (a file's stem) as a safe file name part."""
     name = Path(motor).stem if motor.endswith((".toml", ".yaml")) else motor
-    safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name)
-    return folder / f"nvm_{safe}.bin"
+    return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name)
+
+
+def nvm_path(folder: Path, motor: str) -> Path:
+    """Default NVM file of a simulated drive: one per motor, by content
+    (:func:`motor_key`): a block stores the motor's parameters, which must not leak into
+    a simulation of another motor."""
+    return folder / f"nvm_{motor_key(motor)}.bin"
+
+
+def client_queue_bytes() -> int:
+    """Bound of each client's send queue: ``BENCH_SIM_CLIENT_QUEUE`` (bytes, >= 4096), else
+    :data:`CLIENT_QUEUE_BYTES`; raises :class:`SetupError` (exit 2) when malformed."""
+    text = os.environ.get("BENCH_SIM_CLIENT_QUEUE", "").strip()
+    if not text:
+        return CLIENT_QUEUE_BYTES
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 4096:
+        raise SetupError(f"BENCH_SIM_CLIENT_QUEUE={text}: bytes queued per client, an "
+                         "integer >= 4096", 2)
+    return n
 
 
 def start(motor: str, extractor: str, seed: int, node_id: int, port: int,
@@ -508,33 +847,41 @@ def start(motor: str, extractor: str, seed: int, node_id: int, port: int,
     ------
     AlreadyRunning
         A server is running already.
+    SetupError
+        The state folder cannot be used, or a bad BENCH_SIM_CLIENT_QUEUE.
     SimServerError
         The process did not come up (its log's last lines).
     """
     folder = state_dir()
+    queue = client_queue_bytes()
     with state_lock(folder, LOCK_FILE):
-        return _start_locked(folder, motor, extractor, seed, node_id, port, nvm, timeout_s,
-                             say)
+        return _start_locked(folder, motor, extractor, seed, node_id, port, nvm, queue,
+                             timeout_s, say)
 
 
 def _start_locked(folder: Path, motor: str, extractor: str, seed: int, node_id: int,
-                  port: int, nvm: str | None, timeout_s: float, say: Any) -> ServerState:
+                  port: int, nvm: str | None, queue: int, timeout_s: float,
+                  say: Any) -> ServerState:
     st = read_state(folder)
     if st is not None:
         if pid_is_server(st.pid):
             raise AlreadyRunning(f"a simulated drive server is already running (pid {st.pid}, "
                                  f"{st.address}, motor {st.motor}); `bench sim stop` first")
-        say(f"bench: removed the stale state file {folder / STATE_FILE} (pid {st.pid} "
-            "was not running)")
-        with contextlib.suppress(OSError):
-            (folder / STATE_FILE).unlink()
-    folder.mkdir(parents=True, exist_ok=True)
+        if remove_state_file(folder):
+            say(f"bench: removed the stale state file {folder / STATE_FILE} (pid {st.pid} "
+                "was not running)")
     nvm_file = Path(nvm) if nvm else nvm_path(folder, motor)
+    _note_unkeyed_nvm(folder, motor, nvm_file, say)
     logf = folder / LOG_FILE
     cmd = [sys.executable, "-m", "bench._simserver", "--state-dir", str(folder),
            "--motor", motor, "--extractor", extractor, "--seed", str(seed),
-           "--node-id", str(node_id), "--port", str(port), "--nvm", str(nvm_file.resolve())]
-    with open(logf, "ab") as out:
+           "--node-id", str(node_id), "--port", str(port), "--nvm", str(nvm_file.resolve()),
+           "--client-queue-bytes", str(queue)]
+    try:
+        out = open(logf, "ab")
+    except OSError as e:
+        raise state_error(folder, logf, e) from None
+    with out:
         out.write(f"\n--- {time.strftime('%Y-%m-%d %H:%M:%S')} {' '.join(cmd)}\n".encode())
         out.flush()
         proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=out,
@@ -552,6 +899,17 @@ def _start_locked(folder: Path, motor: str, extractor: str, seed: int, node_id: 
     proc.terminate()
     raise SimServerError(f"the simulated drive server did not start within {timeout_s:g} s "
                          f"({_log_tail(logf)})")
+
+
+def _note_unkeyed_nvm(folder: Path, motor: str, nvm_file: Path, say: Any) -> None:
+    """An NVM file named after the motor file alone (before the NVM was keyed by the
+    motor's content) is not loaded: it may hold another motor's configuration. Say so,
+    with how to keep it, while this motor has no file of its own."""
+    old = folder / f"nvm_{_motor_stem(motor)}.bin"
+    if old.is_file() and not nvm_file.exists() and nvm_file.parent == folder:
+        say(f"bench: {old} (named after the motor file only, perhaps another motor's "
+            f"configuration) is not loaded; this motor's is {nvm_file.name}: rename it to "
+            "keep it")
 
 
 def log_tail(logf: Path, lines: int = 3) -> str:
@@ -573,7 +931,8 @@ def stop(timeout_s: float = 5.0) -> tuple[str, int | None]:
     """Stop the server (SIGTERM, then SIGKILL after ``timeout_s``).
 
     Returns (what happened, pid): ``"stopped"``, ``"killed"``, ``"stale"`` (state
-    file of a dead process removed) or ``"none"``.
+    file of a dead process removed) or ``"none"``. Raises :class:`SetupError` when the
+    state folder cannot be used.
     """
     folder = state_dir()
     with state_lock(folder, LOCK_FILE):
@@ -585,27 +944,45 @@ def _stop_locked(folder: Path, timeout_s: float) -> tuple[str, int | None]:
     if st is None:
         return "none", None
     if not pid_is_server(st.pid):
-        with contextlib.suppress(OSError):
-            (folder / STATE_FILE).unlink()
-        return "stale", st.pid
+        return ("stale" if remove_state_file(folder) else "none"), st.pid
     how = stop_process(st.pid, pid_is_server, timeout_s)
     cur = read_state(folder)
     if cur is not None and cur.pid == st.pid:
-        with contextlib.suppress(OSError):
-            (folder / STATE_FILE).unlink()
+        remove_state_file(folder)
     return how, st.pid
 
 
 def describe(st: ServerState) -> str:
-    """Multi-line status of a running server."""
+    """Multi-line status of a running server (its counters as of its last update of the
+    state file: at once after an event, the traffic within 5 s)."""
     up = time.time() - st.started
-    return (f"simulated drive server: running, pid {st.pid}, up {up:.0f} s\n"
-            f"  socketcand: {st.address}, bus '{st.channel}' (connect: --sim-server, or "
-            f"--interface socketcand --channel {st.channel} --host {st.host} --port {st.port})\n"
-            f"  drive: node {st.node_id}, motor {st.motor}, extractor {st.extractor}, seed "
-            f"{st.seed}, paced to the wall clock\n"
-            f"  non-volatile memory: {st.nvm} (at start: {st.nvm_state})\n"
-            f"  log: {st.log}")
+    s = st.stats
+    lines = [f"simulated drive server: running, pid {st.pid}, up {up:.0f} s",
+             f"  socketcand: {st.address}, bus '{st.channel}' (connect: --sim-server, or "
+             f"--interface socketcand --channel {st.channel} --host {st.host} --port "
+             f"{st.port})",
+             f"  drive: node {st.node_id}, motor {st.motor}, extractor {st.extractor}, seed "
+             f"{st.seed}, paced to the wall clock",
+             f"  non-volatile memory: {st.nvm} (keyed by the motor's name and parameters; "
+             f"at start: {st.nvm_state})"]
+    if s:
+        drop = f" (last: {s['last_drop']})" if s.get("last_drop") else ""
+        lines.append(f"  clients: {s.get('clients_connected', 0)} connected, "
+                     f"{s.get('clients_dropped', 0)} dropped{drop}; a client that does not "
+                     f"read is dropped after {st.queue_bytes} bytes queued for it")
+        refused = f" (last: {s['last_refusal']})" if s.get("last_refusal") else ""
+        lines.append(f"  frames: {s.get('frames_from_clients', 0)} from clients, "
+                     f"{s.get('frames_to_clients', 0)} to clients, "
+                     f"{s.get('frames_refused', 0)} refused (malformed), "
+                     f"{s.get('commands_refused', 0)} other commands refused{refused}")
+        n = s.get("stalls", 0)
+        lines.append("  drive clock: " + (
+            f"paused {n} time{'s' if n != 1 else ''}, {s.get('stalled_s', 0.0):.3f} s in all "
+            f"(last {s.get('last_stall_s', 0.0):.3f} s): the server process was stopped or "
+            "starved, and the drive's time with it" if n else
+            "never paused"))
+    lines.append(f"  log: {st.log}")
+    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -620,11 +997,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--node-id", type=int, default=1)
     ap.add_argument("--port", type=int, default=0)
     ap.add_argument("--nvm", default=None)
+    ap.add_argument("--client-queue-bytes", type=int, default=CLIENT_QUEUE_BYTES)
     a = ap.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     folder = Path(a.state_dir) if a.state_dir else state_dir()
     nvm = Path(a.nvm) if a.nvm else nvm_path(folder, a.motor)
-    return serve(folder, a.motor, a.extractor, a.seed, a.node_id, a.port, nvm)
+    return serve(folder, a.motor, a.extractor, a.seed, a.node_id, a.port, nvm,
+                 queue_bytes=max(4096, a.client_queue_bytes))
 
 
 if __name__ == "__main__":

@@ -1272,6 +1272,17 @@ def _status_or_stop(action: str, mod: Any, error: type[Exception], alive: Any, w
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
+    """``bench sim start|stop|status``; a state folder that cannot be used is one line,
+    exit 2 (a regular file on its path, ...) or 3 (the system refuses it)."""
+    from bench import _simserver as S
+
+    try:
+        return _sim_action(args)
+    except S.SetupError as e:
+        raise UserError(str(e), e.exit_code) from None
+
+
+def _sim_action(args: argparse.Namespace) -> int:
     from bench import _simserver as S
 
     if args.sim_cmd in ("status", "stop"):
@@ -1289,6 +1300,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
                      say=lambda m: print(m, file=sys.stderr))
     except S.AlreadyRunning as e:
         raise UserError(str(e)) from None
+    except S.SetupError:
+        raise  # cmd_sim: its own exit code
     except S.SimServerError as e:
         raise UserError(str(e), EXIT_DRIVE) from None
     print(S.describe(st))
