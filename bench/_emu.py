@@ -23,7 +23,7 @@ sequence times mean drive time on the emulated board as on a rig.
 
 State (``state_dir()``, shared with ``bench sim``): ``emu.json`` (pid, ports, motor,
 ... written once QEMU listens, removed when it stops), ``emu.log`` (QEMU's and the
-board's console), ``emu_boot.bin`` and the flash page ``emu_nvm_<motor>.bin``, which
+board's console), ``emu_boot.bin`` and the flash page ``emu_nvm_<motor>_<hash>.bin``, which
 survives ``bench emu stop`` / ``start`` (``bench config save --emu``). One CAN client
 at a time, as with a USB-CAN adapter.
 """
@@ -44,6 +44,7 @@ from typing import Any
 from bench._simserver import (
     HOST,
     log_tail,
+    motor_key,
     process_is,
     state_dir,
     state_lock,
@@ -315,9 +316,11 @@ def _exit_reason(folder: Path) -> str:
 
 
 def nvm_file(folder: Path, motor: str) -> Path:
-    name = Path(motor).stem if motor.endswith((".toml", ".yaml")) else motor
-    safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name)
-    return folder / f"emu_nvm_{safe}.bin"
+    """The emulated board's flash page for a motor: keyed by the motor's content
+    (:func:`bench._simserver.motor_key`), as the simulated drive server's NVM, so two
+    motor files of one name (every `bench identify` writes a motor.toml) never share a
+    stored configuration."""
+    return folder / f"emu_nvm_{motor_key(motor)}.bin"
 
 
 def start(motor: str = "paper_salient", extractor: str = "sogi_adaptive", seed: int = 0,

@@ -84,3 +84,22 @@ def test_live_on_the_simulated_drive_server(env: dict[str, str], tmp_path: Path)
     assert rc == 0, out + err
     assert "contradict" not in err and "drive disabled" in err
     assert rrd.is_file() and rrd.stat().st_size > 0
+
+
+def test_the_emulated_board_keys_its_flash_by_the_motor(tmp_path: Path) -> None:
+    """Two motor files of one name (every `bench identify` writes a motor.toml) get their
+    own flash page on the emulated board, as on the simulated drive server; the same
+    content, the same page."""
+    from bench._emu import nvm_file
+
+    root = Path(__file__).resolve().parents[2]
+    src = (root / "sim_fallback/motors/iron_core_linear.toml").read_text()
+    other = "\n".join("R_ohm = 3.3" if ln.startswith("R_ohm") else ln
+                      for ln in src.splitlines()) + "\n"
+    a, b, c = (tmp_path / d / "motor.toml" for d in ("a", "b", "c"))
+    for f, text in ((a, src), (b, other), (c, src)):
+        f.parent.mkdir()
+        f.write_text(text)
+    pa, pb, pc = (nvm_file(tmp_path, str(f)) for f in (a, b, c))
+    assert pa != pb and pa == pc
+    assert pa.name.startswith("emu_nvm_motor_")
