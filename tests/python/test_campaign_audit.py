@@ -712,7 +712,7 @@ def test_replay_full_is_a_bench_run_of_the_same_case(tmp_path):
     assert row["params"] == {"fw.spd_filter_Hz": 150.0, "plant.adc_noise_counts": 1.5,
                              "seed": 8, "run": 1}
     assert '"seed": 8,' in out  # an integer, not 8.0
-    (run_dir,) = list((tmp_path / "runs").iterdir())
+    (run_dir,) = [d for d in (tmp_path / "runs").iterdir() if d.is_dir()]
     for name in ("report.html", "summary.json", "can.blf", "campaign_run.json"):
         assert (run_dir / name).stat().st_size > 0, name
     summary = json.loads((run_dir / "summary.json").read_text())
