@@ -60,6 +60,9 @@ class FakeDrive402:
         self.history: list[str] = [self.state]
         self.writes: list[tuple[int, int, Any]] = []
         self.fail_disable = False
+        #: called after a state change or a target torque write (a coupled plant's hook)
+        self.on_change: Any = None
+        self.target_torque = 0  # 0x6071 as last written (per mille)
         self.node.add_write_callback(self._on_write)
         self._set(od.STATUSWORD, _SW[self.state])
         self._t0 = time.monotonic()
@@ -83,6 +86,8 @@ class FakeDrive402:
         self.history.append(state)
         self._set(od.STATUSWORD, _SW[state])
         self._tpdo1()
+        if self.on_change is not None:
+            self.on_change()
 
     def raise_fault(self, code: int = od.FAULT_CODES["EST_PLL_ERROR"]) -> None:
         """Latch a fault (0x603F) and enter FAULT."""
@@ -124,6 +129,10 @@ class FakeDrive402:
         elif index == _OD.MODES_OF_OPERATION.index:
             self.mode = int(value)
             self._set(_OD.MODES_OF_OPERATION_DISPLAY, self.mode)
+        elif index == _OD.TARGET_TORQUE.index:
+            self.target_torque = int(value)
+            if self.on_change is not None:
+                self.on_change()
 
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         """TPDO4 as the drive's default mapping: its period count, no reference count."""

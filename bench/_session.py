@@ -476,6 +476,8 @@ def connect(sim: bool = False, interface: str | None = None, channel: str | None
         target = sim_server if sim_server is not None else emu
         bc = target.bus_config()
         load = target.load_device() if emu is not None else None
+        if sim_server is not None and not load_node:  # its load machine, as on a rig
+            load_node = getattr(sim_server, "load_node", 0) or None
         c = open_hardware(bc.pop("interface"), bc.pop("channel"), None, node_id, load_node,
                           motor, serial_url or target.serial_url(), bus_kw=bc,
                           sync_period_ms=sync_period_ms, load=load)

@@ -188,6 +188,8 @@ class ServerState:
     bench_version: str
     #: bound of each client's send queue (bytes)
     queue_bytes: int = 0
+    #: node id of the load machine coupled to the drive's mover (0: none)
+    load_node: int = 0
     #: counters the running server updates (SocketcandServer.stats, the drive's stalls)
     stats: dict[str, Any] = field(default_factory=dict)
 
@@ -711,6 +713,50 @@ def _events(stats: dict[str, Any]) -> dict[str, Any]:
             if k not in ("frames_from_clients", "frames_to_clients")}
 
 
+class LoadMachineNode:
+    """The load machine of the simulated drive server: a CiA 402 node on the same bus
+    (``node_id``, by default the drive's + 1), in cyclic synchronous torque mode as a
+    rig's load drive is, mechanically coupled to the drive's mover: in OPERATION ENABLED
+    its target torque (0x6071, per mille of its rated force K_f i_max_A, which it
+    publishes like the drive: 0x2050) is the plant's external force, with the sign of
+    a load machine (a positive target pushes forward, i.e. a load of -F); out of it, no
+    force. The bench reaches it with ``--load-node`` (``--sim-server`` uses it by
+    default) through :class:`bench.CanopenLoad`, exactly as a rig's load drive."""
+
+    def __init__(self, channel: str, node_id: int, sim: Any) -> None:
+        import can
+
+        from bench._fake import FakeDrive402
+        from protocols.generated import od_names as od
+        from protocols.units import force_constant_N_per_A
+        from sim_fallback import fw_config
+
+        c = fw_config(sim.motor)  # the load machine is sized like the drive's motor
+        cfg = {"i_max_A": c.i_max_A, "psi_f_Wb": c.psi_f_Wb, "pole_pitch_m": c.pole_pitch_m}
+        self.rated_N = force_constant_N_per_A(cfg["psi_f_Wb"], cfg["pole_pitch_m"]) \
+            * cfg["i_max_A"]
+        self.sim = sim
+        self.force_N = 0.0
+        self.node = FakeDrive402(can.Bus(interface="virtual", channel=channel,
+                                         receive_own_messages=False), node_id)
+        for e, k in ((od.DRIVE_CONFIGURATION__I_MAX_A, "i_max_A"),
+                     (od.DRIVE_CONFIGURATION__PSI_F_WB, "psi_f_Wb"),
+                     (od.DRIVE_CONFIGURATION__POLE_PITCH_M, "pole_pitch_m")):
+            self.node._set(e, float(cfg[k]))
+        self.node.on_change = self._apply
+
+    def _apply(self) -> None:
+        fake = self.node
+        pm = fake.target_torque
+        force = pm / 1000.0 * self.rated_N if fake.state == "OPERATION ENABLED" else 0.0
+        if force != self.force_N:
+            self.force_N = force
+            self.sim.set_load_N(-force)  # a load opposes +x: the machine's +F is a load -F
+
+    def close(self) -> None:
+        self.node.close()
+
+
 def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, port: int,
           nvm: Path, channel: str = CAN_CHANNEL,
           queue_bytes: int = CLIENT_QUEUE_BYTES) -> int:
@@ -734,18 +780,20 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
                    max_lag_s=SimDrive.MAX_LAG_S)  # a stopped process pauses its clock
     server = None
     bus = None
+    load = None
     try:
         nvm_state = NVM_STATES.get(sim.nvm_state(), "unknown")
         log.warning("simulated drive: motor %s, extractor %s, seed %d, node %d; NVM %s: %s",
                     sim.motor.name, extractor, seed, node_id, nvm, nvm_state)
         bus = can.Bus(interface="virtual", channel=vchan, receive_own_messages=False)
+        load = LoadMachineNode(vchan, node_id + 1, sim)  # coupled to the drive's mover
         server = SocketcandServer(bus, port, channel, queue_bytes).start()
         sim.start()
         st = ServerState(pid=os.getpid(), host=HOST, port=server.port, channel=channel,
                          motor=motor, extractor=extractor, seed=seed, node_id=node_id,
                          nvm=str(nvm), nvm_state=nvm_state, log=str(folder / LOG_FILE),
                          started=time.time(), bench_version=__version__,
-                         queue_bytes=server.queue_bytes,
+                         queue_bytes=server.queue_bytes, load_node=node_id + 1,
                          stats={**server.stats(), **_stall_stats(sim)})
         _write_state(folder, st)
         log.warning("socketcand server on %s:%d, bus '%s' (pid %d), client queues of %d "
@@ -785,6 +833,8 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
                 remove_state_file(folder)
         if server is not None:
             server.close()
+        if load is not None:
+            load.close()
         sim.close()
         if bus is not None:
             bus.shutdown()
@@ -965,6 +1015,9 @@ def describe(st: ServerState) -> str:
              f"{st.seed}, paced to the wall clock",
              f"  non-volatile memory: {st.nvm} (keyed by the motor's name and parameters; "
              f"at start: {st.nvm_state})"]
+    if st.load_node:
+        lines.append(f"  load machine: node {st.load_node}, CiA 402 torque mode, coupled to "
+                     "the drive's mover (--load-node; --sim-server uses it by default)")
     if s:
         drop = f" (last: {s['last_drop']})" if s.get("last_drop") else ""
         lines.append(f"  clients: {s.get('clients_connected', 0)} connected, "

@@ -243,3 +243,55 @@ def test_two_concurrent_starts_leave_one_server(env):
     servers = subprocess.run(["pgrep", "-f", pattern], capture_output=True,
                              text=True).stdout.split()
     assert servers == [] and pid > 0
+
+
+def test_the_server_has_a_load_machine_coupled_to_its_drive(env, monkeypatch):
+    """`--sim-server` load steps: the server's load machine (node 2, CiA 402 torque mode)
+    is reached as a rig's load drive is (bench.CanopenLoad, by default with
+    --sim-server); 200 N of it on the mover makes the drive holding it at rest produce
+    200 N less static friction more thrust (its own estimate, 0x6077), and none beyond the
+    friction once it is removed."""
+    import time
+
+    from bench._session import connect
+    from bench._simserver import read_state
+
+    rc, out, err = bench("sim", "start", env=env)
+    assert rc == 0, err
+    rc, out, _ = bench("sim", "status", env=env)
+    assert "load machine: node 2, CiA 402 torque mode" in out
+    monkeypatch.setenv("BENCH_SIM_DIR", env["BENCH_SIM_DIR"])
+    st = read_state(Path(env["BENCH_SIM_DIR"]))
+    conn = connect(sim_server=st, say=lambda _m: None)
+    try:
+        assert conn.load.name == "canopen" and conn.load.drive.node_id == 2
+        d = conn.drive
+        conn.start_heartbeat()
+        d.enable("speed")
+        d.set_speed_mps(0.0)
+
+        def thrust(seconds: float) -> float:
+            t_end, vals = time.monotonic() + seconds, []
+            while time.monotonic() < t_end:
+                vals.append(d.actual()["force_hat_N"])
+                time.sleep(0.02)
+            return sum(vals[len(vals) // 2:]) / len(vals[len(vals) // 2:])
+
+        f0 = thrust(0.6)
+        conn.load.enable()
+        conn.load.set_force_N(200.0)
+        f1 = thrust(1.0)
+        conn.load.set_force_N(0.0)
+        conn.load.disable()
+        f2 = thrust(1.0)
+        d.disable()
+    finally:
+        conn.close()
+    # held at standstill, static friction takes its share of the load (the motor file's
+    # 1.5 N m rotary-equivalent: F_s = T / r, r = p tau / pi)
+    from sim_fallback import load_motor
+
+    f_s = float(load_motor("paper_salient").plant["F_static_N"])
+    assert 40.0 < f_s < 60.0
+    assert abs((f1 - f0) - (200.0 - f_s)) < 25.0, (f0, f1, f2, f_s)
+    assert abs(f2) < f_s + 20.0, (f0, f1, f2, f_s)
