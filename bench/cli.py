@@ -149,6 +149,9 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Check sequence files against the schema; errors name the "
                                    "file, line and field.")
     p.add_argument("sequences", nargs="+", metavar="SEQ.yaml")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", dest="set_",
+                   help="a value for the sequence's parameter NAME, checked as `bench run "
+                        "--set` would use it; repeatable")
 
     p = sub.add_parser("live", help="enable the drive and stream live telemetry to rerun",
                        description="Enable the drive in speed mode at --speed and stream "
@@ -720,9 +723,10 @@ def cmd_validate(args: argparse.Namespace) -> int:
     from bench._sequence import SequenceError, load_sequence
 
     rc = EXIT_OK
+    overrides = _parse_sets(args.set_)
     for f in args.sequences:
         try:
-            s = load_sequence(f)
+            s = load_sequence(f, overrides or None)
             print(f"{f}: ok ({s.name}, {len(s.steps)} steps, {s.duration_s:g} s, "
                   f"{len(s.expectations)} expectations)")
         except SequenceError as e:

@@ -302,3 +302,22 @@ def test_a_loop_with_set_runs_on_the_simulated_drive(tmp_path: Path) -> None:
     told = [e["params"]["value"] for e in events if e.get("kind") == "step"
             and e["step"] == "set_speed"]
     assert told == [100, 300]
+
+
+def test_validate_takes_the_values_run_would(tmp_path: Path) -> None:
+    """`bench validate --set`: the sequence checked with the values `bench run --set`
+    would use (a load the drive cannot take is refused, naming --set), before a rig."""
+    seq = ROOT / "sequences" / "speed_sweep.yaml"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+    def validate(*extra: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "bench", "validate", str(seq), *extra],
+                              cwd=tmp_path, env=env, capture_output=True, text=True,
+                              timeout=120)
+
+    ok = validate("--set", "load=1")
+    assert ok.returncode == 0 and "ok (speed_sweep" in ok.stdout, ok.stderr
+    bad = validate("--set", "load=30")
+    assert bad.returncode == 2
+    assert "(${load} = 30 from --set)" in bad.stderr and "allowed range" in bad.stderr
+    assert validate("--set", "nope").returncode == 2
