@@ -744,6 +744,8 @@ class LoadMachineNode:
                      (od.DRIVE_CONFIGURATION__POLE_PITCH_M, "pole_pitch_m")):
             self.node._set(e, float(cfg[k]))
         self.node.on_change = self._apply
+        # no time of its own on every SYNC (the stand-in's TPDO4): the drive's is the bus's
+        self.node.network.unsubscribe(0x080)
 
     def _apply(self) -> None:
         fake = self.node

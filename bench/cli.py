@@ -1476,6 +1476,9 @@ def exit_code_for(e: BaseException) -> tuple[int, str]:
     drv = sys.modules.get("bench._drive")
     if drv is not None and isinstance(e, drv.ParamInputError):  # a parameter the user gave
         return EXIT_USAGE, str(e)
+    own = getattr(e, "exit_code", None)  # an error that knows whose it is (SetupError)
+    if own in (EXIT_USAGE, EXIT_DRIVE):
+        return own, " ".join(str(e).split())
     drive_errors: list[type[BaseException]] = [ConnectionError]
     for mod, names in (("bench._drive", ("DriveError",)),
                        ("canopen.sdo.exceptions", ("SdoError",)),

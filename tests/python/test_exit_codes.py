@@ -19,6 +19,7 @@ from sim_libs import needs_sim
 
 from bench import cli
 from bench._drive import DriveError, DriveFault, DriveLeftState, DriveLost, ParamInputError
+from bench._simserver import SetupError
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
@@ -60,6 +61,8 @@ def test_the_documented_table_is_the_codes_the_bench_uses() -> None:
     (SdoAbortedError(0x06090030), 3),
     (can.CanOperationError("bus off"), 3),
     (ConnectionRefusedError(111, "Connection refused"), 3),
+    (SetupError("state folder x: not a folder", 2), 2),
+    (SetupError("state folder x: permission denied", 3), 3),
     (KeyboardInterrupt(), 130),
     (ZeroDivisionError("a bug"), 4),
     (OverflowError("a bug"), 4),
@@ -172,3 +175,17 @@ def test_live_with_its_output_gone_still_disables_and_says_so(tmp_path: Path) ->
     assert rc == 130, text
     assert "bench: drive disabled" in text and "SAFE STATE FAILED" not in text, text
     assert "Traceback" not in text, text
+
+
+@pytest.mark.parametrize("action", ["status", "stop", "start"])
+def test_an_unusable_state_folder_is_one_line_for_the_emulated_board_too(
+        tmp_path: Path, action: str) -> None:
+    """`BENCH_SIM_DIR` under a regular file: `bench emu` said "internal error" (exit 4)
+    where `bench sim` says the folder and exits 2."""
+    (tmp_path / "afile").write_text("")
+    r = subprocess.run([sys.executable, "-m", "bench", "emu", action], cwd=tmp_path,
+                       env={**ENV, "BENCH_SIM_DIR": str(tmp_path / "afile" / "x")},
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr
+    (line,) = r.stderr.strip().splitlines()
+    assert "afile is not a folder" in line and "internal error" not in line
