@@ -1264,15 +1264,15 @@ def _duration_text(s: float) -> str:
     return f"{s / 86400:.1f} days"
 
 
-def size_check(c: Campaign, out: Path, workers: int | None, scheduler: Any, serial: bool
-               ) -> tuple[str, bool, str] | None:
-    """How long the runs still to do will take (the line to print, whether it needs
-    --yes, the duration's text), or None for a small campaign (less than
+def size_check(c: Campaign, runs: list[dict[str, Any]], out: Path, workers: int | None,
+               scheduler: Any, serial: bool) -> tuple[str, bool, str] | None:
+    """How long the runs still to do (of ``runs``, :meth:`Campaign.runs`) will take (the
+    line to print, whether it needs --yes, the duration's text), or None for a small
+    campaign (less than
     :data:`ANNOUNCE_DRIVE_S` of drive time). The rate is measured here, on one short
     run of the campaign's base (its first run, shortened), and scaled by the workers a
     local cluster gets; for a remote scheduler, per worker."""
     t_end = float(c.base.get("t_end", 1.0))
-    runs = c.runs()
     try:
         done = done_runs(results_dir(c, out))
     except Exception:  # noqa: BLE001 - unreadable results are reported when the run starts
@@ -1589,7 +1589,7 @@ def cmd(args: Any) -> int:
               f"{': ' + rep.error if rep.error else ''}): {rep.run_dir}"
               + (f"; report {rep.report}" if rep.report else ""), file=sys.stderr)
         return 0 if row["error"] is None and rep.error is None else 1
-    size = size_check(c, Path(args.out), args.workers, args.scheduler, args.serial)
+    size = size_check(c, runs, Path(args.out), args.workers, args.scheduler, args.serial)
     if size:
         print(size[0], file=sys.stderr)
         if size[1] and not args.yes:

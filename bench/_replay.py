@@ -12,6 +12,7 @@ shown side by side; they agree to the extent those two paths do.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -101,8 +102,8 @@ def replay_full(c: Any, params: dict[str, Any], runs_root: str = "runs") -> Repl
     finally:
         conn.close()
     (out.run_dir / "campaign_run.json").write_text(
-        __import__("json").dumps({"campaign": c.name, "file": str(c.path or ""),
-                                  "params": params}, indent=1, default=float) + "\n")
+        json.dumps({"campaign": c.name, "file": str(c.path or ""), "params": params},
+                   indent=1, default=float) + "\n")
     r = out.result
     return Replay(out.run_dir, out.report, r.passed, dict(r.metrics), r.error)
 

@@ -25,12 +25,16 @@ shell disables the drive and closes the connection.
 from __future__ import annotations
 
 import keyword
+import math
 import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from bench._drive import Param
+from canopen.sdo.exceptions import SdoError
+
+from bench._drive import DriveError, Param
+from bench._sequence import SequenceError
 
 
 def ident(name: str) -> str:
@@ -121,6 +125,12 @@ class Params:
                 "documentation, print(drive.p.table('inj')) for a list>")
 
 
+def _finite(value: Any, call: str, what: str) -> None:
+    """A number the shell sends: finite, else a one-line ValueError naming the call."""
+    if not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+        raise ValueError(f"{call}: not a finite number ({what})")
+
+
 class _Speed(float):
     """A speed in m/s that says so when shown (``drive.speed(100, "r/min")`` -> 0.32 m/s)."""
 
@@ -147,8 +157,6 @@ class Shell:
         """What happened to the drive since the last command (Drive.check, the bench's
         one watch: a fault, switched off by another master, lost), said once on stderr."""
         import sys
-
-        from bench._drive import DriveError
 
         try:
             self.d.check()
@@ -181,11 +189,7 @@ class Shell:
     def speed(self, value: float, unit: str = "m/s") -> float:
         """Speed set-point in ``unit`` (m/s by default; mm/s, r/min); returns what was
         sent, in m/s (shown with its unit)."""
-        import math
-
-        if not isinstance(value, (int, float)) or not math.isfinite(float(value)):
-            raise ValueError(f"drive.speed({value!r}): not a finite number (a speed in "
-                             f"{unit})")
+        _finite(value, f"drive.speed({value!r})", f"a speed in {unit}")
         v = self.units.speed_to_mps(float(value), unit)
         self._watch()
         self.d.set_speed_mps(v)
@@ -224,10 +228,7 @@ class Shell:
         """The load machine's force (N; the simulated drive's plant load, or a load drive
         on the bus given with ``--load-node``); 0 removes it. Leaving the shell removes it
         too."""
-        import math
-
-        if not isinstance(force_N, (int, float)) or not math.isfinite(float(force_N)):
-            raise ValueError(f"drive.load({force_N!r}): not a finite number (a force in N)")
+        _finite(force_N, f"drive.load({force_N!r})", "a force in N")
         ld = self.conn.load
         if getattr(ld, "name", "none") == "none":
             raise ValueError("drive.load: no load machine on this connection (the in-process "
@@ -344,17 +345,8 @@ Leaving the shell (exit) disables the drive.
 """
 
 
-def _user_errors() -> tuple[type[BaseException], ...]:
-    from canopen.sdo.exceptions import SdoError
-
-    from bench._drive import DriveError
-    from bench._sequence import SequenceError
-
-    return (DriveError, SdoError, SequenceError, ValueError)
-
-
 #: what the shell shows as one line (its message) instead of a traceback
-USER_ERRORS = _user_errors()
+USER_ERRORS: tuple[type[BaseException], ...] = (DriveError, SdoError, SequenceError, ValueError)
 
 
 def one_line_error(shell: Any, etype: type, value: BaseException, tb: Any,

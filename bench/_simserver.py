@@ -732,17 +732,15 @@ class LoadMachineNode:
         from sim_fallback import fw_config
 
         c = fw_config(sim.motor)  # the load machine is sized like the drive's motor
-        cfg = {"i_max_A": c.i_max_A, "psi_f_Wb": c.psi_f_Wb, "pole_pitch_m": c.pole_pitch_m}
-        self.rated_N = force_constant_N_per_A(cfg["psi_f_Wb"], cfg["pole_pitch_m"]) \
-            * cfg["i_max_A"]
+        self.rated_N = force_constant_N_per_A(c.psi_f_Wb, c.pole_pitch_m) * c.i_max_A
         self.sim = sim
         self.force_N = 0.0
         self.node = FakeDrive402(can.Bus(interface="virtual", channel=channel,
                                          receive_own_messages=False), node_id)
-        for e, k in ((od.DRIVE_CONFIGURATION__I_MAX_A, "i_max_A"),
-                     (od.DRIVE_CONFIGURATION__PSI_F_WB, "psi_f_Wb"),
-                     (od.DRIVE_CONFIGURATION__POLE_PITCH_M, "pole_pitch_m")):
-            self.node._set(e, float(cfg[k]))
+        for e, v in ((od.DRIVE_CONFIGURATION__I_MAX_A, c.i_max_A),
+                     (od.DRIVE_CONFIGURATION__PSI_F_WB, c.psi_f_Wb),
+                     (od.DRIVE_CONFIGURATION__POLE_PITCH_M, c.pole_pitch_m)):
+            self.node._set(e, float(v))  # what the bench reads for the rated force
         self.node.on_change = self._apply
         # no time of its own on every SYNC (the stand-in's TPDO4): the drive's is the bus's
         self.node.network.unsubscribe(0x080)

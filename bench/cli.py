@@ -149,9 +149,7 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Check sequence files against the schema; errors name the "
                                    "file, line and field.")
     p.add_argument("sequences", nargs="+", metavar="SEQ.yaml")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", dest="set_",
-                   help="a value for the sequence's parameter NAME, checked as `bench run "
-                        "--set` would use it; repeatable")
+    _set_arg(p)
 
     p = sub.add_parser("live", help="enable the drive and stream live telemetry to rerun",
                        description="Enable the drive in speed mode at --speed and stream "
@@ -412,6 +410,11 @@ def _record_args(p: argparse.ArgumentParser) -> None:
                                      "host name)")
     g.add_argument("--fixture", help="the fixture the drive is in (default: $BENCH_FIXTURE, "
                                      "else none)")
+    _set_arg(p)
+
+
+def _set_arg(p: argparse.ArgumentParser) -> None:
+    """``--set NAME=VALUE`` (``bench run``, ``bench validate``: :func:`_parse_sets`)."""
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", dest="set_",
                    help="a value for the sequence's parameter NAME (its params:), e.g. --set "
                         "speed=150; repeatable")
@@ -1277,16 +1280,8 @@ def _status_or_stop(action: str, mod: Any, error: type[Exception], alive: Any, w
 
 def cmd_sim(args: argparse.Namespace) -> int:
     """``bench sim start|stop|status``; a state folder that cannot be used is one line,
-    exit 2 (a regular file on its path, ...) or 3 (the system refuses it)."""
-    from bench import _simserver as S
-
-    try:
-        return _sim_action(args)
-    except S.SetupError as e:
-        raise UserError(str(e), e.exit_code) from None
-
-
-def _sim_action(args: argparse.Namespace) -> int:
+    exit 2 (a regular file on its path, ...) or 3 (the system refuses it): its
+    ``SetupError`` carries the code, which :func:`exit_code_for` keeps."""
     from bench import _simserver as S
 
     if args.sim_cmd in ("status", "stop"):
@@ -1305,7 +1300,7 @@ def _sim_action(args: argparse.Namespace) -> int:
     except S.AlreadyRunning as e:
         raise UserError(str(e)) from None
     except S.SetupError:
-        raise  # cmd_sim: its own exit code
+        raise  # its own exit code (exit_code_for)
     except S.SimServerError as e:
         raise UserError(str(e), EXIT_DRIVE) from None
     print(S.describe(st))
@@ -1479,13 +1474,12 @@ def exit_code_for(e: BaseException) -> tuple[int, str]:
     own = getattr(e, "exit_code", None)  # an error that knows whose it is (SetupError)
     if own in (EXIT_USAGE, EXIT_DRIVE):
         return own, " ".join(str(e).split())
-    drive_errors: list[type[BaseException]] = [ConnectionError]
-    for mod, names in (("bench._drive", ("DriveError",)),
-                       ("canopen.sdo.exceptions", ("SdoError",)),
-                       ("can", ("CanError",))):
-        m = sys.modules.get(mod)  # what was never imported cannot have been raised
-        drive_errors += [getattr(m, n) for n in names if m is not None and hasattr(m, n)]
-    if isinstance(e, tuple(drive_errors)):
+    # what was never imported cannot have been raised: look the classes up, not import
+    drive_errors = (ConnectionError, *(
+        cls for mod, name in (("bench._drive", "DriveError"),
+                              ("canopen.sdo.exceptions", "SdoError"), ("can", "CanError"))
+        if (cls := getattr(sys.modules.get(mod), name, None)) is not None))
+    if isinstance(e, drive_errors):
         return EXIT_DRIVE, " ".join(str(e).split()) or type(e).__name__
     return EXIT_INTERNAL, " ".join(f"{type(e).__name__}: {e}".split())
 

@@ -1,6 +1,12 @@
-"""Shared by the bench tests: skip when the simulator libraries are not built."""
+"""Shared by the bench tests: skip when the simulator libraries are not built; the
+bench's Drive against canopen's LocalNode standing in for the drive."""
 
 from __future__ import annotations
+
+import contextlib
+import uuid
+from collections.abc import Iterator
+from typing import Any
 
 import pytest
 
@@ -20,3 +26,28 @@ def sim_available() -> bool:
 
 
 needs_sim = pytest.mark.skipif(not sim_available(), reason="simulator libraries not built")
+
+
+@contextlib.contextmanager
+def stand_in_drive() -> Iterator[tuple[Any, Any]]:
+    """``(drive, fake)``: a :class:`bench.Drive` set up against
+    :class:`bench._fake.FakeDrive402` on a fresh python-can ``virtual`` channel
+    (``fake.network.bus.channel_id``: where another master can join)."""
+    import can
+    import canopen
+
+    from bench import Drive
+    from bench._fake import FakeDrive402
+
+    ch = f"test-{uuid.uuid4().hex[:8]}"
+    fake = FakeDrive402(can.Bus(interface="virtual", channel=ch))
+    net = canopen.Network(can.Bus(interface="virtual", channel=ch))
+    net.NOTIFIER_CYCLE = 0.1
+    net.connect()
+    drive = Drive(net, 1)
+    drive.setup(read_pdos=False)
+    try:
+        yield drive, fake
+    finally:
+        net.disconnect()
+        fake.close()

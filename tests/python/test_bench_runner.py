@@ -10,8 +10,8 @@ import uuid
 from collections.abc import Iterator
 
 import can
-import canopen
 import pytest
+from sim_libs import stand_in_drive
 
 from bench import Drive, MotorUnits, Runner, validate_sequence
 from bench._fake import FakeDrive402
@@ -23,16 +23,8 @@ HEAD = "name: t\nmotor: paper_salient\nextractor: sogi_adaptive\nseed: 0\nsteps:
 
 @pytest.fixture()
 def rig() -> Iterator[tuple[Drive, FakeDrive402]]:
-    ch = f"test-{uuid.uuid4().hex[:8]}"
-    fake = FakeDrive402(can.Bus(interface="virtual", channel=ch))
-    net = canopen.Network(can.Bus(interface="virtual", channel=ch))
-    net.NOTIFIER_CYCLE = 0.1
-    net.connect()
-    drive = Drive(net, 1)
-    drive.setup(read_pdos=False)
-    yield drive, fake
-    net.disconnect()
-    fake.close()
+    with stand_in_drive() as r:
+        yield r
 
 
 class FailingLoad:

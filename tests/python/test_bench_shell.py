@@ -86,6 +86,14 @@ def test_closing_a_stepper_is_the_safe_state(ns):
     assert drive.last_result.aborted
 
 
+def _shell(script: str, runs: Path) -> subprocess.CompletedProcess[str]:
+    """`bench shell --sim` with ``script`` typed into it (a pipe)."""
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.run([sys.executable, "-m", "bench", "shell", "--sim", "--runs",
+                           str(runs)], input=script, capture_output=True, text=True,
+                          cwd=REPO, env=env, timeout=120)
+
+
 def test_bench_shell_with_piped_input(tmp_path):
     script = ("print('U=', float(drive.p.u_inj_V))\n"
               "drive.p.u_inj_V = 25\n"
@@ -93,10 +101,7 @@ def test_bench_shell_with_piped_input(tmp_path):
               "drive.enable(); drive.speed(0.05)\n"
               "print('STATE=', drive.state)\n"
               "exit\n")
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    p = subprocess.run([sys.executable, "-m", "bench", "shell", "--sim", "--runs",
-                        str(tmp_path)], input=script, capture_output=True, text=True,
-                       cwd=REPO, env=env, timeout=120)
+    p = _shell(script, tmp_path)
     assert p.returncode == 0, p.stderr
     assert "U= 50.0" in p.stdout and "U2= 25.0" in p.stdout
     assert "STATE= OPERATION ENABLED" in p.stdout
@@ -175,10 +180,7 @@ def test_user_mistakes_in_the_shell_are_one_line(tmp_path):
               "drive.p.pole_pitch_m = 0.03\n"
               "print('STILL=', drive.state)\n"
               "exit\n")
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    p = subprocess.run([sys.executable, "-m", "bench", "shell", "--sim", "--runs",
-                        str(tmp_path)], input=script, capture_output=True, text=True,
-                       cwd=REPO, env=env, timeout=120)
+    p = _shell(script, tmp_path)
     out = p.stdout + p.stderr
     assert p.returncode == 0, out
     assert "Traceback" not in out and "canopen" not in out, out
@@ -197,10 +199,7 @@ def test_scope_in_the_shell(tmp_path):
     script = ("drive.enable(); drive.speed(0.1)\n"
               "print('END=', drive.scope(1.5))\n"
               "exit\n")
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    p = subprocess.run([sys.executable, "-m", "bench", "shell", "--sim", "--runs",
-                        str(tmp_path)], input=script, capture_output=True, text=True,
-                       cwd=REPO, env=env, timeout=120)
+    p = _shell(script, tmp_path)
     assert p.returncode == 0, p.stderr
     lines = [ln for ln in p.stdout.splitlines() if "drive time" in ln and "speed=" in ln]
     assert lines, p.stdout

@@ -12,34 +12,24 @@ from __future__ import annotations
 import struct
 import threading
 import time
-import uuid
 from collections.abc import Iterator
 
 import can
 import canopen
 import pytest
+from sim_libs import stand_in_drive
+from test_bench_runner import HEAD, UNITS
 
-from bench import Drive, MotorUnits, Runner, validate_sequence
+from bench import Drive, Runner, validate_sequence
 from bench._drive import DriveFault, DriveLeftState, DriveLost
 from bench._fake import FakeDrive402
 from protocols.generated import od_names as od
 
-UNITS = MotorUnits(pole_pitch_m=0.024, pole_pairs=4)
-HEAD = "name: t\nmotor: paper_salient\nextractor: sogi_adaptive\nseed: 0\nsteps:\n"
-
 
 @pytest.fixture()
-def rig() -> Iterator[tuple[Drive, FakeDrive402, str]]:
-    ch = f"watch-{uuid.uuid4().hex[:8]}"
-    fake = FakeDrive402(can.Bus(interface="virtual", channel=ch))
-    net = canopen.Network(can.Bus(interface="virtual", channel=ch))
-    net.NOTIFIER_CYCLE = 0.1
-    net.connect()
-    drive = Drive(net, 1)
-    drive.setup(read_pdos=False)
-    yield drive, fake, ch
-    net.disconnect()
-    fake.close()
+def rig() -> Iterator[tuple[Drive, FakeDrive402]]:
+    with stand_in_drive() as r:
+        yield r
 
 
 def _second_master(ch: str) -> tuple[canopen.Network, canopen.RemoteNode]:
@@ -54,7 +44,8 @@ def _second_master(ch: str) -> tuple[canopen.Network, canopen.RemoteNode]:
 
 
 def test_run_stops_when_another_master_switches_the_drive_off(rig) -> None:
-    drive, fake, ch = rig
+    drive, fake = rig
+    ch = fake.network.bus.channel_id  # the second master joins the same bus
     seq = validate_sequence(HEAD + "  - enable: {}\n  - set_speed: {value: 0.1, unit: m/s}\n"
                             "  - wait: {duration_s: 5}\n  - disable: {}\n")
     net2, other = _second_master(ch)
@@ -78,7 +69,7 @@ def test_run_stops_when_another_master_switches_the_drive_off(rig) -> None:
 def test_a_fault_shown_only_by_the_statusword_is_named(rig) -> None:
     """No EMCY (a lost frame, a drive that sends none): the statusword's FAULT is
     confirmed by SDO and named from 0x603F."""
-    drive, fake, _ = rig
+    drive, fake = rig
     drive.enable("speed")
     code = od.FAULT_CODES["EST_PLL_ERROR"]
     with fake.lock:
@@ -94,7 +85,7 @@ def test_a_fault_shown_only_by_the_statusword_is_named(rig) -> None:
 def test_no_abort_while_the_drive_does_what_it_was_told(rig) -> None:
     """Enable, speed, disable, enable again: every statusword TPDO on the way (including
     the intermediate states of the walk) is expected; check() never raises."""
-    drive, fake, _ = rig
+    drive, fake = rig
     for _ in range(3):
         drive.enable("speed")
         for _ in range(20):
@@ -108,7 +99,7 @@ def test_no_abort_while_the_drive_does_what_it_was_told(rig) -> None:
 def test_heartbeat_consumer_on_a_drive_without_published_time(rig) -> None:
     """The host clock (no TPDO4 time): the drive's CiA 301 heartbeat (0x1017 = 100 ms in
     the EDS) is consumed; three periods without one is a lost drive."""
-    drive, fake, _ = rig
+    drive, fake = rig
     for _ in range(3):
         fake.network.send_message(0x700 + fake.node_id, struct.pack("B", 0x05))
         time.sleep(0.05)
