@@ -94,8 +94,8 @@ _EXPORTS: dict[str, str] = {
     "Connection": "bench._session", "NoHardware": "bench._session",
     "connect": "bench._session", "open_sim": "bench._session",
     "run_sequence": "bench._session",
-    "SimDrive": "bench._simdrive",
-    "SimLoad": "bench._simdrive",
+    "SimDrive": "sim_fallback",
+    "SimLoad": "sim_fallback",
     "MotorUnits": "bench._units",
     "METRIC_NAMES": "sim_fallback.metrics", "compute_metrics": "sim_fallback.metrics",
 }

@@ -5,7 +5,7 @@ Positive load force opposes positive motion (N), as in the simulator.
 * :class:`CanopenLoad`: on hardware, a second CiA 402 node (the load
   machine) in cyclic synchronous torque mode; it produces ``-F`` so that a
   positive load brakes positive motion.
-* :class:`SimLoad` (in :mod:`bench._simdrive`): the plant's external load
+* :class:`SimLoad` (in :mod:`sim_fallback`): the plant's external load
   force of the simulated drive, applied at an exact simulation time.
 * :class:`NoLoad`: nothing attached; load steps are refused.
 """

@@ -232,7 +232,7 @@ def open_sim(motor: str = "paper_salient", extractor: str = "sogi_adaptive", see
     ``sim_fallback._motors.machine_params(other)``). ``noise``: scale of the motor file's
     ADC noise and offsets (``sim_fallback.Sim``'s).
     """
-    from bench._simdrive import SimDrive, SimLoad
+    from sim_fallback import SimDrive, SimLoad
 
     channel = f"pmlsm-sim-{uuid.uuid4().hex[:8]}-vcan"  # no trailing digits (BLF channel)
     sim = SimDrive(channel, motor=motor, extractor=extractor, seed=seed, x0=x0,

@@ -1,7 +1,7 @@
 """The simulated drive as its own process, behind python-can's ``socketcand`` interface.
 
 ``bench sim start`` runs this module as a background process: one
-:class:`bench._simdrive.SimDrive` paced to the wall clock (the simulated
+:class:`sim_fallback.SimDrive` paced to the wall clock (the simulated
 clock follows real time, like a drive that is powered on) and a small
 server that speaks the socketcand protocol on ``127.0.0.1`` only. The bench
 reaches it exactly as it reaches hardware: python-can's ``socketcand``
@@ -37,7 +37,7 @@ The server survives its clients:
 * Stalls. The drive's clock is paced to the wall clock; when the server
   process was stopped (SIGSTOP, a suspended machine) or starved, the drive
   finds itself behind the wall clock and pauses for the lost time instead of
-  running it at full speed (:class:`bench._simdrive.SimDrive`, ``max_lag_s``):
+  running it at full speed (:class:`sim_fallback.SimDrive`, ``max_lag_s``):
   its bus stood still too, and a second of a frozen bus run at once would be a
   second without its supervisor's heartbeat (0x8130). Each stall is logged and
   counted.
@@ -74,6 +74,7 @@ import subprocess
 import sys
 import threading
 import time
+import zlib
 from collections import deque
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
@@ -192,6 +193,10 @@ class ServerState:
     load_node: int = 0
     #: counters the running server updates (SocketcandServer.stats, the drive's stalls)
     stats: dict[str, Any] = field(default_factory=dict)
+    #: CRC-32 (zlib) of the drive's running fw_config_t at start, "0x%08x"
+    config_crc32: str = ""
+    #: fields in which that configuration differs from the motor file's (a stored one)
+    config_differs: list[str] = field(default_factory=list)
 
     @property
     def address(self) -> str:
@@ -764,7 +769,7 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
     import can
 
     from bench import __version__
-    from bench._simdrive import SimDrive
+    from sim_fallback import SimDrive
 
     stop = threading.Event()
 
@@ -785,6 +790,14 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
         nvm_state = NVM_STATES.get(sim.nvm_state(), "unknown")
         log.warning("simulated drive: motor %s, extractor %s, seed %d, node %d; NVM %s: %s",
                     sim.motor.name, extractor, seed, node_id, nvm, nvm_state)
+        running = sim.config()
+        crc = f"0x{zlib.crc32(bytes(running)):08x}"
+        mine, given = running.as_dict(), sim.sim.cfg.as_dict()
+        differs = sorted(k for k in mine if mine[k] != given[k])
+        log.warning("configuration: fw_config_t CRC-32 %s%s", crc, (
+            f"; booted from the stored one, which differs from the motor file's in: "
+            f"{', '.join(differs)}") if differs else " (the motor file's, as every "
+            "simulated drive of this motor is configured: sim_fallback.drive_params)")
         bus = can.Bus(interface="virtual", channel=vchan, receive_own_messages=False)
         load = LoadMachineNode(vchan, node_id + 1, sim)  # coupled to the drive's mover
         server = SocketcandServer(bus, port, channel, queue_bytes).start()
@@ -794,6 +807,7 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
                          nvm=str(nvm), nvm_state=nvm_state, log=str(folder / LOG_FILE),
                          started=time.time(), bench_version=__version__,
                          queue_bytes=server.queue_bytes, load_node=node_id + 1,
+                         config_crc32=crc, config_differs=differs,
                          stats={**server.stats(), **_stall_stats(sim)})
         _write_state(folder, st)
         log.warning("socketcand server on %s:%d, bus '%s' (pid %d), client queues of %d "
@@ -1015,6 +1029,11 @@ def describe(st: ServerState) -> str:
              f"{st.seed}, paced to the wall clock",
              f"  non-volatile memory: {st.nvm} (keyed by the motor's name and parameters; "
              f"at start: {st.nvm_state})"]
+    if st.config_crc32:
+        lines.append(f"  configuration: fw_config_t CRC-32 {st.config_crc32}" + (
+            f", booted from the stored one (differs from the motor file in "
+            f"{', '.join(st.config_differs)})" if st.config_differs else
+            ", the motor file's (as run_scenario and bench run --sim configure it)"))
     if st.load_node:
         lines.append(f"  load machine: node {st.load_node}, CiA 402 torque mode, coupled to "
                      "the drive's mover (--load-node; --sim-server uses it by default)")

@@ -1,5 +1,7 @@
 """Wire protocols of the PMLSM drive: the object dictionary (od.yaml and its
-generators), the serial telemetry link and the CAN bridge to the C drive.
+generators), the serial telemetry link, and the loaders of the firmware's protocol
+libraries (:mod:`protocols.clib`). It imports no simulator: the simulated drive on a bus
+is :class:`sim_fallback.DriveBridge`.
 
 Public API:
 
@@ -7,8 +9,6 @@ Public API:
   :data:`EDS_PATH`: the generated EDS.
 - :mod:`protocols.serial_link`: COBS + CRC-16 frames, :class:`Receiver`,
   :class:`TraceAssembler`.
-- :class:`protocols.sim_bridge.DriveBridge`: python-can bus <-> fw_app in C
-  (import it from its module; it compiles the firmware on first use).
 - ``python -m protocols.generate [--check]``: regenerate / check generated files.
 """
 

@@ -7,6 +7,11 @@ Public API (internals live in private modules)::
                        speed_ref=100.0, load=[(0.0, 0.0), (0.5, 2.0)], t_end=1.0)
     res.metrics["position_error_rms_rad"]; res.t_s; res.theta_hat_rad
 
+The simulated drive as a CAN node (the firmware's whole drive application on a
+python-can bus; python-can is imported on first use)::
+
+    from sim_fallback import SimDrive, DriveBridge
+
 Metrics (one definition for the simulator, the bench and the reports):
 ``sim_fallback.metrics`` (public, numpy only). See docs/simulator.md.
 """
@@ -39,7 +44,21 @@ from ._sim import (
 )
 from .metrics import METRIC_DEFS, METRIC_NAMES, METRICS, compute_metrics, run_metrics, wrap_pi
 
+#: Names of the CAN-node modules, imported on first use (they import python-can).
+_LAZY = {"DriveBridge": "_app", "SimDrive": "_candrive", "SimLoad": "_candrive",
+         "SimClock": "_candrive", "FwCanFrame": "_lib"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 __all__ = [
+    "DriveBridge", "SimDrive", "SimLoad", "SimClock", "FwCanFrame",
     "CHANNELS", "ConfigError", "EMU_BLOB_ADDR", "drive_params", "emu_boot_blob",
     "write_emu_boot_blob", "RefError", "config_error", "METRIC_DEFS", "METRIC_NAMES",
     "METRICS", "MOTOR_DIR", "PAPER_SCENARIO_ARGS", "PAPER_SCENARIOS",

@@ -75,7 +75,7 @@ def emu_boot_blob(motor: Any = "paper_salient", extractor: int | str = "sogi_ada
     if len(raw_path) > NVM_PATH_MAX or b"\0" in raw_path:
         raise ValueError(f"non-volatile memory file {nvm_path!r}: at most {NVM_PATH_MAX} "
                          "bytes of UTF-8 without NUL (use a shorter or relative path)")
-    # as the bench's host simulated drive (bench._simdrive.BENCH_PLANT): the noise
+    # as the bench's host simulated drive (sim_fallback.SimDrive's BENCH_PLANT): the noise
     # restarts from the seed at every switch-on of the inverter
     params, cfg = drive_params(motor, extractor, seed, noise, {"noise_restart": 1,
                                                                **(plant or {})}, fw)

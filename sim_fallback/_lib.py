@@ -243,12 +243,19 @@ class SimCtrlConst(C.Structure):
     _fields_ = [("duty_abc", _f * 3), ("pwm_enable", _u8), ("calls", _u32)]
 
 
+class FwCanFrame(C.Structure):
+    """Mirror of ``fw_can_frame_t`` (fw_port.h): a frame through the drive's port."""
+
+    _fields_ = [("id", _u16), ("dlc", _u8), ("rtr", _u8), ("data", _u8 * 8)]
+
+
 MIRRORS: dict[str, type[C.Structure]] = {
     "fw_config_t": FwConfig, "fw_inputs_t": FwInputs, "fw_adc_inputs_t": FwAdcInputs,
     "fw_outputs_t": FwOutputs, "fw_snapshot_t": FwSnapshot,
     "sim_plant_params_t": SimPlantParams, "sim_plant_state_t": SimPlantState,
     "sim_sched_t": SimSched, "sim_controller_t": SimController,
     "sim_record_t": SimRecord, "sim_ctrl_const_t": SimCtrlConst,
+    "fw_can_frame_t": FwCanFrame,
 }
 
 
@@ -356,6 +363,18 @@ def _declare(lib: C.CDLL) -> None:
         "fw_step_adc": (None, [V, P(FwAdcInputs), P(FwOutputs)]),
         "fw_get_snapshot": (None, [V, P(FwSnapshot)]),
         "fw_ctrl_sizeof": (C.c_size_t, []),
+        # the whole drive application behind the simulator's port (sim_port.c)
+        "sim_app_new": (V, [P(FwConfig), _u8, C.c_char_p, P(C.c_int)]),
+        "sim_app_free": (None, [V]),
+        "sim_app_controller": (None, [V, _u32, P(SimController)]),
+        "sim_app_can_rx": (C.c_bool, [V, P(FwCanFrame)]),
+        "sim_app_can_pop": (C.c_bool, [V, P(FwCanFrame)]),
+        "sim_app_uart_read": (C.c_size_t, [V, C.c_char_p, C.c_size_t]),
+        "sim_app_background_now": (None, [V]),
+        "sim_app_fw_app": (V, [V]),
+        "sim_app_config": (None, [V, P(FwConfig)]),
+        "sim_app_nvm_state": (C.c_int, [V]),
+        "sim_app_crit_unbalanced": (_u32, [V]),
     }
     for name, (res, args) in sig.items():
         fn = getattr(lib, name)
@@ -396,6 +415,35 @@ def lib() -> C.CDLL:
                 "&& cmake --build build/sim --target pmlsm_sim` or set PMLSM_SIM_LIB. Tried: "
                 + ", ".join(tried))
     return _LIB
+
+
+_COMM: C.CDLL | None = None
+
+
+def comm_lib() -> C.CDLL:
+    """Load (once) the drive application alone, without a plant (``libpmlsm_comm``: the
+    core, the CANopen node and the serial link, ``fw_app_*``; enough for NMT, SDO, PDO,
+    heartbeat and EMCY against zero currents), declared with this module's mirrors."""
+    global _COMM
+    if _COMM is None:
+        from protocols.clib import load_app
+
+        cand = load_app()
+        P, V = C.POINTER, C.c_void_p
+        for name, (res, args) in {
+            "fw_app_sizeof": (C.c_size_t, []),
+            "fw_app_init": (C.c_int, [V, P(FwConfig), _u8]),
+            "fw_app_can_rx": (C.c_bool, [V, P(FwCanFrame)]),
+            "fw_app_can_tx_pop": (C.c_bool, [V, P(FwCanFrame)]),
+            "fw_app_step": (None, [V, P(FwInputs), P(FwOutputs)]),
+            "fw_app_uart_read": (C.c_size_t, [V, C.c_char_p, C.c_size_t]),
+            "fw_config_default": (None, [P(FwConfig)]),
+        }.items():
+            fn = getattr(cand, name)
+            fn.restype = res
+            fn.argtypes = args
+        _COMM = cand
+    return _COMM
 
 
 def lib_path() -> str:

@@ -280,6 +280,9 @@ size_t sim_app_uart_read(sim_app_t *d, uint8_t *buf, size_t cap);
 void sim_app_background_now(sim_app_t *d);
 /** The drive's fw_app_t (a void * here: this header does not need fw_app.h), for tests. */
 void *sim_app_fw_app(sim_app_t *d);
+/** The drive's running configuration (fw_config_t of its core: the one it booted with,
+ *  from its non-volatile memory when that held one, as changed since over the bus). */
+void sim_app_config(sim_app_t *d, fw_config_t *out);
 /** fw_app_nvm_state_t of the boot. */
 int sim_app_nvm_state(const sim_app_t *d);
 /** Unbalanced critical sections seen (0 in a correct firmware). */

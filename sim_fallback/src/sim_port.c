@@ -278,6 +278,8 @@ void sim_app_background_now(sim_app_t *d) { fw_board_background(&d->board); }
 
 void *sim_app_fw_app(sim_app_t *d) { return &d->app; }
 
+void sim_app_config(sim_app_t *d, fw_config_t *out) { *out = fw_app_ctrl(&d->app)->cfg; }
+
 int sim_app_nvm_state(const sim_app_t *d) { return (int)fw_app_nvm_state(&d->app); }
 
 uint32_t sim_app_crit_unbalanced(const sim_app_t *d) {

@@ -17,9 +17,9 @@ def sim_available() -> bool:
         from sim_fallback import _lib
 
         _lib.lib()
-        from protocols import _clib
+        from protocols import clib
 
-        _clib.load_app()
+        clib.load_app()
         return True
     except Exception:  # noqa: BLE001
         return False

@@ -244,7 +244,7 @@ def test_runs_do_not_depend_on_thread_timing(tmp_path: Path,
     import time
 
     from bench import run_sequence, validate_sequence
-    from bench._simdrive import SimDrive
+    from sim_fallback import SimDrive
 
     seq = validate_sequence(
         "name: repro\nmotor: paper_salient\nextractor: sogi_adaptive\nseed: 7\nsteps:\n"

@@ -1,7 +1,7 @@
 """The bench's HARDWARE load path against a real (simulated) CANopen load machine.
 
 Two drive applications (the real C firmware + C CANopen slave, ``fw_app``, each in closed
-loop with its own simulated plant, :class:`protocols.sim_bridge.DriveBridge`) share one
+loop with its own simulated plant, :class:`sim_fallback.DriveBridge`) share one
 python-can ``virtual`` channel and are paced to the wall clock:
 
 * node 1: the drive under test (speed mode),
@@ -46,7 +46,7 @@ import pytest
 from canopen.profiles.p402 import State402
 
 from bench import CanopenLoad, WallClock, connect, run_sequence, validate_sequence
-from protocols.sim_bridge import DriveBridge
+from sim_fallback import DriveBridge
 
 MOTOR = "paper_salient"
 DUT, LOAD = 1, 2
@@ -59,11 +59,11 @@ LOAD_NM = 1.0
 
 def _why_unavailable() -> str | None:
     try:
-        from protocols import _clib
+        from protocols import clib
         from sim_fallback import _lib
 
         _lib.lib()
-        _clib.load_app()
+        clib.load_app()
     except (OSError, ImportError) as e:
         return str(e)
     return None

@@ -1,6 +1,6 @@
 """The communication side of "stop safely" (issue 10), end to end: the python
 ``canopen`` library is the master, the C drive application (core + CANopen
-slave) runs in closed loop with the simulated plant (protocols.sim_bridge).
+slave) runs in closed loop with the simulated plant (sim_fallback.DriveBridge).
 
 Timing is judged in simulated time: the bridge is stepped by the test
 (``DriveBridge.advance``), frames sent before a call are processed in its
@@ -24,9 +24,9 @@ import numpy as np
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 
-from protocols import _clib
+from protocols import clib
 from protocols.generated.od_names import FAULT_CODES
-from protocols.sim_bridge import DriveBridge
+from sim_fallback import DriveBridge
 
 ROOT = Path(__file__).resolve().parents[2]
 EDS = ROOT / "protocols" / "generated" / "pmlsm_drive.eds"
@@ -96,7 +96,7 @@ class Rig:
 @pytest.fixture
 def make_rig() -> Iterator[Callable[[str | None], Rig]]:
     try:
-        _clib.load_app()
+        clib.load_app()
     except (OSError, subprocess.CalledProcessError) as e:  # pragma: no cover - no compiler
         pytest.skip(f"drive application cannot be built: {e}")
     rigs: list[Rig] = []

@@ -1,6 +1,6 @@
 """The whole EDS against the drive (issue 34): the python ``canopen`` library is the
 master, the C drive application (fw_app: core + CANopen slave, the code of every
-board) is the node on python-can's ``virtual`` bus (protocols.sim_bridge.DriveBridge,
+board) is the node on python-can's ``virtual`` bus (sim_fallback.DriveBridge,
 paced to real time). For every object of protocols/generated/pmlsm_drive.eds:
 
 - a readable entry uploads, and its size is its EDS data type's (CiA 301);
@@ -48,9 +48,10 @@ import pytest
 from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 from canopen.sdo.exceptions import SdoAbortedError
 
-from protocols import _clib
+from protocols import clib
 from protocols._od import load
-from protocols.sim_bridge import DriveBridge, FwConfigField, FwConfigIssue
+from sim_fallback import DriveBridge
+from sim_fallback._lib import FwConfigField, FwConfigIssue
 
 ROOT = Path(__file__).resolve().parents[2]
 EDS = ROOT / "protocols" / "generated" / "pmlsm_drive.eds"
@@ -72,7 +73,7 @@ def drive(request: pytest.FixtureRequest) -> Iterator[tuple[canopen.RemoteNode, 
     """The drive on the factory configuration (null plant), and the simulated drive in
     closed loop with its motor (paper_salient, configured as the simulator's)."""
     try:
-        _clib.load_app()
+        clib.load_app()
     except (OSError, subprocess.CalledProcessError) as e:  # pragma: no cover - no compiler
         pytest.skip(f"drive application cannot be built: {e}")
     ch = f"pmlsm-eds-{uuid.uuid4().hex[:8]}"

@@ -1,7 +1,7 @@
 """Fault reaction (CiA 402 0x605E) and quick stop (0x605A) option codes on the whole
 simulated drive (issue 34): the python ``canopen`` library is the master, the C drive
 application (core + CANopen slave) runs in closed loop with the simulated plant
-(protocols.sim_bridge), and every judgement is the simulator's truth (the mover's true
+(sim_fallback.DriveBridge), and every judgement is the simulator's truth (the mover's true
 speed and position), which the drive never sees.
 
 - 0x605E 1 and 2 ("slow down on the slow-down / quick-stop ramp") brake until the
@@ -45,9 +45,9 @@ import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 from test_comm_safety import MASTER, MS, NID, REC, Rig, _sdo
 
-from protocols import _clib
+from protocols import clib
 from protocols.generated.od_names import FAULT_CODES, Reaction
-from protocols.sim_bridge import DriveBridge
+from sim_fallback import DriveBridge
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "firmware.md"
@@ -68,7 +68,7 @@ def make_rig() -> Iterator[Callable[[str | None], Rig]]:
     """Rigs of test_comm_safety.py (the canopen master and the drive on one virtual
     bus; None: the null plant), closed after the test."""
     try:
-        _clib.load_app()
+        clib.load_app()
     except (OSError, subprocess.CalledProcessError) as e:  # pragma: no cover - no compiler
         pytest.skip(f"drive application cannot be built: {e}")
     rigs: list[Rig] = []

@@ -43,7 +43,7 @@ def _sdo_download(idx: int, sub: int, value: int, size: int) -> can.Message:
 
 @pytest.fixture(params=[1, 12], ids=["bg_every_period", "bg_every_12"])
 def run(request):
-    from protocols.sim_bridge import DriveBridge
+    from sim_fallback import DriveBridge
 
     ch = f"pmlsm-isr-{uuid.uuid4().hex[:8]}"
     drive_bus = can.Bus(interface="virtual", channel=ch)

@@ -1,7 +1,7 @@
 """The real other side of the wire: the python canopen library (RemoteNode +
 BaseNode402 over python-can ``virtual``) talks to the C drive application
 (fw_app: core + CANopen slave) running in closed loop with the simulated
-plant (protocols.sim_bridge.DriveBridge, paced to real time)."""
+plant (sim_fallback.DriveBridge, paced to real time)."""
 
 from __future__ import annotations
 
@@ -17,8 +17,8 @@ import pytest
 from canopen.profiles.p402 import BaseNode402
 from canopen.sdo.exceptions import SdoAbortedError
 
-from protocols import _clib
-from protocols.sim_bridge import DriveBridge
+from protocols import clib
+from sim_fallback import DriveBridge
 
 ROOT = Path(__file__).resolve().parents[2]
 EDS = ROOT / "protocols" / "generated" / "pmlsm_drive.eds"
@@ -35,7 +35,7 @@ def rig():
     seen: list[can.Message] = []
     net.subscribe(0x700 + NID, lambda cob, data, ts: seen.append(bytes(data)))
     try:
-        _clib.load_app()
+        clib.load_app()
     except (OSError, subprocess.CalledProcessError) as e:  # pragma: no cover - no compiler
         net.disconnect()
         drive_bus.shutdown()

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from protocols import serial_link as sl
-from protocols._clib import load_co
 from protocols._od import load
+from protocols.clib import load_co
 
 MAX_ENC = sl.MAX_ENCODED
 

@@ -27,8 +27,8 @@ import numpy as np
 import pytest
 
 from protocols import serial_link as sl
-from protocols._clib import load_co
 from protocols._od import load
+from protocols.clib import load_co
 
 T = sl.FrameType
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,9 +1,9 @@
-"""Bridge a python-can bus to the drive application (fw_app) running in C.
+"""The drive application (fw_app) in C on a python-can bus: the simulated CAN node.
 
 The drive application (control core + CANopen node + serial link,
-``firmware_c/comm``) runs either in closed loop with the simulated plant of
-``sim_fallback`` (when that library is available) or against a null plant
-(zero currents, constant DC link; enough for NMT/SDO/PDO/heartbeat/EMCY).
+``firmware_c/comm``) runs either in closed loop with the simulated plant
+(:class:`sim_fallback.Sim`) or against a null plant (zero currents, constant DC link;
+enough for NMT/SDO/PDO/heartbeat/EMCY).
 
 With the plant it runs as on the MCU: the simulator library holds the whole
 drive behind its own implementation of the port (``sim_fallback/src/
@@ -12,8 +12,11 @@ board glue's control interrupt (``fw_board_control_isr``: the firmware's one
 ADC conversion, the step, the duties) and the background loop
 (``fw_board_background``: CANopen, OD, EMCY, telemetry) runs every
 ``background_every`` control periods in between; the frames and UART bytes
-it sends through the port are collected here. The null plant steps the
-application library's ``fw_app_step`` (both halves in one call).
+it sends through the port are collected here. The drive is configured with the
+very ``fw_config_t`` of its :class:`Sim` (:func:`sim_fallback.drive_params`: the one
+configuration path of every simulated drive), through the one binding of
+:mod:`sim_fallback._lib`. The null plant steps the application library's
+``fw_app_step`` (both halves in one call).
 
 CAN frames are forwarded both ways once per chunk of control periods; the
 simulation is paced to wall-clock time by default so that CANopen timeouts
@@ -40,78 +43,10 @@ from typing import Any
 import can
 import numpy as np
 
-from . import _clib
+from . import _lib
+from ._lib import FwCanFrame, FwConfig, FwInputs, FwOutputs
 
 log = logging.getLogger(__name__)
-
-class FwCanFrame(C.Structure):
-    """Mirror of ``fw_can_frame_t``."""
-
-    _fields_ = [("id", C.c_uint16), ("dlc", C.c_uint8), ("rtr", C.c_uint8),
-                ("data", C.c_uint8 * 8)]
-
-
-class FwInputs(C.Structure):
-    _fields_ = [("i_abc_A", C.c_float * 3), ("u_dc_V", C.c_float)]
-
-
-class FwOutputs(C.Structure):
-    _fields_ = [("duty_abc", C.c_float * 3), ("pwm_enable", C.c_uint8)]
-
-
-class FwConfigField(C.Structure):
-    """Mirror of ``fw_config_field_t``."""
-
-    _fields_ = [("name", C.c_char_p), ("unit", C.c_char_p), ("offset", C.c_size_t),
-                ("is_int", C.c_uint8), ("is_signed", C.c_uint8), ("min", C.c_float),
-                ("max", C.c_float)]
-
-
-class FwConfigIssue(C.Structure):
-    """Mirror of ``fw_config_issue_t``."""
-
-    _fields_ = [("status", C.c_int), ("field", C.c_char_p), ("value", C.c_float),
-                ("min", C.c_float), ("max", C.c_float)]
-
-
-def _declare(lib: C.CDLL) -> None:
-    """The functions the bridge calls. ``lib`` is a handle of its own: ctypes keeps
-    argument types per handle, so these never change another module's declarations
-    of the same library (sim_fallback declares the simulator library its own way)."""
-    V = C.c_void_p
-    lib.fw_app_sizeof.restype = C.c_size_t
-    lib.fw_app_init.argtypes = [V, V, C.c_uint8]
-    lib.fw_app_init.restype = C.c_int
-    lib.fw_app_can_rx.argtypes = [V, C.POINTER(FwCanFrame)]
-    lib.fw_app_can_rx.restype = C.c_bool
-    lib.fw_app_can_tx_pop.argtypes = [V, C.POINTER(FwCanFrame)]
-    lib.fw_app_can_tx_pop.restype = C.c_bool
-    lib.fw_app_step.argtypes = [V, C.POINTER(FwInputs), C.POINTER(FwOutputs)]
-    lib.fw_app_uart_read.argtypes = [V, C.c_char_p, C.c_size_t]
-    lib.fw_app_uart_read.restype = C.c_size_t
-    lib.fw_config_default.argtypes = [V]
-    lib.fw_config_field_find.argtypes = [C.c_char_p]
-    lib.fw_config_field_find.restype = C.POINTER(FwConfigField)
-    lib.fw_config_check.argtypes = [V, C.POINTER(FwConfigIssue)]
-    lib.fw_config_check.restype = C.c_int
-    if hasattr(lib, "sim_app_new"):  # the simulator library: the drive behind sim_port.c
-        lib.sim_app_new.argtypes = [V, C.c_uint8, C.c_char_p, C.POINTER(C.c_int)]
-        lib.sim_app_new.restype = V
-        lib.sim_app_free.argtypes = [V]
-        lib.sim_app_controller.argtypes = [V, C.c_uint32, V]
-        lib.sim_app_can_rx.argtypes = [V, C.POINTER(FwCanFrame)]
-        lib.sim_app_can_rx.restype = C.c_bool
-        lib.sim_app_can_pop.argtypes = [V, C.POINTER(FwCanFrame)]
-        lib.sim_app_can_pop.restype = C.c_bool
-        lib.sim_app_uart_read.argtypes = [V, C.c_char_p, C.c_size_t]
-        lib.sim_app_uart_read.restype = C.c_size_t
-        lib.sim_app_background_now.argtypes = [V]
-        lib.sim_app_fw_app.argtypes = [V]
-        lib.sim_app_fw_app.restype = V
-        lib.sim_app_nvm_state.argtypes = [V]
-        lib.sim_app_nvm_state.restype = C.c_int
-        lib.sim_app_crit_unbalanced.argtypes = [V]
-        lib.sim_app_crit_unbalanced.restype = C.c_uint32
 
 
 class DriveBridge:
@@ -151,43 +86,38 @@ class DriveBridge:
         self._drive = None  # sim_app_t * (with the plant)
         if plant in ("auto", "sim"):
             try:
-                from sim_fallback import _lib as simlib
-                from sim_fallback._sim import Sim
+                from ._sim import Sim
 
                 self.sim = Sim(**(sim_kwargs or {}))
             except Exception:
                 if plant == "sim":
                     raise
                 self.sim = None
-        # with the plant, the simulator library holds the drive application too
-        self._L = (C.CDLL(self.sim._L._name) if self.sim is not None  # own handle: _declare
-                   else _clib.load_app())
-        _declare(self._L)
-        # Our own fw_config_t (this library's layout), defaults first, then the
-        # simulated motor's values copied field by field by name, so that the
-        # two libraries never have to agree on the struct layout.
-        self._cfg = C.create_string_buffer(4096)
-        self._L.fw_config_default(self._cfg)
         self.f_pwm_Hz = 24000.0
         if self.sim is not None:
-            self._copy_config(self.sim.cfg)
+            # with the plant, the simulator library holds the drive application too
+            self._L = _lib.lib()
             st = C.c_int(0)
             path = os.fsencode(str(nvm_path)) if nvm_path else None
-            self._drive = self._L.sim_app_new(self._cfg, node_id, path, C.byref(st))
+            self._drive = self._L.sim_app_new(C.byref(self.sim.cfg), node_id, path,
+                                              C.byref(st))
             if not self._drive:
                 self.sim.close()
                 raise RuntimeError(f"fw_app_init returned fw_status_t {st.value} "
                                    "(configuration refused)")
             self.f_pwm_Hz = 1.0 / self.sim.dt_s
-            port = simlib.SimController()
+            port = _lib.SimController()
             self._L.sim_app_controller(self._drive, max(1, int(background_every)),
-                                       C.addressof(port))
+                                       C.byref(port))
             self._port = port
             self.sim._L.sim_set_controller(self.sim._h, C.byref(port))
             self._L.sim_app_background_now(self._drive)  # the boot-up message
         else:
+            self._L = _lib.comm_lib()
+            cfg = FwConfig()
+            self._L.fw_config_default(C.byref(cfg))
             self._app = C.create_string_buffer(self._L.fw_app_sizeof())
-            rc = self._L.fw_app_init(self._app, self._cfg, node_id)
+            rc = self._L.fw_app_init(self._app, C.byref(cfg), node_id)
             if rc != 0:
                 raise RuntimeError(f"fw_app_init returned fw_status_t {rc} "
                                    "(configuration refused)")
@@ -203,33 +133,14 @@ class DriveBridge:
         self.error: BaseException | None = None
         self._flush_tx()  # boot-up message
 
-    def _copy_config(self, src: C.Structure) -> None:
-        """Copy the sim's fw_config_t - every field, by name: the drive is configured as
-        the simulator API's and the emulated board's drive for the same motor
-        (``sim_fallback.drive_params``) - into this library's layout; a field the core
-        refuses keeps the firmware default (logged), so a binding that is out of step
-        with the header cannot stop the bridge."""
-        dflt = C.create_string_buffer(self._cfg.raw, len(self._cfg))
-        for name, v in src.as_dict().items():  # flat field names (FwConfig nests in parts)
-            f = self._L.fw_config_field_find(name.encode())
-            if not f:
-                continue
-            off = f.contents.offset
-            if f.contents.is_int:  # int32_t or uint32_t: the same 32 bits
-                C.c_uint32.from_buffer(self._cfg, off).value = int(v) & 0xFFFFFFFF
-            else:
-                C.c_float.from_buffer(self._cfg, off).value = float(v)
-        issue = FwConfigIssue()
-        for _ in range(64):
-            if self._L.fw_config_check(self._cfg, C.byref(issue)) in (0, 4):  # OK, SALIENCY
-                return
-            if not issue.field:
-                break
-            f = self._L.fw_config_field_find(issue.field)
-            off = f.contents.offset
-            log.warning("sim config field %s = %g refused (range %g..%g): firmware default kept",
-                        issue.field.decode(), issue.value, issue.min, issue.max)
-            self._cfg[off:off + 4] = dflt.raw[off:off + 4]
+    def config(self) -> FwConfig:
+        """The drive's running configuration (``fw_config_t``: booted from its non-volatile
+        memory when that held one, as changed since over the bus); with the plant only."""
+        if self._drive is None:
+            raise RuntimeError("a drive without the plant has no simulator configuration")
+        cfg = FwConfig()
+        self._L.sim_app_config(self._drive, C.byref(cfg))
+        return cfg
 
     # ---- the drive's CAN and UART ----------------------------------------
     def _can_rx(self, f: FwCanFrame) -> bool:

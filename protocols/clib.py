@@ -6,7 +6,7 @@ installs them into this package; a development build leaves them under
 
 * ``libpmlsm_co``   : the CANopen + serial stacks alone (vectors, tests);
 * ``libpmlsm_comm`` : the whole drive application: core + CANopen + serial
-  (``fw_app_*``), used by :mod:`protocols.sim_bridge`.
+  (``fw_app_*``), used by :class:`sim_fallback.DriveBridge` without a plant.
 
 Search order: ``$PMLSM_CO_LIB`` / ``$PMLSM_COMM_LIB``, this package's folder
 (wheel install), ``$PMLSM_BUILD_DIR/firmware_c/comm``, then

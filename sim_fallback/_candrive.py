@@ -10,7 +10,7 @@
   (``fw_board.c``) as the MCU image, so the firmware that runs is the
   firmware that ships, shaped as it runs there.
 
-It is a :class:`protocols.sim_bridge.DriveBridge` (library loading, the
+It is a :class:`sim_fallback.DriveBridge` (library loading, the
 configuration taken over by field name, the controller port, the boot-up
 message) extended for the bench: a
 background thread steps it in chunks (default 1 ms of simulated time, one C
@@ -64,7 +64,8 @@ from typing import Any
 import can
 import numpy as np
 
-from protocols.sim_bridge import DriveBridge, FwCanFrame
+from ._app import DriveBridge
+from ._lib import FwCanFrame
 
 log = logging.getLogger("bench.simdrive")
 
@@ -192,7 +193,7 @@ class SimDrive(DriveBridge):
                  | None = None, noise: float = 1.0,
                  plant: dict[str, Any] | None = None, nvm_path: Any = None,
                  background_every: int = 1, max_lag_s: float | None = None) -> None:
-        from sim_fallback import load_motor
+        from ._motors import load_motor
 
         #: plant overrides: the motor actually simulated, when it is not the configured one
         self.plant_overrides = dict(plant or {})
@@ -411,7 +412,7 @@ class SimDrive(DriveBridge):
 
     # ---- the thread ---------------------------------------------------------------------
     def _apply_pending(self) -> None:
-        from sim_fallback import SIM_REF_LOAD
+        from ._sim import SIM_REF_LOAD
 
         assert self.sim is not None
         while self._pending:
