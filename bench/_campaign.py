@@ -42,7 +42,7 @@ import jsonschema
 import numpy as np
 import yaml
 
-from bench import _scenario_metrics as SM
+from sim_fallback import metrics as SM
 
 SCENARIOS = ("load_step", "speed_reversal", "startup", "fault_case")
 #: Axis targets that are plain run arguments (besides plant.<field> and fw.<field>).
@@ -967,7 +967,7 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
     kw: dict[str, Any] = {"t_end": float(base.get("t_end", 1.0)),
                           "record_decimation": int(base.get("record_decimation", 8)),
                           # only what the metrics need
-                          "channels": list(SM.CHANNELS) if analysis or tr else []}
+                          "channels": list(SM.SCENARIO_CHANNELS) if analysis or tr else []}
     if "noise" in rest:
         kw["noise"] = float(rest["noise"])
     if "x0_m" in rest:

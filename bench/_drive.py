@@ -45,27 +45,9 @@ MODES: dict[str, int] = {"speed": 9, "force": 10}
 #: canopen names of the modes.
 _MODE_NAMES = {"speed": "CYCLIC SYNCHRONOUS VELOCITY", "force": "CYCLIC SYNCHRONOUS TORQUE"}
 
-#: CiA 301 SDO abort codes -> plain explanation.
-SDO_ABORTS: dict[int, str] = {
-    0x05040000: "SDO protocol timed out",
-    0x05040001: "client/server command specifier not valid",
-    0x06010000: "unsupported access to an object",
-    0x06010001: "attempt to read a write-only object",
-    0x06010002: "attempt to write a read-only object",
-    0x06020000: "object does not exist in the object dictionary",
-    0x06040041: "object cannot be mapped to the PDO",
-    0x06040042: "the number and length of the objects to be mapped would exceed PDO length",
-    0x06040043: "general parameter incompatibility",
-    0x06070010: "data type does not match, length of service parameter does not match",
-    0x06090011: "sub-index does not exist",
-    0x06090030: "invalid value for parameter",
-    0x06090031: "value of parameter written too high",
-    0x06090032: "value of parameter written too low",
-    0x08000000: "general error",
-    0x08000020: "data cannot be transferred or stored to the application",
-    0x08000021: "data cannot be transferred because of local control",
-    0x08000022: "data cannot be transferred in the present device state",
-}
+#: CiA 301 SDO abort codes -> plain explanation (protocols/od.yaml, sdo_aborts: the codes the
+#: drive answers with are the same list).
+SDO_ABORTS: dict[int, str] = {code: text for code, (_, text) in od.SDO_ABORTS.items()}
 
 #: Fault codes, names and texts: one source, protocols/od.yaml (generated module).
 FAULTS: dict[int, str] = {0x0000: "no fault",

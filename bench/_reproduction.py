@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from bench._scenario_metrics import EST_BAND_RPM, POS_BAND_RAD, SPEED_BAND_RPM
 from bench._sequence import EXTRACTORS
+from sim_fallback.metrics import EST_BAND_RPM, POS_BAND_RAD, SPEED_BAND_RPM
 
 SCENARIOS = ("load_step", "speed_reversal", "startup")
 #: the extractors (od.yaml enums:), in value order

@@ -153,6 +153,15 @@ class Fault:
 
 
 @dataclass(frozen=True)
+class SdoAbort:
+    """One SDO abort code (``sdo_aborts:`` section): CO_ABORT_<name> in C, its text."""
+
+    code: int
+    name: str
+    text: str
+
+
+@dataclass(frozen=True)
 class EnumValue:
     """One value of an enumeration (``enums:`` section)."""
 
@@ -187,6 +196,7 @@ class ObjectDictionary:
     enums: list[Enum] = field(default_factory=list)
     #: fw_config_t's parts in struct order: part name -> doc (od.yaml fw_config_parts)
     fw_config_parts: dict[str, str] = field(default_factory=dict)
+    sdo_aborts: list[SdoAbort] = field(default_factory=list)
 
     def objects(self) -> dict[int, list[OdEntry]]:
         """Entries grouped by index, in order."""
@@ -522,6 +532,18 @@ def _load(path: Path) -> ObjectDictionary:
         if any(g.code == flt.code or g.name == flt.name for g in faults):
             raise OdError(f"{where}: code or name {flt.name} defined twice")
         faults.append(flt)
+    aborts: list[SdoAbort] = []
+    for k, a in enumerate(data.get("sdo_aborts", []) or []):
+        where = f"od.yaml sdo_aborts[{k}]"
+        try:
+            ab = SdoAbort(int(a["code"]), str(a["name"]), str(a["text"]))
+        except KeyError as e:
+            raise OdError(f"{where}: missing {e}") from None
+        if not re.fullmatch(r"[A-Z][A-Z0-9_]*", ab.name) or not 0 < ab.code <= 0xFFFFFFFF:
+            raise OdError(f"{where}: name {ab.name!r} / code {ab.code:#x}")
+        if any(b.code == ab.code or b.name == ab.name for b in aborts):
+            raise OdError(f"{where}: code or name {ab.name} defined twice")
+        aborts.append(ab)
     parts = {str(k): str(v) for k, v in (data.get("fw_config_parts", {}) or {}).items()}
     for name, lim in fw_limits.items():
         if lim.get("group") not in parts:
@@ -529,6 +551,7 @@ def _load(path: Path) -> ObjectDictionary:
                           f"fw_config_parts ({', '.join(parts)})")
     return ObjectDictionary(device=dev, entries=entries, signals=signals,
                             fw_config=fw_limits, faults=faults, fw_config_parts=parts,
+                            sdo_aborts=aborts,
                             enums=_enums(data.get("enums", []) or []))
 
 

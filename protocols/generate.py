@@ -367,7 +367,8 @@ def gen_py_names(od: ObjectDictionary) -> str:
         f"{HEADER}.",
         "",
         "FAULTS: fault code -> (name, text); FAULT_REACTIONS: code -> reaction;",
-        "FAULT_CODES: name -> code; Extractor, Mode, StartPhase, Reaction: the enums;",
+        "FAULT_CODES: name -> code; SDO_ABORTS: abort code -> (name, text);",
+        "Extractor, Mode, StartPhase, Reaction: the enums;",
         "INDEX_<OBJECT NAME>: object index;",
         "ENTRIES: (index, sub) -> name (the EDS ParameterName); every entry as an",
         "``Entry(index, sub, var, unit)`` constant by name (CONTROLWORD, TELEMETRY__DECIMATION).",
@@ -390,7 +391,12 @@ def gen_py_names(od: ObjectDictionary) -> str:
     for f in od.faults:
         lines.append(f"    0x{f.code:04X}: {f.reaction!r},")
     lines += ["}", "", "FAULT_CODES: dict[str, int] = {name: code for code, (name, _) in "
-              "FAULTS.items()}", "", ""]
+              "FAULTS.items()}", "",
+              "#: SDO abort code -> (name, text) (CiA 301; the drive's co_abort_t)",
+              "SDO_ABORTS: dict[int, tuple[str, str]] = {"]
+    for a in od.sdo_aborts:
+        lines.append(f"    0x{a.code:08X}: ({a.name!r}, {a.text!r}),")
+    lines += ["}", "", ""]
     lines += [
         "def fault_name(code: int) -> str:",
         f'    {q}Name of a fault code ("NONE" for 0, "0x1234" when unknown).{q}',
@@ -552,6 +558,28 @@ def gen_fault_header(od: ObjectDictionary) -> str:
     return "\n".join(lines)
 
 
+def gen_aborts_header(od: ObjectDictionary) -> str:
+    """co_abort_t for the CANopen node (firmware_c/comm/generated/co_aborts.h): the SDO
+    abort codes of od.yaml's ``sdo_aborts:`` list, the one source (the bench's texts are
+    od_names.SDO_ABORTS)."""
+    lines = [f"/* {HEADER} */",
+             "/**",
+             " * @file co_aborts.h",
+             " * @brief SDO abort codes (CiA 301) this drive answers with.",
+             " *        Names and texts: protocols/od.yaml, sdo_aborts:.",
+             " */",
+             "#ifndef PMLSM_CO_ABORTS_H",
+             "#define PMLSM_CO_ABORTS_H",
+             "",
+             "typedef enum {",
+             "  CO_ABORT_NONE = 0x00000000u, /**< no abort: accepted */"]
+    for a in sorted(od.sdo_aborts, key=lambda x: x.code):
+        text = a.text.replace("*/", "* /")
+        lines.append(f"  CO_ABORT_{a.name} = 0x{a.code:08X}u, /**< {text} */")
+    lines += ["} co_abort_t;", "", "#endif /* PMLSM_CO_ABORTS_H */", ""]
+    return "\n".join(lines)
+
+
 def _c_f32(x: float) -> str:
     """A float32 C literal that parses to exactly the float32 nearest ``x``."""
     t = _short_f32(float(x))
@@ -639,6 +667,7 @@ def outputs(od: ObjectDictionary | None = None) -> dict[Path, str]:
         gen / "co_od_table.c": gen_c_source(od),
         gen / "fw_serial_signals.h": gen_signals_header(od),
         gen / "fw_serial_signals.c": gen_signals_source(od),
+        gen / "co_aborts.h": gen_aborts_header(od),
         ROOT / "firmware_c" / "include" / "pmlsm" / "fw_faults.h": gen_fault_header(od),
         ROOT / "firmware_c" / "include" / "pmlsm" / "fw_enums.h": gen_enums_header(od),
         ROOT / "firmware_c" / "include" / "pmlsm" / "fw_version.h": gen_version_header(od),

@@ -289,9 +289,9 @@ def field_range(sec: str, key: str) -> tuple[float, float, str]:
         if key in fw:
             lo, hi, fw_unit = fw[key]  # the firmware's own limits
         else:
-            from protocols import _od
+            from protocols import load_od
 
-            c = _od.load().fw_config[key]
+            c = load_od().fw_config[key]
             lo, hi, fw_unit = float(c["min"]), float(c["max"]), str(c.get("unit") or "")
         unit = fw_unit or unit
     return lo, hi, unit

@@ -449,3 +449,31 @@ def test_defaults_derived_from_the_paper_motor(od):
     assert names["extractor"][d["extractor"]] == "sogi_adaptive"
     assert names["reaction"][d["quick_stop_option"]] == "quick_ramp"
     assert names["reaction"][d["fault_reaction_option"]] == "brake_timed"
+
+
+def test_sdo_abort_codes_have_one_source_and_are_cia301s() -> None:
+    """od.yaml's sdo_aborts: is the one list: the C enum co_abort_t is generated from it,
+    the bench explains an abort with its texts, and every code is one CiA 301 defines
+    (the canopen library's table, an independent reference)."""
+    import re
+
+    from canopen.sdo.exceptions import SdoAbortedError
+
+    from bench._drive import SDO_ABORTS
+    from protocols import load_od
+    from protocols.generated import od_names
+
+    od = load_od()
+    codes = {a.code: a for a in od.sdo_aborts}
+    assert set(od_names.SDO_ABORTS) == set(codes) == set(SDO_ABORTS)
+    assert all(SDO_ABORTS[c] == a.text for c, a in codes.items())
+    assert all(c in SdoAbortedError.CODES for c in codes)
+    REPO = Path(__file__).resolve().parents[2]
+    header = (REPO / "firmware_c" / "comm" / "generated" / "co_aborts.h").read_text()
+    enum = {int(v, 16): n for n, v in re.findall(r"CO_ABORT_(\w+) = (0x[0-9A-F]+)u", header)}
+    assert enum.pop(0) == "NONE"
+    assert enum == {c: a.name for c, a in codes.items()}
+    # and no abort code is written as a number in the firmware's sources
+    for src in (REPO / "firmware_c" / "comm" / "src").glob("*.c"):
+        code = re.sub(r"/\*.*?\*/", "", src.read_text(), flags=re.S)
+        assert not re.search(r"0x0[568]0[0-9A-Fa-f]{5}", code), src.name

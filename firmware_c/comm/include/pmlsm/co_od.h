@@ -45,28 +45,8 @@ typedef enum {
 #define CO_FLAG_NODEID 0x02u /**< default is node id + def_i */
 #define CO_FLAG_CMD 0x04u    /**< an action or set-point, not configuration (od.yaml `command`) */
 
-/** SDO abort codes (CiA 301). */
-typedef enum {
-  CO_ABORT_NONE = 0x00000000u,
-  CO_ABORT_TOGGLE = 0x05030000u,          /**< toggle bit not alternated */
-  CO_ABORT_TIMEOUT = 0x05040000u,         /**< SDO protocol timed out */
-  CO_ABORT_CMD = 0x05040001u,             /**< command specifier invalid */
-  CO_ABORT_UNSUPPORTED = 0x06010000u,     /**< unsupported access to an object */
-  CO_ABORT_WRITE_ONLY = 0x06010001u,      /**< attempt to read a write-only object */
-  CO_ABORT_READ_ONLY = 0x06010002u,       /**< attempt to write a read-only object */
-  CO_ABORT_NO_OBJECT = 0x06020000u,       /**< object does not exist */
-  CO_ABORT_NO_MAP = 0x06040041u,          /**< object cannot be mapped to the PDO */
-  CO_ABORT_MAP_LEN = 0x06040042u,         /**< mapped objects exceed the PDO length */
-  CO_ABORT_PARAM_INCOMPAT = 0x06040043u,  /**< general parameter incompatibility */
-  CO_ABORT_TYPE_LEN = 0x06070010u,        /**< data type / length mismatch */
-  CO_ABORT_NO_SUB = 0x06090011u,          /**< sub-index does not exist */
-  CO_ABORT_VALUE_RANGE = 0x06090030u,     /**< invalid value (e.g. NaN) */
-  CO_ABORT_VALUE_HIGH = 0x06090031u,      /**< value too high */
-  CO_ABORT_VALUE_LOW = 0x06090032u,       /**< value too low */
-  CO_ABORT_GENERAL = 0x08000000u,         /**< general error */
-  CO_ABORT_APP = 0x08000020u,             /**< cannot be stored (application refused) */
-  CO_ABORT_DEVICE_STATE = 0x08000022u     /**< not allowed in the present device state */
-} co_abort_t;
+/* SDO abort codes (CiA 301): co_abort_t, generated from protocols/od.yaml (sdo_aborts:). */
+#include "co_aborts.h"
 
 /** One object dictionary entry (generated). */
 typedef struct {
