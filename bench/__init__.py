@@ -22,7 +22,7 @@ import importlib
 import sys
 from typing import Any
 
-__version__ = "0.1.0"
+from protocols import __version__  # the product's one version
 
 
 class _RestoreCanMf4Loader:

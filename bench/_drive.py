@@ -26,6 +26,7 @@ import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from bench._units import si_to_wire, wire_to_si
+from protocols import EDS_PATH
 from protocols.generated import od_names as od
 from protocols.generated.od_names import FAULTS as _OD_FAULTS
 
@@ -38,7 +39,7 @@ PDO_PARAMETER_AREA = range(0x1400, 0x1C00)
 
 ROOT = Path(__file__).resolve().parent.parent
 #: EDS generated from protocols/od.yaml.
-DEFAULT_EDS = ROOT / "protocols" / "generated" / "pmlsm_drive.eds"
+DEFAULT_EDS = EDS_PATH  # the generated EDS (protocols)
 
 #: CiA 402 modes of operation used by the drive.
 MODES: dict[str, int] = {"speed": 9, "force": 10}

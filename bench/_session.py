@@ -467,8 +467,8 @@ def connect(sim: bool = False, interface: str | None = None, channel: str | None
     falls back to the in-process simulated drive, said on stderr; the connection then
     has ``info["fallback"] = True`` and every result says SIMULATED.
 
-    ``sim_server`` (a :class:`bench._simserver.ServerState`, ``bench sim start``) and
-    ``emu`` (a :class:`bench._emu.EmuState`, ``bench emu start``) are reached exactly as
+    ``sim_server`` (a :class:`sim_fallback.server.ServerState`, ``bench sim start``) and
+    ``emu`` (a :class:`sim_fallback.emu.EmuState`, ``bench emu start``) are reached exactly as
     a rig is (:func:`open_hardware`), never a fallback; what they are comes from the
     drive (0x2090:1), as for every drive on a bus.
     """

@@ -552,7 +552,7 @@ def _emu_state(args: argparse.Namespace) -> Any:
     if args.serial:
         raise UserError(f"--emu and --serial {args.serial} contradict each other (the "
                         "emulated board's serial link is used); drop one")
-    from bench._emu import EmuError, check_running
+    from sim_fallback.emu import EmuError, check_running
 
     try:
         st = check_running()
@@ -570,7 +570,7 @@ def _sim_server_state(args: argparse.Namespace) -> Any:
         return None
     _refuse_beside("--sim-server", "the server's drive is paced to the wall clock on its "
                    "own bus", (("--sim", args.sim), *_bus_options(args)))
-    from bench._simserver import SimServerError, check_running
+    from sim_fallback.server import SimServerError, check_running
 
     try:
         st = check_running()
@@ -1257,8 +1257,8 @@ def cmd_shell(args: argparse.Namespace) -> int:
 def _status_or_stop(action: str, mod: Any, error: type[Exception], alive: Any, what: str,
                     pid_word: str, describe: Any) -> int:
     """``bench sim|emu status|stop``: a background process and its state file (``mod``:
-    bench._simserver or bench._emu). Status of none or a dead one: exit 3, one line (a stale
-    state file is removed)."""
+    sim_fallback.server or sim_fallback.emu). Status of none or a dead one: exit 3, one
+    line (a stale state file is removed)."""
     if action == "status":
         try:
             st = mod.check_running()
@@ -1282,7 +1282,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     """``bench sim start|stop|status``; a state folder that cannot be used is one line,
     exit 2 (a regular file on its path, ...) or 3 (the system refuses it): its
     ``SetupError`` carries the code, which :func:`exit_code_for` keeps."""
-    from bench import _simserver as S
+    from sim_fallback import server as S
 
     if args.sim_cmd in ("status", "stop"):
         return _status_or_stop(args.sim_cmd, S, S.SimServerError, S.pid_is_server,
@@ -1311,7 +1311,7 @@ def cmd_emu(args: argparse.Namespace) -> int:
     """``bench emu start|stop|status``."""
     import math
 
-    from bench import _emu as E
+    from sim_fallback import emu as E
 
     if args.emu_cmd in ("status", "stop"):
         return _status_or_stop(args.emu_cmd, E, E.EmuError, E.pid_is_emu, "emulated board",

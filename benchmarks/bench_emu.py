@@ -99,7 +99,7 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 4, 7])
     ap.add_argument("--can-seconds", type=float, default=10.0)
     a = ap.parse_args()
-    from bench import _emu as E
+    from sim_fallback import emu as E
 
     try:
         E.qemu_binary()

@@ -14,6 +14,10 @@ Public API:
 
 from pathlib import Path
 
+#: The product's version (pyproject.toml [project] version): the bench, the simulator and
+#: the protocol tools ship as one.
+__version__ = "0.1.0"
+
 from ._od import ObjectDictionary, OdEntry, OdError
 from ._od import load as load_od
 from .serial_link import (
@@ -32,6 +36,7 @@ EDS_PATH = Path(__file__).resolve().parent / "generated" / "pmlsm_drive.eds"
 
 __all__ = [
     "EDS_PATH",
+    "__version__",
     "Frame",
     "FrameError",
     "FrameType",

@@ -12,6 +12,11 @@ python-can bus; python-can is imported on first use)::
 
     from sim_fallback import SimDrive, DriveBridge
 
+The drive worlds beside it, as public modules: :mod:`sim_fallback.server` (the simulated
+drive server, ``bench sim``), :mod:`sim_fallback.emu` (the firmware image on the emulated
+board in QEMU, ``bench emu``), :mod:`sim_fallback.standin` (``FakeDrive402``: a CiA 402
+stand-in node without a plant, for protocol tests).
+
 Metrics (one definition for the simulator, the bench and the reports):
 ``sim_fallback.metrics`` (public, numpy only). See docs/simulator.md.
 """
@@ -46,7 +51,7 @@ from .metrics import METRIC_DEFS, METRIC_NAMES, METRICS, compute_metrics, run_me
 
 #: Names of the CAN-node modules, imported on first use (they import python-can).
 _LAZY = {"DriveBridge": "_app", "SimDrive": "_candrive", "SimLoad": "_candrive",
-         "SimClock": "_candrive", "FwCanFrame": "_lib"}
+         "SimClock": "_candrive", "FwCanFrame": "_lib", "FakeDrive402": "standin"}
 
 
 def __getattr__(name: str):
@@ -58,7 +63,7 @@ def __getattr__(name: str):
 
 
 __all__ = [
-    "DriveBridge", "SimDrive", "SimLoad", "SimClock", "FwCanFrame",
+    "DriveBridge", "SimDrive", "SimLoad", "SimClock", "FwCanFrame", "FakeDrive402",
     "CHANNELS", "ConfigError", "EMU_BLOB_ADDR", "drive_params", "emu_boot_blob",
     "write_emu_boot_blob", "RefError", "config_error", "METRIC_DEFS", "METRIC_NAMES",
     "METRICS", "MOTOR_DIR", "PAPER_SCENARIO_ARGS", "PAPER_SCENARIOS",

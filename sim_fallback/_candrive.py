@@ -67,7 +67,7 @@ import numpy as np
 from ._app import DriveBridge
 from ._lib import FwCanFrame
 
-log = logging.getLogger("bench.simdrive")
+log = logging.getLogger("sim_fallback.candrive")
 
 #: Channels recorded from the simulation (truth + firmware internals) and their units.
 SIM_CHANNELS: dict[str, str] = {

@@ -31,13 +31,13 @@ needs_sim = pytest.mark.skipif(not sim_available(), reason="simulator libraries 
 @contextlib.contextmanager
 def stand_in_drive() -> Iterator[tuple[Any, Any]]:
     """``(drive, fake)``: a :class:`bench.Drive` set up against
-    :class:`bench._fake.FakeDrive402` on a fresh python-can ``virtual`` channel
+    :class:`sim_fallback.FakeDrive402` on a fresh python-can ``virtual`` channel
     (``fake.network.bus.channel_id``: where another master can join)."""
     import can
     import canopen
 
     from bench import Drive
-    from bench._fake import FakeDrive402
+    from sim_fallback import FakeDrive402
 
     ch = f"test-{uuid.uuid4().hex[:8]}"
     fake = FakeDrive402(can.Bus(interface="virtual", channel=ch))

@@ -90,7 +90,7 @@ def test_the_emulated_board_keys_its_flash_by_the_motor(tmp_path: Path) -> None:
     """Two motor files of one name (every `bench identify` writes a motor.toml) get their
     own flash page on the emulated board, as on the simulated drive server; the same
     content, the same page."""
-    from bench._emu import nvm_file
+    from sim_fallback.emu import nvm_file
 
     root = Path(__file__).resolve().parents[2]
     src = (root / "sim_fallback/motors/iron_core_linear.toml").read_text()

@@ -14,8 +14,8 @@ import pytest
 from sim_libs import stand_in_drive
 
 from bench import Drive, MotorUnits, Runner, validate_sequence
-from bench._fake import FakeDrive402
 from protocols.generated import od_names
+from sim_fallback import FakeDrive402
 
 UNITS = MotorUnits(pole_pitch_m=0.024, pole_pairs=4)
 HEAD = "name: t\nmotor: paper_salient\nextractor: sogi_adaptive\nseed: 0\nsteps:\n"

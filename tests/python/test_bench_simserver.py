@@ -243,7 +243,7 @@ def test_two_concurrent_starts_leave_one_server(env):
     assert "already running" in refused[2] and refused[2].count("\n") == 1
     pid = _state(env)["pid"]
     assert bench("sim", "stop", env=env)[0] == 0
-    pattern = f"bench._simserver --state-dir {env['BENCH_SIM_DIR']}"
+    pattern = f"sim_fallback.server --state-dir {env['BENCH_SIM_DIR']}"
     servers = subprocess.run(["pgrep", "-f", pattern], capture_output=True,
                              text=True).stdout.split()
     assert servers == [] and pid > 0
@@ -258,7 +258,7 @@ def test_the_server_has_a_load_machine_coupled_to_its_drive(env, monkeypatch):
     import time
 
     from bench._session import connect
-    from bench._simserver import read_state
+    from sim_fallback.server import read_state
 
     rc, out, err = bench("sim", "start", env=env)
     assert rc == 0, err

@@ -3,7 +3,7 @@ identification stop with a named cause when the drive leaves the state the bench
 in without a fault (another master on the bus), when only its statusword shows a fault,
 and when its heartbeat stops; never on a normal run.
 
-The other side of the wire is canopen's LocalNode (``bench._fake.FakeDrive402``), a
+The other side of the wire is canopen's LocalNode (``sim_fallback.FakeDrive402``), a
 second canopen master built from the canopen library, and the simulated drive.
 """
 
@@ -22,8 +22,8 @@ from test_bench_runner import HEAD, UNITS
 
 from bench import Drive, Runner, validate_sequence
 from bench._drive import DriveFault, DriveLeftState, DriveLost
-from bench._fake import FakeDrive402
 from protocols.generated import od_names as od
+from sim_fallback import FakeDrive402
 
 
 @pytest.fixture()

@@ -98,7 +98,7 @@ def test_image_size(emu_build: tuple[Path, str]) -> None:
 
 
 def _free_ports(n: int) -> list[int]:
-    from bench._emu import free_ports
+    from sim_fallback.emu import free_ports
 
     return free_ports(n)
 

@@ -19,7 +19,7 @@ from sim_libs import needs_sim
 
 from bench import cli
 from bench._drive import DriveError, DriveFault, DriveLeftState, DriveLost, ParamInputError
-from bench._simserver import SetupError
+from sim_fallback.server import SetupError
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}

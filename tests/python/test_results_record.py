@@ -2,7 +2,7 @@
 operator / station / fixture from the options, the environment or the system, in
 summary.json (and its schema), meta.json, junit.xml and the results store.
 
-The drive here is canopen's LocalNode (``bench._fake.FakeDrive402``) reached as any drive
+The drive here is canopen's LocalNode (``sim_fallback.FakeDrive402``) reached as any drive
 on a bus is (``--interface virtual``), given a serial number and build id of its own on the
 drive side: the record must carry them."""
 
@@ -26,9 +26,9 @@ import pytest
 from sim_libs import needs_sim
 
 from bench import _results as R
-from bench._fake import FakeDrive402
 from bench.cli import main
 from protocols.generated import od_names as od
+from sim_fallback import FakeDrive402
 
 ROOT = Path(__file__).resolve().parents[2]
 SCHEMA = json.loads((ROOT / "bench" / "schemas" / "summary.schema.json").read_text())

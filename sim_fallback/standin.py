@@ -19,7 +19,7 @@ from typing import Any
 import can
 import canopen
 
-from bench._drive import DEFAULT_EDS
+from protocols import EDS_PATH as DEFAULT_EDS
 from protocols.generated import od_names as od
 
 _OD = od

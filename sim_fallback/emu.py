@@ -41,7 +41,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from bench._simserver import (
+from .server import (
     HOST,
     log_tail,
     motor_key,
@@ -317,7 +317,7 @@ def _exit_reason(folder: Path) -> str:
 
 def nvm_file(folder: Path, motor: str) -> Path:
     """The emulated board's flash page for a motor: keyed by the motor's content
-    (:func:`bench._simserver.motor_key`), as the simulated drive server's NVM, so two
+    (:func:`sim_fallback.server.motor_key`), as the simulated drive server's NVM, so two
     motor files of one name (every `bench identify` writes a motor.toml) never share a
     stored configuration."""
     return folder / f"emu_nvm_{motor_key(motor)}.bin"
@@ -337,8 +337,9 @@ def start(motor: str = "paper_salient", extractor: str = "sogi_adaptive", seed: 
         No image, no QEMU, or QEMU exited (the board's own line from its log, e.g. a
         refused boot block).
     """
-    from bench import __version__
-    from sim_fallback import write_emu_boot_blob
+    from protocols import __version__
+
+    from ._emu_blob import write_emu_boot_blob
 
     folder = state_dir()
     with state_lock(folder, LOCK_FILE):
@@ -355,8 +356,9 @@ def start(motor: str = "paper_salient", extractor: str = "sogi_adaptive", seed: 
         qemu = qemu_binary()
         plant: dict[str, Any] | None = None
         if plant_motor and plant_motor != motor:
-            from sim_fallback import load_motor
             from sim_fallback._motors import machine_params
+
+            from ._motors import load_motor
 
             plant = machine_params(load_motor(plant_motor))
         if not ref_sensor:
@@ -426,7 +428,7 @@ def speed(st: EmuState, window_s: float = 1.0) -> float | None:
         return None
     finally:
         ld.close()
-    from sim_fallback import load_motor
+    from ._motors import load_motor
 
     f = float(load_motor(st.plant).plant["f_pwm_Hz"])
     return (b.get("periods", 0.0) - a.get("periods", 0.0)) / f / (t1 - t0)

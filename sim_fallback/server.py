@@ -81,7 +81,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-log = logging.getLogger("bench.simserver")
+log = logging.getLogger("sim_fallback.server")
 
 STATE_FILE = "simserver.json"
 LOG_FILE = "simserver.log"
@@ -319,7 +319,7 @@ def stop_process(pid: int, alive: Any, timeout_s: float) -> str:
 
 def pid_is_server(pid: int) -> bool:
     """Whether ``pid`` is alive and is a simulated drive server (not a reused pid)."""
-    return process_is(pid, b"bench._simserver")
+    return process_is(pid, b"sim_fallback.server")
 
 
 def probe(host: str, port: int, timeout_s: float = 1.0) -> str | None:
@@ -731,10 +731,11 @@ class LoadMachineNode:
     def __init__(self, channel: str, node_id: int, sim: Any) -> None:
         import can
 
-        from bench._fake import FakeDrive402
         from protocols.generated import od_names as od
         from protocols.units import force_constant_N_per_A
-        from sim_fallback import fw_config
+
+        from ._motors import fw_config
+        from .standin import FakeDrive402
 
         c = fw_config(sim.motor)  # the load machine is sized like the drive's motor
         self.rated_N = force_constant_N_per_A(c.psi_f_Wb, c.pole_pitch_m) * c.i_max_A
@@ -768,8 +769,9 @@ def serve(folder: Path, motor: str, extractor: str, seed: int, node_id: int, por
     """Run the simulated drive and its server until SIGTERM/SIGINT (this process)."""
     import can
 
-    from bench import __version__
-    from sim_fallback import SimDrive
+    from protocols import __version__
+
+    from ._candrive import SimDrive
 
     stop = threading.Event()
 
@@ -864,7 +866,7 @@ def motor_key(motor: str) -> str:
     them, so that a new bench version does not re-key a motor), so that two motors of one
     file name (every `bench identify` writes a motor.toml) never share a stored
     configuration, and an edited motor starts from the defaults."""
-    from sim_fallback import load_motor
+    from ._motors import load_motor
 
     m = load_motor(motor)
     doc = {sec: body for sec, body in m.raw.items() if sec != "motor"}
@@ -937,7 +939,7 @@ def _start_locked(folder: Path, motor: str, extractor: str, seed: int, node_id: 
     nvm_file = Path(nvm) if nvm else nvm_path(folder, motor)
     _note_unkeyed_nvm(folder, motor, nvm_file, say)
     logf = folder / LOG_FILE
-    cmd = [sys.executable, "-m", "bench._simserver", "--state-dir", str(folder),
+    cmd = [sys.executable, "-m", "sim_fallback.server", "--state-dir", str(folder),
            "--motor", motor, "--extractor", extractor, "--seed", str(seed),
            "--node-id", str(node_id), "--port", str(port), "--nvm", str(nvm_file.resolve()),
            "--client-queue-bytes", str(queue)]
@@ -1058,8 +1060,8 @@ def describe(st: ServerState) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m bench._simserver``: the server process (started by ``bench sim start``)."""
-    ap = argparse.ArgumentParser(prog="python -m bench._simserver",
+    """``python -m sim_fallback.server``: the server process (started by ``bench sim start``)."""
+    ap = argparse.ArgumentParser(prog="python -m sim_fallback.server",
                                  description="Simulated drive behind a socketcand server "
                                  "on 127.0.0.1 (use `bench sim start`).")
     ap.add_argument("--state-dir", default=None)
