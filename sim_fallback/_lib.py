@@ -185,6 +185,29 @@ class SimPlantParams(C.Structure):
     ]
 
 
+#: ``sim_realism_t`` fields (plant realism, docs/simulator.md), every one 0 = off.
+REALISM_FIELDS: tuple[str, ...] = (
+    "dLq_sat_H", "Iq_sat_A", "cross_L_H", "cross_I_A", "sal2_L_H", "sal2_order",
+    "sal2_phase_rad", "emf_h5", "emf_h5_phase_rad", "emf_h7", "emf_h7_phase_rad",
+    "end_dL_H", "end_psi_frac", "end_base", "end_travel_m", "end_zone_m",
+    "dt_C_eq_F", "u_dev_V", "r_dev_ohm")
+
+
+class SimRealism(C.Structure):
+    """Mirror of ``sim_realism_t`` (plant realism; all 0 = off)."""
+
+    _fields_ = [(n, _u32 if n == "sal2_order" else _d) for n in REALISM_FIELDS[:6]] + [
+        ("pad_real_", _u32)] + [(n, _d) for n in REALISM_FIELDS[6:]]
+
+
+class SimMagnetics(C.Structure):
+    """Mirror of ``sim_magnetics_t`` (sim_plant_magnetics: flux, incremental inductance,
+    speed voltage per velocity, thrust at one operating point)."""
+
+    _fields_ = [("psi_dq_Wb", _d * 2), ("L_dq_H", _d * 3), ("e_dq_V_per_mps", _d * 2),
+                ("force_N", _d)]
+
+
 class SimPlantState(C.Structure):
     """Mirror of ``sim_plant_state_t`` (truth)."""
 
@@ -256,6 +279,7 @@ MIRRORS: dict[str, type[C.Structure]] = {
     "sim_sched_t": SimSched, "sim_controller_t": SimController,
     "sim_record_t": SimRecord, "sim_ctrl_const_t": SimCtrlConst,
     "fw_can_frame_t": FwCanFrame,
+    "sim_realism_t": SimRealism, "sim_magnetics_t": SimMagnetics,
 }
 
 
@@ -329,6 +353,9 @@ def _declare(lib: C.CDLL) -> None:
         "sim_plant_advance": (None, [V, P(_d), C.c_int, _d, _u32]),
         "sim_sample": (None, [V, P(FwInputs), P(FwAdcInputs)]),
         "sim_force_N": (_d, [V]),
+        "sim_realism_check": (C.c_int, [P(SimPlantParams), P(SimRealism), P(C.c_char_p)]),
+        "sim_set_realism": (C.c_int, [V, P(SimRealism), P(C.c_char_p)]),
+        "sim_plant_magnetics": (None, [V, _d, _d, _d, P(SimMagnetics)]),
         "sim_ctrl_const_port": (None, [P(SimCtrlConst), P(SimController)]),
         "sim_fw_port": (None, [V, P(SimController)]),
         "sim_fw_new": (V, []),

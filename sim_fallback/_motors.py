@@ -154,6 +154,25 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float | None, float | None, str, Any]
     ("electrical", "psi_f_Wb"): (True, None, None, "Wb", None),
     ("electrical", "dL_sat_H"): (False, 0.0, 0.5, "H (< L_d_H)", 0.0),
     ("electrical", "I_sat_A"): (False, 0.01, 1000.0, "A", 5.0),
+    # plant realism (docs/simulator.md "Plant realism"), 0 = off: q-axis saturation,
+    # cross-saturation, a secondary spatial saliency, back-EMF harmonics
+    ("electrical", "dLq_sat_H"): (False, 0.0, 0.5, "H (< L_q_H)", 0.0),
+    ("electrical", "Iq_sat_A"): (False, 0.0, 1000.0, "A (> 0 with dLq_sat_H)", 0.0),
+    ("electrical", "cross_L_H"): (False, 0.0, 0.5, "H", 0.0),
+    ("electrical", "cross_I_A"): (False, 0.0, 1000.0, "A (> 0 with cross_L_H)", 0.0),
+    ("electrical", "saliency2_L_H"): (False, 0.0, 0.5, "H", 0.0),
+    ("electrical", "saliency2_order"): (False, 1, 12, "(integer)", 4),
+    ("electrical", "saliency2_phase_rad"): (False, -10.0, 10.0, "rad", 0.0),
+    ("electrical", "emf_h5"): (False, 0.0, 0.5, "(of the fundamental)", 0.0),
+    ("electrical", "emf_h5_phase_rad"): (False, -10.0, 10.0, "rad", 0.0),
+    ("electrical", "emf_h7"): (False, 0.0, 0.5, "(of the fundamental)", 0.0),
+    ("electrical", "emf_h7_phase_rad"): (False, -10.0, 10.0, "rad", 0.0),
+    # end effect of the linear machine (outer phases a and c), 0 = off
+    ("end_effect", "dL_H"): (False, 0.0, 0.5, "H", 0.0),
+    ("end_effect", "psi_frac"): (False, 0.0, 0.9, "", 0.0),
+    ("end_effect", "base"): (False, 0.0, 1.0, "", 0.0),
+    ("end_effect", "travel_m"): (False, 0.0, 100.0, "m (0: no stator ends)", 0.0),
+    ("end_effect", "zone_m"): (False, 0.0, 10.0, "m (> 0 with travel_m)", 0.0),
     # mechanical, both parameterizations
     ("mechanical", "pole_pitch_m"): (True, None, None, "m", None),
     ("mechanical", "pole_pairs"): (False, None, None, "", None),
@@ -178,6 +197,10 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float | None, float | None, str, Any]
     ("inverter", "dead_time_s"): (False, 0.0, 5e-6, "s", 0.0),
     ("inverter", "dead_band_A"): (False, 0.0, 10.0, "A", 0.05),
     ("inverter", "n_sub"): (False, 1, 1024, "", 1),
+    # inverter nonlinearity (plant realism), 0 = off
+    ("inverter", "dead_time_C_F"): (False, 0.0, 1e-7, "F", 0.0),
+    ("inverter", "device_drop_V"): (False, 0.0, 10.0, "V", 0.0),
+    ("inverter", "device_r_ohm"): (False, 0.0, 10.0, "ohm", 0.0),
     # sensing
     ("sensing", "adc_bits"): (False, 8, 16, "bit", 12),
     ("sensing", "adc_i_fullscale_A"): (False, 0.1, 1000.0, "A", 25.0),
@@ -224,6 +247,8 @@ class Motor:
     controller : dict
         ``[controller]`` section values (with defaults; the back-EMF handover and witness
         speeds only when the file gives them).
+    realism : dict
+        ``sim_realism_t`` fields (plant realism, :data:`REALISM_FIELD_SOURCES`; all 0 = off).
     """
 
     name: str
@@ -235,6 +260,7 @@ class Motor:
     radius_m: float
     controller: dict[str, float]
     raw: dict[str, Any] = field(repr=False, default_factory=dict)
+    realism: dict[str, Any] = field(default_factory=dict)
 
     @property
     def tau_m(self) -> float:
@@ -324,10 +350,27 @@ PLANT_FIELD_SOURCES: dict[str, tuple[str, str]] = {
 }
 
 
+#: ``sim_realism_t`` fields (plant realism) by the motor-file field that sets them.
+REALISM_FIELD_SOURCES: dict[str, tuple[str, str]] = {
+    "dLq_sat_H": ("electrical", "dLq_sat_H"), "Iq_sat_A": ("electrical", "Iq_sat_A"),
+    "cross_L_H": ("electrical", "cross_L_H"), "cross_I_A": ("electrical", "cross_I_A"),
+    "sal2_L_H": ("electrical", "saliency2_L_H"), "sal2_order": ("electrical", "saliency2_order"),
+    "sal2_phase_rad": ("electrical", "saliency2_phase_rad"),
+    "emf_h5": ("electrical", "emf_h5"), "emf_h5_phase_rad": ("electrical", "emf_h5_phase_rad"),
+    "emf_h7": ("electrical", "emf_h7"), "emf_h7_phase_rad": ("electrical", "emf_h7_phase_rad"),
+    "end_dL_H": ("end_effect", "dL_H"), "end_psi_frac": ("end_effect", "psi_frac"),
+    "end_base": ("end_effect", "base"), "end_travel_m": ("end_effect", "travel_m"),
+    "end_zone_m": ("end_effect", "zone_m"),
+    "dt_C_eq_F": ("inverter", "dead_time_C_F"), "u_dev_V": ("inverter", "device_drop_V"),
+    "r_dev_ohm": ("inverter", "device_r_ohm"),
+}
+
+
 def plant_field_range(name: str) -> tuple[float, float, str] | None:
     """A plant field's allowed range ``(lo, hi, unit)``, inclusive: its motor-file field's
-    (:data:`PLANT_FIELD_SOURCES`, :func:`field_range`); None for a field without one."""
-    src = PLANT_FIELD_SOURCES.get(name)
+    (:data:`PLANT_FIELD_SOURCES`, :data:`REALISM_FIELD_SOURCES`, :func:`field_range`);
+    None for a field without one."""
+    src = PLANT_FIELD_SOURCES.get(name) or REALISM_FIELD_SOURCES.get(name)
     return field_range(*src) if src else None
 
 
@@ -380,6 +423,36 @@ def resolve_motor_path(motor: str | Path) -> Path:
 MACHINE_FIELDS = ("R_ohm", "L_d0_H", "L_q_H", "dL_sat_H", "I_sat_A", "psi_f_Wb", "tau_m",
                   "mass_kg", "b_visc_Ns_per_m", "F_coulomb_N", "F_static_N", "v_stick_mps",
                   "cog_amp_N", "cog_period_m", "cog_phase_rad")
+
+
+def realism_params(motor: Motor, **overrides: Any) -> _lib.SimRealism:
+    """``sim_realism_t`` for a motor (plant realism), with field overrides."""
+    vals = dict(motor.realism)
+    for k, v in overrides.items():
+        if k not in _lib.REALISM_FIELDS:
+            raise KeyError(f"unknown plant realism parameter '{k}'")
+        vals[k] = v
+    r = _lib.SimRealism()
+    for k, v in vals.items():
+        setattr(r, k, int(v) if k == "sal2_order" else float(v))
+    return r
+
+
+def split_plant_overrides(plant: dict[str, Any] | None
+                          ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Plant overrides split into ``sim_plant_params_t`` and ``sim_realism_t`` fields."""
+    ov = dict(plant or {})
+    real = {k: ov.pop(k) for k in list(ov) if k in _lib.REALISM_FIELDS}
+    return ov, real
+
+
+def realism_refused(p: _lib.SimPlantParams, r: _lib.SimRealism) -> str | None:
+    """The realism field the simulator's own check (``sim_realism_check``: signs, ranges,
+    the incremental inductance positive definite) refuses with plant ``p``; None if none."""
+    bad = C.c_char_p()
+    if _lib.lib().sim_realism_check(p, r, C.byref(bad)) != 0:
+        return bad.value.decode() if bad.value else "?"
+    return None
 
 
 def machine_params(motor: Motor) -> dict[str, Any]:
@@ -435,6 +508,16 @@ def load_motor(motor: str | Path) -> Motor:
             raise MotorFileError(path, f"{sec}.{name}" if sec else f"(derived) {name}",
                                  "the firmware refuses the configuration derived from this "
                                  f"file: {msg}")
+        if firmware_field_ranges():  # the simulator library is there: its own checks
+            bad = realism_refused(plant_params(mot), realism_params(mot))
+            if bad is not None:
+                sec, key = REALISM_FIELD_SOURCES.get(bad, ("electrical", bad))
+                lo, hi, unit = field_range(sec, key)
+                raise MotorFileError(path, f"{sec}.{key}", (
+                    f"{mot.raw.get(sec, {}).get(key, 0.0)!r} refused by the simulator with the "
+                    f"other fields: allowed range [{lo}, {hi}] {unit}, and the incremental "
+                    "inductance must stay positive definite (>= 10 % of the smaller "
+                    "unsaturated one) over twice the current ADC's range"))
         return mot
     except MotorFileErrors as e:
         raise MotorFileErrors([x if x.line or not x.field else
@@ -480,6 +563,18 @@ def _build(path: Path, doc: dict[str, Any]) -> Motor:
     L_d, L_q = float(g["L_d_H"]), float(g["L_q_H"])
     if g["dL_sat_H"] >= L_d:
         raise _err(path, "electrical.dL_sat_H", f"{g['dL_sat_H']} must be < L_d_H = {L_d}")
+    if g["dLq_sat_H"] >= L_q:
+        raise _err(path, "electrical.dLq_sat_H", f"{g['dLq_sat_H']} must be < L_q_H = {L_q}")
+    for k_on, k_scale in (("dLq_sat_H", "Iq_sat_A"), ("cross_L_H", "cross_I_A")):
+        if g[k_on] > 0.0 and not g[k_scale] > 0.0:
+            raise _err(path, f"electrical.{k_scale}", f"{g[k_scale]} must be > 0 when "
+                       f"electrical.{k_on} > 0; allowed range (0, 1000.0] A")
+    if g["travel_m"] > 0.0 and not g["zone_m"] > 0.0:
+        raise _err(path, "end_effect.zone_m", f"{g['zone_m']} must be > 0 when "
+                   "end_effect.travel_m > 0; allowed range (0, 10.0] m")
+    if int(g["saliency2_order"]) != g["saliency2_order"]:
+        raise _err(path, "electrical.saliency2_order",
+                   f"{g['saliency2_order']!r} is not an integer; allowed range [1, 12]")
     if param == "rotary":
         for k in ("pole_pairs", "inertia_kgm2"):
             if k not in doc["mechanical"]:
@@ -553,9 +648,12 @@ def _build(path: Path, doc: dict[str, Any]) -> Motor:
         ref_fault=0, noise_restart=0,
     )
     ctrl = {k: float(g[k]) for (s, k) in _SCHEMA if s == "controller" and g[k] is not None}
+    realism = {name: (int(g[k]) if name == "sal2_order" else float(g[k]))
+               for name, (_, k) in REALISM_FIELD_SOURCES.items()}
     return Motor(name=str(m.get("name", path.stem)), path=path,
                  description=str(m.get("description", "")), parameterization=param,
-                 plant=plant, pole_pairs=p, radius_m=r, controller=ctrl, raw=doc)
+                 plant=plant, pole_pairs=p, radius_m=r, controller=ctrl, raw=doc,
+                 realism=realism)
 
 
 def plant_params(motor: Motor, **overrides: Any) -> _lib.SimPlantParams:

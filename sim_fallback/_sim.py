@@ -30,6 +30,8 @@ from ._motors import (
     load_motor,
     plant_params,
     plant_params_refused,
+    realism_params,
+    split_plant_overrides,
 )
 from .metrics import METRIC_DEFS, METRIC_NAMES, TRUTH_CHANNELS, run_metrics, wrap_pi
 
@@ -136,7 +138,8 @@ class Sim:
     x0_m : float
         Initial mover position (true; the firmware does not know it).
     plant : dict
-        ``sim_plant_params_t`` overrides (linear units).
+        ``sim_plant_params_t`` overrides (linear units), and ``sim_realism_t`` ones (plant
+        realism: ``cross_L_H``, ``emf_h5``, ...; applied with ``sim_set_realism``).
     fw : dict
         ``fw_config_t`` overrides.
     strict : bool
@@ -153,10 +156,17 @@ class Sim:
         self._rec_raw = _SimRecordRaw()  # advance()'s record, reused
         self._rec = _lib.SimRecord.from_buffer(self._rec_raw)
         self.motor = motor if isinstance(motor, Motor) else load_motor(motor)
-        self.params, self.cfg = drive_params(self.motor, extractor, seed, noise, plant, fw)
+        plant_ov, real_ov = split_plant_overrides(plant)
+        self.params, self.cfg = drive_params(self.motor, extractor, seed, noise, plant_ov, fw)
+        self.realism = realism_params(self.motor, **real_ov)
         self._h = self._L.sim_new(self.params)
         if not self._h:
             raise MemoryError("sim_new failed")
+        bad = C.c_char_p()
+        if self._L.sim_set_realism(self._h, self.realism, C.byref(bad)) != 0:
+            self._L.sim_free(self._h)
+            self._h = None
+            raise ValueError(f"plant parameter '{bad.value.decode()}' invalid")
         self.dt_s = 1.0 / self.params.f_pwm_Hz
         self.firmware = Firmware(self.cfg, strict=strict)
         self._port = _lib.SimController()
@@ -205,6 +215,9 @@ class Sim:
         """Change plant parameters mid-run (fault injection: DC-link sag, sensor
         gain/offset errors, ``open_phase_mask``, ``adc_stuck_mask``); state and
         time are kept. Truth only: the firmware sees the effect, never the value."""
+        changes, real = split_plant_overrides(changes)
+        for k, v in real.items():
+            setattr(self.realism, k, v)
         for k, v in changes.items():
             if not hasattr(self.params, k):
                 raise ValueError(f"unknown plant parameter '{k}'")
@@ -216,6 +229,8 @@ class Sim:
                 setattr(self.params, k, v)
         bad = C.c_char_p()
         if self._L.sim_set_params(self._h, self.params, C.byref(bad)) != 0:
+            raise ValueError(f"plant parameter '{bad.value.decode()}' invalid")
+        if real and self._L.sim_set_realism(self._h, self.realism, C.byref(bad)) != 0:
             raise ValueError(f"plant parameter '{bad.value.decode()}' invalid")
 
     def set_schedule(self, kind: int, spec: ScheduleLike, scale: float = 1.0) -> None:
@@ -323,6 +338,16 @@ class Sim:
     def force_N(self) -> float:
         """True electromagnetic thrust at the present state."""
         return float(self._L.sim_force_N(self._h))
+
+    def magnetics(self, i_d_A: float, i_q_A: float, x_m: float) -> dict[str, Any]:
+        """The plant's magnetics at currents (true rotor frame) and position
+        (``sim_plant_magnetics``): ``psi_dq_Wb`` (2), ``L_dq_H`` (dd, dq, qq),
+        ``e_dq_V_per_mps`` (speed voltage per velocity), ``force_N`` (thrust, no cogging)."""
+        m = _lib.SimMagnetics()
+        self._L.sim_plant_magnetics(self._h, float(i_d_A), float(i_q_A), float(x_m),
+                                    C.byref(m))
+        return {"psi_dq_Wb": np.array(m.psi_dq_Wb[:]), "L_dq_H": np.array(m.L_dq_H[:]),
+                "e_dq_V_per_mps": np.array(m.e_dq_V_per_mps[:]), "force_N": m.force_N}
 
 
 # ---- results ---------------------------------------------------------------

@@ -77,6 +77,40 @@ typedef struct {
                                   and the emulated drive); 0: one stream from creation */
 } sim_plant_params_t;
 
+/**
+ * Plant realism (docs/simulator.md "Plant realism"): the magnetics and inverter effects
+ * beyond sim_plant_params_t, set with sim_set_realism. Every field 0 = off (a new
+ * simulation has all of them 0), and with all of them 0 the plant computes exactly what
+ * it does without them. A separate block, not part of sim_plant_params_t, whose layout the
+ * emulated board's boot block pins (firmware_c/boards/mps2_an386/emu_boot.c).
+ */
+typedef struct {
+  double dLq_sat_H;     /**< q-axis saturation depth: L_qq = L_q - dLq tanh^2(i_q/Iq_sat) */
+  double Iq_sat_A;      /**< q-axis saturation current scale (> 0 when dLq_sat_H > 0) */
+  double cross_L_H;     /**< cross-saturation: L_dq(0, i_q) = -cross_L tanh(i_q/cross_I) */
+  double cross_I_A;     /**< cross-saturation current scale (> 0 when cross_L_H > 0) */
+  double sal2_L_H;      /**< secondary spatial saliency: stator-frame inductance term
+                             sal2_L [[cos a, sin a], [sin a, -cos a]], a = n theta_e + phase */
+  uint32_t sal2_order;  /**< its order n (1..12; used when sal2_L_H > 0) */
+  uint32_t pad_real_;
+  double sal2_phase_rad;  /**< its phase */
+  double emf_h5;        /**< 5th back-EMF harmonic / fundamental (PM flux harmonic h5/5 psi_f) */
+  double emf_h5_phase_rad; /**< its phase: psi_a = psi_f (cos th + h5/5 cos(5 th + phase) + ...) */
+  double emf_h7;        /**< 7th back-EMF harmonic / fundamental */
+  double emf_h7_phase_rad; /**< its phase */
+  double end_dL_H;      /**< end effect: self-inductance reduction of the outer phases a, c
+                             at full exposure e(x) = 1 */
+  double end_psi_frac;  /**< end effect: relative PM flux reduction of phases a, c at e = 1 */
+  double end_base;      /**< exposure in the middle of the travel (0..1; 1: short primary) */
+  double end_travel_m;  /**< stator length, centred on x = 0 (0: exposure end_base everywhere) */
+  double end_zone_m;    /**< length over which the exposure rises at the ends (> 0 with travel) */
+  double dt_C_eq_F;     /**< dead time: pole parasitic capacitance (0: the sign model over
+                             dead_band_A); > 0: the capacitive-commutation error with its
+                             zero-current clamp */
+  double u_dev_V;       /**< device threshold drop (V_ce0 = V_f), pole error -u_dev sgn(i) */
+  double r_dev_ohm;     /**< device on-resistance, pole error -r_dev i */
+} sim_realism_t;
+
 /** Plant state (truth). */
 typedef struct {
   double i_d_A, i_q_A; /**< currents in the true rotor frame */
@@ -85,6 +119,15 @@ typedef struct {
   int32_t stuck;       /**< 1: static friction holds the mover */
   int32_t pad_;
 } sim_plant_state_t;
+
+/** The machine's magnetics at one operating point (sim_plant_magnetics): what the
+ *  plant's electrical equations and thrust use, for tests and identification. */
+typedef struct {
+  double psi_dq_Wb[2];      /**< flux linkage in the rotor frame, R(-theta_e) psi_alpha_beta */
+  double L_dq_H[3];         /**< incremental inductance d psi_dq / d i_dq at fixed x: dd, dq, qq */
+  double e_dq_V_per_mps[2]; /**< speed voltage per velocity: u_dq = R i + L di/dt + e v */
+  double force_N;           /**< electromagnetic thrust (co-energy derivative; no cogging) */
+} sim_magnetics_t;
 
 /** Schedule kinds, also the argument of sim_controller_t.set_ref. */
 typedef enum {
@@ -170,6 +213,14 @@ int sim_params_check(const sim_plant_params_t *p, const char **bad_field);
  *  schedules kept): fault injection such as a DC-link sag or a sensor fault at
  *  a chosen instant. Returns 0, or the sim_params_check code (nothing changed). */
 int sim_set_params(sim_t *s, const sim_plant_params_t *p, const char **bad_field);
+/** Validate plant realism against the plant parameters it goes with: 0 or a negative
+ *  index naming the bad field (the incremental inductance must stay positive definite
+ *  over twice the current ADC's range). */
+int sim_realism_check(const sim_plant_params_t *p, const sim_realism_t *r,
+                      const char **bad_field);
+/** Set the plant realism of a simulation (NULL: all off), at creation or mid-run (state,
+ *  time kept). Returns 0, or the sim_realism_check code (nothing changed). */
+int sim_set_realism(sim_t *s, const sim_realism_t *r, const char **bad_field);
 /** Create (malloc) a simulation; NULL on bad params. Initial state zero. */
 sim_t *sim_new(const sim_plant_params_t *p);
 /** sizeof(sim_t): storage for sim_init_in. */
@@ -233,6 +284,11 @@ void sim_sample(sim_t *s, fw_inputs_t *in, fw_adc_inputs_t *adc);
 uint8_t sim_ref_sample(sim_t *s, int32_t *count);
 /** Truth: electromagnetic thrust at the present state. */
 double sim_force_N(const sim_t *s);
+/** The magnetics (flux, incremental inductance, speed voltage, thrust) of the plant's
+ *  parameters at currents i_d, i_q (true rotor frame) and position x: the full model
+ *  with libm, the same equations the plant integrates (docs/simulator.md). */
+void sim_plant_magnetics(const sim_t *s, double i_d_A, double i_q_A, double x_m,
+                         sim_magnetics_t *out);
 
 /* ---- controllers ------------------------------------------------------ */
 

@@ -81,6 +81,10 @@ struct sim_s {
   double flux_far_A;                /**< stages beyond this |i_d - b_id0| use libm */
   sim_flux_coef_t flux_lin;         /**< linear d axis (dL = 0), or out of the grid */
   double inv_L_q, inv_mass, inv_I_sat, k_cog;
+  /* plant realism (sim_plant.c, "plant realism"): 1 when a magnetic / inverter field of
+   * it is set; 0 keeps every path and value of the plant without it */
+  int real_mag, real_inv;
+  sim_realism_t r;  /**< plant realism (sim_set_realism; zero: off) */
   /* RNG: xoshiro256** + ziggurat Gaussian (Marsaglia-Tsang / Doornik ZIGNOR,
    * 128 layers; tables per instance, no shared mutable state) */
   uint64_t rng[4];
@@ -185,6 +189,11 @@ void sim_plant_derive(sim_t *s);
 void sim_plant_period(sim_t *s, const double duty[3], int pwm_on, double dt_s,
                       uint32_t n_sub);
 double sim_plant_force(const sim_t *s, const sim_plant_state_t *st);
+/** Smallest eigenvalue of the incremental inductance over |i_d|, |i_q| <= i_lim and one
+ *  electrical period of x (the realism terms' bounds added): the plant is well posed
+ *  when it is positive (sim_params_check). */
+double sim_plant_min_inductance(const sim_plant_params_t *p, const sim_realism_t *r,
+                                double i_lim);
 void sim_rng_seed(sim_t *s, uint64_t seed);
 /** The generator's state from seed again (the ziggurat tables kept). */
 void sim_rng_restart(sim_t *s, uint64_t seed);

@@ -72,6 +72,45 @@ int sim_params_check(const sim_plant_params_t *p, const char **bad_field) {
   return 0;
 }
 
+#define RNONNEG(f) CHECK(isfinite(r->f) && r->f >= 0.0, #f)
+
+int sim_realism_check(const sim_plant_params_t *p, const sim_realism_t *r,
+                      const char **bad_field) {
+  int idx = 0;
+  if (bad_field) *bad_field = NULL;
+  if (!p || !r) return -1;
+  RNONNEG(dLq_sat_H);
+  CHECK(r->dLq_sat_H < p->L_q_H, "dLq_sat_H");
+  CHECK(r->dLq_sat_H == 0.0 || (isfinite(r->Iq_sat_A) && r->Iq_sat_A > 0.0), "Iq_sat_A");
+  RNONNEG(cross_L_H);
+  CHECK(r->cross_L_H == 0.0 || (isfinite(r->cross_I_A) && r->cross_I_A > 0.0), "cross_I_A");
+  RNONNEG(sal2_L_H);
+  CHECK(r->sal2_L_H == 0.0 || (r->sal2_order >= 1u && r->sal2_order <= 12u), "sal2_order");
+  CHECK(isfinite(r->sal2_phase_rad), "sal2_phase_rad");
+  CHECK(isfinite(r->emf_h5) && r->emf_h5 >= 0.0 && r->emf_h5 <= 0.5, "emf_h5");
+  CHECK(isfinite(r->emf_h5_phase_rad), "emf_h5_phase_rad");
+  CHECK(isfinite(r->emf_h7) && r->emf_h7 >= 0.0 && r->emf_h7 <= 0.5, "emf_h7");
+  CHECK(isfinite(r->emf_h7_phase_rad), "emf_h7_phase_rad");
+  RNONNEG(end_dL_H);
+  CHECK(isfinite(r->end_psi_frac) && r->end_psi_frac >= 0.0 && r->end_psi_frac < 1.0,
+        "end_psi_frac");
+  CHECK(isfinite(r->end_base) && r->end_base >= 0.0 && r->end_base <= 1.0, "end_base");
+  RNONNEG(end_travel_m);
+  CHECK(r->end_travel_m == 0.0 || (isfinite(r->end_zone_m) && r->end_zone_m > 0.0),
+        "end_zone_m");
+  RNONNEG(dt_C_eq_F);
+  RNONNEG(u_dev_V);
+  RNONNEG(r_dev_ohm);
+  /* the incremental inductance positive definite (at least 10 % of the smaller
+   * unsaturated one) over twice the current ADC's range */
+  CHECK(!(r->dLq_sat_H != 0.0 || r->cross_L_H != 0.0 || r->sal2_L_H != 0.0 ||
+          r->end_dL_H != 0.0) ||
+            sim_plant_min_inductance(p, r, 2.0 * p->adc_i_fullscale_A) >=
+                0.1 * fmin(p->L_d0_H - p->dL_sat_H, p->L_q_H - r->dLq_sat_H),
+        r->cross_L_H != 0.0 ? "cross_L_H" : (r->sal2_L_H != 0.0 ? "sal2_L_H" : "end_dL_H"));
+  return 0;
+}
+
 /* ---- life cycle -------------------------------------------------------- */
 
 _Static_assert(offsetof(sim_t, flux_tab) + sizeof(((sim_t *)0)->flux_tab) == sizeof(sim_t),
@@ -111,8 +150,20 @@ void sim_set_load(sim_t *s, double F_N) {
 int sim_set_params(sim_t *s, const sim_plant_params_t *p, const char **bad_field) {
   if (!s) return -1;
   int rc = sim_params_check(p, bad_field);
+  if (rc == 0) rc = sim_realism_check(p, &s->r, bad_field); /* the realism still fits */
   if (rc != 0) return rc;
   s->p = *p;
+  sim_plant_derive(s);
+  return 0;
+}
+
+int sim_set_realism(sim_t *s, const sim_realism_t *r, const char **bad_field) {
+  if (!s) return -1;
+  const sim_realism_t off = {0};
+  if (!r) r = &off;
+  const int rc = sim_realism_check(&s->p, r, bad_field);
+  if (rc != 0) return rc;
+  s->r = *r;
   sim_plant_derive(s);
   return 0;
 }

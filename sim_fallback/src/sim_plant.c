@@ -133,6 +133,11 @@ void sim_plant_derive(sim_t *s) {
   /* the flux grid's coefficients depend on psi_f, L_d0, dL_sat and I_sat: after a
    * parameter change (sim_set_params) every entry is computed afresh when used */
   memset(s->flux_ok, 0, sizeof s->flux_ok);
+  const sim_realism_t *r = &s->r;
+  s->real_mag = r->dLq_sat_H != 0.0 || r->cross_L_H != 0.0 || r->sal2_L_H != 0.0 ||
+                r->emf_h5 != 0.0 || r->emf_h7 != 0.0 || r->end_dL_H != 0.0 ||
+                r->end_psi_frac != 0.0;
+  s->real_inv = r->dt_C_eq_F != 0.0 || r->u_dev_V != 0.0 || r->r_dev_ohm != 0.0;
 }
 
 /** ln cosh(z), overflow free. */
@@ -279,6 +284,168 @@ static void d_axis_flux_exact(const sim_plant_params_t *p, double i_d, double *p
   *inv_L_dd = 1.0 / (p->L_d0_H - p->dL_sat_H * tanh(z));
 }
 
+/* ---- plant realism: the full magnetic model (libm, no expansions) -------------
+ *
+ * One co-energy per unit of (3/2) (amplitude-invariant Clarke: the stator co-energy is
+ * W' = 3/2 w, psi_alpha_beta = grad w, thrust F = 3/2 dw/dx at fixed stator currents):
+ *   w = w_m(i_d, i_q) + w_h(i_alpha_beta, x)
+ *   w_m  = psi_f i_d + L_d0 i_d^2/2 - dL I_s^2 Lambda(i_d/I_s)       (Lambda' = ln cosh)
+ *        + L_q i_q^2/2 - dLq (i_q^2/2 - Iq^2 ln cosh(i_q/Iq))          (q saturation)
+ *        - L_x I_x^2 tanh(i_d/I_x) ln cosh(i_q/I_x)                    (cross-saturation)
+ *   w_h  = i . Psi_57(theta)                                           (back-EMF 5th, 7th)
+ *        + L_n/2 i^T [[cos a, sin a], [sin a, -cos a]] i, a = n theta + phi  (saliency n)
+ *        + 2/3 (-dL_e(x)/2 (i_a^2 + i_c^2) - eps e(x) (psi_PM,a i_a + psi_PM,c i_c))
+ *                                                                      (end effect)
+ * Every flux is a gradient of w, so the flux maps are reciprocal (d psi_d / d i_q =
+ * d psi_q / d i_d) and the thrust is the co-energy's derivative: energy-consistent. */
+
+/** End-effect exposure e(x) in [0, 1] and de/dx. */
+static void end_exposure(const sim_realism_t *r, double x, double *e, double *de) {
+  double edge = 0.0, dedge = 0.0;
+  if (r->end_travel_m > 0.0) {
+    const double k = 1.0 / r->end_zone_m, h = 0.5 * r->end_travel_m;
+    const double th = tanh((x - h) * k), tl = tanh((x + h) * k);
+    edge = 0.5 * (1.0 + th) + 0.5 * (1.0 - tl);
+    dedge = 0.5 * k * ((1.0 - th * th) - (1.0 - tl * tl));
+  }
+  *e = r->end_base + (1.0 - r->end_base) * edge;
+  *de = (1.0 - r->end_base) * dedge;
+}
+
+/** The rotor-frame part w_m: psi_m, its incremental inductance (dd, dq, qq). */
+static void mag_dq(const sim_plant_params_t *p, const sim_realism_t *r, double i_d, double i_q,
+                   double psi[2], double L[3]) {
+  double inv_L_dd;
+  d_axis_flux_exact(p, i_d, &psi[0], &inv_L_dd);
+  L[0] = p->L_d0_H - p->dL_sat_H * tanh(i_d / p->I_sat_A);
+  L[1] = 0.0;
+  psi[1] = p->L_q_H * i_q;
+  L[2] = p->L_q_H;
+  if (r->dLq_sat_H != 0.0) {
+    const double tq = tanh(i_q / r->Iq_sat_A);
+    psi[1] -= r->dLq_sat_H * (i_q - r->Iq_sat_A * tq);
+    L[2] -= r->dLq_sat_H * tq * tq;
+  }
+  if (r->cross_L_H != 0.0) {
+    const double Lx = r->cross_L_H, Ix = r->cross_I_A;
+    const double td = tanh(i_d / Ix), tq = tanh(i_q / Ix), lc = lncosh(i_q / Ix);
+    const double sd2 = 1.0 - td * td, sq2 = 1.0 - tq * tq;
+    psi[0] -= Lx * Ix * sd2 * lc;
+    psi[1] -= Lx * Ix * td * tq;
+    L[0] += 2.0 * Lx * td * sd2 * lc;
+    L[1] = -Lx * sd2 * tq;
+    L[2] -= Lx * td * sq2;
+  }
+}
+
+/** The full model at (i_d, i_q, x); cs = {cos, sin} theta_e for the caller. */
+static void mag_eval(const sim_plant_params_t *p, const sim_realism_t *r, double i_d,
+                     double i_q, double x, sim_magnetics_t *m, double cs[2]) {
+  const double k_th = SIM_PI / p->tau_m, th = k_th * x;
+  const double c = cos(th), sn = sin(th);
+  cs[0] = c;
+  cs[1] = sn;
+  double psi_m[2], L[3];
+  mag_dq(p, r, i_d, i_q, psi_m, L);
+  const double i_a = c * i_d - sn * i_q, i_b = sn * i_d + c * i_q; /* alpha, beta */
+  double ph[2] = {0.0, 0.0}, H[3] = {0.0, 0.0, 0.0}, dph[2] = {0.0, 0.0}, dw = 0.0;
+  if (r->emf_h5 != 0.0) { /* negative sequence: psi = A5 e^{-j(5 th + phi)} */
+    const double A = p->psi_f_Wb * r->emf_h5 / 5.0, a = 5.0 * th + r->emf_h5_phase_rad;
+    const double ca = cos(a), sa = sin(a);
+    const double d0 = -5.0 * k_th * A * sa, d1 = -5.0 * k_th * A * ca;
+    ph[0] += A * ca;
+    ph[1] -= A * sa;
+    dph[0] += d0;
+    dph[1] += d1;
+    dw += i_a * d0 + i_b * d1;
+  }
+  if (r->emf_h7 != 0.0) { /* positive sequence: psi = A7 e^{j(7 th + phi)} */
+    const double A = p->psi_f_Wb * r->emf_h7 / 7.0, a = 7.0 * th + r->emf_h7_phase_rad;
+    const double ca = cos(a), sa = sin(a);
+    const double d0 = -7.0 * k_th * A * sa, d1 = 7.0 * k_th * A * ca;
+    ph[0] += A * ca;
+    ph[1] += A * sa;
+    dph[0] += d0;
+    dph[1] += d1;
+    dw += i_a * d0 + i_b * d1;
+  }
+  if (r->sal2_L_H != 0.0) {
+    const double n = (double)r->sal2_order, a = n * th + r->sal2_phase_rad;
+    const double ca = r->sal2_L_H * cos(a), sa = r->sal2_L_H * sin(a);
+    H[0] += ca;
+    H[1] += sa;
+    H[2] -= ca;
+    ph[0] += ca * i_a + sa * i_b;
+    ph[1] += sa * i_a - ca * i_b;
+    /* dH/dx = n k_th L_n [[-sin a, cos a], [cos a, sin a]] */
+    const double g0 = n * k_th * (-sa * i_a + ca * i_b), g1 = n * k_th * (ca * i_a + sa * i_b);
+    dph[0] += g0;
+    dph[1] += g1;
+    dw += 0.5 * (i_a * g0 + i_b * g1);
+  }
+  if (r->end_dL_H != 0.0 || r->end_psi_frac != 0.0) {
+    double e, de;
+    end_exposure(r, x, &e, &de);
+    const double dL = r->end_dL_H * e, ddL = r->end_dL_H * de, eps = r->end_psi_frac;
+    const double h3 = 0.5 * SIM_SQRT3;
+    const double ia = i_a, ic = -0.5 * i_a - h3 * i_b; /* phase currents a, c */
+    const double pa = p->psi_f_Wb * c, pc = p->psi_f_Wb * (-0.5 * c - h3 * sn);
+    const double dpa = -k_th * p->psi_f_Wb * sn, dpc = -k_th * p->psi_f_Wb * (-0.5 * sn + h3 * c);
+    const double fa = -dL * ia - eps * e * pa, fc = -dL * ic - eps * e * pc; /* abc fluxes */
+    const double ga = -ddL * ia - eps * (de * pa + e * dpa);
+    const double gc = -ddL * ic - eps * (de * pc + e * dpc);
+    /* 2/3 K^T: k_a = (1, 0), k_c = (-1/2, -sqrt3/2) */
+    ph[0] += (2.0 / 3.0) * (fa - 0.5 * fc);
+    ph[1] += (2.0 / 3.0) * (-h3 * fc);
+    dph[0] += (2.0 / 3.0) * (ga - 0.5 * gc);
+    dph[1] += (2.0 / 3.0) * (-h3 * gc);
+    H[0] -= (2.0 / 3.0) * dL * 1.25;
+    H[1] -= (2.0 / 3.0) * dL * 0.25 * SIM_SQRT3;
+    H[2] -= (2.0 / 3.0) * dL * 0.75;
+    dw += (2.0 / 3.0) * (-0.5 * ddL * (ia * ia + ic * ic) -
+                         eps * ((de * pa + e * dpa) * ia + (de * pc + e * dpc) * ic));
+  }
+  /* stator-frame terms into the rotor frame: R(-th) v, R(-th) H R(th) */
+  const double cc = c * c, ss = sn * sn, cs2 = c * sn;
+  const double Hdd = H[0] * cc + 2.0 * H[1] * cs2 + H[2] * ss;
+  const double Hdq = (H[2] - H[0]) * cs2 + H[1] * (cc - ss);
+  const double Hqq = H[0] * ss - 2.0 * H[1] * cs2 + H[2] * cc;
+  m->psi_dq_Wb[0] = psi_m[0] + (c * ph[0] + sn * ph[1]);
+  m->psi_dq_Wb[1] = psi_m[1] + (-sn * ph[0] + c * ph[1]);
+  m->L_dq_H[0] = L[0] + Hdd;
+  m->L_dq_H[1] = L[1] + Hdq;
+  m->L_dq_H[2] = L[2] + Hqq;
+  /* speed voltage per velocity: k_th (J psi_m + H_dq J i) + R(-th) d psi_h/dx; J i = (-i_q, i_d) */
+  m->e_dq_V_per_mps[0] = k_th * (-psi_m[1] + (-Hdd * i_q + Hdq * i_d)) + (c * dph[0] + sn * dph[1]);
+  m->e_dq_V_per_mps[1] = k_th * (psi_m[0] + (-Hdq * i_q + Hqq * i_d)) + (-sn * dph[0] + c * dph[1]);
+  m->force_N = 1.5 * k_th * (psi_m[0] * i_q - psi_m[1] * i_d) + 1.5 * dw;
+}
+
+void sim_plant_magnetics(const sim_t *s, double i_d_A, double i_q_A, double x_m,
+                         sim_magnetics_t *out) {
+  double cs[2];
+  if (s && out) mag_eval(&s->p, &s->r, i_d_A, i_q_A, x_m, out, cs);
+}
+
+double sim_plant_min_inductance(const sim_plant_params_t *p, const sim_realism_t *r,
+                                double i_lim) {
+  /* the rotor-frame part on a grid; the stator-frame terms' largest eigenvalues bound
+   * the rest: |sal2_L| (the saliency term) and end_dL_H (2/3 end_dL (k_a k_a^T + k_c
+   * k_c^T) has the eigenvalues end_dL and end_dL / 3) */
+  enum { N = 24 };
+  double lo = (double)INFINITY;
+  for (int a = -N; a <= N; ++a) {
+    for (int b = -N; b <= N; ++b) {
+      double psi[2], L[3];
+      mag_dq(p, r, i_lim * a / N, i_lim * b / N, psi, L);
+      const double mean = 0.5 * (L[0] + L[2]), dif = 0.5 * (L[0] - L[2]);
+      const double lmin = mean - sqrt(dif * dif + L[1] * L[1]);
+      if (!(lmin >= lo)) lo = lmin; /* NaN propagates */
+    }
+  }
+  return lo - fabs(r->sal2_L_H) - r->end_dL_H;
+}
+
 #if SIM_FLUX_ORDER != 7
 #error "d_axis_flux evaluates order-7 polynomials"
 #endif
@@ -326,6 +493,12 @@ SIM_INLINE void d_axis_flux(const sim_t *s, double i_d, double *psi_d, double *i
 }
 
 double sim_plant_force(const sim_t *s, const sim_plant_state_t *st) {
+  if (s->real_mag) {
+    sim_magnetics_t m;
+    double cs[2];
+    mag_eval(&s->p, &s->r, st->i_d_A, st->i_q_A, st->x_m, &m, cs);
+    return m.force_N;
+  }
   double psi_d, inv_L_dd;
   if (s->basis_valid)
     d_axis_flux(s, st->i_d_A, &psi_d, &inv_L_dd); /* expansion (exact when far) */
@@ -337,6 +510,7 @@ double sim_plant_force(const sim_t *s, const sim_plant_state_t *st) {
 /** Inputs held constant over one RK4 sub-step. */
 typedef struct {
   double u_dq0_V[2];  /**< stator voltage in the rotor frame at the basis angle */
+  double u_ab_V[2];   /**< the same in the stator frame (plant realism: deriv_real) */
   double F_load_N;
   /** F_em + load_add = (F_em + 0.0) - F_load_N for every F_em (no cogging):
    * -F_load_N, or +0.0 when F_load_N is a zero (x - (+0.0) keeps x = -0.0,
@@ -345,6 +519,41 @@ typedef struct {
   int mech_dir;       /**< 0: stuck/locked; +1/-1: sliding direction (Coulomb sign) */
   int elec_open;      /**< 1: PWM off and currents extinct: i held at 0 */
 } substep_in_t;
+
+/** dy/dt for y = {i_d, i_q, x, v} with the full magnetic model (plant realism, libm):
+ * M di/dt = u_dq - R i - e v (M, e: mag_eval); returns the net drive force. */
+static double deriv_real(const sim_t *s, const double y[4], const substep_in_t *in,
+                         double dy[4], const int elec, const int slide) {
+  const sim_plant_params_t *p = &s->p;
+  sim_magnetics_t m;
+  double cs[2];
+  mag_eval(p, &s->r, y[0], y[1], y[2], &m, cs);
+  if (elec) {
+    const double u_d = cs[0] * in->u_ab_V[0] + cs[1] * in->u_ab_V[1];
+    const double u_q = -cs[1] * in->u_ab_V[0] + cs[0] * in->u_ab_V[1];
+    const double r0 = u_d - p->R_ohm * y[0] - m.e_dq_V_per_mps[0] * y[3];
+    const double r1 = u_q - p->R_ohm * y[1] - m.e_dq_V_per_mps[1] * y[3];
+    const double *L = m.L_dq_H;
+    const double inv_det = 1.0 / (L[0] * L[2] - L[1] * L[1]);
+    dy[0] = (L[2] * r0 - L[1] * r1) * inv_det;
+    dy[1] = (L[0] * r1 - L[1] * r0) * inv_det;
+  } else {
+    dy[0] = 0.0;
+    dy[1] = 0.0;
+  }
+  const double F_cog =
+      p->cog_amp_N != 0.0 ? p->cog_amp_N * sin(s->k_cog * y[2] + p->cog_phase_rad) : 0.0;
+  const double F_drive = (m.force_N + F_cog) - in->F_load_N;
+  if (slide) {
+    dy[2] = y[3];
+    dy[3] = ((F_drive - p->b_visc_Ns_per_m * y[3]) - p->F_coulomb_N * (double)in->mech_dir) *
+            s->inv_mass;
+  } else {
+    dy[2] = 0.0;
+    dy[3] = 0.0;
+  }
+  return F_drive;
+}
 
 /**
  * dy/dt for y = {i_d, i_q, x, v}; returns the net drive force (without
@@ -359,7 +568,8 @@ typedef struct {
  */
 SIM_INLINE double deriv_t(const sim_t *s, const double y[4], const substep_in_t *in,
                           double dy[4], const int cog, const int elec, const int slide,
-                          int *far) {
+                          const int real, int *far) {
+  if (real) return deriv_real(s, y, in, dy, elec, slide);
   const sim_plant_params_t *p = &s->p;
   const double dx = y[2] - s->b_x0;
   double psi_d, inv_L_dd;
@@ -408,23 +618,23 @@ SIM_INLINE double deriv_t(const sim_t *s, const double y[4], const substep_in_t 
 /** One classical RK4 step of length h from y0 to y1 (far: see deriv_t). */
 SIM_INLINE void rk4_body(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
                          double y1[4], const int cog, const int elec, const int slide,
-                         int *far) {
+                         const int real, int *far) {
   double k1[4], k2[4], k3[4], k4[4], yt[4];
   const double hh = 0.5 * h, h6 = h * (1.0 / 6.0);
   /* Stuck (slide == 0): k[2] = k[3] = 0.0 and hh * 0.0 == h * 0.0 for every h
    * (the same signed zero, or the same NaN), so stages 2..4 see one x and v:
    * written as one expression, their angle terms are evaluated once. */
   const double z = hh * 0.0;
-  (void)deriv_t(s, y0, in, k1, cog, elec, slide, far);
+  (void)deriv_t(s, y0, in, k1, cog, elec, slide, real, far);
   for (int j = 0; j < 4; ++j) yt[j] = y0[j] + hh * k1[j];
   if (!slide) yt[2] = y0[2] + z, yt[3] = y0[3] + z;
-  (void)deriv_t(s, yt, in, k2, cog, elec, slide, far);
+  (void)deriv_t(s, yt, in, k2, cog, elec, slide, real, far);
   for (int j = 0; j < 4; ++j) yt[j] = y0[j] + hh * k2[j];
   if (!slide) yt[2] = y0[2] + z, yt[3] = y0[3] + z;
-  (void)deriv_t(s, yt, in, k3, cog, elec, slide, far);
+  (void)deriv_t(s, yt, in, k3, cog, elec, slide, real, far);
   for (int j = 0; j < 4; ++j) yt[j] = y0[j] + h * k3[j];
   if (!slide) yt[2] = y0[2] + z, yt[3] = y0[3] + z;
-  (void)deriv_t(s, yt, in, k4, cog, elec, slide, far);
+  (void)deriv_t(s, yt, in, k4, cog, elec, slide, real, far);
   for (int j = 0; j < 4; ++j) y1[j] = y0[j] + h6 * ((k1[j] + k4[j]) + 2.0 * (k2[j] + k3[j]));
 }
 
@@ -434,14 +644,21 @@ __attribute__((noinline, cold))
 #endif
 static void rk4_exact(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
                       double y1[4]) {
-  rk4_body(s, in, y0, h, y1, s->p.cog_amp_N != 0.0, !in->elec_open, in->mech_dir != 0, NULL);
+  rk4_body(s, in, y0, h, y1, s->p.cog_amp_N != 0.0, !in->elec_open, in->mech_dir != 0, 0,
+           NULL);
+}
+
+/** The step with the full magnetic model (plant realism). */
+static void rk4_real(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
+                     double y1[4]) {
+  rk4_body(s, in, y0, h, y1, 0, !in->elec_open, in->mech_dir != 0, 1, NULL);
 }
 
 /** The step on the expansions; redone by rk4_exact when a stage was far. */
 SIM_INLINE void rk4_t(const sim_t *s, const substep_in_t *in, const double y0[4], double h,
                       double y1[4], const int cog, const int elec, const int slide) {
   int far = 0;
-  rk4_body(s, in, y0, h, y1, cog, elec, slide, &far);
+  rk4_body(s, in, y0, h, y1, cog, elec, slide, 0, &far);
   if (far) rk4_exact(s, in, y0, h, y1);
 }
 
@@ -473,13 +690,16 @@ static double drive_force(const sim_t *s, const double y[4], const substep_in_t 
   double dtmp[4];
   substep_in_t in0 = *in;
   in0.mech_dir = 0;
-  return deriv_t(s, y, &in0, dtmp, s->p.cog_amp_N != 0.0, 0, 0, NULL);
+  if (s->real_mag) return deriv_real(s, y, &in0, dtmp, 0, 0);
+  return deriv_t(s, y, &in0, dtmp, s->p.cog_amp_N != 0.0, 0, 0, 0, NULL);
 }
 
 /** RK4 step with the specialisation matching the sub-step's inputs. */
 static inline void rk4_dispatch(const sim_t *s, const substep_in_t *in, const double y0[4],
                                 double h, double y1[4]) {
-  if (in->elec_open) {
+  if (s->real_mag) {
+    rk4_real(s, in, y0, h, y1);
+  } else if (in->elec_open) {
     rk4_generic(s, in, y0, h, y1);
   } else if (s->p.cog_amp_N == 0.0) {
     if (in->mech_dir != 0)
@@ -498,6 +718,31 @@ static inline double sgn_band(double i, double band) {
   if (band <= 0.0) return (i > 0.0) ? 1.0 : ((i < 0.0) ? -1.0 : 0.0);
   const double r = i / band;
   return r > 1.0 ? 1.0 : (r < -1.0 ? -1.0 : r);
+}
+
+/**
+ * Pole-voltage error of the realistic inverter (plant realism) for phase current i:
+ * dead time with capacitive commutation (pole capacitance C = dt_C_eq_F charged by the
+ * phase current during the dead time t_d; i_c = C u_dc / t_d):
+ *   |i| <= i_c:  f_pwm t_d^2 |i| / (2 C)           (the zero-current clamp: linear in i)
+ *   |i| >  i_c:  f_pwm (u_dc t_d - C u_dc^2 / (2 |i|))   (-> u_dc t_d f_pwm)
+ * (continuous with its slope at i_c), times sgn(i); without C (dt_C_eq_F = 0) the sign
+ * model over dead_band_A; plus the device drops u_dev sgn_band(i) + r_dev i.
+ */
+static double inverter_error(const sim_t *s, double i) {
+  const sim_plant_params_t *p = &s->p;
+  const sim_realism_t *r = &s->r;
+  double e;
+  if (r->dt_C_eq_F > 0.0) {
+    const double a = fabs(i), td = p->dead_time_s, C = r->dt_C_eq_F;
+    const double m = (a * td <= C * p->u_dc_V)
+                         ? td * td * a / (2.0 * C)
+                         : p->u_dc_V * td - C * p->u_dc_V * p->u_dc_V / (2.0 * a);
+    e = p->f_pwm_Hz * (i < 0.0 ? -m : m);
+  } else {
+    e = s->u_dt_V * sgn_band(i, p->dead_band_A);
+  }
+  return e + r->u_dev_V * sgn_band(i, p->dead_band_A) + r->r_dev_ohm * i;
 }
 
 /** A sub-step's inputs but the voltage: the load (see load_add), the phases conducting. */
@@ -544,7 +789,9 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
     const double i_abc[3] = {i_al, -0.5 * i_al + 0.5 * SIM_SQRT3 * i_be,
                              -0.5 * i_al - 0.5 * SIM_SQRT3 * i_be};
     double u_pole[3];
-    if (pwm_on) {
+    if (pwm_on && s->real_inv) {
+      for (int j = 0; j < 3; ++j) u_pole[j] = duty[j] * p->u_dc_V - inverter_error(s, i_abc[j]);
+    } else if (pwm_on) {
       for (int j = 0; j < 3; ++j)
         u_pole[j] = duty[j] * p->u_dc_V - s->u_dt_V * sgn_band(i_abc[j], p->dead_band_A);
     } else if (i_al * i_al + i_be * i_be > 1e-12) {
@@ -559,6 +806,8 @@ static void substep(sim_t *s, const double duty[3], int pwm_on, double h,
   }
 
   substep_in_voltage(s, u_ab, &in);
+  in.u_ab_V[0] = u_ab[0];
+  in.u_ab_V[1] = u_ab[1];
 
   /* mechanics: stuck, or sliding in a fixed direction for this sub-step */
   double y0[4] = {st->i_d_A, st->i_q_A, st->x_m, st->v_mps};
@@ -760,14 +1009,15 @@ void sim_plant_period(sim_t *s, const double duty[3], int pwm_on, double dt_s,
   const double h = dt_s / (double)n_sub;
   double u_ab[2];
   const double *u_fixed = NULL;
-  if (pwm_on && s->u_dt_V == 0.0) {
+  if (pwm_on && s->u_dt_V == 0.0 && !s->real_inv) {
     const double ua = duty[0] * s->p.u_dc_V, ub = duty[1] * s->p.u_dc_V,
                  uc = duty[2] * s->p.u_dc_V;
     u_ab[0] = (2.0 / 3.0) * (ua - 0.5 * ub - 0.5 * uc);
     u_ab[1] = (ub - uc) * (1.0 / SIM_SQRT3);
     u_fixed = u_ab;
   }
-  const int fast = u_fixed && !s->p.locked && s->p.cog_amp_N == 0.0 && !s->p.open_phase_mask;
+  const int fast = u_fixed && !s->p.locked && s->p.cog_amp_N == 0.0 && !s->p.open_phase_mask &&
+                   !s->real_mag;
   for (uint32_t j = 0; j < n_sub; ++j)
     if (!(fast && substep_fast(s, h, u_fixed))) substep(s, duty, pwm_on, h, u_fixed);
 }

@@ -14,7 +14,8 @@ HDRS = {"fw": (ROOT / "firmware_c/include/pmlsm/fw_ctrl.h").read_text()
 TYPES = [("fw", "fw_config_t"), ("fw", "fw_inputs_t"), ("fw", "fw_adc_inputs_t"),
          ("fw", "fw_outputs_t"), ("fw", "fw_snapshot_t"), ("sim", "sim_plant_params_t"),
          ("sim", "sim_plant_state_t"), ("sim", "sim_sched_t"), ("sim", "sim_controller_t"),
-         ("sim", "sim_record_t"), ("sim", "sim_ctrl_const_t")]
+         ("sim", "sim_record_t"), ("sim", "sim_ctrl_const_t"),
+         ("sim", "sim_realism_t"), ("sim", "sim_magnetics_t")]
 
 
 def _decls(src: str, name: str) -> list[str]:
