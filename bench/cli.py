@@ -1336,8 +1336,8 @@ def cmd_emu(args: argparse.Namespace) -> int:
                      image=args.image, say=lambda m: print(m, file=sys.stderr))
     except E.AlreadyRunning as e:
         raise UserError(str(e)) from None
-    except E.EmuError as e:
-        raise UserError(str(e), EXIT_DRIVE) from None
+    except E.EmuError as e:  # the user's choice it cannot run (EmuRefused): 2; else 3
+        raise UserError(str(e), getattr(e, "exit_code", EXIT_DRIVE)) from None
     except ValueError as e:  # the boot block: a value it cannot hold
         raise UserError(f"bench emu start: {e}") from None
     print(E.describe(st))

@@ -75,6 +75,19 @@ def emu_boot_blob(motor: Any = "paper_salient", extractor: int | str = "sogi_ada
     if len(raw_path) > NVM_PATH_MAX or b"\0" in raw_path:
         raise ValueError(f"non-volatile memory file {nvm_path!r}: at most {NVM_PATH_MAX} "
                          "bytes of UTF-8 without NUL (use a shorter or relative path)")
+    # the emulated board's plant has no realism block (sim_realism_t) in its boot block
+    # yet: a motor that sets one would run a simpler plant there than on the host, silently
+    from ._motors import load_motor, split_plant_overrides
+
+    mot = motor if not isinstance(motor, (str, Path)) else load_motor(motor)
+    plant, real_ov = split_plant_overrides(plant)
+    real = {**mot.realism, **real_ov}
+    on = sorted(k for k, v in real.items() if k != "sal2_order" and float(v) != 0.0)
+    if on:
+        raise ValueError(f"motor {mot.name}: the emulated board's plant has no plant realism "
+                         f"yet ({', '.join(on)} set); run it on the host's simulated drive "
+                         "(--sim or --sim-server)")
+    motor = mot
     # as the bench's host simulated drive (sim_fallback.SimDrive's BENCH_PLANT): the noise
     # restarts from the seed at every switch-on of the inverter
     params, cfg = drive_params(motor, extractor, seed, noise, {"noise_restart": 1,

@@ -65,6 +65,12 @@ class EmuError(RuntimeError):
     """No usable emulated board (none, stale, QEMU missing or refusing); exit 3."""
 
 
+class EmuRefused(EmuError):
+    """A motor or plant the emulated board cannot run (the user's choice); exit 2."""
+
+    exit_code = 2
+
+
 class AlreadyRunning(EmuError):
     """``start`` while one runs: the user's mistake (exit 2), nothing started."""
 
@@ -365,8 +371,11 @@ def start(motor: str = "paper_salient", extractor: str = "sogi_adaptive", seed: 
             plant = {**(plant or {}), "ref_res_m": 0.0}
         nvm = nvm_file(folder, motor)
         boot = folder / BOOT_FILE
-        write_emu_boot_blob(boot, motor=motor, extractor=extractor, seed=seed, x0_m=x0_m,
-                            node_id=node_id, nvm_path=nvm.name, plant=plant)
+        try:
+            write_emu_boot_blob(boot, motor=motor, extractor=extractor, seed=seed,
+                                x0_m=x0_m, node_id=node_id, nvm_path=nvm.name, plant=plant)
+        except ValueError as e:  # a motor or plant the emulated board cannot run
+            raise EmuRefused(str(e)) from None
         ports = free_ports(3)
         logf = folder / LOG_FILE
         cmd = qemu_command(img, boot, (ports[0], ports[1], ports[2]), qemu)

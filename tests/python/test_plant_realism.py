@@ -397,3 +397,15 @@ def test_realism_changes_mid_run_and_refusal_names_the_field() -> None:
         assert s.magnetics(0.0, 10.0, 0.0)["L_dq_H"][1] == pytest.approx(-5e-4 * math.tanh(1.0))
         with pytest.raises(ValueError, match="cross_I_A"):
             s.set_plant(cross_I_A=0.0)
+
+
+def test_the_emulated_board_refuses_a_plant_it_cannot_simulate() -> None:
+    """The emulated board's boot block has no realism block: a motor that sets one is
+    refused in one line naming its fields, not run as a simpler plant."""
+    from sim_fallback import emu_boot_blob
+
+    with pytest.raises(ValueError, match=r"realistic_linear: .*cross_L_H.*--sim"):
+        emu_boot_blob(motor="realistic_linear")
+    with pytest.raises(ValueError, match=r"emf_h5"):
+        emu_boot_blob(motor="iron_core_linear", plant={"emf_h5": 0.02})
+    assert len(emu_boot_blob(motor="iron_core_linear", plant={"emf_h5": 0.0})) > 0
