@@ -10,6 +10,17 @@
 /* Corner of the |PLL error| filter used for adaptation and supervision. */
 #define FW_ERR_FILTER_HZ 5.0f
 
+/* obs_mode 2 (docs/method.md section 5): corner of the innovation's short-window
+ * mean, time constants of its variance and of the widening, the clip of one
+ * sample's contribution to the variance (times the variance: a transient raises
+ * it by at most 1 + (clip - 1) dt / FW_OBS_VAR_S per sample) and the speed over
+ * which the Coulomb friction of the model changes sign. */
+#define FW_OBS_INN_HZ 30.0f
+#define FW_OBS_VAR_S 0.2f
+#define FW_OBS_ATT_S 0.002f
+#define FW_OBS_VAR_CLIP 4.0f
+#define FW_OBS_W_FRIC_RADPS 2.0f
+
 static float lp_alpha(float f_Hz, float dt_s) {
   return 1.0f - expf(-FW_TWO_PI_F32 * f_Hz * dt_s);
 }
@@ -57,6 +68,30 @@ void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s) {
   o->ki0_dt = cfg->estimator.pll_ki * dt_s;
   o->kd_dt = dt_s * cfg->estimator.pll_kd;
   o->accel_per_A = cfg->estimator.pll_accel_per_A;
+  o->mode = cfg->estimator.obs_mode;
+  if (o->mode == (uint32_t)FW_OBS_FIXED) { /* lambda = 1 whatever the error */
+    o->bw_min = 1.0f;
+    o->bw_span = 0.0f;
+  }
+  o->lam_n = cfg->estimator.obs_bw_narrow;
+  o->lam_span = cfg->estimator.obs_bw_wide - cfg->estimator.obs_bw_narrow;
+  o->det2 = cfg->estimator.obs_detect_sigma * cfg->estimator.obs_detect_sigma;
+  o->inn_alpha = lp_alpha(FW_OBS_INN_HZ, dt_s);
+  o->var_alpha = dt_s / FW_OBS_VAR_S;
+  o->att_alpha = dt_s / FW_OBS_ATT_S;
+  o->rel_alpha = dt_s / cfg->estimator.obs_release_s; /* obs_release_s >= 0.001 (checked) */
+  /* el. rad per m (pole_pitch_m >= 0.001, mass_kg >= 0.001: checked) */
+  const float k_e = FW_PI_F32 / cfg->machine.pole_pitch_m;
+  o->fric_c = k_e * cfg->machine.coulomb_N / cfg->machine.mass_kg;
+  o->fric_v = cfg->machine.visc_Ns_per_m / cfg->machine.mass_kg;
+  o->inv_w_fric = 1.0f / FW_OBS_W_FRIC_RADPS;
+}
+
+/** obs_mode 2: the statistics restart (wide, variance unknown). */
+static void adapt_reset(fw_obs_t *o) {
+  o->inn_m = 0.0f;
+  o->inn_var = FW_OBS_INN_VAR0;
+  o->beta = 1.0f;
 }
 
 void fw_obs_reset(fw_obs_t *o, const fw_config_t *cfg) {
@@ -69,6 +104,8 @@ void fw_obs_reset(fw_obs_t *o, const fw_config_t *cfg) {
   o->pll_err_time_s = 0.0f;
   o->omega_f = 0.0f;
   o->theta_prev = o->pll.theta_rad;
+  adapt_reset(o);
+  o->bemf_prev = 0u;
 }
 
 void fw_obs_keep_position(fw_obs_t *o) {
@@ -91,6 +128,7 @@ void fw_obs_catch_speed(fw_obs_t *o, float w0_radps) {
   fw_pll_set_speed_f32(&o->pll, w0_radps);
   o->omega_f = w0_radps;
   o->accel_dist = 0.0f;
+  adapt_reset(o);
 }
 
 void fw_obs_catch_angle(fw_obs_t *o, float theta_rad) {
@@ -113,9 +151,40 @@ void fw_obs_rotate(fw_obs_t *o, float d_rad) {
   pos_add(o, d_rad);
   o->err_f = 0.0f;
   o->accel_dist = 0.0f;
+  adapt_reset(o);
 }
 
 void fw_obs_hold(fw_obs_t *o, float t_s) { o->est_hold_s = t_s; }
+
+/** obs_mode 2: the bandwidth scale of this sample from the innovation test
+ *  (docs/method.md section 5). The short-window mean of the innovation eps
+ *  against its own measured standard deviation: beyond obs_detect_sigma the
+ *  scale goes to obs_bw_wide within FW_OBS_ATT_S, quiet it returns to
+ *  obs_bw_narrow with obs_release_s. Outside the closed loop the configured
+ *  gains (scale 1) and the test restarts wide; a change of the error source
+ *  (HF <-> back-EMF) restarts it wide too. */
+static FW_ALWAYS_INLINE float adapt_lambda(fw_obs_t *o, const fw_obs_in_t *in, float eps) {
+  if (FW_UNLIKELY(!in->running || !in->settled || in->hold ||
+                  in->bemf_active != o->bemf_prev || !(eps - eps == 0.0f))) {
+    o->bemf_prev = in->bemf_active;
+    o->beta = 1.0f;
+    return in->running ? o->lam_n + o->lam_span : 1.0f;
+  }
+  const float m = o->inn_m + o->inn_alpha * (eps - o->inn_m);
+  o->inn_m = m;
+  const float m2 = m * m;
+  const float v = o->inn_var;
+  const float clip = FW_OBS_VAR_CLIP * v;
+  o->inn_var = v + o->var_alpha * ((m2 < clip ? m2 : clip) - v);
+  float beta = o->beta;
+  if (m2 > o->det2 * v) {
+    beta += o->att_alpha * (1.0f - beta);
+  } else {
+    beta -= o->rel_alpha * beta;
+  }
+  o->beta = beta;
+  return o->lam_n + o->lam_span * beta;
+}
 
 float fw_obs_update_pll(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
   /* the last move is added (fw_obs_pos_flush): theta_prev is the estimate it
@@ -148,9 +217,14 @@ float fw_obs_update_pll(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
     eps = 0.0f; /* filters still settling: extrapolate, do not correct */
   }
   /* Bandwidth scheduling: all observer poles scaled by lambda in [bw_min, 1],
-   * lambda rising with the tracking error (same observable as the SOGI). The
-   * PLL step (fw_pll_step_f32) inline, with ki dt precomputed. */
-  const float lam = o->bw_min + o->bw_span * r;
+   * lambda rising with the tracking error (same observable as the SOGI); fixed
+   * gains: bw_min = 1, bw_span = 0. The PLL step (fw_pll_step_f32) inline, with
+   * ki dt precomputed. */
+  float lam = o->bw_min + o->bw_span * r;
+  const bool adaptive = o->mode == (uint32_t)FW_OBS_ADAPTIVE;
+  if (adaptive) {
+    lam = adapt_lambda(o, in, eps);
+  }
   const float lam2 = lam * lam;
   const float kp = o->kp0 * lam;
   o->lam = lam; /* pll.kp, pll.ki: set with the position (fw_obs_pll_gains) */
@@ -167,13 +241,23 @@ float fw_obs_update_pll(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
    * integrates the acceleration the measured thrust current predicts, plus
    * an estimated disturbance (load, friction) driven by the same error.
    * Error dynamics: e''' + kp e'' + ki e' + kd e = (disturbance changes). */
+  float accel = 0.0f;
   if (in->running) {
-    w_i += dt * (o->accel_per_A * o->i_q_ff_A + o->accel_dist);
+    accel = o->accel_per_A * o->i_q_ff_A + o->accel_dist;
+    if (adaptive) { /* the configured friction in the model: the disturbance is the rest */
+      accel -= o->fric_v * w_i + o->fric_c * fw_clamp_symf(w_i * o->inv_w_fric, 1.0f);
+    }
+    w_i += dt * accel;
     w_i = fw_clamp_symf(w_i, w_max); /* w_max = speed_max_radps_e (checked > 0) */
     o->accel_dist += o->kd_dt * lam * lam * lam * eps;
   }
   pll->w_i_radps = w_i;
   o->pos_due = 1u; /* the position follows in fw_obs_pos_flush */
+  if (adaptive) {
+    /* the speed for the loops: low-passed, but the acceleration the model knows
+     * passes without the filter's lag */
+    o->omega_f += dt * accel;
+  }
   o->omega_f += o->spd_alpha * (w_i - o->omega_f);
   return eps;
 }

@@ -17,7 +17,7 @@ from enum import IntEnum
 from typing import Any, NamedTuple
 
 #: the firmware's version (device.firmware_version; 0x100A, 0x2040 packed)
-FW_VERSION_STRING = '0.4.0'
+FW_VERSION_STRING = '0.5.0'
 
 FAULTS: dict[int, tuple[str, str]] = {
     0x2310: ('OVERCURRENT', '|phase current| above i_trip_A'),
@@ -186,6 +186,18 @@ class RefStatus(IntEnum):
         return self.name.lower()
 
 
+class ObsMode(IntEnum):
+    """Angle/speed observer gain law (fw_config obs_mode, 0x2011:6) (fw_obs_mode_t); ``.key`` is the bench's lower-case name."""
+
+    FIXED = 0  # fixed gains pll_kp, pll_ki, pll_kd: the paper's PLL
+    SCHEDULED = 1  # poles scaled by pll_bw_min..1 with |filtered PLL error|
+    ADAPTIVE = 2  # innovation-adaptive: obs_bw_narrow in steady state, obs_bw_wide in a transient, friction model
+
+    @property
+    def key(self) -> str:
+        return self.name.lower()
+
+
 
 #: fw_config_t's parts in struct order (od.yaml fw_config_parts:)
 FW_CONFIG_PARTS: tuple[str, ...] = ('machine', 'sensing', 'loops', 'estimator', 'protection')
@@ -222,6 +234,11 @@ FW_CONFIG_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ('pll_accel_per_A', 'estimator', False),
     ('pll_bw_min', 'estimator', False),
     ('pll_kd', 'estimator', False),
+    ('obs_mode', 'estimator', True),
+    ('obs_bw_narrow', 'estimator', False),
+    ('obs_bw_wide', 'estimator', False),
+    ('obs_detect_sigma', 'estimator', False),
+    ('obs_release_s', 'estimator', False),
     ('align_time_s', 'estimator', False),
     ('pol_pulse_V', 'estimator', False),
     ('pol_pulse_samples', 'estimator', True),
@@ -483,6 +500,11 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2011, 3): 'kd',
     (0x2011, 4): 'Acceleration feed-forward',
     (0x2011, 5): 'Bandwidth scale when locked',
+    (0x2011, 6): 'Observer mode',
+    (0x2011, 7): 'Adaptive narrow bandwidth',
+    (0x2011, 8): 'Adaptive wide bandwidth',
+    (0x2011, 9): 'Adaptive detection threshold',
+    (0x2011, 10): 'Adaptive release time',
     (0x2020, 0): 'Highest sub-index supported',
     (0x2020, 1): 'Estimated angle',
     (0x2020, 2): 'Estimated speed',
@@ -776,6 +798,11 @@ PLL_GAINS__PLL_KI = Entry(0x2011, 2, unit='1/s^2')
 PLL_GAINS__PLL_KD = Entry(0x2011, 3, unit='1/s^3')
 PLL_GAINS__PLL_ACCEL_PER_A = Entry(0x2011, 4, unit='rad/(s^2 A)')
 PLL_GAINS__PLL_BW_MIN = Entry(0x2011, 5)
+PLL_GAINS__OBS_MODE = Entry(0x2011, 6)
+PLL_GAINS__OBS_BW_NARROW = Entry(0x2011, 7)
+PLL_GAINS__OBS_BW_WIDE = Entry(0x2011, 8)
+PLL_GAINS__OBS_DETECT_SIGMA = Entry(0x2011, 9)
+PLL_GAINS__OBS_RELEASE_S = Entry(0x2011, 10, unit='s')
 ESTIMATOR__ESTIMATED_ANGLE = Entry(0x2020, 1, unit='rad')
 ESTIMATOR__ESTIMATED_SPEED = Entry(0x2020, 2, unit='rad/s')
 ESTIMATOR__ESTIMATED_LINEAR_SPEED = Entry(0x2020, 3, unit='m/s')

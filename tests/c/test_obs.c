@@ -222,11 +222,119 @@ static void test_supervise(void) {
   TT_CHECK(n == 0);
 }
 
+
+/* obs_mode 0 (FW_OBS_FIXED): the configured gains whatever the error. */
+static void test_mode_fixed(void) {
+  fw_config_t cfg;
+  fw_obs_t o;
+  setup(&o, &cfg);
+  cfg.estimator.obs_mode = (uint32_t)FW_OBS_FIXED;
+  fw_obs_init(&o, &cfg, o.dt_s);
+  float r;
+  for (int k = 0; k < 2000; k++) { /* a large error: mode 1 would widen to 1 */
+    fw_obs_in_t in = hf_in(0.05f, (k & 1) ? 0.004f : 0.0f);
+    (void)fw_obs_update(&o, &in, &r);
+    TT_CHECK(o.pll.kp == cfg.estimator.pll_kp && o.pll.ki == cfg.estimator.pll_ki);
+  }
+  TT_CHECK(r > 0.5f); /* the SOGI's adaptation signal is formed as before */
+}
+
+/* obs_mode 2: the bandwidth scale against the closed forms of its law. Quiet
+ * (zero innovation): beta(n) = (1 - dt / obs_release_s)^n from 1; the test firing
+ * (constant innovation well beyond obs_detect_sigma of the measured deviation):
+ * beta(n) = 1 - (1 - dt / 2 ms)^n; outside the closed loop the configured gains. */
+static void test_mode_adaptive_law(void) {
+  fw_config_t cfg;
+  fw_obs_t o;
+  setup(&o, &cfg);
+  cfg.estimator.obs_mode = (uint32_t)FW_OBS_ADAPTIVE;
+  cfg.estimator.pll_accel_per_A = 0.0f;
+  cfg.machine.coulomb_N = 0.0f;
+  cfg.machine.visc_Ns_per_m = 0.0f;
+  fw_obs_init(&o, &cfg, o.dt_s);
+  fw_obs_reset(&o, &cfg);
+  const double dt = o.dt_s, ln = cfg.estimator.obs_bw_narrow, lw = cfg.estimator.obs_bw_wide;
+  float r;
+  fw_obs_in_t in = hf_in(0.05f, 0.0f); /* zero innovation */
+  (void)fw_obs_update(&o, &in, &r);    /* not running: scale 1 */
+  TT_CHECK_NEAR(o.pll.kp, cfg.estimator.pll_kp, 1e-4);
+  in.running = 1u;
+  const int n = 2400; /* 0.1 s */
+  for (int k = 0; k < n; k++) {
+    (void)fw_obs_update(&o, &in, &r);
+  }
+  const double beta_q = pow(1.0 - dt / cfg.estimator.obs_release_s, n);
+  TT_CHECK_NEAR(o.beta, beta_q, 1e-4);
+  TT_CHECK_NEAR(o.pll.kp, cfg.estimator.pll_kp * (ln + (lw - ln) * beta_q), 1e-2);
+  /* the variance is learnt down from its prior: (1 - dt / 0.2 s)^n of it left */
+  TT_CHECK_NEAR(o.inn_var, FW_OBS_INN_VAR0 * pow(1.0 - dt / 0.2, n), 1e-8);
+  for (int k = 0; k < 24000; k++) { /* long quiet: narrow */
+    (void)fw_obs_update(&o, &in, &r);
+  }
+  const double lam_q = ln + (lw - ln) * pow(1.0 - dt / cfg.estimator.obs_release_s, n + 24000);
+  TT_CHECK(lam_q - ln < 1e-3 * ln); /* narrow, to 0.1 % */
+  TT_CHECK_NEAR(o.pll.kp, cfg.estimator.pll_kp * lam_q, 1e-3);
+  TT_CHECK_NEAR(o.pll.ki, cfg.estimator.pll_ki * lam_q * lam_q, 1e-2);
+  /* the test fires on an innovation of 0.05 rad against a deviation near 0: the
+   * mean crosses the threshold within a sample or two, then beta rises with the
+   * 2 ms attack */
+  o.pll.theta_rad = 0.0f; /* the estimate held where the error is formed */
+  in = hf_in(0.05f, 0.05f / 3.0f); /* eps = (E_q / E_d) 3 = 1/3 ... clamp-free */
+  in.running = 1u;
+  (void)fw_obs_update(&o, &in, &r);
+  const float b0 = o.beta;
+  for (int k = 0; k < 48; k++) { /* 2 ms */
+    (void)fw_obs_update(&o, &in, &r);
+  }
+  TT_CHECK_NEAR(1.0 - o.beta, (1.0 - b0) * pow(1.0 - dt / 0.002, 48), 1e-4);
+  TT_CHECK(o.beta > 0.6f);
+  /* a change of the error source (HF -> back-EMF) restarts wide */
+  in.bemf_active = 1u;
+  in.bemf_err_rad = 0.0f;
+  (void)fw_obs_update(&o, &in, &r);
+  TT_CHECK(o.beta == 1.0f);
+  TT_CHECK_NEAR(o.lam, lw, 1e-6);
+}
+
+/* obs_mode 2: the friction model, against its closed form. No error, no thrust,
+ * coasting above the Coulomb term's sign band: w' = -(b / m) w - k_e F_c / m. */
+static void test_mode_adaptive_friction(void) {
+  fw_config_t cfg;
+  fw_obs_t o;
+  setup(&o, &cfg);
+  cfg.estimator.obs_mode = (uint32_t)FW_OBS_ADAPTIVE;
+  fw_obs_init(&o, &cfg, o.dt_s);
+  fw_obs_reset(&o, &cfg);
+  const double dt = o.dt_s, k_e = M_PI / cfg.machine.pole_pitch_m;
+  const double c = k_e * cfg.machine.coulomb_N / cfg.machine.mass_kg;
+  const double b = cfg.machine.visc_Ns_per_m / cfg.machine.mass_kg;
+  const double w0 = 300.0;
+  fw_obs_set(&o, 0.0f, (float)w0);
+  o.omega_f = (float)w0;
+  fw_obs_set_iq(&o, 0.0f);
+  fw_obs_in_t in = hf_in(0.05f, 0.0f);
+  in.running = 1u;
+  float r;
+  const int n = 240; /* 10 ms */
+  double w = w0;
+  for (int k = 0; k < n; k++) {
+    (void)fw_obs_update(&o, &in, &r);
+    w += dt * (-b * w - c); /* explicit Euler, as the observer integrates */
+  }
+  TT_CHECK(w > 100.0); /* stayed above the sign band */
+  TT_CHECK_NEAR(o.pll.w_i_radps, w, 1e-3 * w0);
+  /* the speed for the loops follows the modelled deceleration without lag */
+  TT_CHECK_NEAR(o.omega_f, w, 1e-3 * w0);
+}
+
 int main(void) {
   TT_RUN(test_error);
   TT_RUN(test_mechanical_extension);
   TT_RUN(test_position);
   TT_RUN(test_update_pll_then_flush);
   TT_RUN(test_supervise);
+  TT_RUN(test_mode_fixed);
+  TT_RUN(test_mode_adaptive_law);
+  TT_RUN(test_mode_adaptive_friction);
   return TT_SUMMARY();
 }

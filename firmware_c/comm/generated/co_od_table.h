@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 295u
-#define CO_OD_RAM_SIZE 995u
+#define CO_OD_COUNT 300u
+#define CO_OD_RAM_SIZE 1015u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -153,158 +153,163 @@
 #define CO_OD_2011_03 140u /* PLL gains: kd */
 #define CO_OD_2011_04 141u /* PLL gains: Acceleration feed-forward */
 #define CO_OD_2011_05 142u /* PLL gains: Bandwidth scale when locked */
-#define CO_OD_2020_00 143u /* Estimator: Highest sub-index supported */
-#define CO_OD_2020_01 144u /* Estimator: Estimated angle */
-#define CO_OD_2020_02 145u /* Estimator: Estimated speed */
-#define CO_OD_2020_03 146u /* Estimator: Estimated linear speed */
-#define CO_OD_2020_04 147u /* Estimator: PLL error */
-#define CO_OD_2020_05 148u /* Estimator: HF amplitude */
-#define CO_OD_2020_06 149u /* Estimator: Filtered PLL error */
-#define CO_OD_2020_07 150u /* Estimator: SOGI k in use */
-#define CO_OD_2020_08 151u /* Estimator: Start-up phase */
-#define CO_OD_2020_09 152u /* Estimator: Disturbance acceleration */
-#define CO_OD_2030_00 153u /* Fault history: Highest sub-index supported */
-#define CO_OD_2030_01 154u /* Fault history: Fault 1 */
-#define CO_OD_2030_02 155u /* Fault history: Fault 2 */
-#define CO_OD_2030_03 156u /* Fault history: Fault 3 */
-#define CO_OD_2030_04 157u /* Fault history: Fault 4 */
-#define CO_OD_2030_05 158u /* Fault history: Fault 5 */
-#define CO_OD_2030_06 159u /* Fault history: Fault 6 */
-#define CO_OD_2030_07 160u /* Fault history: Fault 7 */
-#define CO_OD_2030_08 161u /* Fault history: Fault 8 */
-#define CO_OD_2040_00 162u /* Firmware version: Firmware version */
-#define CO_OD_2041_00 163u /* Build id: Build id */
-#define CO_OD_2042_00 164u /* Device tag: Device tag */
-#define CO_OD_2050_00 165u /* Drive configuration: Highest sub-index supported */
-#define CO_OD_2050_01 166u /* Drive configuration: PWM frequency */
-#define CO_OD_2050_02 167u /* Drive configuration: Phase resistance */
-#define CO_OD_2050_03 168u /* Drive configuration: L_d */
-#define CO_OD_2050_04 169u /* Drive configuration: L_q */
-#define CO_OD_2050_05 170u /* Drive configuration: PM flux linkage */
-#define CO_OD_2050_06 171u /* Drive configuration: Pole pitch */
-#define CO_OD_2050_07 172u /* Drive configuration: DC undervoltage trip */
-#define CO_OD_2050_08 173u /* Drive configuration: DC overvoltage trip */
-#define CO_OD_2050_09 174u /* Drive configuration: Overcurrent trip */
-#define CO_OD_2050_0A 175u /* Drive configuration: Current limit */
-#define CO_OD_2050_0B 176u /* Drive configuration: Speed limit */
-#define CO_OD_2050_0C 177u /* Drive configuration: Current loop kp */
-#define CO_OD_2050_0D 178u /* Drive configuration: Current loop ki */
-#define CO_OD_2050_0E 179u /* Drive configuration: Speed loop kp */
-#define CO_OD_2050_0F 180u /* Drive configuration: Speed loop ki */
-#define CO_OD_2050_10 181u /* Drive configuration: Speed filter */
-#define CO_OD_2050_11 182u /* Drive configuration: Saliency minimum */
-#define CO_OD_2050_12 183u /* Drive configuration: Quick stop time */
-#define CO_OD_2050_13 184u /* Drive configuration: Pole pairs */
-#define CO_OD_2051_00 185u /* Protections: Highest sub-index supported */
-#define CO_OD_2051_01 186u /* Protections: Max speed */
-#define CO_OD_2051_02 187u /* Protections: Position limit min */
-#define CO_OD_2051_03 188u /* Protections: Position limit max */
-#define CO_OD_2051_04 189u /* Protections: Following error window */
-#define CO_OD_2051_05 190u /* Protections: Following error time */
-#define CO_OD_2051_06 191u /* Protections: Rated current */
-#define CO_OD_2051_07 192u /* Protections: i2t time */
-#define CO_OD_2051_08 193u /* Protections: Quick stop option */
-#define CO_OD_2051_09 194u /* Protections: Fault reaction option */
-#define CO_OD_2051_0A 195u /* Protections: Fault braking time */
-#define CO_OD_2051_0B 196u /* Protections: Overspeed margin */
-#define CO_OD_2052_00 197u /* Integrity monitor: Highest sub-index supported */
-#define CO_OD_2052_01 198u /* Integrity monitor: HF angle limit */
-#define CO_OD_2052_02 199u /* Integrity monitor: Detection time */
-#define CO_OD_2052_03 200u /* Integrity monitor: Saliency tolerance */
-#define CO_OD_2052_04 201u /* Integrity monitor: Back-EMF angle limit */
-#define CO_OD_2052_05 202u /* Integrity monitor: Back-EMF minimum speed */
-#define CO_OD_2052_06 203u /* Integrity monitor: Current sum limit */
-#define CO_OD_2052_07 204u /* Integrity monitor: Current offset limit */
-#define CO_OD_2052_08 205u /* Integrity monitor: Start speed limit */
-#define CO_OD_2052_09 206u /* Integrity monitor: Back-EMF minimum */
-#define CO_OD_2053_00 207u /* Back-EMF observer: Highest sub-index supported */
-#define CO_OD_2053_01 208u /* Back-EMF observer: Handover up speed */
-#define CO_OD_2053_02 209u /* Back-EMF observer: Handover down speed */
-#define CO_OD_2053_03 210u /* Back-EMF observer: Injection share */
-#define CO_OD_2053_04 211u /* Back-EMF observer: Handover up */
-#define CO_OD_2053_05 212u /* Back-EMF observer: Handover down */
-#define CO_OD_2054_00 213u /* Machine and loop bandwidths: Highest sub-index supported */
-#define CO_OD_2054_01 214u /* Machine and loop bandwidths: Mover mass */
-#define CO_OD_2054_02 215u /* Machine and loop bandwidths: Viscous friction */
-#define CO_OD_2054_03 216u /* Machine and loop bandwidths: Coulomb friction */
-#define CO_OD_2054_04 217u /* Machine and loop bandwidths: Current loop bandwidth */
-#define CO_OD_2054_05 218u /* Machine and loop bandwidths: Speed loop bandwidth */
-#define CO_OD_2054_06 219u /* Machine and loop bandwidths: Gains automatic */
-#define CO_OD_2055_00 220u /* Start-up and estimate supervision: Highest sub-index supported */
-#define CO_OD_2055_01 221u /* Start-up and estimate supervision: Alignment time */
-#define CO_OD_2055_02 222u /* Start-up and estimate supervision: Polarity pulse voltage */
-#define CO_OD_2055_03 223u /* Start-up and estimate supervision: Polarity pulse samples */
-#define CO_OD_2055_04 224u /* Start-up and estimate supervision: Polarity pulse pairs */
-#define CO_OD_2055_05 225u /* Start-up and estimate supervision: Polarity margin */
-#define CO_OD_2055_06 226u /* Start-up and estimate supervision: HF amplitude minimum ratio */
-#define CO_OD_2055_07 227u /* Start-up and estimate supervision: PLL error limit */
-#define CO_OD_2055_08 228u /* Start-up and estimate supervision: PLL error time */
-#define CO_OD_2056_00 229u /* Board sensing: Highest sub-index supported */
-#define CO_OD_2056_01 230u /* Board sensing: Current per count */
-#define CO_OD_2056_02 231u /* Board sensing: Current zero */
-#define CO_OD_2056_03 232u /* Board sensing: DC link volts per count */
-#define CO_OD_2056_04 233u /* Board sensing: Full-scale count */
-#define CO_OD_2060_00 234u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 235u /* Telemetry: Decimation */
-#define CO_OD_2060_02 236u /* Telemetry: Signal count */
-#define CO_OD_2060_03 237u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 238u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 239u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 240u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 241u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 242u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 243u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 244u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 245u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 246u /* Trace: Command */
-#define CO_OD_2070_02 247u /* Trace: State */
-#define CO_OD_2070_03 248u /* Trace: Trigger signal */
-#define CO_OD_2070_04 249u /* Trace: Trigger level */
-#define CO_OD_2070_05 250u /* Trace: Trigger edge */
-#define CO_OD_2070_06 251u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 252u /* Trace: Signal count */
-#define CO_OD_2070_08 253u /* Trace: Signal 1 */
-#define CO_OD_2070_09 254u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 255u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 256u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 257u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 258u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 259u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 260u /* Trace: Signal 8 */
-#define CO_OD_2080_00 261u /* Identification: Highest sub-index supported */
-#define CO_OD_2080_01 262u /* Identification: d-axis current reference */
-#define CO_OD_2080_02 263u /* Identification: Measured smaller inductance */
-#define CO_OD_2080_03 264u /* Identification: Measured larger inductance */
-#define CO_OD_2090_00 265u /* Board: Highest sub-index supported */
-#define CO_OD_2090_01 266u /* Board: Drive kind */
-#define CO_OD_2090_02 267u /* Board: Board name */
-#define CO_OD_2090_03 268u /* Board: Drive time */
-#define CO_OD_2091_00 269u /* Reference sensor: Highest sub-index supported */
-#define CO_OD_2091_01 270u /* Reference sensor: Status */
-#define CO_OD_2091_02 271u /* Reference sensor: Resolution */
-#define CO_OD_2091_03 272u /* Reference sensor: Electrical zero */
-#define CO_OD_2091_04 273u /* Reference sensor: Count */
-#define CO_OD_2091_05 274u /* Reference sensor: Position */
-#define CO_OD_2091_06 275u /* Reference sensor: Faults seen */
-#define CO_OD_603F_00 276u /* Error code: Error code */
-#define CO_OD_6040_00 277u /* Controlword: Controlword */
-#define CO_OD_6041_00 278u /* Statusword: Statusword */
-#define CO_OD_605A_00 279u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 280u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 281u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 282u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 283u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 284u /* Following error window: Following error window */
-#define CO_OD_6066_00 285u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 286u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 287u /* Target torque: Target torque */
-#define CO_OD_6077_00 288u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 289u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 290u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 291u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 292u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 293u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 294u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2011_06 143u /* PLL gains: Observer mode */
+#define CO_OD_2011_07 144u /* PLL gains: Adaptive narrow bandwidth */
+#define CO_OD_2011_08 145u /* PLL gains: Adaptive wide bandwidth */
+#define CO_OD_2011_09 146u /* PLL gains: Adaptive detection threshold */
+#define CO_OD_2011_0A 147u /* PLL gains: Adaptive release time */
+#define CO_OD_2020_00 148u /* Estimator: Highest sub-index supported */
+#define CO_OD_2020_01 149u /* Estimator: Estimated angle */
+#define CO_OD_2020_02 150u /* Estimator: Estimated speed */
+#define CO_OD_2020_03 151u /* Estimator: Estimated linear speed */
+#define CO_OD_2020_04 152u /* Estimator: PLL error */
+#define CO_OD_2020_05 153u /* Estimator: HF amplitude */
+#define CO_OD_2020_06 154u /* Estimator: Filtered PLL error */
+#define CO_OD_2020_07 155u /* Estimator: SOGI k in use */
+#define CO_OD_2020_08 156u /* Estimator: Start-up phase */
+#define CO_OD_2020_09 157u /* Estimator: Disturbance acceleration */
+#define CO_OD_2030_00 158u /* Fault history: Highest sub-index supported */
+#define CO_OD_2030_01 159u /* Fault history: Fault 1 */
+#define CO_OD_2030_02 160u /* Fault history: Fault 2 */
+#define CO_OD_2030_03 161u /* Fault history: Fault 3 */
+#define CO_OD_2030_04 162u /* Fault history: Fault 4 */
+#define CO_OD_2030_05 163u /* Fault history: Fault 5 */
+#define CO_OD_2030_06 164u /* Fault history: Fault 6 */
+#define CO_OD_2030_07 165u /* Fault history: Fault 7 */
+#define CO_OD_2030_08 166u /* Fault history: Fault 8 */
+#define CO_OD_2040_00 167u /* Firmware version: Firmware version */
+#define CO_OD_2041_00 168u /* Build id: Build id */
+#define CO_OD_2042_00 169u /* Device tag: Device tag */
+#define CO_OD_2050_00 170u /* Drive configuration: Highest sub-index supported */
+#define CO_OD_2050_01 171u /* Drive configuration: PWM frequency */
+#define CO_OD_2050_02 172u /* Drive configuration: Phase resistance */
+#define CO_OD_2050_03 173u /* Drive configuration: L_d */
+#define CO_OD_2050_04 174u /* Drive configuration: L_q */
+#define CO_OD_2050_05 175u /* Drive configuration: PM flux linkage */
+#define CO_OD_2050_06 176u /* Drive configuration: Pole pitch */
+#define CO_OD_2050_07 177u /* Drive configuration: DC undervoltage trip */
+#define CO_OD_2050_08 178u /* Drive configuration: DC overvoltage trip */
+#define CO_OD_2050_09 179u /* Drive configuration: Overcurrent trip */
+#define CO_OD_2050_0A 180u /* Drive configuration: Current limit */
+#define CO_OD_2050_0B 181u /* Drive configuration: Speed limit */
+#define CO_OD_2050_0C 182u /* Drive configuration: Current loop kp */
+#define CO_OD_2050_0D 183u /* Drive configuration: Current loop ki */
+#define CO_OD_2050_0E 184u /* Drive configuration: Speed loop kp */
+#define CO_OD_2050_0F 185u /* Drive configuration: Speed loop ki */
+#define CO_OD_2050_10 186u /* Drive configuration: Speed filter */
+#define CO_OD_2050_11 187u /* Drive configuration: Saliency minimum */
+#define CO_OD_2050_12 188u /* Drive configuration: Quick stop time */
+#define CO_OD_2050_13 189u /* Drive configuration: Pole pairs */
+#define CO_OD_2051_00 190u /* Protections: Highest sub-index supported */
+#define CO_OD_2051_01 191u /* Protections: Max speed */
+#define CO_OD_2051_02 192u /* Protections: Position limit min */
+#define CO_OD_2051_03 193u /* Protections: Position limit max */
+#define CO_OD_2051_04 194u /* Protections: Following error window */
+#define CO_OD_2051_05 195u /* Protections: Following error time */
+#define CO_OD_2051_06 196u /* Protections: Rated current */
+#define CO_OD_2051_07 197u /* Protections: i2t time */
+#define CO_OD_2051_08 198u /* Protections: Quick stop option */
+#define CO_OD_2051_09 199u /* Protections: Fault reaction option */
+#define CO_OD_2051_0A 200u /* Protections: Fault braking time */
+#define CO_OD_2051_0B 201u /* Protections: Overspeed margin */
+#define CO_OD_2052_00 202u /* Integrity monitor: Highest sub-index supported */
+#define CO_OD_2052_01 203u /* Integrity monitor: HF angle limit */
+#define CO_OD_2052_02 204u /* Integrity monitor: Detection time */
+#define CO_OD_2052_03 205u /* Integrity monitor: Saliency tolerance */
+#define CO_OD_2052_04 206u /* Integrity monitor: Back-EMF angle limit */
+#define CO_OD_2052_05 207u /* Integrity monitor: Back-EMF minimum speed */
+#define CO_OD_2052_06 208u /* Integrity monitor: Current sum limit */
+#define CO_OD_2052_07 209u /* Integrity monitor: Current offset limit */
+#define CO_OD_2052_08 210u /* Integrity monitor: Start speed limit */
+#define CO_OD_2052_09 211u /* Integrity monitor: Back-EMF minimum */
+#define CO_OD_2053_00 212u /* Back-EMF observer: Highest sub-index supported */
+#define CO_OD_2053_01 213u /* Back-EMF observer: Handover up speed */
+#define CO_OD_2053_02 214u /* Back-EMF observer: Handover down speed */
+#define CO_OD_2053_03 215u /* Back-EMF observer: Injection share */
+#define CO_OD_2053_04 216u /* Back-EMF observer: Handover up */
+#define CO_OD_2053_05 217u /* Back-EMF observer: Handover down */
+#define CO_OD_2054_00 218u /* Machine and loop bandwidths: Highest sub-index supported */
+#define CO_OD_2054_01 219u /* Machine and loop bandwidths: Mover mass */
+#define CO_OD_2054_02 220u /* Machine and loop bandwidths: Viscous friction */
+#define CO_OD_2054_03 221u /* Machine and loop bandwidths: Coulomb friction */
+#define CO_OD_2054_04 222u /* Machine and loop bandwidths: Current loop bandwidth */
+#define CO_OD_2054_05 223u /* Machine and loop bandwidths: Speed loop bandwidth */
+#define CO_OD_2054_06 224u /* Machine and loop bandwidths: Gains automatic */
+#define CO_OD_2055_00 225u /* Start-up and estimate supervision: Highest sub-index supported */
+#define CO_OD_2055_01 226u /* Start-up and estimate supervision: Alignment time */
+#define CO_OD_2055_02 227u /* Start-up and estimate supervision: Polarity pulse voltage */
+#define CO_OD_2055_03 228u /* Start-up and estimate supervision: Polarity pulse samples */
+#define CO_OD_2055_04 229u /* Start-up and estimate supervision: Polarity pulse pairs */
+#define CO_OD_2055_05 230u /* Start-up and estimate supervision: Polarity margin */
+#define CO_OD_2055_06 231u /* Start-up and estimate supervision: HF amplitude minimum ratio */
+#define CO_OD_2055_07 232u /* Start-up and estimate supervision: PLL error limit */
+#define CO_OD_2055_08 233u /* Start-up and estimate supervision: PLL error time */
+#define CO_OD_2056_00 234u /* Board sensing: Highest sub-index supported */
+#define CO_OD_2056_01 235u /* Board sensing: Current per count */
+#define CO_OD_2056_02 236u /* Board sensing: Current zero */
+#define CO_OD_2056_03 237u /* Board sensing: DC link volts per count */
+#define CO_OD_2056_04 238u /* Board sensing: Full-scale count */
+#define CO_OD_2060_00 239u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 240u /* Telemetry: Decimation */
+#define CO_OD_2060_02 241u /* Telemetry: Signal count */
+#define CO_OD_2060_03 242u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 243u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 244u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 245u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 246u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 247u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 248u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 249u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 250u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 251u /* Trace: Command */
+#define CO_OD_2070_02 252u /* Trace: State */
+#define CO_OD_2070_03 253u /* Trace: Trigger signal */
+#define CO_OD_2070_04 254u /* Trace: Trigger level */
+#define CO_OD_2070_05 255u /* Trace: Trigger edge */
+#define CO_OD_2070_06 256u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 257u /* Trace: Signal count */
+#define CO_OD_2070_08 258u /* Trace: Signal 1 */
+#define CO_OD_2070_09 259u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 260u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 261u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 262u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 263u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 264u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 265u /* Trace: Signal 8 */
+#define CO_OD_2080_00 266u /* Identification: Highest sub-index supported */
+#define CO_OD_2080_01 267u /* Identification: d-axis current reference */
+#define CO_OD_2080_02 268u /* Identification: Measured smaller inductance */
+#define CO_OD_2080_03 269u /* Identification: Measured larger inductance */
+#define CO_OD_2090_00 270u /* Board: Highest sub-index supported */
+#define CO_OD_2090_01 271u /* Board: Drive kind */
+#define CO_OD_2090_02 272u /* Board: Board name */
+#define CO_OD_2090_03 273u /* Board: Drive time */
+#define CO_OD_2091_00 274u /* Reference sensor: Highest sub-index supported */
+#define CO_OD_2091_01 275u /* Reference sensor: Status */
+#define CO_OD_2091_02 276u /* Reference sensor: Resolution */
+#define CO_OD_2091_03 277u /* Reference sensor: Electrical zero */
+#define CO_OD_2091_04 278u /* Reference sensor: Count */
+#define CO_OD_2091_05 279u /* Reference sensor: Position */
+#define CO_OD_2091_06 280u /* Reference sensor: Faults seen */
+#define CO_OD_603F_00 281u /* Error code: Error code */
+#define CO_OD_6040_00 282u /* Controlword: Controlword */
+#define CO_OD_6041_00 283u /* Statusword: Statusword */
+#define CO_OD_605A_00 284u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 285u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 286u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 287u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 288u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 289u /* Following error window: Following error window */
+#define CO_OD_6066_00 290u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 291u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 292u /* Target torque: Target torque */
+#define CO_OD_6077_00 293u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 294u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 295u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 296u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 297u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 298u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 299u /* Supported drive modes: Supported drive modes */
 
 /** Where each entry's value lives in the OD RAM (compile-time handles for the
  *  application's per-period access, co_node.h CO_NODE_PUT/CO_NODE_GET):
@@ -597,309 +602,319 @@
 #define CO_OD_LEN_2011_04 4u
 #define CO_OD_OFF_2011_05 482u
 #define CO_OD_LEN_2011_05 4u
-#define CO_OD_OFF_2020_00 486u
+#define CO_OD_OFF_2011_06 486u
+#define CO_OD_LEN_2011_06 4u
+#define CO_OD_OFF_2011_07 490u
+#define CO_OD_LEN_2011_07 4u
+#define CO_OD_OFF_2011_08 494u
+#define CO_OD_LEN_2011_08 4u
+#define CO_OD_OFF_2011_09 498u
+#define CO_OD_LEN_2011_09 4u
+#define CO_OD_OFF_2011_0A 502u
+#define CO_OD_LEN_2011_0A 4u
+#define CO_OD_OFF_2020_00 506u
 #define CO_OD_LEN_2020_00 1u
-#define CO_OD_OFF_2020_01 487u
+#define CO_OD_OFF_2020_01 507u
 #define CO_OD_LEN_2020_01 4u
-#define CO_OD_OFF_2020_02 491u
+#define CO_OD_OFF_2020_02 511u
 #define CO_OD_LEN_2020_02 4u
-#define CO_OD_OFF_2020_03 495u
+#define CO_OD_OFF_2020_03 515u
 #define CO_OD_LEN_2020_03 4u
-#define CO_OD_OFF_2020_04 499u
+#define CO_OD_OFF_2020_04 519u
 #define CO_OD_LEN_2020_04 4u
-#define CO_OD_OFF_2020_05 503u
+#define CO_OD_OFF_2020_05 523u
 #define CO_OD_LEN_2020_05 4u
-#define CO_OD_OFF_2020_06 507u
+#define CO_OD_OFF_2020_06 527u
 #define CO_OD_LEN_2020_06 4u
-#define CO_OD_OFF_2020_07 511u
+#define CO_OD_OFF_2020_07 531u
 #define CO_OD_LEN_2020_07 4u
-#define CO_OD_OFF_2020_08 515u
+#define CO_OD_OFF_2020_08 535u
 #define CO_OD_LEN_2020_08 1u
-#define CO_OD_OFF_2020_09 516u
+#define CO_OD_OFF_2020_09 536u
 #define CO_OD_LEN_2020_09 4u
-#define CO_OD_OFF_2030_00 520u
+#define CO_OD_OFF_2030_00 540u
 #define CO_OD_LEN_2030_00 1u
-#define CO_OD_OFF_2030_01 521u
+#define CO_OD_OFF_2030_01 541u
 #define CO_OD_LEN_2030_01 2u
-#define CO_OD_OFF_2030_02 523u
+#define CO_OD_OFF_2030_02 543u
 #define CO_OD_LEN_2030_02 2u
-#define CO_OD_OFF_2030_03 525u
+#define CO_OD_OFF_2030_03 545u
 #define CO_OD_LEN_2030_03 2u
-#define CO_OD_OFF_2030_04 527u
+#define CO_OD_OFF_2030_04 547u
 #define CO_OD_LEN_2030_04 2u
-#define CO_OD_OFF_2030_05 529u
+#define CO_OD_OFF_2030_05 549u
 #define CO_OD_LEN_2030_05 2u
-#define CO_OD_OFF_2030_06 531u
+#define CO_OD_OFF_2030_06 551u
 #define CO_OD_LEN_2030_06 2u
-#define CO_OD_OFF_2030_07 533u
+#define CO_OD_OFF_2030_07 553u
 #define CO_OD_LEN_2030_07 2u
-#define CO_OD_OFF_2030_08 535u
+#define CO_OD_OFF_2030_08 555u
 #define CO_OD_LEN_2030_08 2u
-#define CO_OD_OFF_2040_00 537u
+#define CO_OD_OFF_2040_00 557u
 #define CO_OD_LEN_2040_00 4u
-#define CO_OD_OFF_2041_00 541u
+#define CO_OD_OFF_2041_00 561u
 #define CO_OD_LEN_2041_00 24u
-#define CO_OD_OFF_2042_00 566u
+#define CO_OD_OFF_2042_00 586u
 #define CO_OD_LEN_2042_00 24u
-#define CO_OD_OFF_2050_00 591u
+#define CO_OD_OFF_2050_00 611u
 #define CO_OD_LEN_2050_00 1u
-#define CO_OD_OFF_2050_01 592u
+#define CO_OD_OFF_2050_01 612u
 #define CO_OD_LEN_2050_01 4u
-#define CO_OD_OFF_2050_02 596u
+#define CO_OD_OFF_2050_02 616u
 #define CO_OD_LEN_2050_02 4u
-#define CO_OD_OFF_2050_03 600u
+#define CO_OD_OFF_2050_03 620u
 #define CO_OD_LEN_2050_03 4u
-#define CO_OD_OFF_2050_04 604u
+#define CO_OD_OFF_2050_04 624u
 #define CO_OD_LEN_2050_04 4u
-#define CO_OD_OFF_2050_05 608u
+#define CO_OD_OFF_2050_05 628u
 #define CO_OD_LEN_2050_05 4u
-#define CO_OD_OFF_2050_06 612u
+#define CO_OD_OFF_2050_06 632u
 #define CO_OD_LEN_2050_06 4u
-#define CO_OD_OFF_2050_07 616u
+#define CO_OD_OFF_2050_07 636u
 #define CO_OD_LEN_2050_07 4u
-#define CO_OD_OFF_2050_08 620u
+#define CO_OD_OFF_2050_08 640u
 #define CO_OD_LEN_2050_08 4u
-#define CO_OD_OFF_2050_09 624u
+#define CO_OD_OFF_2050_09 644u
 #define CO_OD_LEN_2050_09 4u
-#define CO_OD_OFF_2050_0A 628u
+#define CO_OD_OFF_2050_0A 648u
 #define CO_OD_LEN_2050_0A 4u
-#define CO_OD_OFF_2050_0B 632u
+#define CO_OD_OFF_2050_0B 652u
 #define CO_OD_LEN_2050_0B 4u
-#define CO_OD_OFF_2050_0C 636u
+#define CO_OD_OFF_2050_0C 656u
 #define CO_OD_LEN_2050_0C 4u
-#define CO_OD_OFF_2050_0D 640u
+#define CO_OD_OFF_2050_0D 660u
 #define CO_OD_LEN_2050_0D 4u
-#define CO_OD_OFF_2050_0E 644u
+#define CO_OD_OFF_2050_0E 664u
 #define CO_OD_LEN_2050_0E 4u
-#define CO_OD_OFF_2050_0F 648u
+#define CO_OD_OFF_2050_0F 668u
 #define CO_OD_LEN_2050_0F 4u
-#define CO_OD_OFF_2050_10 652u
+#define CO_OD_OFF_2050_10 672u
 #define CO_OD_LEN_2050_10 4u
-#define CO_OD_OFF_2050_11 656u
+#define CO_OD_OFF_2050_11 676u
 #define CO_OD_LEN_2050_11 4u
-#define CO_OD_OFF_2050_12 660u
+#define CO_OD_OFF_2050_12 680u
 #define CO_OD_LEN_2050_12 4u
-#define CO_OD_OFF_2050_13 664u
+#define CO_OD_OFF_2050_13 684u
 #define CO_OD_LEN_2050_13 4u
-#define CO_OD_OFF_2051_00 668u
+#define CO_OD_OFF_2051_00 688u
 #define CO_OD_LEN_2051_00 1u
-#define CO_OD_OFF_2051_01 669u
+#define CO_OD_OFF_2051_01 689u
 #define CO_OD_LEN_2051_01 4u
-#define CO_OD_OFF_2051_02 673u
+#define CO_OD_OFF_2051_02 693u
 #define CO_OD_LEN_2051_02 4u
-#define CO_OD_OFF_2051_03 677u
+#define CO_OD_OFF_2051_03 697u
 #define CO_OD_LEN_2051_03 4u
-#define CO_OD_OFF_2051_04 681u
+#define CO_OD_OFF_2051_04 701u
 #define CO_OD_LEN_2051_04 4u
-#define CO_OD_OFF_2051_05 685u
+#define CO_OD_OFF_2051_05 705u
 #define CO_OD_LEN_2051_05 4u
-#define CO_OD_OFF_2051_06 689u
+#define CO_OD_OFF_2051_06 709u
 #define CO_OD_LEN_2051_06 4u
-#define CO_OD_OFF_2051_07 693u
+#define CO_OD_OFF_2051_07 713u
 #define CO_OD_LEN_2051_07 4u
-#define CO_OD_OFF_2051_08 697u
+#define CO_OD_OFF_2051_08 717u
 #define CO_OD_LEN_2051_08 4u
-#define CO_OD_OFF_2051_09 701u
+#define CO_OD_OFF_2051_09 721u
 #define CO_OD_LEN_2051_09 4u
-#define CO_OD_OFF_2051_0A 705u
+#define CO_OD_OFF_2051_0A 725u
 #define CO_OD_LEN_2051_0A 4u
-#define CO_OD_OFF_2051_0B 709u
+#define CO_OD_OFF_2051_0B 729u
 #define CO_OD_LEN_2051_0B 4u
-#define CO_OD_OFF_2052_00 713u
+#define CO_OD_OFF_2052_00 733u
 #define CO_OD_LEN_2052_00 1u
-#define CO_OD_OFF_2052_01 714u
+#define CO_OD_OFF_2052_01 734u
 #define CO_OD_LEN_2052_01 4u
-#define CO_OD_OFF_2052_02 718u
+#define CO_OD_OFF_2052_02 738u
 #define CO_OD_LEN_2052_02 4u
-#define CO_OD_OFF_2052_03 722u
+#define CO_OD_OFF_2052_03 742u
 #define CO_OD_LEN_2052_03 4u
-#define CO_OD_OFF_2052_04 726u
+#define CO_OD_OFF_2052_04 746u
 #define CO_OD_LEN_2052_04 4u
-#define CO_OD_OFF_2052_05 730u
+#define CO_OD_OFF_2052_05 750u
 #define CO_OD_LEN_2052_05 4u
-#define CO_OD_OFF_2052_06 734u
+#define CO_OD_OFF_2052_06 754u
 #define CO_OD_LEN_2052_06 4u
-#define CO_OD_OFF_2052_07 738u
+#define CO_OD_OFF_2052_07 758u
 #define CO_OD_LEN_2052_07 4u
-#define CO_OD_OFF_2052_08 742u
+#define CO_OD_OFF_2052_08 762u
 #define CO_OD_LEN_2052_08 4u
-#define CO_OD_OFF_2052_09 746u
+#define CO_OD_OFF_2052_09 766u
 #define CO_OD_LEN_2052_09 4u
-#define CO_OD_OFF_2053_00 750u
+#define CO_OD_OFF_2053_00 770u
 #define CO_OD_LEN_2053_00 1u
-#define CO_OD_OFF_2053_01 751u
+#define CO_OD_OFF_2053_01 771u
 #define CO_OD_LEN_2053_01 4u
-#define CO_OD_OFF_2053_02 755u
+#define CO_OD_OFF_2053_02 775u
 #define CO_OD_LEN_2053_02 4u
-#define CO_OD_OFF_2053_03 759u
+#define CO_OD_OFF_2053_03 779u
 #define CO_OD_LEN_2053_03 4u
-#define CO_OD_OFF_2053_04 763u
+#define CO_OD_OFF_2053_04 783u
 #define CO_OD_LEN_2053_04 4u
-#define CO_OD_OFF_2053_05 767u
+#define CO_OD_OFF_2053_05 787u
 #define CO_OD_LEN_2053_05 4u
-#define CO_OD_OFF_2054_00 771u
+#define CO_OD_OFF_2054_00 791u
 #define CO_OD_LEN_2054_00 1u
-#define CO_OD_OFF_2054_01 772u
+#define CO_OD_OFF_2054_01 792u
 #define CO_OD_LEN_2054_01 4u
-#define CO_OD_OFF_2054_02 776u
+#define CO_OD_OFF_2054_02 796u
 #define CO_OD_LEN_2054_02 4u
-#define CO_OD_OFF_2054_03 780u
+#define CO_OD_OFF_2054_03 800u
 #define CO_OD_LEN_2054_03 4u
-#define CO_OD_OFF_2054_04 784u
+#define CO_OD_OFF_2054_04 804u
 #define CO_OD_LEN_2054_04 4u
-#define CO_OD_OFF_2054_05 788u
+#define CO_OD_OFF_2054_05 808u
 #define CO_OD_LEN_2054_05 4u
-#define CO_OD_OFF_2054_06 792u
+#define CO_OD_OFF_2054_06 812u
 #define CO_OD_LEN_2054_06 4u
-#define CO_OD_OFF_2055_00 796u
+#define CO_OD_OFF_2055_00 816u
 #define CO_OD_LEN_2055_00 1u
-#define CO_OD_OFF_2055_01 797u
+#define CO_OD_OFF_2055_01 817u
 #define CO_OD_LEN_2055_01 4u
-#define CO_OD_OFF_2055_02 801u
+#define CO_OD_OFF_2055_02 821u
 #define CO_OD_LEN_2055_02 4u
-#define CO_OD_OFF_2055_03 805u
+#define CO_OD_OFF_2055_03 825u
 #define CO_OD_LEN_2055_03 4u
-#define CO_OD_OFF_2055_04 809u
+#define CO_OD_OFF_2055_04 829u
 #define CO_OD_LEN_2055_04 4u
-#define CO_OD_OFF_2055_05 813u
+#define CO_OD_OFF_2055_05 833u
 #define CO_OD_LEN_2055_05 4u
-#define CO_OD_OFF_2055_06 817u
+#define CO_OD_OFF_2055_06 837u
 #define CO_OD_LEN_2055_06 4u
-#define CO_OD_OFF_2055_07 821u
+#define CO_OD_OFF_2055_07 841u
 #define CO_OD_LEN_2055_07 4u
-#define CO_OD_OFF_2055_08 825u
+#define CO_OD_OFF_2055_08 845u
 #define CO_OD_LEN_2055_08 4u
-#define CO_OD_OFF_2056_00 829u
+#define CO_OD_OFF_2056_00 849u
 #define CO_OD_LEN_2056_00 1u
-#define CO_OD_OFF_2056_01 830u
+#define CO_OD_OFF_2056_01 850u
 #define CO_OD_LEN_2056_01 4u
-#define CO_OD_OFF_2056_02 834u
+#define CO_OD_OFF_2056_02 854u
 #define CO_OD_LEN_2056_02 4u
-#define CO_OD_OFF_2056_03 838u
+#define CO_OD_OFF_2056_03 858u
 #define CO_OD_LEN_2056_03 4u
-#define CO_OD_OFF_2056_04 842u
+#define CO_OD_OFF_2056_04 862u
 #define CO_OD_LEN_2056_04 4u
-#define CO_OD_OFF_2060_00 846u
+#define CO_OD_OFF_2060_00 866u
 #define CO_OD_LEN_2060_00 1u
-#define CO_OD_OFF_2060_01 847u
+#define CO_OD_OFF_2060_01 867u
 #define CO_OD_LEN_2060_01 2u
-#define CO_OD_OFF_2060_02 849u
+#define CO_OD_OFF_2060_02 869u
 #define CO_OD_LEN_2060_02 1u
-#define CO_OD_OFF_2060_03 850u
+#define CO_OD_OFF_2060_03 870u
 #define CO_OD_LEN_2060_03 1u
-#define CO_OD_OFF_2060_04 851u
+#define CO_OD_OFF_2060_04 871u
 #define CO_OD_LEN_2060_04 1u
-#define CO_OD_OFF_2060_05 852u
+#define CO_OD_OFF_2060_05 872u
 #define CO_OD_LEN_2060_05 1u
-#define CO_OD_OFF_2060_06 853u
+#define CO_OD_OFF_2060_06 873u
 #define CO_OD_LEN_2060_06 1u
-#define CO_OD_OFF_2060_07 854u
+#define CO_OD_OFF_2060_07 874u
 #define CO_OD_LEN_2060_07 1u
-#define CO_OD_OFF_2060_08 855u
+#define CO_OD_OFF_2060_08 875u
 #define CO_OD_LEN_2060_08 1u
-#define CO_OD_OFF_2060_09 856u
+#define CO_OD_OFF_2060_09 876u
 #define CO_OD_LEN_2060_09 1u
-#define CO_OD_OFF_2060_0A 857u
+#define CO_OD_OFF_2060_0A 877u
 #define CO_OD_LEN_2060_0A 1u
-#define CO_OD_OFF_2070_00 858u
+#define CO_OD_OFF_2070_00 878u
 #define CO_OD_LEN_2070_00 1u
-#define CO_OD_OFF_2070_01 859u
+#define CO_OD_OFF_2070_01 879u
 #define CO_OD_LEN_2070_01 1u
-#define CO_OD_OFF_2070_02 860u
+#define CO_OD_OFF_2070_02 880u
 #define CO_OD_LEN_2070_02 1u
-#define CO_OD_OFF_2070_03 861u
+#define CO_OD_OFF_2070_03 881u
 #define CO_OD_LEN_2070_03 1u
-#define CO_OD_OFF_2070_04 862u
+#define CO_OD_OFF_2070_04 882u
 #define CO_OD_LEN_2070_04 4u
-#define CO_OD_OFF_2070_05 866u
+#define CO_OD_OFF_2070_05 886u
 #define CO_OD_LEN_2070_05 1u
-#define CO_OD_OFF_2070_06 867u
+#define CO_OD_OFF_2070_06 887u
 #define CO_OD_LEN_2070_06 2u
-#define CO_OD_OFF_2070_07 869u
+#define CO_OD_OFF_2070_07 889u
 #define CO_OD_LEN_2070_07 1u
-#define CO_OD_OFF_2070_08 870u
+#define CO_OD_OFF_2070_08 890u
 #define CO_OD_LEN_2070_08 1u
-#define CO_OD_OFF_2070_09 871u
+#define CO_OD_OFF_2070_09 891u
 #define CO_OD_LEN_2070_09 1u
-#define CO_OD_OFF_2070_0A 872u
+#define CO_OD_OFF_2070_0A 892u
 #define CO_OD_LEN_2070_0A 1u
-#define CO_OD_OFF_2070_0B 873u
+#define CO_OD_OFF_2070_0B 893u
 #define CO_OD_LEN_2070_0B 1u
-#define CO_OD_OFF_2070_0C 874u
+#define CO_OD_OFF_2070_0C 894u
 #define CO_OD_LEN_2070_0C 1u
-#define CO_OD_OFF_2070_0D 875u
+#define CO_OD_OFF_2070_0D 895u
 #define CO_OD_LEN_2070_0D 1u
-#define CO_OD_OFF_2070_0E 876u
+#define CO_OD_OFF_2070_0E 896u
 #define CO_OD_LEN_2070_0E 1u
-#define CO_OD_OFF_2070_0F 877u
+#define CO_OD_OFF_2070_0F 897u
 #define CO_OD_LEN_2070_0F 1u
-#define CO_OD_OFF_2080_00 878u
+#define CO_OD_OFF_2080_00 898u
 #define CO_OD_LEN_2080_00 1u
-#define CO_OD_OFF_2080_01 879u
+#define CO_OD_OFF_2080_01 899u
 #define CO_OD_LEN_2080_01 4u
-#define CO_OD_OFF_2080_02 883u
+#define CO_OD_OFF_2080_02 903u
 #define CO_OD_LEN_2080_02 4u
-#define CO_OD_OFF_2080_03 887u
+#define CO_OD_OFF_2080_03 907u
 #define CO_OD_LEN_2080_03 4u
-#define CO_OD_OFF_2090_00 891u
+#define CO_OD_OFF_2090_00 911u
 #define CO_OD_LEN_2090_00 1u
-#define CO_OD_OFF_2090_01 892u
+#define CO_OD_OFF_2090_01 912u
 #define CO_OD_LEN_2090_01 1u
-#define CO_OD_OFF_2090_02 893u
+#define CO_OD_OFF_2090_02 913u
 #define CO_OD_LEN_2090_02 24u
-#define CO_OD_OFF_2090_03 918u
+#define CO_OD_OFF_2090_03 938u
 #define CO_OD_LEN_2090_03 4u
-#define CO_OD_OFF_2091_00 922u
+#define CO_OD_OFF_2091_00 942u
 #define CO_OD_LEN_2091_00 1u
-#define CO_OD_OFF_2091_01 923u
+#define CO_OD_OFF_2091_01 943u
 #define CO_OD_LEN_2091_01 1u
-#define CO_OD_OFF_2091_02 924u
+#define CO_OD_OFF_2091_02 944u
 #define CO_OD_LEN_2091_02 4u
-#define CO_OD_OFF_2091_03 928u
+#define CO_OD_OFF_2091_03 948u
 #define CO_OD_LEN_2091_03 4u
-#define CO_OD_OFF_2091_04 932u
+#define CO_OD_OFF_2091_04 952u
 #define CO_OD_LEN_2091_04 4u
-#define CO_OD_OFF_2091_05 936u
+#define CO_OD_OFF_2091_05 956u
 #define CO_OD_LEN_2091_05 4u
-#define CO_OD_OFF_2091_06 940u
+#define CO_OD_OFF_2091_06 960u
 #define CO_OD_LEN_2091_06 4u
-#define CO_OD_OFF_603F_00 944u
+#define CO_OD_OFF_603F_00 964u
 #define CO_OD_LEN_603F_00 2u
-#define CO_OD_OFF_6040_00 946u
+#define CO_OD_OFF_6040_00 966u
 #define CO_OD_LEN_6040_00 2u
-#define CO_OD_OFF_6041_00 948u
+#define CO_OD_OFF_6041_00 968u
 #define CO_OD_LEN_6041_00 2u
-#define CO_OD_OFF_605A_00 950u
+#define CO_OD_OFF_605A_00 970u
 #define CO_OD_LEN_605A_00 2u
-#define CO_OD_OFF_605E_00 952u
+#define CO_OD_OFF_605E_00 972u
 #define CO_OD_LEN_605E_00 2u
-#define CO_OD_OFF_6060_00 954u
+#define CO_OD_OFF_6060_00 974u
 #define CO_OD_LEN_6060_00 1u
-#define CO_OD_OFF_6061_00 955u
+#define CO_OD_OFF_6061_00 975u
 #define CO_OD_LEN_6061_00 1u
-#define CO_OD_OFF_6064_00 956u
+#define CO_OD_OFF_6064_00 976u
 #define CO_OD_LEN_6064_00 4u
-#define CO_OD_OFF_6065_00 960u
+#define CO_OD_OFF_6065_00 980u
 #define CO_OD_LEN_6065_00 4u
-#define CO_OD_OFF_6066_00 964u
+#define CO_OD_OFF_6066_00 984u
 #define CO_OD_LEN_6066_00 2u
-#define CO_OD_OFF_606C_00 966u
+#define CO_OD_OFF_606C_00 986u
 #define CO_OD_LEN_606C_00 4u
-#define CO_OD_OFF_6071_00 970u
+#define CO_OD_OFF_6071_00 990u
 #define CO_OD_LEN_6071_00 2u
-#define CO_OD_OFF_6077_00 972u
+#define CO_OD_OFF_6077_00 992u
 #define CO_OD_LEN_6077_00 2u
-#define CO_OD_OFF_607D_00 974u
+#define CO_OD_OFF_607D_00 994u
 #define CO_OD_LEN_607D_00 1u
-#define CO_OD_OFF_607D_01 975u
+#define CO_OD_OFF_607D_01 995u
 #define CO_OD_LEN_607D_01 4u
-#define CO_OD_OFF_607D_02 979u
+#define CO_OD_OFF_607D_02 999u
 #define CO_OD_LEN_607D_02 4u
-#define CO_OD_OFF_6080_00 983u
+#define CO_OD_OFF_6080_00 1003u
 #define CO_OD_LEN_6080_00 4u
-#define CO_OD_OFF_60FF_00 987u
+#define CO_OD_OFF_60FF_00 1007u
 #define CO_OD_LEN_60FF_00 4u
-#define CO_OD_OFF_6502_00 991u
+#define CO_OD_OFF_6502_00 1011u
 #define CO_OD_LEN_6502_00 4u
 
 /** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */
@@ -1047,6 +1062,11 @@
   X(2011_03) \
   X(2011_04) \
   X(2011_05) \
+  X(2011_06) \
+  X(2011_07) \
+  X(2011_08) \
+  X(2011_09) \
+  X(2011_0A) \
   X(2020_00) \
   X(2020_01) \
   X(2020_02) \
@@ -1203,7 +1223,7 @@
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 81u
+#define CO_OD_CFG_COUNT 86u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 

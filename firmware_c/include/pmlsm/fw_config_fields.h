@@ -9,7 +9,7 @@
  *   - machine (fw_cfg_machine_t, 9 fields): nominal machine parameters the controller uses (electrical and mechanical)
  *   - sensing (fw_cfg_sensing_t, 5 fields): sampling rate and ADC scaling (fw_step_adc)
  *   - loops (fw_cfg_loops_t, 10 fields): current and speed loops: limits, PI gains, bandwidths for the derived gains
- *   - estimator (fw_cfg_estimator_t, 22 fields): injection, HF extraction, PLL observer, start-up (align, polarity), back-EMF observer and handover
+ *   - estimator (fw_cfg_estimator_t, 27 fields): injection, HF extraction, PLL observer, start-up (align, polarity), back-EMF observer and handover
  *   - protection (fw_cfg_protection_t, 28 fields): trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h)
  *
  * Field names are unique across the parts: the object dictionary, the field
@@ -75,6 +75,11 @@ typedef struct {
   float pll_accel_per_A;      /**< torque feed-forward: el. rad/s^2 per A of i_q (p K_t / J or (pi/tau) K_F / m); 0 = paper's pure PI PLL. Default: the paper's motor, p x 1.5 p psi_f / J with J = 0.03 kg m^2 [rad/(s^2 A)] */
   float pll_bw_min;           /**< observer bandwidth scale when locked (0.1..1; 1 = fixed paper gains); rises to 1 with |filtered PLL error|. Default 0.5: the observer poles halved when locked, against noise */
   float pll_kd;               /**< disturbance (load/friction) integrator gain, 1/s^3; 0 = none. Stable for pll_kd < pll_kp * pll_ki. Default: poles at -28 +/- 50j and -30 rad/s with the paper's kp, ki [1/s^3] */
+  uint32_t obs_mode;          /**< fw_obs_mode_t: 0 fixed gains pll_kp, pll_ki, pll_kd (the paper's PLL; pll_accel_per_A = pll_kd = 0 for its pure PI loop), 1 bandwidth scheduled by pll_bw_min on |filtered PLL error|, 2 innovation-adaptive observer with a friction model (obs_bw_narrow .. obs_bw_wide; docs/method.md section 5) */
+  float obs_bw_narrow;        /**< obs_mode 2: observer poles (pll_kp, pll_ki, pll_kd) scaled by this in steady state, where the HF error's noise sets the bandwidth */
+  float obs_bw_wide;          /**< obs_mode 2: observer poles scaled by this while the innovation test fires (a load change the model does not know) */
+  float obs_detect_sigma;     /**< obs_mode 2: the innovation's short-window mean beyond this many of its own measured standard deviations widens the observer */
+  float obs_release_s;        /**< obs_mode 2: time constant of the return from the wide to the narrow bandwidth once the test is quiet [s] */
   float align_time_s;         /**< angle-mod-pi convergence time with injection only [s] */
   float pol_pulse_V;          /**< polarity pulse voltage on the estimated d axis [V] */
   uint32_t pol_pulse_samples; /**< samples per pulse half */
@@ -163,6 +168,11 @@ typedef struct {
   F32(estimator, pll_accel_per_A, "rad/(s^2 A)", 0.0f, 10000000.0f, 146.16f) \
   F32(estimator, pll_bw_min, "", 0.1f, 1.0f, 0.5f) \
   F32(estimator, pll_kd, "1/s^3", 0.0f, 1000000000.0f, 100000.0f) \
+  U32(estimator, obs_mode, "", 0.0f, 2.0f, 1u) \
+  F32(estimator, obs_bw_narrow, "", 0.05f, 1.0f, 0.15f) \
+  F32(estimator, obs_bw_wide, "", 1.0f, 4.0f, 2.0f) \
+  F32(estimator, obs_detect_sigma, "", 1.0f, 20.0f, 3.0f) \
+  F32(estimator, obs_release_s, "s", 0.001f, 10.0f, 0.1f) \
   F32(estimator, align_time_s, "s", 0.0f, 5.0f, 0.08f) \
   F32(estimator, pol_pulse_V, "V", 0.0f, 600.0f, 60.0f) \
   U32(estimator, pol_pulse_samples, "", 1.0f, 1000.0f, 12u) \
@@ -210,6 +220,6 @@ typedef struct {
   F32(protection, mon_bemf_min_V, "V", 0.0f, 1000000000.0f, 5.022228f)
 /* clang-format on */
 
-#define FW_CONFIG_FIELD_COUNT 74u
+#define FW_CONFIG_FIELD_COUNT 79u
 
 #endif /* PMLSM_FW_CONFIG_FIELDS_H */

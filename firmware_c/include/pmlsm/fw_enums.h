@@ -54,4 +54,11 @@ typedef enum {
   FW_REF_NOT_REFERENCED = 3 /**< the reference mark has not been passed since power-up */
 } fw_ref_status_t;
 
+/** Angle/speed observer gain law (fw_config obs_mode, 0x2011:6) */
+typedef enum {
+  FW_OBS_FIXED = 0, /**< fixed gains pll_kp, pll_ki, pll_kd: the paper's PLL */
+  FW_OBS_SCHEDULED = 1, /**< poles scaled by pll_bw_min..1 with |filtered PLL error| */
+  FW_OBS_ADAPTIVE = 2 /**< innovation-adaptive: obs_bw_narrow in steady state, obs_bw_wide in a transient, friction model */
+} fw_obs_mode_t;
+
 #endif /* PMLSM_FW_ENUMS_H */

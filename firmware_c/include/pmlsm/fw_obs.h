@@ -62,6 +62,22 @@ typedef struct {
   /** the last update's bandwidth scale: pll.kp and pll.ki (which nothing in the
    *  step reads: the PLL step is inline) follow with the position */
   float lam;
+  /* obs_mode 2 (FW_OBS_ADAPTIVE, docs/method.md section 5): constants ... */
+  uint32_t mode;          /**< fw_obs_mode_t */
+  float lam_n, lam_span;  /**< obs_bw_narrow and obs_bw_wide - obs_bw_narrow */
+  float det2;             /**< obs_detect_sigma^2 */
+  float inn_alpha;        /**< short-window mean of the innovation: coefficient */
+  float var_alpha;        /**< its variance (slow, clipped): coefficient */
+  float att_alpha;        /**< beta towards 1 (test fires) */
+  float rel_alpha;        /**< beta towards 0 (test quiet): dt / obs_release_s */
+  float fric_c;           /**< configured Coulomb friction as el. acceleration, rad/s^2 */
+  float fric_v;           /**< configured viscous friction / mass, 1/s */
+  float inv_w_fric;       /**< 1 / speed (el. rad/s) over which the Coulomb term changes sign */
+  /* ... and state */
+  float inn_m;            /**< short-window mean of the innovation (rad) */
+  float inn_var;          /**< measured variance of inn_m in steady state (rad^2) */
+  float beta;             /**< 0 narrow .. 1 wide */
+  uint8_t bemf_prev;      /**< the error source of the last sample (1: back-EMF) */
 } fw_obs_t;
 
 /** Inputs of one sample. */
@@ -73,6 +89,10 @@ typedef struct {
   uint8_t settled;        /**< 0: extraction still settling: extrapolate, do not correct */
   uint8_t running;        /**< 1: closed loop: mechanical extension on */
 } fw_obs_in_t;
+
+/** Prior of fw_obs_t.inn_var at a reset, rad^2: large, so that the test does not
+ *  fire before the variance is measured (it is learnt downwards in obs_var_s). */
+#define FW_OBS_INN_VAR0 (0.02f * 0.02f)
 
 /** Constants from the configuration (the state is left as it is). */
 void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s);
