@@ -1,6 +1,6 @@
 """``bench identify``: the drive measures the motor it is connected to.
 
-The procedure is :func:`sim_fallback._identify.run_identification` (one implementation;
+The procedure is :func:`identification.run_identification` (one implementation;
 docs/identify.md); here it runs on a drive over the wire, through :class:`WireProbe`:
 CiA 402 commands, configuration and the d-axis current reference (0x2080:1) over SDO,
 the measured inductances of each standstill start from 0x2080:2/3, and everything else
@@ -23,9 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from protocols.generated import od_names as od
-from protocols.generated.od_names import StartPhase
-from sim_fallback._identify import (
+from identification import (
     IDENT_RESTORED,
     PROBE_SIGNALS,
     START_WINDOWS,
@@ -33,8 +31,10 @@ from sim_fallback._identify import (
     Probe,
     ident_overrides,
     run_identification,
-    truth_of,
 )
+from protocols.generated import od_names as od
+from protocols.generated.od_names import StartPhase
+from sim_fallback import truth_of
 
 #: Telemetry signals the probe asks for (one frame per millisecond).
 TEL_SIGNALS = (*PROBE_SIGNALS, "fault_code", "start_phase")
@@ -64,7 +64,7 @@ class IdentifyError(RuntimeError):
 
 
 class WireProbe(Probe):
-    """:class:`sim_fallback._identify.Probe` over CANopen + the serial telemetry link.
+    """:class:`identification.Probe` over CANopen + the serial telemetry link.
 
     ``logger`` (a :class:`bench._logging.RunLogger`) receives the telemetry as
     ``tel.<signal>`` (the reader thread appends it); windows are cut on the drive's own

@@ -40,6 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench._scenario_metrics import window_metrics  # noqa: E402
+
 from sim_fallback import fw_config, load_motor, paper_scenario, run_scenario  # noqa: E402
 
 #: the issue's targets (upper bounds, judged on the median over seeds)

@@ -23,6 +23,7 @@ Metrics (one definition for the simulator, the bench and the reports):
 
 from ._emu_blob import EMU_BLOB_ADDR, emu_boot_blob, write_emu_boot_blob
 from ._firmware import ConfigError, Firmware, RefError, config_error
+from ._identify import SimProbe, identify, randomized_plant, seed_range, truth_of
 from ._lib import FwConfig, FwSnapshot, SimPlantParams, lib_path
 from ._motors import (
     MOTOR_DIR,
@@ -64,6 +65,7 @@ def __getattr__(name: str):
 
 __all__ = [
     "DriveBridge", "SimDrive", "SimLoad", "SimClock", "FwCanFrame", "FakeDrive402",
+    "SimProbe", "identify", "randomized_plant", "seed_range", "truth_of",
     "CHANNELS", "ConfigError", "EMU_BLOB_ADDR", "drive_params", "emu_boot_blob",
     "write_emu_boot_blob", "RefError", "config_error", "METRIC_DEFS", "METRIC_NAMES",
     "METRICS", "MOTOR_DIR", "PAPER_SCENARIO_ARGS", "PAPER_SCENARIOS",

@@ -1,7 +1,7 @@
 """The issue's accuracy target on motors the drive has never seen, configured from their
 own identification (docs/identify.md, last section).
 
-For each randomized motor (:func:`sim_fallback._identify.randomized_plant`): identify it
+For each randomized motor (:func:`sim_fallback.randomized_plant`): identify it
 in-process, configure the drive with what was identified (gains derived by the drive),
 run a speed step with a load step of 20 % of the rated thrust at 0.5 s, and print the
 position error from 0.15 s on (RMS / max, el. rad) against the target 0.02 / 0.08.
@@ -27,9 +27,13 @@ except ModuleNotFoundError:
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from protocols.units import force_constant_N_per_A  # noqa: E402
-from sim_fallback import run_scenario  # noqa: E402
+from sim_fallback import (  # noqa: E402
+    identify,
+    randomized_plant,
+    run_scenario,  # noqa: E402
+    seed_range,
+)
 from sim_fallback._faults import FAULT_NAMES  # noqa: E402
-from sim_fallback._identify import identify, randomized_plant, seed_range  # noqa: E402
 from sim_fallback._motors import fw_config, load_motor  # noqa: E402
 
 

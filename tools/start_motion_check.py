@@ -32,7 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sim_fallback._identify import randomized_plant, seed_range  # noqa: E402
+from sim_fallback import randomized_plant, seed_range  # noqa: E402
 from sim_fallback._motors import load_motor  # noqa: E402
 from sim_fallback._start_check import FRICTIONLESS, MOVING_AT_ENABLE, motion_check  # noqa: E402
 

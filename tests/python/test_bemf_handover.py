@@ -205,7 +205,7 @@ def test_load_step_through_the_handover_band_on_unseen_motors():
     values) every run tracks, within 0.02 rad RMS, max 0.054-0.074 rad (target 0.08). Before
     the handover went down on the measured back-EMF, 2 of 9 stopped on EST_BEMF_MISMATCH
     and the others reached 0.077-0.63 rad. The runs are chaotic: at most one over 0.08."""
-    from sim_fallback._identify import randomized_plant
+    from sim_fallback import randomized_plant
 
     mot = load_motor("iron_core_linear")
     maxima = []

@@ -14,7 +14,7 @@ import pytest
 from bench._identify import identify_drive
 from bench._session import connect
 from bench.cli import main
-from sim_fallback._identify import truth_of
+from sim_fallback import truth_of
 from sim_fallback._motors import load_motor, tomllib
 
 ELECTRICAL = ("R_ohm", "L_d_H", "L_q_H", "psi_f_Wb")   # issue target 3 %

@@ -1,11 +1,11 @@
-"""Motor identification by the drive (sim_fallback/_identify.py) against the simulated
+"""Motor identification by the drive (identification/, sim_fallback.SimProbe) against the simulated
 plant's truth, with 12-bit ADC noise: shipped motors and a randomized one."""
 
 import functools
 
 import pytest
 
-from sim_fallback._identify import identify, randomized_plant, truth_of
+from sim_fallback import identify, randomized_plant, truth_of
 from sim_fallback._motors import load_motor
 
 ELECTRICAL = ("R_ohm", "L_d_H", "L_q_H")

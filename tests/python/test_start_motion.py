@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim_fallback._identify import randomized_plant
+from sim_fallback import randomized_plant
 from sim_fallback._motors import load_motor
 from sim_fallback._start_check import FRICTIONLESS, MOVING_AT_ENABLE, motion_check
 
@@ -98,7 +98,8 @@ def test_alignment_saddle_is_left_by_turning_the_estimate():
     the check (the motor could not be identified); the drive now turns the estimate by
     the measured error, aligns and checks again (FW_SAL_RETRIES), and reaches closed
     loop on the right axis, later than a start off the saddle."""
-    from sim_fallback._identify import IDENT_FW, randomized_plant
+    from identification import IDENT_FW
+    from sim_fallback import randomized_plant
     from sim_fallback._motors import load_motor
     from sim_fallback._sim import SIM_REF_FORCE, Sim
     from sim_fallback.metrics import wrap_pi

@@ -1,0 +1,22 @@
+"""Motor identification by the drive: one procedure over a probe interface.
+
+:func:`run_identification` runs the procedure (docs/identify.md) on any :class:`Probe`:
+the simulated drive's (``sim_fallback.SimProbe``) or a rig's (the bench's CANopen and
+serial-telemetry probe, ``bench identify``). It reads only what a drive measures; the
+package imports neither the simulator nor the bench.
+"""
+
+from ._procedure import (
+    IDENT_FW,
+    IDENT_RESTORED,
+    IDENT_SPEED_BW,
+    PROBE_SIGNALS,
+    START_WINDOWS,
+    Identified,
+    Probe,
+    ident_overrides,
+    run_identification,
+)
+
+__all__ = ["IDENT_FW", "IDENT_RESTORED", "IDENT_SPEED_BW", "PROBE_SIGNALS", "START_WINDOWS",
+           "Identified", "Probe", "ident_overrides", "run_identification"]
