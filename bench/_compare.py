@@ -205,9 +205,9 @@ def compare(dir_a: str | Path, dir_b: str | Path, tolerances: list[str] | None =
 
 def _write_page(path: Path, a: dict[str, Any], b: dict[str, Any], rows: list[Row],
                 fa: list[int], fb: list[int], ok: bool, sig_a: Any, sig_b: Any) -> None:
-    from bench._report import _decimate, _plotly_page_parts
+    from bench._report import _decimate, plotly_page_parts
 
-    lib_head, lib_notice, lib_footer = _plotly_page_parts(
+    lib_head, lib_notice, lib_footer = plotly_page_parts(
         path, b["dir"].resolve().parent,
         fix=f"<code>bench compare {html.escape(str(a['dir']))} {html.escape(str(b['dir']))}"
             "</code> writes it again")

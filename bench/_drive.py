@@ -174,9 +174,9 @@ def param_table() -> dict[str, Param]:
     (``Injection.Amplitude``), the object name for variables
     (``Target velocity``) and the address (``0x2010:1``).
     """
-    from protocols import _od
+    from protocols import load_od
 
-    od = _od.load()
+    od = load_od()
     cfg = od.fw_config
     out: dict[str, Param] = {}
     for e in od.entries:

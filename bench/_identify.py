@@ -207,7 +207,7 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
     from bench._logging import RunLogger, run_dir_for
     from bench._session import TelemetryReader
     from protocols.serial_link import signal_names
-    from sim_fallback._motors import extractor_id
+    from sim_fallback import extractor_id
 
     if conn.serial is None:
         raise IdentifyError("identification needs the serial telemetry link (--serial PORT)")

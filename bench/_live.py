@@ -372,7 +372,7 @@ def rerun_exe() -> str:
     return exe_path
 
 
-def _wait_port(port: int, proc: Any, what: str, timeout_s: float = 10.0) -> None:
+def wait_port(port: int, proc: Any, what: str, timeout_s: float = 10.0) -> None:
     import socket
 
     deadline = time.monotonic() + timeout_s
@@ -431,8 +431,8 @@ def serve(grpc_port: int, web_port: int) -> str:
         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log_file)
     proc.log_file = log_file  # type: ignore[attr-defined]
     _servers[key] = proc
-    _wait_port(grpc_port, proc, "server")
-    _wait_port(web_port, proc, "server")
+    wait_port(grpc_port, proc, "server")
+    wait_port(web_port, proc, "server")
     return url
 
 
@@ -449,7 +449,7 @@ def spawn_viewer(grpc_port: int) -> str:
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                 stderr=log_file, start_new_session=True)
         proc.log_file = log_file  # type: ignore[attr-defined]
-        _wait_port(grpc_port, proc, "viewer", timeout_s=5.0)
+        wait_port(grpc_port, proc, "viewer", timeout_s=5.0)
         time.sleep(0.3)  # a viewer that cannot open its window exits right after listening
         if proc.poll() is not None:
             raise RerunStartError(f"rerun viewer exited ({proc.returncode}) right after "

@@ -512,9 +512,9 @@ def _signal_units() -> dict[str, str]:
     """Units of the drive's serial/trace signals (od.yaml ``signals:``)."""
     global _SIGNAL_UNITS
     if _SIGNAL_UNITS is None:
-        from protocols._od import load
+        from protocols import load_od
 
-        _SIGNAL_UNITS = {s["name"]: str(s.get("unit", "")) for s in load().signals}
+        _SIGNAL_UNITS = {s["name"]: str(s.get("unit", "")) for s in load_od().signals}
     return _SIGNAL_UNITS
 
 

@@ -203,7 +203,7 @@ def write_plotly_asset(runs_root: str | Path) -> Path:
     return out
 
 
-def _plotly_page_parts(page: Path, runs_root: Path | None = None,
+def plotly_page_parts(page: Path, runs_root: Path | None = None,
                        fix: str = "one file that works anywhere: <code>bench report "
                                   "--standalone RUN_DIR</code>") -> tuple[str, str, str]:
     """``(head, notice, footer)`` of a page at ``page`` that loads the runs folder's
@@ -777,7 +777,7 @@ def write_html(path: Path, result: RunResult, plots: list[tuple[str, str]],
     rotary-equivalent ones in r/min and N·m (:func:`bench._units.run_units`)."""
     ok = result.passed
     units = run_units(meta, units)
-    lib_head, lib_notice, lib_footer = _plotly_page_parts(Path(path))
+    lib_head, lib_notice, lib_footer = plotly_page_parts(Path(path))
 
     def unit(metric: str) -> str:
         return METRIC_DEFS[metric].unit if metric in METRIC_DEFS else ""
@@ -1026,7 +1026,7 @@ def write_index(runs_root: str | Path) -> Path:
                                                    "compare", "drive", "system")} for r in runs},
             "metrics": names, "units": {k: units.get(k, "") for k in names},
             "system": {k: metric_system(k) for k in names}}
-    lib_head, lib_notice, lib_footer = _plotly_page_parts(
+    lib_head, lib_notice, lib_footer = plotly_page_parts(
         root / "index.html", root, fix=f"<code>bench report index --runs "
                                        f"{html.escape(str(root))}</code> writes it again")
 

@@ -337,7 +337,11 @@ SequenceLoader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12,
                                      list("-+0123456789."))
 
 
-def _compose(text: str, file: str) -> tuple[Any, dict[tuple[Any, ...], tuple[int, int]]]:
+def compose_yaml(text: str, file: str) -> tuple[Any, dict[tuple[Any, ...], tuple[int, int]]]:
+    """``text`` (YAML, read with :class:`SequenceLoader`) as plain data, and the (line,
+    column) of every node by its path; raises :class:`SequenceError` for invalid YAML, an
+    empty file or a duplicate key, positioned in ``file``. Sequences and campaign files
+    are read with it."""
     try:
         loader = SequenceLoader(text)
         try:
@@ -427,9 +431,9 @@ def _message(err: jsonschema.ValidationError) -> str:
 def _signal_names() -> list[str]:
     """Telemetry/trace signal names from protocols/od.yaml ([] if unavailable)."""
     try:
-        from protocols import _od
+        from protocols import load_od
 
-        return [sig["name"] for sig in _od.load().signals]
+        return [sig["name"] for sig in load_od().signals]
     except Exception:  # noqa: BLE001 - validation then skips this check
         return []
 
@@ -1025,7 +1029,7 @@ def validate_sequence(text: str, file: str = "<string>",
         With every problem found, each naming the file, line and field as written
         (and the loop values of a repetition).
     """
-    doc, marks = _compose(text, file)
+    doc, marks = compose_yaml(text, file)
     if not isinstance(doc, dict):
         raise SequenceError([Issue(file, 1, 1, "", "top level must be a mapping")])
     loc = _Locator(file, marks)

@@ -396,7 +396,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "METRIC=0.002 (absolute, the metric's unit); repeatable")
     p.add_argument("--out", metavar="PAGE.html", help="where to write the comparison page")
 
-    from bench import _campaign
+    import simcampaign as _campaign
     _campaign.add_parser(sub)
     return ap
 
@@ -634,8 +634,7 @@ def _connect(args: argparse.Namespace, seq: Any = None) -> Any:
         if not args.sim or server is not None or emu is not None:
             raise UserError(f"--sim-plant {args.sim_plant}: only with --sim (the in-process "
                             "simulated drive)")
-        from sim_fallback import load_motor
-        from sim_fallback._motors import machine_params
+        from sim_fallback import load_motor, machine_params
 
         try:
             sim_plant = machine_params(load_motor(args.sim_plant))
@@ -1413,7 +1412,7 @@ def cmd_faults(args: argparse.Namespace) -> int:
 
 
 def _campaign_cmd(args: argparse.Namespace) -> int:
-    from bench._campaign import cmd
+    from simcampaign import cmd
 
     return cmd(args)
 

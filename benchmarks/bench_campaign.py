@@ -35,7 +35,7 @@ import yaml  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench._campaign import (  # noqa: E402
+from simcampaign import (  # noqa: E402
     parse_campaign,
     peak_rss_mb,
     run_campaign,

@@ -39,9 +39,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench._scenario_metrics import window_metrics  # noqa: E402
-
 from sim_fallback import fw_config, load_motor, paper_scenario, run_scenario  # noqa: E402
+from sim_fallback.metrics import window_metrics  # noqa: E402
 
 #: the issue's targets (upper bounds, judged on the median over seeds)
 PAPER_TARGETS = {"steady.pos_rms": 0.004, "steady.pos_max": 0.010, "steady.spd_max": 1.0,

@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import can  # noqa: E402
 import canopen  # noqa: E402
 
-from bench._logging import RunLogger  # noqa: E402
+from bench import RunLogger  # noqa: E402
 from protocols.generated import od_names as od  # noqa: E402
 
 
@@ -48,7 +48,7 @@ def _cpu() -> float:
 
 def run_sim(duration_s: float, out: Path) -> dict[str, float]:
     """Simulated drive at ~8 kframes/s, paced to the wall clock."""
-    from bench._session import PdoRecorder, TelemetryReader, open_sim
+    from bench import PdoRecorder, TelemetryReader, open_sim
 
     conn = open_sim(realtime=True, chunk_s=0.5e-3, record_decimation=24)
     try:

@@ -108,8 +108,7 @@ V0_MPS: dict[str, float] = {"iron_core_flying_start": 0.94}
 
 def make_trace(name: str, t_end: float, path: Path, seed: int = 3) -> np.ndarray:
     """Closed-loop run of a scenario; writes the PIL trace, returns the loop's duties."""
-    from sim_fallback import SIM_REF_LOAD, SIM_REF_SPEED, Sim
-    from sim_fallback._motors import load_motor
+    from sim_fallback import SIM_REF_LOAD, SIM_REF_SPEED, Sim, load_motor
 
     motor, speed, load, events = SCENARIOS[name]
     mot = load_motor(motor)

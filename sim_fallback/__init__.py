@@ -27,13 +27,18 @@ from ._identify import SimProbe, identify, randomized_plant, seed_range, truth_o
 from ._lib import FwConfig, FwSnapshot, SimPlantParams, lib_path
 from ._motors import (
     MOTOR_DIR,
+    PLANT_FIELD_SOURCES,
     Motor,
     MotorFileError,
+    extractor_id,
     firmware_check,
     firmware_field_ranges,
     fw_config,
     load_motor,
+    machine_params,
+    plant_field_range,
     plant_params,
+    plant_params_refused,
 )
 from ._sim import (
     CHANNELS,
@@ -42,6 +47,7 @@ from ._sim import (
     SIM_REF_FORCE,
     SIM_REF_LOAD,
     SIM_REF_SPEED,
+    X0_MAX_M,
     Result,
     Sim,
     drive_params,
@@ -66,6 +72,8 @@ def __getattr__(name: str):
 __all__ = [
     "DriveBridge", "SimDrive", "SimLoad", "SimClock", "FwCanFrame", "FakeDrive402",
     "SimProbe", "identify", "randomized_plant", "seed_range", "truth_of",
+    "PLANT_FIELD_SOURCES", "extractor_id", "machine_params", "plant_field_range",
+    "plant_params_refused", "X0_MAX_M",
     "CHANNELS", "ConfigError", "EMU_BLOB_ADDR", "drive_params", "emu_boot_blob",
     "write_emu_boot_blob", "RefError", "config_error", "METRIC_DEFS", "METRIC_NAMES",
     "METRICS", "MOTOR_DIR", "PAPER_SCENARIO_ARGS", "PAPER_SCENARIOS",

@@ -456,9 +456,9 @@ def definitions_markdown() -> str:
 #
 # Per-run analyses of a simulated paper scenario, beyond the headline metrics.
 #
-# A campaign (bench/_campaign.py) computes these in the worker, from the run's
+# A campaign (simcampaign/_campaign.py) computes these in the worker, from the run's
 # full-rate record, and keeps only the numbers (and, if asked, a decimated trace)
-# in its Parquet results; the paper reproduction (bench/_reproduction.py) renders
+# in its Parquet results; the paper reproduction (simcampaign/_reproduction.py) renders
 # its tables and figures from those results alone.
 #
 # Names, as a campaign lists them under ``metrics:``:

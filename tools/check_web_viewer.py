@@ -227,7 +227,7 @@ def serve_recording(duration_s: float, grpc_port: int, web_port: int, cwd: Path
 
     if str(ROOT) not in sys.path:
         sys.path.insert(0, str(ROOT))
-    from bench._live import _wait_port, rerun_exe, web_viewer_url
+    from bench import rerun_exe, wait_port, web_viewer_url
 
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get(
         "PYTHONPATH", "")}
@@ -248,8 +248,8 @@ def serve_recording(duration_s: float, grpc_port: int, web_port: int, cwd: Path
                              str(grpc_port), "--web-viewer-port", str(web_port), *argv[1:]],
                             cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, text=True)
-    _wait_port(grpc_port, proc, "server")
-    _wait_port(web_port, proc, "server")
+    wait_port(grpc_port, proc, "server")
+    wait_port(web_port, proc, "server")
     return proc, web_viewer_url(f"rerun+http://127.0.0.1:{grpc_port}/proxy", web_port), lines
 
 

@@ -28,13 +28,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from protocols.units import force_constant_N_per_A  # noqa: E402
 from sim_fallback import (  # noqa: E402
+    fw_config,
     identify,
+    load_motor,
     randomized_plant,
     run_scenario,  # noqa: E402
     seed_range,
 )
-from sim_fallback._faults import FAULT_NAMES  # noqa: E402
-from sim_fallback._motors import fw_config, load_motor  # noqa: E402
+from sim_fallback.faults import FAULT_NAMES  # noqa: E402
 
 
 def main() -> int:

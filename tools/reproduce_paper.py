@@ -9,9 +9,9 @@
 The simulations are the campaigns in campaigns/reproduction/ (the paper's three
 scenarios for the three extractors over 20 seeds, the sweeps, the sensing floor and
 the paper's own Table 1 machine; docs/campaigns.md, "The paper reproduction"), run
-by the campaign runner (bench/_campaign.py) into fresh Parquet results
+by the campaign runner (simcampaign/_campaign.py) into fresh Parquet results
 (runs/reproduction/<campaign>/). The report is rendered from those results only
-(bench/_reproduction.py):
+(simcampaign/_reproduction.py):
 
     <out>/reproduction.md     tables, the paper's claims beside ours with verdicts, discussion
     <out>/reproduction.json   every number of the tables, as data
@@ -42,17 +42,17 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from bench._campaign import (  # noqa: E402
+from simcampaign import (  # noqa: E402
     Axis,
     Campaign,
     CampaignError,
     judge,
     load_campaign,
     load_results,
+    render,  # noqa: E402
     replay_command,
     run_campaigns,
 )
-from bench._reproduction import render  # noqa: E402
 
 CAMPAIGN_DIR = REPO / "campaigns" / "reproduction"
 

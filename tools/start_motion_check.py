@@ -32,9 +32,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sim_fallback import randomized_plant, seed_range  # noqa: E402
-from sim_fallback._motors import load_motor  # noqa: E402
-from sim_fallback._start_check import FRICTIONLESS, MOVING_AT_ENABLE, motion_check  # noqa: E402
+from sim_fallback import load_motor, randomized_plant, seed_range  # noqa: E402
+from sim_fallback.start_check import FRICTIONLESS, MOVING_AT_ENABLE, motion_check  # noqa: E402
 
 
 def cases(motor_seeds: range) -> list[tuple[str, str, dict[str, Any] | None,

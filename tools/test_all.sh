@@ -16,7 +16,7 @@ cmake --build build/test
 ctest --test-dir build/test --output-on-failure
 
 echo "== lint (ruff) =="
-"$PY" -m ruff check bench sim_fallback protocols identification tests benchmarks tools examples
+"$PY" -m ruff check bench sim_fallback protocols identification simcampaign tests benchmarks tools examples
 
 echo "== Python tests (pytest) =="
 export PMLSM_BUILD_DIR="$PWD/build/test"

@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from sim_fallback import MOTOR_DIR, SIM_REF_LOAD, SIM_REF_SPEED, Sim, load_motor  # noqa: E402
-from sim_fallback._faults import CASES, record_case  # noqa: E402
+from sim_fallback.faults import CASES, record_case  # noqa: E402
 
 T_END = 0.4
 
@@ -48,7 +48,7 @@ def _closed_loop(motor: str, extractor: str, plant: dict[str, Any], seed: int,
 
 
 def _fault_case(case: Any, seed: int) -> dict[str, np.ndarray]:
-    """The matrix's run (sim_fallback._faults.record_case) recording every channel."""
+    """The matrix's run (sim_fallback.faults.record_case) recording every channel."""
     return record_case(case, seed)[0]
 
 

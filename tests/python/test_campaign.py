@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from bench._campaign import (
+from simcampaign._campaign import (
     CampaignError,
     judge,
     load_campaign,
@@ -126,7 +126,7 @@ def test_dask_local_cluster_matches_serial(tmp_path):
     pytest.importorskip("dask.distributed")
     from dask.distributed import Client
 
-    from bench._campaign import _shares_our_files, start_local_cluster
+    from simcampaign._campaign import _shares_our_files, start_local_cluster
     text = TINY.replace("seed: {values: [1, 2, 3]}", "seed: {values: [1, 2, 3]}\n"
                         "  plant.L_d0_H: {values: [0.012, 0.002]}\n"  # half the runs fail:
                         "  plant.dL_sat_H: {values: [0.003]}")  # dL_sat_H >= L_d0_H
@@ -201,7 +201,7 @@ def test_dask_campaign_resumes_after_interruption(tmp_path):
 def test_results_count_each_run_once_in_run_order(tmp_path):
     """A chunk run again (its worker died) writes its parts again: same names, and a
     run found in two parts still counts once; rows come back in run order."""
-    from bench._campaign import _write_part
+    from simcampaign._campaign import _write_part
     rows = [{"run": k, "error": None, "x": float(k)} for k in (5, 3, 4)]
     _write_part(tmp_path, rows)
     _write_part(tmp_path, rows)  # same first run: replaces the part
@@ -224,8 +224,8 @@ def test_campaign_runs_give_paper_scenario_numbers(scenario, extractor, seed, pl
                                                    valid):
     """The lean run a campaign makes (``metrics=``: only those metrics and the channels
     they need) gives bit for bit the full run's numbers."""
-    from bench._campaign import _motor_and_config
     from sim_fallback import METRIC_NAMES, paper_scenario
+    from simcampaign._campaign import _motor_and_config
     motor, _ = _motor_and_config("paper_salient", extractor)
     kw = {"t_end": 0.3, "record_decimation": 8, **kw}
     r = paper_scenario(scenario, extractor=extractor, motor=motor, seed=seed, plant=plant,
@@ -248,7 +248,7 @@ def test_campaign_runs_give_paper_scenario_numbers(scenario, extractor, seed, pl
 
 
 def test_tasks_cover_every_run_once_large_first():
-    from bench._campaign import _chunks
+    from simcampaign._campaign import _chunks
     todos = [[{"run": k} for k in range(1000)], [], [{"run": k} for k in range(37)]]
     for largest in (128, 1024):
         tasks = _chunks(todos, 2, largest)
@@ -270,7 +270,7 @@ def test_statistics_against_numpy():
 
 def test_report_shows_limits_worst_runs_and_comparison(tmp_path):
     pytest.importorskip("plotly")
-    from bench._campaign_report import write_report
+    from simcampaign._report import write_report
     c = _parse(TINY)
     run_campaign(c, tmp_path / "a", serial=True)
     c2 = _parse(TINY.replace("values: [1, 2, 3]", "values: [4, 5]"))
@@ -339,7 +339,7 @@ def test_extension_errors_name_file_line_field(base, axes, metrics, where):
 
 
 def test_set_expressions_evaluate_like_python():
-    from bench._campaign import eval_expr, parse_expr
+    from simcampaign._campaign import eval_expr, parse_expr
     plant = {"L_d0_H": 0.012, "R_ohm": 0.958}
     for x in (0.8, 0.9, 1.1, 1.2):  # bit for bit what a hand-written loop computes
         assert eval_expr("1100 * plant.L_d0_H * x", x, plant) == 1100.0 * 0.012 * x
@@ -416,7 +416,7 @@ metrics: [valid, steady.pos_rms, steady.ripple_d, t_est_back_s]
 def test_seeds_are_integers_as_the_runs_use_them(tmp_path) -> None:
     """A seed axis over a range gave 96707.0 / 9.671e+04 in the outputs; a run used
     int(seed): the run list now holds that integer."""
-    from bench._campaign import load_campaign
+    from simcampaign._campaign import load_campaign
 
     f = tmp_path / "c.yaml"
     f.write_text("name: s\nbase: {scenario: load_step, t_end: 0.3}\n"

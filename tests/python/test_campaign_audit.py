@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench._campaign import CampaignError, load_campaign
+from simcampaign._campaign import CampaignError, load_campaign
 
 METRICS = ("position_error_rms_rad", "position_error_max_rad")
 OK = """name: t
@@ -185,7 +185,7 @@ def test_a_run_that_kills_its_worker_is_recorded(tmp_path, local):
     import dask
     from distributed.diagnostics.plugin import WorkerPlugin
 
-    from bench._campaign import load_results, run_campaign, start_local_cluster
+    from simcampaign._campaign import load_results, run_campaign, start_local_cluster
 
     class CrashRun(WorkerPlugin):
         """Installed again on every restarted worker: run ``run`` kills its worker
@@ -199,7 +199,7 @@ def test_a_run_that_kills_its_worker_is_recorded(tmp_path, local):
         def setup(self, worker) -> None:
             import os
 
-            import bench._campaign as m
+            import simcampaign._campaign as m
             real, crash_at = m._simulate, self.run
 
             def simulate(base, params, metrics):
@@ -238,7 +238,7 @@ def test_results_of_another_campaign_are_not_mixed(tmp_path):
     """A changed file (same name) resumed into the old folder: its run k is not the old
     run k, yet the old runs were kept and only the 'missing' ones added (3 runs reported
     for a 2-run campaign). Now it is refused and the folder left as it was."""
-    from bench._campaign import ResultsError, load_results, run_campaign
+    from simcampaign._campaign import ResultsError, load_results, run_campaign
     a = _load(tmp_path, OK)
     run_campaign(a, tmp_path / "out", serial=True)
     before = load_results(tmp_path / "out" / "t")
@@ -264,7 +264,7 @@ def test_results_of_another_campaign_are_not_mixed(tmp_path):
 def test_a_damaged_part_is_moved_aside_and_its_runs_run_again(tmp_path):
     """A part damaged after it was written was deleted without a word on resume; now it
     is kept as part-*.parquet.corrupt, said, and the results equal a clean run's."""
-    from bench._campaign import ResultsError, load_results, run_campaign
+    from simcampaign._campaign import ResultsError, load_results, run_campaign
     c = _load(tmp_path, OK)
     run_campaign(c, tmp_path / "clean", serial=True)
     run_campaign(c, tmp_path / "out", serial=True, batch=2)
@@ -372,7 +372,7 @@ def test_a_silent_scheduler_address_is_given_a_short_timeout(tmp_path, monkeypat
     import dask.distributed
     from dask.utils import parse_timedelta
 
-    from bench._campaign import SchedulerError, run_campaign
+    from simcampaign._campaign import SchedulerError, run_campaign
     seen = {}
 
     class Client:
@@ -419,8 +419,8 @@ def test_report_highlights_failing_corners_with_replay_commands(tmp_path):
     pytest.importorskip("plotly")
     import re
 
-    from bench._campaign import load_results, run_campaign
-    from bench._campaign_report import write_report
+    from simcampaign._campaign import load_results, run_campaign
+    from simcampaign._report import write_report
     c = _load(tmp_path, CORNERS)
     run_campaign(c, tmp_path / "out", serial=True)
     res = load_results(tmp_path / "out" / "corners")
@@ -451,7 +451,7 @@ def test_replay_command_reproduces_the_recorded_run(tmp_path):
     import json
     import re
 
-    from bench._campaign import load_results, replay_command, run_campaign
+    from simcampaign._campaign import load_results, replay_command, run_campaign
     f = tmp_path / "c.yaml"
     f.write_text(CORNERS)
     c = load_campaign(f, METRICS)
@@ -474,7 +474,7 @@ def test_replay_command_works_from_another_directory(tmp_path, monkeypatch):
     import json
     import shlex
 
-    from bench._campaign import load_results, replay_command, run_campaign
+    from simcampaign._campaign import load_results, replay_command, run_campaign
     (tmp_path / "my dir").mkdir()
     (tmp_path / "elsewhere").mkdir()
     (tmp_path / "my dir" / "c.yaml").write_text(OK)
@@ -497,8 +497,8 @@ def test_reproduction_renderer_reads_results_as_campaigns_do(tmp_path, capsys):
     them through load_results (each run once, in run order) and exits 3 with one line."""
     import importlib.util
 
-    from bench._campaign import ResultsError, load_results, run_campaign
-    from bench._reproduction import read_results
+    from simcampaign._campaign import ResultsError, load_results, run_campaign
+    from simcampaign._reproduction import read_results
     c = _load(tmp_path, OK)
     run_campaign(c, tmp_path / "out", serial=True, batch=2)
     meta, rows = read_results(tmp_path / "out" / "t")
@@ -530,7 +530,7 @@ def test_one_process_writes_a_results_folder(tmp_path):
     """Two campaign processes on the same folder each deleted the other's temporary
     parts (a resume cleans up after a killed writer) and ran the same runs; now the
     second is refused while the first holds the folder's lock, which a kill releases."""
-    from bench._campaign import ResultsError, _locked, load_results, run_campaign
+    from simcampaign._campaign import ResultsError, _locked, load_results, run_campaign
     c = _load(tmp_path, OK)
     rdir = tmp_path / "out" / "t"
     rdir.mkdir(parents=True)
@@ -568,7 +568,7 @@ def test_kill_9_mid_campaign_then_resume_equals_an_uninterrupted_run(tmp_path):
 
     import pyarrow.parquet as pq
 
-    from bench._campaign import load_results, run_campaign
+    from simcampaign._campaign import load_results, run_campaign
     text = OK.replace("{method: grid}", "{method: random, n: 240, seed: 2}").replace(
         "{values: [1, 2, 3]}", "{range: [0, 100000]}").replace("t_end: 0.3", "t_end: 1.0")
     f = tmp_path / "c.yaml"
@@ -612,7 +612,7 @@ def test_sigterm_keeps_the_finished_runs(tmp_path):
     import subprocess
     import sys
 
-    from bench._campaign import load_results, run_campaign
+    from simcampaign._campaign import load_results, run_campaign
     text = OK.replace("{method: grid}", "{method: random, n: 200, seed: 2}").replace(
         "{values: [1, 2, 3]}", "{range: [0, 100000]}").replace("t_end: 0.3", "t_end: 1.0")
     f = tmp_path / "c.yaml"
@@ -647,7 +647,7 @@ def test_a_broken_motor_file_is_named_with_its_error(tmp_path, monkeypatch):
     """A motor file that exists but does not load was reported as 'need one of motor
     names (..., the same name, ...)', hiding the file's own error."""
     import sim_fallback._motors as motors
-    from bench import _campaign
+    from simcampaign import _campaign
     motor_dir = tmp_path / "motors"
     motor_dir.mkdir()
     for f in Path(motors.MOTOR_DIR).glob("*.toml"):
@@ -671,7 +671,7 @@ def test_workers_outside_what_the_machine_can_run_is_one_line(tmp_path):
     anything starts: one line naming the allowed range, exit 2, no results folder."""
     import os
 
-    from bench._campaign import WORKERS_PER_CORE
+    from simcampaign._campaign import WORKERS_PER_CORE
     f = tmp_path / "a.yaml"
     f.write_text(OK)
     top = WORKERS_PER_CORE * (os.cpu_count() or 1)

@@ -10,7 +10,7 @@ PWM off at once (hard faults) or within the braking bound.
 import numpy as np
 import pytest
 
-from sim_fallback._faults import BLIND_ERR_RAD, BLIND_TIME_S, CASES, FaultCase, judge, run_case
+from sim_fallback.faults import BLIND_ERR_RAD, BLIND_TIME_S, CASES, FaultCase, judge, run_case
 
 SEEDS = (0, 1)
 

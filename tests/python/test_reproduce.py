@@ -1,5 +1,5 @@
 """The paper reproduction: campaigns in campaigns/reproduction/, Parquet results, a
-renderer that reads only those (tools/reproduce_paper.py, bench/_reproduction.py).
+renderer that reads only those (tools/reproduce_paper.py, simcampaign/_reproduction.py).
 
 1. ``--quick`` into a tmp dir: every output exists; the numbers in reproduction.json are
    the Parquet results' own (no markdown is parsed back), and one of them is recomputed
@@ -186,7 +186,7 @@ def test_compare_can_fail() -> None:
 def test_a_failed_run_is_named_with_its_replay_command(rp: ModuleType, tmp_path: Path,
                                                        monkeypatch: pytest.MonkeyPatch) -> None:
     """A campaign with a run the simulator refuses: the summary line names the first
-    failed run's replay command (bench._campaign.replay_command: absolute path)."""
+    failed run's replay command (simcampaign._campaign.replay_command: absolute path)."""
     cfile = tmp_path / "tiny.yaml"
     cfile.write_text(
         "name: tiny\nbase: {scenario: load_step, t_end: 0.05}\nsampling: {method: grid}\n"

@@ -15,7 +15,7 @@ import pytest
 
 from sim_fallback import randomized_plant
 from sim_fallback._motors import load_motor
-from sim_fallback._start_check import FRICTIONLESS, MOVING_AT_ENABLE, motion_check
+from sim_fallback.start_check import FRICTIONLESS, MOVING_AT_ENABLE, motion_check
 
 TAU = load_motor("iron_core_linear").tau_m
 

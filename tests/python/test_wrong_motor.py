@@ -14,8 +14,8 @@ from bench._logging import read_signals
 from bench._session import connect
 from bench.cli import main
 from sim_fallback import randomized_plant, truth_of
-from sim_fallback._faults import BLIND_ERR_RAD, BLIND_TIME_S
 from sim_fallback._motors import load_motor, machine_params
+from sim_fallback.faults import BLIND_ERR_RAD, BLIND_TIME_S
 
 ROOT = Path(__file__).resolve().parents[2]
 

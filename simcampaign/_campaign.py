@@ -55,7 +55,7 @@ BASE_KEYS = ("scenario", "motor", "extractor", "t_end", "record_decimation", "ca
 #: ``base.motor`` and ``base.extractor`` when the file does not give them.
 BASE_MOTOR = "paper_salient"
 BASE_EXTRACTOR = "sogi_adaptive"
-#: Metrics of a fault_case run (sim_fallback._faults.run_case), beside the drive metrics.
+#: Metrics of a fault_case run (sim_fallback.faults.run_case), beside the drive metrics.
 FAULT_CASE_METRICS = ("blind_max_s", "rms_rad", "max_rad", "t_fault_s", "pwm_off_after_s",
                       "verdict_ok")
 METHODS = ("grid", "random", "lhs")
@@ -201,7 +201,7 @@ _FACTOR = re.compile(r"(?:x(?:\^(\d+))?|(plant\.[A-Za-z0-9_]+)|([-+]?(?:\d+\.?\d
 
 
 def _valid_extractor(v: Any) -> bool:
-    from bench._sequence import EXTRACTORS
+    from bench import EXTRACTORS
     return v in EXTRACTORS
 
 
@@ -232,7 +232,7 @@ def _motor_why(name: Any) -> str:
 
 def _choices(what: str) -> str:
     if what == "extractor":
-        from bench._sequence import EXTRACTORS
+        from bench import EXTRACTORS
         return ", ".join(EXTRACTORS)
     from sim_fallback import MOTOR_DIR
     return "motor names (" + ", ".join(sorted(f.stem for f in Path(MOTOR_DIR).glob("*.toml"))) \
@@ -267,7 +267,7 @@ def _value_error(t: str, kind: str, vals: list[float], motor: Any, extractor: An
     if t == "noise" and lo_hi[0] < 0:
         return f"{lo_hi[0]:g}: noise scales the sensor noise; allowed >= 0"
     if t == "x0_m":
-        from sim_fallback._sim import X0_MAX_M
+        from sim_fallback import X0_MAX_M
         if lo_hi[0] < -X0_MAX_M or lo_hi[1] > X0_MAX_M:
             return f"{_span(lo_hi)}; the simulator allows {_allowed('x0_m', motor)}"
         return None
@@ -305,11 +305,11 @@ def _span(xs: list[float]) -> str:
 def _allowed(t: str, motor: Any) -> str | None:
     """What the simulator allows for x0_m or plant.<field> ('[lo, hi] unit'), else None."""
     if t == "x0_m":
-        from sim_fallback._sim import X0_MAX_M
+        from sim_fallback import X0_MAX_M
         return f"initial positions [{-X0_MAX_M:g}, {X0_MAX_M:g}] m"
     if not t.startswith("plant.") or _motor_plant(motor) is None:
         return None
-    from sim_fallback._motors import plant_field_range
+    from sim_fallback import plant_field_range
     rng = plant_field_range(t[6:])
     return None if rng is None else f"[{rng[0]:g}, {rng[1]:g}]" + (
         f" {rng[2]}" if rng[2] else "")
@@ -321,7 +321,7 @@ def _plant_value_error(f: str, kind: str, vals: list[float], motor: Any) -> str 
     the motor-file field it comes from (sim_fallback plant_field_range, the one table
     load_motor checks files against), integers for integer fields, then each end with
     the motor's other parameters through the simulator's own sim_params_check."""
-    from sim_fallback._motors import (
+    from sim_fallback import (
         PLANT_FIELD_SOURCES,
         plant_field_range,
         plant_params,
@@ -552,16 +552,16 @@ def _check_base(base: dict[str, Any], bnode: yaml.Node | None, sc: str,
 
 def load_campaign(path: str | Path, metric_names: Iterable[str] | None = None) -> Campaign:
     """Read and validate a campaign file. Raises CampaignError naming file:line: field.
-    Read as sequence files are (bench._sequence: YAML errors and duplicate keys with
+    Read as sequence files are (bench.compose_yaml: YAML errors and duplicate keys with
     their line, no aliases, YAML 1.2 numbers such as 1e-3)."""
-    from bench._sequence import SequenceError, SequenceLoader, _compose
+    from bench import SequenceError, SequenceLoader, compose_yaml
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
         raise CampaignError(f"{p}: cannot read campaign file: {e}") from None
     try:
-        data, _ = _compose(text, str(p))
+        data, _ = compose_yaml(text, str(p))
         root = yaml.compose(text, Loader=SequenceLoader)
     except SequenceError as e:
         raise CampaignError("\n".join(str(i) for i in e.issues)) from None
@@ -673,7 +673,7 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
         err(bnode, "base.scenario", f"{sc!r} not one of {', '.join(SCENARIOS)}")
     case_names: list[str] = []
     if sc == "fault_case":
-        from sim_fallback._faults import CASES
+        from sim_fallback.faults import CASES
         names = case_names = [c.name for c in CASES]
         if "case" not in data.get("axes", {}) and base.get("case") not in names:
             err(bnode, "base.case", f"{base.get('case')!r} is not a fault case ({len(names)} "
@@ -948,7 +948,7 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
 
     seed = int(params.get("seed", 0))
     if base.get("scenario") == "fault_case":
-        from sim_fallback._faults import CASES, run_case
+        from sim_fallback.faults import CASES, run_case
         name = params.get("case", base.get("case"))
         case = next(c for c in CASES if c.name == name)
         r = run_case(case, seed)
@@ -1001,8 +1001,8 @@ def warm_worker(motors: tuple[str, ...] = (BASE_MOTOR,),
                 extractors: tuple[str, ...] = (BASE_EXTRACTOR,)) -> None:
     """A worker's one-time costs (imports, loading the simulator library, parsing the
     motor files), paid when the cluster starts rather than by its first runs."""
-    from sim_fallback import _lib
-    _lib.lib()
+    from sim_fallback import lib_path
+    lib_path()  # loads the simulator library
     warm_writer()  # a local cluster's workers write the Parquet parts
     for m in motors:
         for e in extractors:
@@ -1576,7 +1576,7 @@ def cmd(args: Any) -> int:
         print(json.dumps(shown, indent=1, allow_nan=False))
         if not args.full:
             return 0 if row["error"] is None else 1
-        from bench._replay import ReplayError, comparison, replay_full
+        from ._replay import ReplayError, comparison, replay_full
         try:
             rep = replay_full(c, runs[args.replay], args.runs)
         except ReplayError as e:
@@ -1653,7 +1653,7 @@ def cmd(args: Any) -> int:
     finally:
         signal.signal(signal.SIGTERM, old_term)
         bar.close()
-    from bench._campaign_report import write_report
+    from ._report import write_report
     try:
         res = load_results(rdir)
         report = write_report(c, rdir, other)

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from bench._campaign import Campaign, judge, load_results, replay_command, statistic
+from ._campaign import Campaign, judge, load_results, replay_command, statistic
 
 _STATS = ("mean", "p50", "p95", "p99", "max", "fail_fraction")
 
@@ -172,9 +172,9 @@ def render(c: Campaign, rdir: Path, other: Path | None = None, worst: int = 10) 
              ".fail{color:#b00;font-weight:bold}tr.beyond td{background:#fde2e2}"
              ".libnote{color:#555;font-size:12px;border-top:1px solid #ccc;margin-top:2em}"
              "</style>")
-    from bench._report import _plotly_page_parts
+    from bench import plotly_page_parts
 
-    head, notice, footer = _plotly_page_parts(
+    head, notice, footer = plotly_page_parts(
         Path(rdir) / "report.html", fix="copy it together with the plotly-*.min.js "
                                         "beside its campaign folder")
     return (f"<!doctype html><html><head><meta charset='utf-8'><title>campaign "

@@ -1,7 +1,7 @@
 """The paper reproduction (docs/reproduction.md), rendered from campaign results only.
 
 The simulations are campaigns (campaigns/reproduction/*.yaml, run by
-bench/_campaign.py); this module reads their Parquet results (pyarrow) and
+simcampaign/_campaign.py); this module reads their Parquet results (pyarrow) and
 writes ``reproduction.json`` (every number of the report, as data),
 ``reproduction.md`` (tables, the claim table, discussion) and ``figures/*.png``.
 Nothing is simulated here and no markdown is read back.
@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from bench._sequence import EXTRACTORS
+from bench import EXTRACTORS
 from sim_fallback.metrics import EST_BAND_RPM, POS_BAND_RAD, SPEED_BAND_RPM
 
 SCENARIOS = ("load_step", "speed_reversal", "startup")
@@ -126,7 +126,7 @@ class Reproduction:
 def read_results(rdir: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """A campaign's description (campaign.json) and its runs (Parquet), in run order,
     each with its parameters parsed (``p``)."""
-    from bench._campaign import ResultsError, load_results
+    from ._campaign import ResultsError, load_results
 
     try:
         meta = json.loads((rdir / "campaign.json").read_text(encoding="utf-8"))
@@ -608,7 +608,7 @@ def fig_table1(rows: list[dict[str, Any]], path: Path, dpi: int) -> bool:
 # ---- report ------------------------------------------------------------------------
 
 def _fault_name(code: int) -> str:
-    from sim_fallback._faults import FAULT_NAMES  # generated from protocols/od.yaml
+    from sim_fallback.faults import FAULT_NAMES  # generated from protocols/od.yaml
     return FAULT_NAMES.get(code, "")
 
 

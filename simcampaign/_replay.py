@@ -83,10 +83,10 @@ class Replay:
 
 def replay_full(c: Any, params: dict[str, Any], runs_root: str = "runs") -> Replay:
     """Run campaign ``c``'s run ``params`` as a bench run on the simulated drive."""
-    from bench._campaign import resolve_run
-    from bench._sequence import validate_sequence
-    from bench._session import open_sim, run_sequence
+    from bench import open_sim, run_sequence, validate_sequence
     from sim_fallback import PAPER_SCENARIO_ARGS
+
+    from ._campaign import resolve_run
 
     base = c.run_base()
     scenario = str(base.get("scenario", "load_step"))
