@@ -569,7 +569,7 @@ def gen_config_fields_header(od: ObjectDictionary) -> str:
              " * @file fw_config_fields.h",
              " * @brief fw_config_t, split into parts (one struct each, protocols/od.yaml",
              " *        fw_config_parts:), and every field: part, type, SI unit, inclusive",
-             " *        range and default (od.yaml fw_config:). Included by fw_ctrl.h.",
+             " *        range and default (od.yaml fw_config:). Included by fw_types.h.",
              " *",
              " * Parts, in struct order:",
              *[f" *   - {g} (fw_cfg_{g}_t, {sum(1 for _, v in items if v['group'] == g)} fields):"
