@@ -10,7 +10,8 @@
  *   obs     angle error, PLL, filtered speed (fw_obs_update_pll)
  *   foc     Park of the fundamental current (fw_foc_measure)
  *   bemf    back-EMF observer and handover (closed loop)
- *   start   polarity pulses / flying-start observation / saliency check;
+ *   start   polarity pulses and decision (fw_start_polarity) / flying-start
+ *           observation and catch (fw_start_fly_catch_begin) / saliency check;
  *           the phase transitions are this file's
  *   obs     HF-loss and PLL-error supervision (fw_obs_supervise)
  *   foc     speed PI (fw_foc_speed_update), current PIs (fw_foc_current_update)
@@ -23,8 +24,9 @@
  * because nothing before the duties needs it (supervise_deferred: the
  * observer's position, the adaptive SOGI gain back to inj (fw_inj_adapt), the
  * back-EMF angle error, the flying-start rotation and the rest of a catch), judges
- * a completed saliency check, and runs the integrity monitor (fw_mon_update) and
- * the protections (fw_protect_update) on the staged inputs; a hard fault there
+ * a completed saliency check (fw_start_saliency_done), and runs the integrity
+ * monitor (fw_mon_update) and the protections (fw_protect_step) on the staged
+ * inputs; a hard fault there
  * switches the duties just computed off before they take effect
  * (docs/firmware.md, "the two interrupts").
  */

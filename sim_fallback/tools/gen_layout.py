@@ -8,8 +8,9 @@ import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-HDRS = {"fw": (ROOT / "firmware_c/include/pmlsm/fw_ctrl.h").read_text()
-        + (ROOT / "firmware_c/include/pmlsm/fw_config_fields.h").read_text(),
+FW_INC = ROOT / "firmware_c/include/pmlsm"
+HDRS = {"fw": "".join((FW_INC / h).read_text()
+                      for h in ("fw_types.h", "fw_snapshot.h", "fw_config_fields.h")),
         "sim": (ROOT / "sim_fallback/include/pmlsm_sim.h").read_text()}
 TYPES = [("fw", "fw_config_t"), ("fw", "fw_inputs_t"), ("fw", "fw_adc_inputs_t"),
          ("fw", "fw_outputs_t"), ("fw", "fw_snapshot_t"), ("sim", "sim_plant_params_t"),

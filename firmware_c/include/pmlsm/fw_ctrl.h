@@ -208,7 +208,7 @@ void fw_step(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out);
  * reads next period (fw_bemf_prepare), the adaptive SOGI's gain, the flying-start
  * rotation; the standstill saliency check's judgement when the period completed
  * it; then the integrity monitor (fw_mon_update) and the linear-axis protections
- * (fw_protect_update) on what fw_step_into staged for them. Call it once after
+ * (fw_protect_step) on what fw_step_into staged for them. Call it once after
  * every fw_step_into, before the next one and before the duties take effect
  * (fw_app: the supervision interrupt, pended by the control interrupt and
  * tail-chained to it). A fault it finds latches in the same period as before the
