@@ -259,7 +259,7 @@ def gen_hooks_header(od: ObjectDictionary) -> str:
         "/** The hook of index:sub, NULL when it has none. */",
         "const fw_app_hook_t *fw_app_hook_find(uint16_t index, uint8_t sub);",
         "",
-        "/* The handlers (fw_app.c, fw_nvm.c, fw_trace.c), by object. */",
+        "/* The handlers (fw_app_od.c, fw_nvm.c, fw_trace.c), by object. */",
     ]
     for e in hooked:
         where = f"0x{e.index:04X}" + (f":{e.sub}" if e.kind != "var" else "")

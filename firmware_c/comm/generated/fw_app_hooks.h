@@ -33,7 +33,7 @@ extern const fw_app_hook_t fw_app_hooks[FW_APP_HOOK_COUNT];
 /** The hook of index:sub, NULL when it has none. */
 const fw_app_hook_t *fw_app_hook_find(uint16_t index, uint8_t sub);
 
-/* The handlers (fw_app.c, fw_nvm.c, fw_trace.c), by object. */
+/* The handlers (fw_app_od.c, fw_nvm.c, fw_trace.c), by object. */
 /** 0x1010:1 Save all parameters, outside the lock. */
 co_abort_t fw_app_hook_store(fw_app_t *app, uint32_t value);
 /** 0x1011:1 Restore all default parameters, outside the lock. */
