@@ -40,6 +40,7 @@ INT_RANGE = {
 }
 
 NODEID_RE = re.compile(r"^\$NODEID\+(0x[0-9A-Fa-f]+|\d+)$")
+C_IDENT_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 #: ``min:`` / ``max:`` of an entry that holds a signal id (telemetry, trace): the
 #: highest id of the ``signals:`` list, so the limit follows the list
@@ -106,6 +107,13 @@ class OdEntry:
         a capability or an identity the port or the build sets (od.yaml ``live:
         true``; every read-only PDO-mappable entry is live). Its default is only
         the value before the drive writes it.
+    hook : str | None
+        C handler the drive application calls when the entry is written
+        (od.yaml ``hook:``; the generated dispatch, fw_app_hooks.c).
+    hook_unlocked : bool
+        The handler runs outside the lock of the background's core changes
+        (od.yaml ``hook_unlocked: true``: a flash write must not hold the
+        control interrupt off).
     """
 
     index: int
@@ -127,6 +135,8 @@ class OdEntry:
     scale: float = 1.0
     doc: str = ""
     live: bool = False
+    hook: str | None = None
+    hook_unlocked: bool = False
 
     @property
     def type_code(self) -> int:
@@ -294,12 +304,21 @@ def _entry(obj: dict[str, Any], sub: dict[str, Any], kind: str,
     if live and fwc is not None:
         raise OdError(f"{where}: live and fw_config exclude each other (configuration is "
                       "not live)")
+    hook = sub.get("hook")
+    if hook is not None and (not isinstance(hook, str) or not C_IDENT_RE.fullmatch(hook)):
+        raise OdError(f"{where}: hook {hook!r} is not a C identifier")
+    if hook is not None and access not in ("rw", "wo"):
+        raise OdError(f"{where}: hook needs a writable entry, not access {access}")
+    hook_unlocked = bool(sub.get("hook_unlocked", False))
+    if hook_unlocked and hook is None:
+        raise OdError(f"{where}: hook_unlocked without a hook")
     return OdEntry(
         index=index, sub=sub_i, name=name, object_name=str(obj["name"]), kind=kind,
         type=typ, access=access, unit=str(sub.get("unit", "") or ""), min=mn, max=mx,
         default=default, nodeid_relative=rel, pdo=pdo,
         command=bool(sub.get("command", False)), size=size, fw_config=fwc, scale=scale,
         doc=str(sub.get("doc", "") or ""), live=live or (access == "ro" and pdo),
+        hook=hook, hook_unlocked=hook_unlocked,
     )
 
 

@@ -204,7 +204,7 @@ def gen_signals_source(od: ObjectDictionary) -> str:
         "#include <stddef.h>",
         "",
         '#include "fw_serial_signals.h"',
-        '#include "pmlsm/fw_ctrl.h"',
+        '#include "pmlsm/fw_snapshot.h"',
         "",
         "const fw_serial_signal_t fw_serial_signals[FW_SERIAL_SIGNAL_COUNT] = {",
     ]
@@ -214,6 +214,84 @@ def gen_signals_source(od: ObjectDictionary) -> str:
             f"{_field_offset(s['field'])}, {tmap[s.get('ctype', 'f32')]}}},"
         )
     lines += ["};", ""]
+    return "\n".join(lines)
+
+
+def _hooked(od: ObjectDictionary) -> list[OdEntry]:
+    return [e for e in od.entries if e.hook]
+
+
+def gen_hooks_header(od: ObjectDictionary) -> str:
+    hooked = _hooked(od)
+    lines = [
+        f"/* {HEADER} */",
+        "/**",
+        " * @file fw_app_hooks.h",
+        " * @brief The drive application's write hooks: the entries of od.yaml with",
+        " *        `hook:`, their handlers and the dispatch fw_app's SDO/RPDO write",
+        " *        callback calls (fw_app_hook_find). A hooked object is one od.yaml",
+        " *        line plus its handler.",
+        " */",
+        "#ifndef PMLSM_FW_APP_HOOKS_H",
+        "#define PMLSM_FW_APP_HOOKS_H",
+        "",
+        "#include <stdint.h>",
+        "",
+        '#include "pmlsm/fw_app.h"',
+        "",
+        "/** A handler: the written value (its first four bytes, little endian; a REAL32",
+        " *  as its bits) in; the SDO abort code out (CO_ABORT_NONE: accepted). */",
+        "typedef co_abort_t (*fw_app_hook_fn_t)(fw_app_t *app, uint32_t value);",
+        "",
+        "/** One hooked entry. */",
+        "typedef struct {",
+        "  uint16_t index;",
+        "  uint8_t sub;",
+        "  uint8_t locked; /**< 1: called inside the background's lock (fw_app_attach_lock) */",
+        "  fw_app_hook_fn_t fn;",
+        "} fw_app_hook_t;",
+        "",
+        f"#define FW_APP_HOOK_COUNT {len(hooked)}u",
+        "",
+        "/** The hooks, by (index, sub). */",
+        "extern const fw_app_hook_t fw_app_hooks[FW_APP_HOOK_COUNT];",
+        "",
+        "/** The hook of index:sub, NULL when it has none. */",
+        "const fw_app_hook_t *fw_app_hook_find(uint16_t index, uint8_t sub);",
+        "",
+        "/* The handlers (fw_app_od.c, fw_nvm.c, fw_trace.c), by object. */",
+    ]
+    for e in hooked:
+        where = f"0x{e.index:04X}" + (f":{e.sub}" if e.kind != "var" else "")
+        lock = ", outside the lock" if e.hook_unlocked else ""
+        lines.append(f"/** {where} {e.name}{lock}. */")
+        lines.append(f"co_abort_t {e.hook}(fw_app_t *app, uint32_t value);")
+    lines += ["", "#endif /* PMLSM_FW_APP_HOOKS_H */", ""]
+    return "\n".join(lines)
+
+
+def gen_hooks_source(od: ObjectDictionary) -> str:
+    hooked = _hooked(od)
+    lines = [
+        f"/* {HEADER} */",
+        '#include "fw_app_hooks.h"',
+        "",
+        "#include <stddef.h>",
+        "",
+        "const fw_app_hook_t fw_app_hooks[FW_APP_HOOK_COUNT] = {",
+    ]
+    for e in hooked:
+        locked = 0 if e.hook_unlocked else 1
+        lines.append(f"    {{0x{e.index:04X}u, {e.sub}u, {locked}u, {e.hook}}},")
+    lines += [
+        "};",
+        "",
+        "const fw_app_hook_t *fw_app_hook_find(uint16_t index, uint8_t sub) {",
+        "  switch (((uint32_t)index << 8) | sub) {",
+    ]
+    for k, e in enumerate(hooked):
+        lines += [f"  case 0x{e.index:04X}{e.sub:02X}u:", f"    return &fw_app_hooks[{k}];"]
+    lines += ["  default:", "    return NULL;", "  }", "}", ""]
     return "\n".join(lines)
 
 
@@ -597,7 +675,7 @@ def gen_config_fields_header(od: ObjectDictionary) -> str:
              " * @file fw_config_fields.h",
              " * @brief fw_config_t, split into parts (one struct each, protocols/od.yaml",
              " *        fw_config_parts:), and every field: part, type, SI unit, inclusive",
-             " *        range and default (od.yaml fw_config:). Included by fw_ctrl.h.",
+             " *        range and default (od.yaml fw_config:). Included by fw_types.h.",
              " *",
              " * Parts, in struct order:",
              *[f" *   - {g} (fw_cfg_{g}_t, {sum(1 for _, v in items if v['group'] == g)} fields):"
@@ -668,6 +746,8 @@ def outputs(od: ObjectDictionary | None = None) -> dict[Path, str]:
         gen / "fw_serial_signals.h": gen_signals_header(od),
         gen / "fw_serial_signals.c": gen_signals_source(od),
         gen / "co_aborts.h": gen_aborts_header(od),
+        gen / "fw_app_hooks.h": gen_hooks_header(od),
+        gen / "fw_app_hooks.c": gen_hooks_source(od),
         ROOT / "firmware_c" / "include" / "pmlsm" / "fw_faults.h": gen_fault_header(od),
         ROOT / "firmware_c" / "include" / "pmlsm" / "fw_enums.h": gen_enums_header(od),
         ROOT / "firmware_c" / "include" / "pmlsm" / "fw_version.h": gen_version_header(od),

@@ -1,6 +1,7 @@
 """ctypes binding of ``libpmlsm_sim`` (plant + batch loop + firmware core).
 
-The structures below mirror ``fw_ctrl.h`` and ``pmlsm_sim.h`` field by field;
+The structures below mirror the firmware's (``fw_types.h``, ``fw_snapshot.h``) and
+``pmlsm_sim.h`` field by field;
 ``tests/python/test_sim_layout.py`` proves every offset and size against the
 C compiler's answer (``sim_layout_offsetof`` / ``sim_layout_sizeof``).
 
@@ -25,7 +26,7 @@ _u8 = C.c_uint8
 _u16 = C.c_uint16
 _u32 = C.c_uint32
 
-# ---- firmware structures (fw_ctrl.h) -------------------------------------
+# ---- firmware structures (fw_types.h, fw_snapshot.h) ----------------------
 
 #: fw_config_t's parts in struct order and every field as (flat name, part, ctypes type)
 #: in the order of the firmware's field table (fw_config_field(i)); within a part this

@@ -6,7 +6,7 @@
 #include <stdbool.h>
 #include <string.h>
 
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_bemf.h"
 
 #define BEMF_TAU_S 0.001f      /* back-EMF low-pass (a DC signal in the estimated frame) */
 #define BEMF_HOLD_S 0.005f     /* the switching condition must hold this long */

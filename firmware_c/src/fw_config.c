@@ -7,8 +7,9 @@
 #include <stddef.h>
 #include <string.h>
 
-#include "pmlsm/fw_config_fields.h"
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_config.h"
+#include "pmlsm/fw_sogi.h"
+#include "pmlsm/fw_units.h"
 
 /* The table itself is generated from protocols/od.yaml (fw_config:), the one
  * source of the ranges (engineering limits for this drive class, not tuning

@@ -10,7 +10,8 @@
  *   obs     angle error, PLL, filtered speed (fw_obs_update_pll)
  *   foc     Park of the fundamental current (fw_foc_measure)
  *   bemf    back-EMF observer and handover (closed loop)
- *   start   polarity pulses / flying-start observation / saliency check;
+ *   start   polarity pulses and decision (fw_start_polarity) / flying-start
+ *           observation and catch (fw_start_fly_catch_begin) / saliency check;
  *           the phase transitions are this file's
  *   obs     HF-loss and PLL-error supervision (fw_obs_supervise)
  *   foc     speed PI (fw_foc_speed_update), current PIs (fw_foc_current_update)
@@ -23,8 +24,9 @@
  * because nothing before the duties needs it (supervise_deferred: the
  * observer's position, the adaptive SOGI gain back to inj (fw_inj_adapt), the
  * back-EMF angle error, the flying-start rotation and the rest of a catch), judges
- * a completed saliency check, and runs the integrity monitor (fw_mon_update) and
- * the protections (fw_protect_update) on the staged inputs; a hard fault there
+ * a completed saliency check (fw_start_saliency_done), and runs the integrity
+ * monitor (fw_mon_update) and the protections (fw_protect_step) on the staged
+ * inputs; a hard fault there
  * switches the duties just computed off before they take effect
  * (docs/firmware.md, "the two interrupts").
  */
@@ -72,19 +74,6 @@ static void latch_fault(fw_ctrl_t *c, fw_fault_t code) {
     fw_cia402_fault(&c->sm);
     brake_start(c, c->cfg.protection.fault_reaction_option); /* used if it brakes */
   }
-}
-
-/** Unwrapped estimated position, m: rad_e -> m is the factor tau / pi of the
- *  speed conversion rad_e/s -> m/s. */
-static float pos_m_of(const fw_config_t *cfg, float pos_e) {
-  return fw_units_radps_e_to_mps(cfg, pos_e);
-}
-
-/** The estimated position, m, in the supervision half (protect): fw_supervise has
- *  added the period's move (fw_obs_pos_flush), so the parts are read as they are
- *  (fw_obs_pos_e's pending case would put a call on that path). */
-static float pos_hat_m(const fw_ctrl_t *c) {
-  return pos_m_of(&c->cfg, fw_obs_pos_e_of(c->obs.pos_turns, c->obs.pos_unwrapped_e));
 }
 
 static void foc_param(const fw_config_t *cfg, float dt_s, fw_foc_param_t *p) {
@@ -240,10 +229,9 @@ const fw_config_t *fw_get_config(const fw_ctrl_t *ctrl) { return ctrl ? &ctrl->c
 
 fw_cia402_state_t fw_state(const fw_ctrl_t *ctrl) { return ctrl->sm.state; }
 
-/** The statusword from the signals it depends on (fw_statusword, fw_snapshot_complete). */
-static uint16_t statusword_of(const fw_config_t *cfg, fw_cia402_state_t state, float u_dc_V,
-                              fw_start_phase_t phase, fw_mode_t mode, float speed_ref,
-                              float omega_f, uint8_t ref_limited, float i_q_ref) {
+uint16_t fw_statusword_of(const fw_config_t *cfg, fw_cia402_state_t state, float u_dc_V,
+                          fw_start_phase_t phase, fw_mode_t mode, float speed_ref,
+                          float omega_f, uint8_t ref_limited, float i_q_ref) {
   bool warning = u_dc_V < cfg->protection.u_dc_min_V;
   bool reached = false;
   bool limit = false;
@@ -270,9 +258,9 @@ static uint16_t statusword_of(const fw_config_t *cfg, fw_cia402_state_t state, f
 uint16_t fw_statusword(const fw_ctrl_t *ctrl) {
   /* the core's own state, not the snapshot (write-only, and in fw_app a ring slot:
      ctrl->snap holds the last period only when the ring was full) */
-  return statusword_of(&ctrl->cfg, ctrl->sm.state, ctrl->u_dc_V, ctrl->phase, ctrl->mode,
-                       ctrl->speed_ref_radps_e, ctrl->obs.omega_f, ctrl->ref_limited,
-                       fw_foc_i_q_ref(&ctrl->foc));
+  return fw_statusword_of(&ctrl->cfg, ctrl->sm.state, ctrl->u_dc_V, ctrl->phase, ctrl->mode,
+                          ctrl->speed_ref_radps_e, ctrl->obs.omega_f, ctrl->ref_limited,
+                          fw_foc_i_q_ref(&ctrl->foc));
 }
 
 uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
@@ -381,25 +369,27 @@ size_t fw_ctrl_sizeof(void) { return sizeof(fw_ctrl_t); }
 
 /* ---- start-up transitions ----------------------------------------------- */
 
+/** Enter a start-up phase (or closed loop, FW_START_RUN): its time starts. */
+static void enter_phase(fw_ctrl_t *c, fw_start_phase_t phase) {
+  c->phase = phase;
+  c->phase_time_s = 0.0f;
+}
+
 /**
- * One polarity-test sample (fw_start_polarity_step); on the decision, pi is
- * added to the estimate if needed and the drive goes to closed loop with
- * clean filters. Returns the d^ voltage to apply.
+ * One polarity-test sample (fw_start_polarity: the test and its decision on the
+ * estimate); on the decision the drive goes to closed loop with clean filters.
+ * Returns the d^ voltage to apply.
  */
 static float polarity_step(fw_ctrl_t *c, float i_d) {
-  fw_pol_result_t res;
-  const float v = fw_start_polarity_step(&c->start, &c->cfg.estimator, i_d, &res);
+  float v;
+  const fw_pol_result_t res =
+      fw_start_polarity(&c->start, &c->cfg.estimator, &c->obs, i_d, &v, &c->polarity_flipped);
   c->snap.pol_dI_pos_A = c->start.pol_sum_pos;
   c->snap.pol_dI_neg_A = c->start.pol_sum_neg;
   if (res == FW_POL_BUSY) {
     return v;
   }
-  if (res == FW_POL_ALIGNED) {
-    c->polarity_flipped = 0u;
-  } else if (res == FW_POL_FLIPPED) {
-    c->polarity_flipped = 1u;
-    fw_obs_flip(&c->obs);
-  } else {
+  if (res == FW_POL_UNDETERMINED) {
     latch_fault(c, FW_FAULT_POLARITY_UNDETERMINED);
     return 0.0f;
   }
@@ -407,96 +397,52 @@ static float polarity_step(fw_ctrl_t *c, float i_d) {
   const float th = c->obs.pll.theta_rad;
   reset_dynamics(c);
   fw_obs_set(&c->obs, th, 0.0f);
-  c->phase = FW_START_RUN;
-  c->phase_time_s = 0.0f;
+  enter_phase(c, FW_START_RUN);
   return 0.0f;
 }
 
 /**
  * Motion at enable: catch the mover with the back-EMF observer when its
- * back-EMF is large enough to be tracked (flying start), else refuse.
+ * back-EMF is large enough to be tracked (flying start: fw_start_fly_catch_begin
+ * sets what this period's loops read), else refuse. The rest of the catch in
+ * the supervision half (supervise_deferred: fw_start_fly_catch_finish).
  * Returns FW_FAULT_NONE when caught.
  */
 static fw_fault_t fly_catch(fw_ctrl_t *c) {
-  float w0;
-  const fw_fault_t f = fw_start_fly_catch_speed(&c->start, &c->cfg, c->bemf.w_on, &w0);
+  const fw_fault_t f =
+      fw_start_fly_catch_begin(&c->start, &c->cfg, c->bemf.w_on, &c->obs, &c->foc);
   if (f != FW_FAULT_NONE) {
     return f; /* too slow for the back-EMF, too fast for injection */
   }
-  /* what this period's loops and modulation read: the speeds, closed loop (the
-   * injection's scale, which they read too, is the full one fw_bemf_catch's reset
-   * gives: only fw_bemf_schedule changes it, in closed loop, and an enable resets
-   * it); the rest (the angle, the back-EMF observer, the monitor's restart) only
-   * from the supervision on, which completes the catch (catch_rest) */
-  fw_obs_catch_speed(&c->obs, w0);
-  fw_foc_speed_clear(&c->foc);
-  c->phase = FW_START_RUN;
-  c->phase_time_s = 0.0f;
+  enter_phase(c, FW_START_RUN);
   c->sup.caught = 1u;
   return FW_FAULT_NONE;
 }
 
 /** The rest of a flying start (fly_catch), in the supervision half before its
- *  monitor update: the observer's angle (an atan2, fw_start_fly_catch_angle), the
- *  back-EMF observer started locked, the monitor's closed-loop restart (no standstill
- *  saliency check: the HF witness stays off). The same states as a catch done at
- *  once. */
+ *  monitor update (fw_start_fly_catch_finish). */
 static FW_NOINLINE void catch_rest(fw_ctrl_t *c) {
   c->sup.caught = 0u;
-  const float w0 = c->obs.omega_f; /* the catch's speed (fw_obs_catch_speed), as it left it */
-  fw_obs_catch_angle(&c->obs, fw_start_fly_catch_angle(&c->start, w0));
-  const float i0[2] = {0.0f, 0.0f};
-  fw_bemf_catch(&c->bemf, w0, i0);
-  fw_mon_run_start(&c->mon);
+  fw_start_fly_catch_finish(&c->start, &c->obs, &c->bemf, &c->mon);
 }
 
-/** End of the standstill saliency check: judge, then go on to the polarity test. */
+/** End of the standstill saliency check (fw_start_saliency_done: the judgement,
+ *  and an estimate turned for another try): align again, latch its fault, or go
+ *  on to the polarity test. */
 static FW_NOINLINE void saliency_done(fw_ctrl_t *c) {
-  float y[4];
-  fw_start_saliency_means(&c->start, c->inj.n_inj, y);
-  fw_fault_t f = fw_mon_saliency(&c->mon, &c->cfg, y[0], y[1], y[2], y[3],
-                                 c->dt_s * c->cfg.estimator.u_inj_V);
+  bool again;
+  const fw_fault_t f = fw_start_saliency_done(&c->start, &c->cfg, c->inj.n_inj, c->dt_s,
+                                              &c->mon, &c->obs, &again);
   c->snap.sal_meas = c->mon.sal_meas;
   c->snap.L_small_meas_H = c->mon.L_small_meas_H;
   c->snap.L_large_meas_H = c->mon.L_large_meas_H;
-  if (f == FW_FAULT_EST_HF_ANGLE && c->start.sal_retries < FW_SAL_RETRIES) {
-    /* The check measured the angle error (mod pi) from the full HF admittance:
-     * the alignment ended on or near its unstable equilibrium pi/2 from the
-     * axis, where the PLL's error signal vanishes too. Turn the estimate by the
-     * measured error, align and check again; a second miss is the fault. */
-    c->start.sal_retries++;
-    fw_obs_rotate(&c->obs, c->mon.sal_axis_rad);
-    c->phase = FW_START_ALIGN;
-    c->phase_time_s = 0.0f;
-    return;
-  }
-  if (f != FW_FAULT_NONE) {
+  if (again) {
+    enter_phase(c, FW_START_ALIGN);
+  } else if (f != FW_FAULT_NONE) {
     latch_fault(c, f);
-    return;
+  } else {
+    enter_phase(c, FW_START_POLARITY);
   }
-  c->phase = FW_START_POLARITY;
-  c->phase_time_s = 0.0f;
-  fw_start_polarity_begin(&c->start);
-}
-
-/** Linear-axis protections on the estimate (fw_protect_update). */
-static fw_fault_t protect(fw_ctrl_t *c, fw_vec2_f32_t i_dq, bool quick_stop) {
-  const fw_config_t *cfg = &c->cfg;
-  fw_protect_in_t pi;
-  pi.i_dq_A[0] = i_dq.x;
-  pi.i_dq_A[1] = i_dq.y;
-  pi.omega_hat_radps = c->obs.pll.w_i_radps;
-  pi.omega_f_radps = c->obs.omega_f;
-  /* the position (a division) only when the limits are on */
-  const bool pos_on = FW_UNLIKELY(c->prot.pos_on); /* off by default */
-  pi.pos_m = pos_on ? pos_hat_m(c) : 0.0f;
-  /* the command's sign matters only to the position limits (fw_protect_update
-   * reads it nowhere else): not selected per mode on the usual period */
-  pi.cmd = pos_on ? (c->mode == FW_MODE_SPEED ? c->speed_ref_radps_e : c->i_q_ref_force_A) : 0.0f;
-  pi.speed_ref_radps_e = c->speed_ref_radps_e;
-  pi.speed_mode = (uint8_t)(c->mode == FW_MODE_SPEED);
-  pi.quick_stop = (uint8_t)quick_stop;
-  return fw_protect_update(&c->prot, cfg, &pi);
 }
 
 /* ---- the step ----------------------------------------------------------- */
@@ -768,8 +714,7 @@ static void stage_startup(fw_ctrl_t *c, const fw_inj_meas_t *hf, fw_period_t *p)
   if (c->phase == FW_START_ALIGN &&
       fw_start_align_done(&cfg->estimator, c->phase_time_s, c->inj.inj_idx, n_inj) &&
       c->fault.code == FW_FAULT_NONE) {
-    c->phase = FW_START_SALIENCY; /* whole injection periods: ends on the same phase */
-    c->phase_time_s = 0.0f;
+    enter_phase(c, FW_START_SALIENCY); /* whole injection periods: ends on the same phase */
     fw_start_saliency_begin(&c->start);
   }
   if (c->phase == FW_START_SALIENCY) {
@@ -1040,7 +985,8 @@ bool fw_supervise(fw_ctrl_t *c, fw_outputs_t *out, fw_snapshot_t *snap) {
   fw_fault_t mf = fw_mon_update(&c->mon, mi);
   if (FW_LIKELY(mf == FW_FAULT_NONE && mi->running)) {
     const fw_vec2_f32_t i_dq = {mi->i_dq_A[0], mi->i_dq_A[1]};
-    mf = protect(c, i_dq, c->sup.quick_stop != 0u);
+    mf = fw_protect_step(&c->prot, &c->cfg, &c->obs, i_dq, c->mode, c->speed_ref_radps_e,
+                         c->i_q_ref_force_A, c->sup.quick_stop != 0u);
   }
   if (FW_LIKELY(mf == FW_FAULT_NONE && !judged)) {
     return false;
@@ -1084,173 +1030,3 @@ bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_input
   return m <= cfg->sensing.adc_max_count;
 }
 
-/** Copy one float as a 32-bit word: GCC (hard-float ARM) limits a float load
- *  or store, even one through core registers, to the FPU's +-1020-byte offset,
- *  so fields further into fw_ctrl_t cost an address computation each; a word
- *  has the +4095 of LDR/STR. The same bits either way. */
-static FW_ALWAYS_INLINE void copy_f32(float *dst, const float *src) {
-  uint32_t w;
-  memcpy(&w, src, sizeof w);
-  memcpy(dst, &w, sizeof w);
-}
-
-void fw_snapshot_carry(fw_snapshot_t *snap, const fw_snapshot_t *prev, unsigned written) {
-  if (!(written & FW_SNAP_W_COMMON)) {
-    snap->step_count = prev->step_count;
-    snap->theta_hat_rad = prev->theta_hat_rad;
-    snap->cia402_state = prev->cia402_state;
-    snap->start_phase = prev->start_phase;
-    snap->fault_code = prev->fault_code;
-    snap->i_ab_A[0] = prev->i_ab_A[0];
-    snap->i_ab_A[1] = prev->i_ab_A[1];
-    snap->u_dc_V = prev->u_dc_V;
-    snap->duty_abc[0] = prev->duty_abc[0];
-    snap->duty_abc[1] = prev->duty_abc[1];
-    snap->duty_abc[2] = prev->duty_abc[2];
-  }
-  if (!(written & FW_SNAP_W_EST)) {
-    snap->pll_err_rad = prev->pll_err_rad;
-    snap->hf_amp_A = prev->hf_amp_A;
-    snap->hf_q_A = prev->hf_q_A;
-    snap->i_h_ab_A[0] = prev->i_h_ab_A[0];
-    snap->i_h_ab_A[1] = prev->i_h_ab_A[1];
-  }
-  if (!(written & FW_SNAP_W_OUT)) {
-    snap->i_dq_A[0] = prev->i_dq_A[0];
-    snap->i_dq_A[1] = prev->i_dq_A[1];
-    snap->u_dq_V[0] = prev->u_dq_V[0];
-    snap->u_dq_V[1] = prev->u_dq_V[1];
-    snap->u_inj_V = prev->u_inj_V;
-  }
-  if (!(written & FW_SNAP_W_REF)) {
-    snap->i_dq_ref_A[0] = prev->i_dq_ref_A[0];
-    snap->i_dq_ref_A[1] = prev->i_dq_ref_A[1];
-  }
-}
-
-/** The position parts with a move fw_supervise has not yet added (a snapshot
- *  captured between the two halves). */
-static FW_NOINLINE void pos_pending(const fw_obs_t *o, fw_snapshot_raw_t *raw) {
-  fw_obs_pos_parts(o, &raw->pos_turns, &raw->pos_unwrapped_e);
-}
-
-void fw_snapshot_capture_state(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
-                               fw_snapshot_raw_t *raw) {
-  /* the blocks' present states */
-  snap->omega_hat_radps = ctrl->obs.pll.w_i_radps;
-  snap->omega_f_radps = ctrl->obs.omega_f;
-  snap->pll_err_f_rad = ctrl->obs.err_f;
-  snap->accel_dist_radps2 = ctrl->obs.accel_dist;
-  copy_f32(&snap->mon_angle_hf_rad, &ctrl->mon.angle_hf_rad); /* the monitor's outputs change */
-  copy_f32(&snap->mon_angle_bemf_rad, &ctrl->mon.angle_bemf_rad); /* once per block */
-  copy_f32(&snap->mon_e_bemf_V, &ctrl->mon.e_bemf_V);
-  copy_f32(&snap->mon_i_sum_A, &ctrl->mon.isum_f);
-  copy_f32(&snap->inj_scale, &ctrl->bemf.inj_scale);
-  snap->bemf_active = ctrl->bemf.active;
-  copy_f32(&snap->sogi_k_eff, &ctrl->inj.sogi_a.k); /* fw_inj_k */
-  /* two words: the sum is the background's (after fw_supervise, the usual
-   * caller's case, the estimate's last move is in them; else it is added as
-   * fw_obs_pos_flush will, out of line) */
-  if (FW_LIKELY(!ctrl->obs.pos_due)) {
-    raw->pos_turns = ctrl->obs.pos_turns;
-    raw->pos_unwrapped_e = ctrl->obs.pos_unwrapped_e;
-  } else {
-    pos_pending(&ctrl->obs, raw);
-  }
-  copy_f32(&raw->bemf_e_dq_V[0], &ctrl->bemf.e_d_f);
-  copy_f32(&raw->bemf_e_dq_V[1], &ctrl->bemf.e_q_f);
-  copy_f32(&raw->bemf_err_rad, &ctrl->bemf.err_rad);
-  raw->bemf_fresh = ctrl->bemf.err_fresh;
-  raw->bemf_w_neg = ctrl->bemf.w_neg;
-}
-
-void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
-  const fw_snapshot_t *s = &ctrl->snap;
-  snap->pol_dI_pos_A = s->pol_dI_pos_A;
-  snap->pol_dI_neg_A = s->pol_dI_neg_A;
-  snap->sal_meas = s->sal_meas;
-  snap->L_small_meas_H = s->L_small_meas_H;
-  snap->L_large_meas_H = s->L_large_meas_H;
-  snap->flying_start = ctrl->start.flying;
-  snap->extractor = (uint8_t)ctrl->cfg.estimator.extractor;
-  snap->mode = (uint8_t)ctrl->mode;
-  snap->polarity_flipped = ctrl->polarity_flipped;
-  snap->speed_ref_radps_e = ctrl->speed_ref_radps_e;
-  snap->ref_limited = ctrl->ref_limited;
-}
-
-/** The raw snapshot of the period whose step wrote `period`: what the step
- *  wrote (every field it writes; the start-up results are in the slow part),
- *  the blocks' present states, the slow part. */
-static void capture_of(const fw_ctrl_t *ctrl, const fw_snapshot_t *period, fw_snapshot_t *snap,
-                       fw_snapshot_raw_t *raw) {
-  fw_snapshot_carry(snap, period, 0u);
-  fw_snapshot_capture_state(ctrl, snap, raw);
-  fw_snapshot_capture_slow(ctrl, snap);
-}
-
-void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw) {
-  capture_of(ctrl, &ctrl->snap, snap, raw);
-}
-
-void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
-                          const fw_snapshot_raw_t *raw) {
-  const fw_config_t *cfg = &ctrl->cfg;
-  const float w = snap->omega_hat_radps;
-  const float pos_e_rad = fw_obs_pos_e_of(raw->pos_turns, raw->pos_unwrapped_e);
-  snap->pos_hat_m = pos_m_of(cfg, pos_e_rad);
-  snap->speed_hat_mps = fw_units_radps_e_to_mps(cfg, w);
-  snap->pos_hat_mech_rad = pos_e_rad / cfg->machine.pole_pairs;
-  snap->speed_hat_rpm = fw_units_radps_e_to_rpm(cfg, w);
-  snap->force_hat_N = fw_units_force_per_A(cfg) * snap->i_dq_A[1];
-  snap->torque_hat_Nm = 1.5f * cfg->machine.pole_pairs * cfg->machine.psi_f_Wb * snap->i_dq_A[1];
-  /* the observer's angle error as at the capture (an atan2 on demand, as fw_bemf_error) */
-  snap->bemf_err_rad = raw->bemf_fresh ? raw->bemf_err_rad
-                                       : fw_bemf_angle_of(&ctrl->bemf, raw->bemf_e_dq_V[0],
-                                                          raw->bemf_e_dq_V[1], raw->bemf_w_neg);
-  snap->statusword =
-      statusword_of(cfg, (fw_cia402_state_t)snap->cia402_state, snap->u_dc_V,
-                    (fw_start_phase_t)snap->start_phase, (fw_mode_t)snap->mode,
-                    snap->speed_ref_radps_e, snap->omega_f_radps, snap->ref_limited,
-                    snap->i_dq_ref_A[1]);
-}
-
-void fw_get_snapshot_of(const fw_ctrl_t *ctrl, const fw_snapshot_t *period,
-                        fw_snapshot_t *snap) {
-  if (ctrl == NULL || period == NULL || snap == NULL) {
-    return;
-  }
-  fw_snapshot_raw_t raw;
-  *snap = ctrl->snap; /* padding as before */
-  capture_of(ctrl, period, snap, &raw);
-  fw_snapshot_complete(ctrl, snap, &raw);
-  snap->statusword = fw_statusword(ctrl); /* the present state (a command may follow the step) */
-}
-
-void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap) {
-  if (ctrl == NULL) {
-    return;
-  }
-  fw_get_snapshot_of(ctrl, &ctrl->snap, snap);
-}
-
-/* ---- units ---------------------------------------------------------------- */
-
-float fw_units_mps_to_radps_e(const fw_config_t *cfg, float v) {
-  return FW_PI_F32 * v / cfg->machine.pole_pitch_m;
-}
-float fw_units_bemf_V(const fw_config_t *cfg, float v) {
-  return fw_units_mps_to_radps_e(cfg, v) * cfg->machine.psi_f_Wb;
-}
-float fw_units_radps_e_to_mps(const fw_config_t *cfg, float w) {
-  return w * cfg->machine.pole_pitch_m / FW_PI_F32;
-}
-float fw_units_rpm_to_radps_e(const fw_config_t *cfg, float n) {
-  return n * FW_TWO_PI_F32 * cfg->machine.pole_pairs / 60.0f;
-}
-float fw_units_radps_e_to_rpm(const fw_config_t *cfg, float w) {
-  return w * 60.0f / (FW_TWO_PI_F32 * cfg->machine.pole_pairs);
-}
-float fw_units_force_per_A(const fw_config_t *cfg) {
-  return 1.5f * (FW_PI_F32 / cfg->machine.pole_pitch_m) * cfg->machine.psi_f_Wb;
-}

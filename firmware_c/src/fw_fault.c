@@ -5,7 +5,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_fault.h"
 
 void fw_fault_latch_init(fw_fault_latch_t *f) { memset(f, 0, sizeof(*f)); }
 
@@ -131,4 +131,26 @@ fw_fault_t fw_protect_update(fw_protect_t *p, const fw_config_t *cfg, const fw_p
     return FW_FAULT_FOLLOWING_ERROR;
   }
   return FW_FAULT_NONE;
+}
+
+fw_fault_t fw_protect_step(fw_protect_t *p, const fw_config_t *cfg, const fw_obs_t *obs,
+                           fw_vec2_f32_t i_dq, fw_mode_t mode, float speed_ref_radps_e,
+                           float i_q_ref_force_A, bool quick_stop) {
+  fw_protect_in_t pi;
+  pi.i_dq_A[0] = i_dq.x;
+  pi.i_dq_A[1] = i_dq.y;
+  pi.omega_hat_radps = obs->pll.w_i_radps;
+  pi.omega_f_radps = obs->omega_f;
+  /* the position (a division) only when the limits are on */
+  const bool pos_on = FW_UNLIKELY(p->pos_on); /* off by default */
+  pi.pos_m = pos_on ? fw_units_rad_e_to_m(cfg, fw_obs_pos_e_of(obs->pos_turns,
+                                                               obs->pos_unwrapped_e))
+                    : 0.0f;
+  /* the command's sign matters only to the position limits (fw_protect_update
+   * reads it nowhere else): not selected per mode on the usual period */
+  pi.cmd = pos_on ? (mode == FW_MODE_SPEED ? speed_ref_radps_e : i_q_ref_force_A) : 0.0f;
+  pi.speed_ref_radps_e = speed_ref_radps_e;
+  pi.speed_mode = (uint8_t)(mode == FW_MODE_SPEED);
+  pi.quick_stop = (uint8_t)quick_stop;
+  return fw_protect_update(p, cfg, &pi);
 }

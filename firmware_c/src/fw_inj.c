@@ -5,7 +5,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_inj.h"
 
 /** The SOGI gain after a reset: the adaptive extractor starts at its largest. */
 static float reset_k(const fw_cfg_estimator_t *est) {

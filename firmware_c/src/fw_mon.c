@@ -23,7 +23,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_mon.h"
 
 #define MON_HF_TAU_S 0.002f   /* HF response low-pass */
 #define MON_SLOW_TAU_S 0.005f /* residual, current-sum, current-error low-pass */

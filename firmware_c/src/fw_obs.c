@@ -5,7 +5,7 @@
  */
 #include <math.h>
 
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_obs.h"
 
 /* Corner of the |PLL error| filter used for adaptation and supervision. */
 #define FW_ERR_FILTER_HZ 5.0f

@@ -1,12 +1,12 @@
 /**
  * @file fw_start.c
- * @brief Start-up: flying-start observation and catch, saliency check,
- *        polarity test (see fw_start.h).
+ * @brief Start-up: flying-start observation and catch, saliency check and its
+ *        judgement, polarity test and its decision (see fw_start.h).
  */
 #include <math.h>
 #include <string.h>
 
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_start.h"
 
 void fw_start_init(fw_start_t *s, float dt_s) {
   memset(s, 0, sizeof(*s));
@@ -67,6 +67,27 @@ float fw_start_fly_catch_angle(const fw_start_t *s, float w0) {
 }
 
 /* ---- SALIENCY ------------------------------------------------------------- */
+
+fw_fault_t fw_start_fly_catch_begin(fw_start_t *s, const fw_config_t *cfg, float bemf_w_on,
+                                    fw_obs_t *obs, fw_foc_t *foc) {
+  float w0;
+  const fw_fault_t f = fw_start_fly_catch_speed(s, cfg, bemf_w_on, &w0);
+  if (f != FW_FAULT_NONE) {
+    return f;
+  }
+  fw_obs_catch_speed(obs, w0);
+  fw_foc_speed_clear(foc);
+  return FW_FAULT_NONE;
+}
+
+void fw_start_fly_catch_finish(const fw_start_t *s, fw_obs_t *obs, fw_bemf_t *bemf,
+                               fw_mon_t *mon) {
+  const float w0 = obs->omega_f; /* the catch's speed (fw_obs_catch_speed), as it left it */
+  fw_obs_catch_angle(obs, fw_start_fly_catch_angle(s, w0));
+  const float i0[2] = {0.0f, 0.0f};
+  fw_bemf_catch(bemf, w0, i0);
+  fw_mon_run_start(mon);
+}
 
 void fw_start_saliency_begin(fw_start_t *s) {
   s->sal_k = 0u;
@@ -158,4 +179,39 @@ float fw_start_polarity_step(fw_start_t *s, const fw_cfg_estimator_t *est, float
   default:
     return 0.0f;
   }
+}
+
+fw_fault_t fw_start_saliency_done(fw_start_t *s, const fw_config_t *cfg, uint32_t n_inj,
+                                  float dt_s, fw_mon_t *mon, fw_obs_t *obs, bool *again) {
+  float y[4];
+  fw_start_saliency_means(s, n_inj, y);
+  const fw_fault_t f =
+      fw_mon_saliency(mon, cfg, y[0], y[1], y[2], y[3], dt_s * cfg->estimator.u_inj_V);
+  *again = false;
+  if (f == FW_FAULT_EST_HF_ANGLE && s->sal_retries < FW_SAL_RETRIES) {
+    /* The check measured the angle error (mod pi) from the full HF admittance:
+     * turn the estimate by it; the orchestrator aligns and checks again, and a
+     * second miss is the fault. */
+    s->sal_retries++;
+    fw_obs_rotate(obs, mon->sal_axis_rad);
+    *again = true;
+    return FW_FAULT_NONE;
+  }
+  if (f == FW_FAULT_NONE) {
+    fw_start_polarity_begin(s);
+  }
+  return f;
+}
+
+fw_pol_result_t fw_start_polarity(fw_start_t *s, const fw_cfg_estimator_t *est, fw_obs_t *obs,
+                                  float i_d_A, float *u_d_V, uint8_t *flipped) {
+  fw_pol_result_t res;
+  *u_d_V = fw_start_polarity_step(s, est, i_d_A, &res);
+  if (res == FW_POL_ALIGNED) {
+    *flipped = 0u;
+  } else if (res == FW_POL_FLIPPED) {
+    *flipped = 1u;
+    fw_obs_flip(obs);
+  }
+  return res;
 }

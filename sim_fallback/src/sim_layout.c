@@ -103,10 +103,6 @@ static const layout_row_t k_rows[] = {
     ROW(fw_adc_inputs_t, u_dc_counts),
     ROW(fw_outputs_t, duty_abc),
     ROW(fw_outputs_t, pwm_enable),
-    ROW(fw_can_frame_t, id),
-    ROW(fw_can_frame_t, dlc),
-    ROW(fw_can_frame_t, rtr),
-    ROW(fw_can_frame_t, data),
     ROW(fw_snapshot_t, step_count),
     ROW(fw_snapshot_t, statusword),
     ROW(fw_snapshot_t, cia402_state),
@@ -259,6 +255,10 @@ static const layout_row_t k_rows[] = {
     ROW(sim_magnetics_t, L_dq_H),
     ROW(sim_magnetics_t, e_dq_V_per_mps),
     ROW(sim_magnetics_t, force_N),
+    ROW(fw_can_frame_t, id),
+    ROW(fw_can_frame_t, dlc),
+    ROW(fw_can_frame_t, rtr),
+    ROW(fw_can_frame_t, data),
 };
 
 static const layout_size_t k_sizes[] = {
@@ -275,8 +275,8 @@ static const layout_size_t k_sizes[] = {
     SZ(sim_ctrl_const_t),
     SZ(sim_realism_t),
     SZ(sim_magnetics_t),
-    SZ(fw_ctrl_t),
     SZ(fw_can_frame_t),
+    SZ(fw_ctrl_t),
 };
 
 size_t sim_layout_sizeof(const char *type_name) {

@@ -8,14 +8,16 @@ import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-HDRS = {"fw": (ROOT / "firmware_c/include/pmlsm/fw_ctrl.h").read_text()
-        + (ROOT / "firmware_c/include/pmlsm/fw_config_fields.h").read_text(),
-        "sim": (ROOT / "sim_fallback/include/pmlsm_sim.h").read_text()}
+FW_INC = ROOT / "firmware_c/include/pmlsm"
+HDRS = {"fw": "".join((FW_INC / h).read_text()
+                      for h in ("fw_types.h", "fw_snapshot.h", "fw_config_fields.h")),
+        "sim": (ROOT / "sim_fallback/include/pmlsm_sim.h").read_text(),
+        "port": (FW_INC / "fw_port.h").read_text()}
 TYPES = [("fw", "fw_config_t"), ("fw", "fw_inputs_t"), ("fw", "fw_adc_inputs_t"),
          ("fw", "fw_outputs_t"), ("fw", "fw_snapshot_t"), ("sim", "sim_plant_params_t"),
          ("sim", "sim_plant_state_t"), ("sim", "sim_sched_t"), ("sim", "sim_controller_t"),
          ("sim", "sim_record_t"), ("sim", "sim_ctrl_const_t"),
-         ("sim", "sim_realism_t"), ("sim", "sim_magnetics_t")]
+         ("sim", "sim_realism_t"), ("sim", "sim_magnetics_t"), ("port", "fw_can_frame_t")]
 
 
 def _decls(src: str, name: str) -> list[str]:

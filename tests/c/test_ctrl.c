@@ -178,7 +178,7 @@ static void test_startup_polarity(void) {
     TT_CHECK(scale_bad == 0);
     TT_CHECK(c.phase == FW_START_RUN);
     TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
-    TT_CHECK_NEAR(wrap(c.pll.theta_rad - th), 0.0, 0.03);
+    TT_CHECK_NEAR(wrap(c.obs.pll.theta_rad - th), 0.0, 0.03);
     /* pulses were measured in the pre-decision frame: the larger response
      * (along the magnet) was on + unless the estimate had to be flipped */
     if (c.polarity_flipped) {
@@ -732,15 +732,15 @@ static void test_pos_unwrapped_precision(void) {
   fw_inputs_t in = {{0.0f, 0.0f, 0.0f}, 300.0f};
   fw_outputs_t out;
   fw_step(&c, &in, &out);
-  c.pll.w_i_radps = c.pll.w_hat_radps = 19999.0f;
+  c.obs.pll.w_i_radps = c.obs.pll.w_hat_radps = 19999.0f;
   double ref = 0.0;
-  float prev = c.pll.theta_rad;
+  float prev = c.obs.pll.theta_rad;
   fw_snapshot_t s0;
   fw_get_snapshot(&c, &s0);
   for (int k = 0; k < 110000; k++) {
     fw_step(&c, &in, &out);
-    ref += wrap((double)c.pll.theta_rad - (double)prev);
-    prev = c.pll.theta_rad;
+    ref += wrap((double)c.obs.pll.theta_rad - (double)prev);
+    prev = c.obs.pll.theta_rad;
   }
   TT_CHECK(fw_fault_code(&c) == FW_FAULT_NONE);
   fw_snapshot_t s;
@@ -794,8 +794,8 @@ static void test_zero_saliency_refused(void) {
   for (int k = 0; k < 480; k++) {
     loop_step(&c, &p, &out);
   }
-  TT_CHECK(fw_isfinite_f32(c.err_f) && fw_isfinite_f32(c.pll.theta_rad) &&
-           fw_isfinite_f32(c.pll.w_i_radps) && fw_isfinite_f32(c.pll.kp));
+  TT_CHECK(fw_isfinite_f32(c.obs.err_f) && fw_isfinite_f32(c.obs.pll.theta_rad) &&
+           fw_isfinite_f32(c.obs.pll.w_i_radps) && fw_isfinite_f32(c.obs.pll.kp));
 }
 
 /* Review: references set under the old limits must obey a new, smaller
@@ -900,12 +900,12 @@ static void test_extractor_switch_in_run(void) {
     loop_step(&c, &p, &out);
   }
   TT_CHECK(c.phase == FW_START_RUN);
-  TT_CHECK(fabs(wrap(c.pll.theta_rad - p.theta)) < 0.01);
+  TT_CHECK(fabs(wrap(c.obs.pll.theta_rad - p.theta)) < 0.01);
   TT_CHECK(fw_set_extractor(&c, FW_EXTRACTOR_SOGI_ADAPTIVE) == FW_OK);
   double emax = 0.0, eps_max = 0.0;
   for (int k = 0; k < (int)(0.1 * 24000); k++) {
     loop_step(&c, &p, &out);
-    double e = fabs(wrap(c.pll.theta_rad - p.theta));
+    double e = fabs(wrap(c.obs.pll.theta_rad - p.theta));
     emax = e > emax ? e : emax;
     double ae = fabs(c.snap.pll_err_rad);
     eps_max = ae > eps_max ? ae : eps_max;
@@ -1205,7 +1205,7 @@ static void test_supervision_deferred_work(void) {
   for (int k = 0; k < 200; k++) {
     fw_inputs_t in;
     plant_sample(&p, &in);
-    c.pll.w_i_radps += 0.5f; /* test set-up: keep the estimate and its error moving */
+    c.obs.pll.w_i_radps += 0.5f; /* test set-up: keep the estimate and its error moving */
     (void)fw_step_into(&c, &in, NULL, &out, &c.snap);
     bad += c.obs.pos_due != 1u || c.sup.adapt != 1u;
     t = c; /* a twin whose supervision is lost */

@@ -6,7 +6,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_config.h"
+#include "pmlsm/fw_fault.h"
 #include "tinytest.h"
 
 static void test_latch_first_cause_and_history(void) {

@@ -8,7 +8,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_config.h"
+#include "pmlsm/fw_inj.h"
 #include "tinytest.h"
 
 static void init(fw_inj_t *j, fw_config_t *cfg, fw_extractor_t ex) {

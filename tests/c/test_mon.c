@@ -7,7 +7,9 @@
 #include <math.h>
 #include <string.h>
 
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_config.h"
+#include "pmlsm/fw_mon.h"
+#include "pmlsm/fw_units.h"
 #include "tinytest.h"
 
 static const double Ts = 1.0 / 24000.0;

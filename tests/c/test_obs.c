@@ -7,7 +7,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_config.h"
+#include "pmlsm/fw_obs.h"
 #include "tinytest.h"
 
 static void setup(fw_obs_t *o, fw_config_t *cfg) {

@@ -7,7 +7,8 @@
 #include <stddef.h>
 #include <string.h>
 
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_config.h"
+#include "pmlsm/fw_start.h"
 #include "tinytest.h"
 
 static void test_align_done(void) {

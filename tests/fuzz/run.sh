@@ -29,7 +29,8 @@ rc=0
 for t in "${TARGETS[@]}"; do
   extra=()
   if [ "$t" = fuzz_app ]; then
-    extra=("$COMM/src/fw_app.c" "$ROOT"/firmware_c/src/*.c)
+    extra=("$COMM"/src/fw_app*.c "$COMM/src/fw_nvm.c" "$COMM/src/fw_trace.c"
+           "$COMM/generated/fw_app_hooks.c" "$ROOT"/firmware_c/src/*.c)
   elif [ "$t" = fuzz_slcan ]; then
     extra=(-I"$ROOT/firmware_c/boards/_common" "$ROOT/firmware_c/boards/_common/slcan.c")
   fi

@@ -323,10 +323,13 @@ def test_enums_are_one_list_for_c_and_python(od):
     assert od_names.StartPhase.RUN == 3 and od_names.StartPhase.ALIGN == 1
     assert [e.key for e in od_names.Extractor] == ["pseudo", "sogi", "sogi_adaptive"]
     assert od_names.Mode.FORCE == 1 and od_names.Reaction.QUICK_RAMP == 2
-    # the header is the one definition: fw_ctrl.h includes it and defines none of them
-    ctrl = Path(generate.ROOT, "firmware_c", "include", "pmlsm", "fw_ctrl.h").read_text()
-    assert '#include "fw_enums.h"' in ctrl
-    assert not any(f"}} {en.ctype};" in ctrl for en in od.enums)
+    # the header is the one definition: the bottom layer (fw_types.h) includes it, and
+    # neither it nor the core's header defines any of them
+    pmlsm = Path(generate.ROOT, "firmware_c", "include", "pmlsm")
+    assert '#include "fw_enums.h"' in (pmlsm / "fw_types.h").read_text()
+    for name in ("fw_types.h", "fw_ctrl.h"):
+        text = (pmlsm / name).read_text()
+        assert not any(f"}} {en.ctype};" in text for en in od.enums), name
 
 
 def _expect_od_error(tmp_path, old: str, new: str, match: str) -> None:
@@ -366,6 +369,36 @@ def test_bad_enum_is_reported_with_its_place(tmp_path, old, new, match):
      r"live needs access ro or rw, not const"),
 ])
 def test_bad_field_kind_limit_or_live_is_a_one_line_error(tmp_path, old, new, match):
+    _expect_od_error(tmp_path, old, new, match)
+
+
+def test_hooked_objects_are_od_yaml_keys(od):
+    """The objects the drive application acts on when written are od.yaml `hook:` keys:
+    the generated dispatch (fw_app_hooks.c) names each handler, and each handler is
+    defined in the application's sources; the storage commands run outside the lock."""
+    hooked = {(e.index, e.sub): (e.hook, e.hook_unlocked) for e in od.entries if e.hook}
+    assert set(hooked) == {(0x1010, 1), (0x1011, 1), (0x2000, 0), (0x2002, 0), (0x2070, 1),
+                           (0x2080, 1), (0x6040, 0)}
+    assert {k for k, (_, unlocked) in hooked.items() if unlocked} == {(0x1010, 1), (0x1011, 1)}
+    comm = Path(generate.ROOT, "firmware_c", "comm")
+    table = (comm / "generated" / "fw_app_hooks.c").read_text()
+    src = "".join(p.read_text() for p in (comm / "src").glob("*.c"))
+    for (index, sub), (name, unlocked) in hooked.items():
+        assert f"{{0x{index:04X}u, {sub}u, {0 if unlocked else 1}u, {name}}}" in table
+        assert re.search(rf"^co_abort_t {name}\(fw_app_t \*app, uint32_t \w+\) {{", src,
+                         re.M), name
+
+
+@pytest.mark.parametrize("old, new, match", [
+    ("    hook: fw_app_hook_controlword\n", "    hook: fw-app-hook\n",
+     r"0x6040:0: hook 'fw-app-hook' is not a C identifier"),
+    ("      - {sub: 2, name: State, type: UNSIGNED8, access: ro, default: 0, live: true,",
+     "      - {sub: 2, name: State, type: UNSIGNED8, access: ro, default: 0, live: true, hook: h,",
+     r"0x2070:2: hook needs a writable entry, not access ro"),
+    ("    hook: fw_app_hook_controlword\n", "    hook_unlocked: true\n",
+     r"0x6040:0: hook_unlocked without a hook"),
+])
+def test_bad_hook_is_a_one_line_error(tmp_path, old, new, match):
     _expect_od_error(tmp_path, old, new, match)
 
 

@@ -2,7 +2,7 @@
 #include <stddef.h>
 
 #include "fw_serial_signals.h"
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_snapshot.h"
 
 const fw_serial_signal_t fw_serial_signals[FW_SERIAL_SIGNAL_COUNT] = {
     {"theta_hat_rad", "rad", offsetof(fw_snapshot_t, theta_hat_rad), FW_SIG_F32},

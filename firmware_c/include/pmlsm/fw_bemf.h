@@ -18,16 +18,14 @@
  * to the HF error once the extraction has settled (2 ms). The PLL state is continuous
  * through both, so the estimate does not jump.
  *
- * Included by fw_ctrl.h (needs fw_config_t).
+ * Needs the bottom layer only (fw_types.h).
  */
 #ifndef PMLSM_FW_BEMF_H
 #define PMLSM_FW_BEMF_H
 
 #include <stdint.h>
 
-#ifndef PMLSM_FW_CTRL_H
-#error "include pmlsm/fw_ctrl.h"
-#endif
+#include "fw_types.h"
 
 #ifdef __cplusplus
 extern "C" {

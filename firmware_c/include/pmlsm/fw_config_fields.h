@@ -3,7 +3,7 @@
  * @file fw_config_fields.h
  * @brief fw_config_t, split into parts (one struct each, protocols/od.yaml
  *        fw_config_parts:), and every field: part, type, SI unit, inclusive
- *        range and default (od.yaml fw_config:). Included by fw_ctrl.h.
+ *        range and default (od.yaml fw_config:). Included by fw_types.h.
  *
  * Parts, in struct order:
  *   - machine (fw_cfg_machine_t, 9 fields): nominal machine parameters the controller uses (electrical and mechanical)

@@ -19,170 +19,36 @@
  * Units: SI; angles and speeds are *electrical* inside the core
  * (theta_e = pi x / tau = p theta_m). Conversions to m, m/s, rad, r/min are
  * in the snapshot and in fw_units_* helpers.
+ *
+ * Layers (docs/firmware.md): this header is the top of the core. Below it the
+ * blocks (fw_fault.h, fw_start.h, fw_inj.h, fw_obs.h, fw_foc.h, fw_mon.h,
+ * fw_bemf.h, fw_cia402.h), each a caller-owned struct; at the bottom the
+ * configuration, units and shared types (fw_types.h, fw_config.h, fw_units.h)
+ * that every block includes. The snapshot (fw_snapshot.h) reads the core.
  */
 #ifndef PMLSM_FW_CTRL_H
 #define PMLSM_FW_CTRL_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
+#include "fw_bemf.h"
 #include "fw_cia402.h"
-#include "fw_math.h"
-#include "fw_pll.h"
-#include "fw_sogi.h"
+#include "fw_config.h"
+#include "fw_fault.h"
+#include "fw_foc.h"
+#include "fw_inj.h"
+#include "fw_mon.h"
+#include "fw_obs.h"
+#include "fw_snapshot.h"
+#include "fw_start.h"
+#include "fw_types.h"
+#include "fw_units.h"
 
 #ifdef __cplusplus
 extern "C" {
 #endif
-
-/* FW_VERSION_MAJOR/MINOR/PATCH, FW_VERSION_U32: generated from protocols/od.yaml
- * (device.firmware_version). */
-#include "fw_version.h"
-
-/** Largest supported number of PWM periods per injection period. */
-#define FW_INJ_MAX_SAMPLES 64u
-/** Depth of the fault history. */
-#define FW_FAULT_HISTORY_LEN 8u
-
-/* Extractor, control mode, start-up phase and reaction option codes: generated
- * from protocols/od.yaml (enums:), the one list for the core and the bench. */
-#include "fw_enums.h"
-
-/** Injection periods per axis in the standstill saliency check (the first is
- *  not averaged: the axis change settles). */
-#define FW_SAL_PERIODS 4u
-/** Standstill saliency checks that may find d^ off the axis and turn the estimate
- *  by the measured angle before a miss is the EST_HF_ANGLE fault. */
-#define FW_SAL_RETRIES 1u
-
-/* Fault codes (fw_fault_t): generated from protocols/od.yaml (faults:), the one
- * list of codes, names and texts for the core, the CANopen slave, the bench and the
- * docs. */
-#include "fw_faults.h"
-
-/** Result of configuration checks and setters. */
-typedef enum {
-  FW_OK = 0,
-  FW_ERR_NULL = 1,         /**< NULL pointer */
-  FW_ERR_RANGE = 2,        /**< a field outside its documented range */
-  FW_ERR_NOT_FINITE = 3,   /**< a field is NaN or inf */
-  FW_ERR_SALIENCY = 4,     /**< saliency below saliency_min: injection refused */
-  FW_ERR_INCONSISTENT = 5, /**< fields valid alone but not together */
-  FW_ERR_STATE = 6         /**< not allowed in the current drive state */
-} fw_status_t;
-
-/* Configuration: fw_config_t and its parts (fw_cfg_machine_t, fw_cfg_sensing_t,
- * fw_cfg_loops_t, fw_cfg_estimator_t, fw_cfg_protection_t), generated from
- * protocols/od.yaml (fw_config_parts:, fw_config:) with each field's doc, unit and
- * range. */
-#include "fw_config_fields.h"
-
-#include "fw_mon.h"
-#include "fw_bemf.h"
-
-/** One configuration field, for validation messages, the OD and tools. */
-typedef struct {
-  const char *name; /**< field name as in fw_config_t */
-  const char *unit; /**< SI unit, "" for dimensionless */
-  size_t offset;    /**< offsetof(fw_config_t, part.name) */
-  uint8_t is_int;   /**< 1: a 32-bit integer field (uint32_t, int32_t when is_signed);
-                         0: float field */
-  uint8_t is_signed; /**< with is_int: int32_t (signed option codes) */
-  float min;        /**< inclusive */
-  float max;        /**< inclusive */
-} fw_config_field_t;
-
-/** Where a configuration check failed. */
-typedef struct {
-  fw_status_t status;
-  const char *field; /**< offending field (NULL if none) */
-  float value;       /**< its value */
-  float min, max;    /**< its allowed range */
-} fw_config_issue_t;
-
-/** Sampled inputs of one PWM period, physical units. */
-typedef struct {
-  float i_abc_A[3]; /**< phase currents */
-  float u_dc_V;     /**< DC-link voltage */
-} fw_inputs_t;
-
-/** Sampled inputs of one PWM period, raw ADC counts. */
-typedef struct {
-  uint16_t i_abc_counts[3];
-  uint16_t u_dc_counts;
-} fw_adc_inputs_t;
-
-/** Outputs of one step. */
-typedef struct {
-  float duty_abc[3];   /**< 0..1, to be latched at the next PWM period */
-  uint8_t pwm_enable;  /**< 0: all switches off */
-} fw_outputs_t;
-
-#include "fw_fault.h"
-#include "fw_foc.h"
-#include "fw_inj.h"
-#include "fw_obs.h"
-#include "fw_start.h"
-
-/** Read-only view of internal signals, for telemetry. */
-typedef struct {
-  uint32_t step_count;
-  uint16_t statusword;
-  uint8_t cia402_state;  /**< fw_cia402_state_t */
-  uint8_t start_phase;   /**< fw_start_phase_t */
-  uint8_t extractor;     /**< fw_extractor_t in use */
-  uint8_t mode;          /**< fw_mode_t */
-  uint8_t polarity_flipped; /**< 1 when start-up added pi to the estimate */
-  uint16_t fault_code;   /**< latched fw_fault_t, 0 if none */
-  /* estimator */
-  float theta_hat_rad;   /**< electrical angle estimate at the sampling instant of this step, [-pi, pi) */
-  float omega_hat_radps; /**< electrical speed estimate (PLL integrator) */
-  float omega_f_radps;   /**< filtered speed used by the speed loop */
-  float pos_hat_m;       /**< unwrapped linear position estimate */
-  float speed_hat_mps;
-  float pos_hat_mech_rad;  /**< unwrapped rotary-equivalent position */
-  float speed_hat_rpm;     /**< rotary-equivalent speed */
-  float pll_err_rad;       /**< normalised PLL error (approx theta - theta_hat) */
-  float pll_err_f_rad;     /**< low-passed signed PLL error; |.| drives adaptation, supervision */
-  float accel_dist_radps2; /**< observer's disturbance acceleration (load, friction) */
-  float hf_amp_A;          /**< demodulated HF amplitude on d-hat per sample */
-  float hf_q_A;            /**< demodulated HF q-hat component per sample */
-  float sogi_k_eff;        /**< SOGI gain in use */
-  float pol_dI_pos_A;      /**< polarity test: summed response to + pulses */
-  float pol_dI_neg_A;      /**< polarity test: summed response to - pulses */
-  /* current and voltage (estimated frame) */
-  float i_dq_A[2];       /**< fundamental current */
-  float i_dq_ref_A[2];
-  float u_dq_V[2];       /**< fundamental voltage command (without injection) */
-  float u_inj_V;         /**< signed injection voltage commanded this step */
-  float i_ab_A[2];       /**< measured alpha/beta current */
-  float i_h_ab_A[2];     /**< extracted HF current */
-  float speed_ref_radps_e;
-  float force_hat_N;     /**< thrust from i_q estimate, 1.5 (pi/tau) psi_f i_q */
-  float torque_hat_Nm;   /**< rotary equivalent, 1.5 p psi_f i_q */
-  float u_dc_V;
-  float duty_abc[3];
-  /* integrity monitor (fw_mon.h) */
-  float mon_angle_hf_rad;   /**< |angle error| solved from the raw HF response */
-  float mon_angle_bemf_rad; /**< angle of the voltage residual against the estimate */
-  float mon_e_bemf_V;       /**< |voltage residual| (back-EMF magnitude); in start-up the
-                             *   motion check's statistic (MOVING_AT_ENABLE) */
-  float mon_i_sum_A;        /**< low-passed |i_a + i_b + i_c| */
-  float sal_meas;           /**< saliency measured at start-up (L_large / L_small - 1) */
-  float L_small_meas_H;     /**< smaller inductance measured at start-up */
-  float L_large_meas_H;     /**< larger inductance measured at start-up */
-  /* back-EMF observer (fw_bemf.h) */
-  float bemf_err_rad;       /**< angle error seen by the back-EMF (its observer's present
-                             *   value, computed by fw_get_snapshot) */
-  float inj_scale;          /**< injection amplitude in use, share of u_inj_V */
-  uint8_t bemf_active;      /**< 1: the PLL tracks the back-EMF, 0: the HF response */
-  uint8_t flying_start;     /**< 1: closed loop was entered on a moving mover */
-  uint8_t ref_limited;      /**< FW_REF_LIMITED_* of the references in use */
-  /* the board's reference position sensor (fw_port_ref_read), for the bench's
-   * judgement only: written by the drive application (fw_app) into the periods
-   * it publishes, never by the core, which never reads it */
-  float ref_pos_m; /**< reference sensor position (electrical zero at 0), NaN: none */
-} fw_snapshot_t;
 
 /**
  * Drive core state. Allocate it yourself (static or on a stack); treat the
@@ -200,7 +66,7 @@ typedef struct {
  * The core itself keeps only the drive state machine (start-up phase and its
  * time, quick stop), the references and the configuration.
  */
-typedef struct {
+struct fw_ctrl {
   fw_config_t cfg;
   uint8_t cfg_ok;        /**< cfg passed fw_config_check (saliency aside) */
   uint8_t saliency_ok;
@@ -231,16 +97,7 @@ typedef struct {
   fw_fault_latch_t fault;
   fw_protect_t prot;
   fw_start_t start;
-  union {
-    fw_obs_t obs;
-    /* The observer's PLL and error filter under their former names, for tests
-     * and tools that read them (tests/c/test_ctrl.c, benchmarks/): the same
-     * storage as obs.pll and obs.err_f (common initial sequence). */
-    struct {
-      fw_pll_f32_t pll;
-      float err_f;
-    };
-  };
+  fw_obs_t obs;
   fw_foc_t foc;
   fw_mon_t mon;
   /** The period's supervision (fw_supervise), staged by fw_step_into: the
@@ -265,44 +122,7 @@ typedef struct {
    *  smaller (set with the configuration; the background sets the target every
    *  pass) */
   float speed_ref_max_radps_e;
-} fw_ctrl_t;
-
-/* ---- configuration ---------------------------------------------------- */
-
-/**
- * Defaults: the paper's Table 1 machine and gains, with the salient variant
- * L_q = 1.5 L_d (Table 1 itself has L_q = L_d, which cannot be tracked by
- * injection; see docs/method-notes). 24 kHz PWM, 3 kHz injection.
- */
-void fw_config_default(fw_config_t *cfg);
-
-/**
- * Derive the back-EMF levels of the configured speeds (always):
- *   bemf_e_on_V = psi_f (pi/tau) bemf_v_on_mps, bemf_e_off_V likewise from bemf_v_off_mps,
- *   mon_bemf_min_V from mon_bemf_min_mps (the back-EMF w psi_f at that speed),
- * and the gains from the physical description when gains_auto is set:
- *   K_F = 1.5 (pi/tau) psi_f (N/A),
- *   cur_kp = L_d w_c, cur_ki = R w_c (w_c = cur_bw_radps),
- *   spd_kp = m w_s / K_F * tau / pi (A per el. rad/s), spd_ki = spd_kp w_s / 6,
- *   pll_accel_per_A = (pi/tau) K_F / m (el. rad/s^2 per A),
- *   observer poles at -w: pll_kp = 3 w, pll_ki = 3 w^2, pll_kd = w^3 with
- *   w = sqrt(a_d / (3 * 0.05 rad)), a_d = (pi/tau) 0.2 K_F i_max / m (a load step of
- *   20 % of the peak thrust leaves about 0.05 rad), w within [30, 2 pi f_inj / 40].
- * fw_init and fw_set_config apply it, so the stored configuration (and the
- * object dictionary) shows the levels and gains in use; fw_config_default applies it
- * too. The gains are left as they are when gains_auto is 0.
- */
-void fw_config_derive(fw_config_t *cfg);
-
-/** Range and consistency check. Saliency below saliency_min -> FW_ERR_SALIENCY. */
-fw_status_t fw_config_check(const fw_config_t *cfg, fw_config_issue_t *issue);
-
-/** Number of entries in the configuration field table. */
-size_t fw_config_field_count(void);
-/** Field i of the table (NULL when out of range). */
-const fw_config_field_t *fw_config_field(size_t i);
-/** Look a field up by name (NULL when unknown). */
-const fw_config_field_t *fw_config_field_find(const char *name);
+}; /* fw_ctrl_t: typedef in fw_snapshot.h */
 
 /* ---- life cycle ------------------------------------------------------- */
 
@@ -331,6 +151,12 @@ uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw);
 /** Current statusword. */
 uint16_t fw_statusword(const fw_ctrl_t *ctrl);
 fw_cia402_state_t fw_state(const fw_ctrl_t *ctrl);
+/** The statusword from the signals it depends on: fw_statusword on the core's
+ *  present state, fw_snapshot_complete on a snapshot's (the configuration's
+ *  u_dc_min_V for the warning bit, i_max_A for the speed loop's limit). */
+uint16_t fw_statusword_of(const fw_config_t *cfg, fw_cia402_state_t state, float u_dc_V,
+                          fw_start_phase_t phase, fw_mode_t mode, float speed_ref_radps_e,
+                          float omega_f_radps, uint8_t ref_limited, float i_q_ref_A);
 
 fw_status_t fw_set_mode(fw_ctrl_t *ctrl, fw_mode_t mode);
 /** fw_ctrl_t.ref_limited / fw_snapshot_t.ref_limited: the last speed or force
@@ -382,7 +208,7 @@ void fw_step(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out);
  * reads next period (fw_bemf_prepare), the adaptive SOGI's gain, the flying-start
  * rotation; the standstill saliency check's judgement when the period completed
  * it; then the integrity monitor (fw_mon_update) and the linear-axis protections
- * (fw_protect_update) on what fw_step_into staged for them. Call it once after
+ * (fw_protect_step) on what fw_step_into staged for them. Call it once after
  * every fw_step_into, before the next one and before the duties take effect
  * (fw_app: the supervision interrupt, pended by the control interrupt and
  * tail-chained to it). A fault it finds latches in the same period as before the
@@ -396,18 +222,6 @@ void fw_step(fw_ctrl_t *ctrl, const fw_inputs_t *in, fw_outputs_t *out);
  * judgement first (the period's current-loop snapshot fields stay unwritten).
  */
 bool fw_supervise(fw_ctrl_t *ctrl, fw_outputs_t *out, fw_snapshot_t *snap);
-
-/** Groups of the snapshot fields fw_step writes (fw_step_into's result): the
- *  period's common signals (step count, the angle estimate at the sample
- *  (theta_hat_rad), states, fault code, alpha/beta current,
- *  DC link, duties), the extraction's (PLL error, HF amplitudes, HF current),
- *  the current loop's (i_dq, u_dq, u_inj) and the current references. A field
- *  of a group not written keeps its value of the period before. */
-#define FW_SNAP_W_COMMON 1u
-#define FW_SNAP_W_EST 2u
-#define FW_SNAP_W_OUT 4u
-#define FW_SNAP_W_REF 8u
-#define FW_SNAP_W_ALL 15u
 
 /**
  * fw_step (adc NULL) or fw_step_adc (adc not NULL: the inputs converted from it;
@@ -432,72 +246,13 @@ void fw_step_adc(fw_ctrl_t *ctrl, const fw_adc_inputs_t *in, fw_outputs_t *out);
  *  above adc_max_count (the caller raises FW_FAULT_ADC_RANGE; fw_step_adc does). */
 bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_inputs_t *in);
 
-/** Copy of the internal signals after the last step (fw_snapshot_capture +
- *  fw_snapshot_complete, with the statusword of the core's present state). */
-void fw_get_snapshot(const fw_ctrl_t *ctrl, fw_snapshot_t *snap);
-/** fw_get_snapshot when the last period's snapshot fields were written into
- *  period (fw_step_into) rather than into ctrl->snap. */
-void fw_get_snapshot_of(const fw_ctrl_t *ctrl, const fw_snapshot_t *period,
-                        fw_snapshot_t *snap);
-
-/** What fw_snapshot_complete needs besides the captured snapshot fields. */
-typedef struct {
-  int32_t pos_turns;      /**< the observer's position (fw_obs_pos_e_of: whole turns ... */
-  float pos_unwrapped_e;  /**< ... and the remainder), summed in fw_snapshot_complete */
-  float bemf_e_dq_V[2]; /**< the back-EMF observer's filtered back-EMF */
-  float bemf_err_rad;  /**< its angle error, when bemf_fresh */
-  uint8_t bemf_fresh;  /**< bemf_err_rad is computed (fw_bemf_t.err_fresh) */
-  uint8_t bemf_w_neg;  /**< fw_bemf_t.w_neg */
-} fw_snapshot_raw_t;
-
-/**
- * The snapshot in two halves, for a control interrupt that hands its periods
- * to a background loop (fw_app): fw_snapshot_capture copies this period's
- * signals and the blocks' present states (loads and stores only: no unit
- * conversion, no division, no statusword, no atan2) into snap and raw;
- * fw_snapshot_complete computes the rest of snap from them (positions and
- * speeds in units, thrust, torque, the back-EMF angle error, the statusword)
- * with ctrl's configuration, later and elsewhere. Right after fw_step (with
- * inputs), capture + complete give exactly fw_get_snapshot.
- */
-void fw_snapshot_capture(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw);
-/**
- * fw_snapshot_capture in parts:
- *  - fw_snapshot_carry copies the groups of the period's fields (what fw_step
- *    wrote) not in written (FW_SNAP_W_*) from prev: with written 0 and prev
- *    &ctrl->snap, all of them;
- *  - _state the blocks' present states (a caller of fw_step_into, which wrote
- *    the period's fields itself, captures only these and the slow part);
- *  - _slow the fields that change only at start-up events and on commands
- *    (polarity and saliency results, polarity flag, flying start, extractor,
- *    mode, speed reference). A caller that keeps snapshots (fw_app's ring
- *    slots) copies the slow part only when fw_snapshot_slow_gen differs from
- *    the value it had at its last copy into that snapshot.
- */
-void fw_snapshot_carry(fw_snapshot_t *snap, const fw_snapshot_t *prev, unsigned written);
-void fw_snapshot_capture_state(const fw_ctrl_t *ctrl, fw_snapshot_t *snap, fw_snapshot_raw_t *raw);
-void fw_snapshot_capture_slow(const fw_ctrl_t *ctrl, fw_snapshot_t *snap);
+/** Changes (+1) whenever a field fw_snapshot_capture_slow copies may have changed
+ *  (fw_snapshot.h: a caller that keeps snapshots copies the slow part when it
+ *  differs from the value at its last copy). */
 static inline uint32_t fw_snapshot_slow_gen(const fw_ctrl_t *ctrl) { return ctrl->snap_slow_gen; }
-void fw_snapshot_complete(const fw_ctrl_t *ctrl, fw_snapshot_t *snap,
-                          const fw_snapshot_raw_t *raw);
 
 /** sizeof(fw_ctrl_t), for bindings that allocate it. */
 size_t fw_ctrl_sizeof(void);
-
-/* ---- unit helpers ----------------------------------------------------- */
-
-/** Linear speed (m/s) -> electrical rad/s: w_e = pi v / tau. */
-float fw_units_mps_to_radps_e(const fw_config_t *cfg, float v_mps);
-float fw_units_radps_e_to_mps(const fw_config_t *cfg, float w_radps_e);
-/** Back-EMF magnitude w psi_f (V) of a mover at v_mps (the one conversion used by
- *  fw_config_derive for the handover and witness levels, and the start check). */
-float fw_units_bemf_V(const fw_config_t *cfg, float v_mps);
-/** Rotary-equivalent r/min -> electrical rad/s: w_e = p 2 pi n / 60. */
-float fw_units_rpm_to_radps_e(const fw_config_t *cfg, float n_rpm);
-float fw_units_radps_e_to_rpm(const fw_config_t *cfg, float w_radps_e);
-/** Nominal thrust constant K_F = 1.5 (pi/tau) psi_f (N per A of i_q); the one
- *  definition used by the gain derivation, force mode and the snapshot. */
-float fw_units_force_per_A(const fw_config_t *cfg);
 
 #ifdef __cplusplus
 }

@@ -10,7 +10,8 @@
  * are the drive state machine's (fw_ctrl.c); this block only decides and
  * remembers.
  *
- * Included by fw_ctrl.h (needs fw_config_t and fw_inputs_t).
+ * Needs the bottom layer (fw_types.h, fw_units.h) and, for the protections'
+ * inputs, the observer (fw_obs.h).
  */
 #ifndef PMLSM_FW_FAULT_H
 #define PMLSM_FW_FAULT_H
@@ -19,9 +20,9 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-#ifndef PMLSM_FW_CTRL_H
-#error "include pmlsm/fw_ctrl.h"
-#endif
+#include "fw_obs.h"
+#include "fw_types.h"
+#include "fw_units.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -31,7 +32,7 @@ extern "C" {
 typedef struct {
   fw_fault_t code;     /**< latched first cause, FW_FAULT_NONE if none */
   uint8_t hard;        /**< a latched fault needs the power stage off at once */
-  uint16_t hist[FW_FAULT_HISTORY_LEN]; /**< newest first (depth: fw_ctrl.h) */
+  uint16_t hist[FW_FAULT_HISTORY_LEN]; /**< newest first (depth: fw_types.h) */
   uint32_t hist_count;
 } fw_fault_latch_t;
 
@@ -152,6 +153,18 @@ void fw_protect_cool(fw_protect_t *p, const fw_config_t *cfg);
  * order; returns the first fault found.
  */
 fw_fault_t fw_protect_update(fw_protect_t *p, const fw_config_t *cfg, const fw_protect_in_t *in);
+/**
+ * fw_protect_update on a closed-loop period of the drive: its inputs from the
+ * observer (its speed and filtered speed; its position, a division, only when
+ * the position limits are on: pos_on), the fundamental current i_dq, the mode
+ * and its references (the command's sign matters only to the position limits:
+ * the speed reference in SPEED mode, the i_q reference in FORCE mode), and
+ * whether the drive brakes (quick_stop). The observer's position must be
+ * flushed (fw_obs_pos_flush: its parts are read as they are).
+ */
+fw_fault_t fw_protect_step(fw_protect_t *p, const fw_config_t *cfg, const fw_obs_t *obs,
+                           fw_vec2_f32_t i_dq, fw_mode_t mode, float speed_ref_radps_e,
+                           float i_q_ref_force_A, bool quick_stop);
 
 #ifdef __cplusplus
 }

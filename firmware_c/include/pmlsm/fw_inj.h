@@ -19,7 +19,7 @@
  * command this period (it then ages the sign history). Both SOGIs always run,
  * so switching extractor is seamless.
  *
- * Included by fw_ctrl.h (needs fw_config_t).
+ * Needs the bottom layer (fw_types.h) and the SOGI (fw_sogi.h).
  */
 #ifndef PMLSM_FW_INJ_H
 #define PMLSM_FW_INJ_H
@@ -28,9 +28,8 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-#ifndef PMLSM_FW_CTRL_H
-#error "include pmlsm/fw_ctrl.h"
-#endif
+#include "fw_sogi.h"
+#include "fw_types.h"
 
 #ifdef __cplusplus
 extern "C" {

@@ -35,14 +35,10 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "fw_types.h"
+
 #ifdef __cplusplus
 extern "C" {
-#endif
-
-/* Included by fw_ctrl.h after fw_fault_t and fw_config_t are defined: include
- * fw_ctrl.h, not this header. */
-#ifndef PMLSM_FW_CTRL_H
-#error "include pmlsm/fw_ctrl.h"
 #endif
 
 /** Periods per block: the monitor's filters advance and its witnesses are

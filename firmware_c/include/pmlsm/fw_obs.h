@@ -15,7 +15,7 @@
  * fw_obs_update() runs once per sample after the extraction; the estimate it
  * leaves (pll.theta_rad) belongs to the next sampling instant.
  *
- * Included by fw_ctrl.h (needs fw_config_t).
+ * Needs the bottom layer (fw_types.h) and the PLL (fw_pll.h).
  */
 #ifndef PMLSM_FW_OBS_H
 #define PMLSM_FW_OBS_H
@@ -23,16 +23,14 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-#ifndef PMLSM_FW_CTRL_H
-#error "include pmlsm/fw_ctrl.h"
-#endif
+#include "fw_pll.h"
+#include "fw_types.h"
 
 #ifdef __cplusplus
 extern "C" {
 #endif
 
-/** Observer state (caller-owned). pll and err_f come first: fw_ctrl_t keeps
- *  their old names as aliases (see there). */
+/** Observer state (caller-owned). */
 typedef struct {
   fw_pll_f32_t pll;
   float err_f;            /**< low-passed signed PLL error */

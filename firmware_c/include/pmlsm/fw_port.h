@@ -49,7 +49,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "fw_ctrl.h"
+#include "fw_types.h"
 
 #ifdef __cplusplus
 extern "C" {

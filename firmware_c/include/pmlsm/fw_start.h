@@ -6,8 +6,10 @@
  *
  * The sequence ALIGN -> SALIENCY -> POLARITY -> RUN (or ALIGN -> RUN on a
  * moving mover) is the drive state machine's (fw_ctrl.c, fw_start_phase_t);
- * this block measures and decides, the orchestrator applies the decisions
- * to the observer and the loops.
+ * this block measures and decides, and its steps (the flying catch, the
+ * saliency check's judgement, the polarity test's decision) apply what they
+ * decide to the observer, the back-EMF observer, the monitor and the loops;
+ * the orchestrator changes the phase and latches the faults they return.
  *
  *  - ALIGN: injection + PLL at zero current converge to the angle mod pi.
  *    Meanwhile the back-EMF in the stationary frame,
@@ -20,7 +22,9 @@
  *  - POLARITY: per pair, N samples at zero, +V, -V, 0, -V, +V on d^; with
  *    d-axis saturation the excursion along the magnet (+d) is larger.
  *
- * Included by fw_ctrl.h (needs fw_config_t).
+ * Needs the bottom layer and the blocks its steps act on: the observer, the
+ * back-EMF observer, the integrity monitor and the loops (fw_obs.h, fw_bemf.h,
+ * fw_mon.h, fw_foc.h).
  */
 #ifndef PMLSM_FW_START_H
 #define PMLSM_FW_START_H
@@ -29,13 +33,22 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-#ifndef PMLSM_FW_CTRL_H
-#error "include pmlsm/fw_ctrl.h"
-#endif
+#include "fw_bemf.h"
+#include "fw_foc.h"
+#include "fw_mon.h"
+#include "fw_obs.h"
+#include "fw_types.h"
 
 #ifdef __cplusplus
 extern "C" {
 #endif
+
+/** Injection periods per axis in the standstill saliency check (the first is
+ *  not averaged: the axis change settles). */
+#define FW_SAL_PERIODS 4u
+/** Standstill saliency checks that may find d^ off the axis and turn the estimate
+ *  by the measured angle before a miss is the EST_HF_ANGLE fault. */
+#define FW_SAL_RETRIES 1u
 
 /** Flying start: the back-EMF vector is watched from this time in the
  *  alignment through a low-pass of this time constant. */
@@ -179,6 +192,27 @@ static inline fw_fault_t fw_start_fly_catch_speed(fw_start_t *s, const fw_config
 /** The angle of a catch fw_start_fly_catch_speed made with the speed w0_radps it
  *  gave (an atan2; only the next period needs it): fw_start_fly_catch's theta. */
 float fw_start_fly_catch_angle(const fw_start_t *s, float w0_radps);
+/**
+ * The period of a flying catch (the motion check found the mover moving):
+ * fw_start_fly_catch_speed's decision and, when caught, what this period's loops
+ * and modulation read: the observer's speeds (fw_obs_catch_speed) and the speed
+ * loop cleared (fw_foc_speed_clear). The injection's scale, which they read too,
+ * is the full one fw_bemf_catch's reset gives (only fw_bemf_schedule changes it,
+ * in closed loop, and an enable resets it). The rest of the catch waits for
+ * fw_start_fly_catch_finish. Returns FW_FAULT_NONE when caught, else
+ * FW_FAULT_MOVING_AT_ENABLE (too slow for the back-EMF, too fast for injection).
+ */
+fw_fault_t fw_start_fly_catch_begin(fw_start_t *s, const fw_config_t *cfg, float bemf_w_on,
+                                    fw_obs_t *obs, fw_foc_t *foc);
+/**
+ * The rest of a flying catch (fw_start_fly_catch_begin), in the supervision half
+ * before its monitor update: the observer's angle (an atan2,
+ * fw_start_fly_catch_angle), the back-EMF observer started locked
+ * (fw_bemf_catch), the monitor's closed-loop restart (no standstill saliency
+ * check: the HF witness stays off). The same states as a catch done at once.
+ */
+void fw_start_fly_catch_finish(const fw_start_t *s, fw_obs_t *obs, fw_bemf_t *bemf,
+                               fw_mon_t *mon);
 /** End of the alignment: align_time_s elapsed and this period commands
  *  injection index n/4 - 1, the last + command before the HF current triangle
  *  crosses its mean (no residual HF current biases the next test). */
@@ -198,6 +232,18 @@ bool fw_start_saliency_on_q(const fw_start_t *s, uint32_t n_inj);
 bool fw_start_saliency_advance(fw_start_t *s, uint32_t n_inj);
 /** Mean responses y_dd, y_qd, y_dq, y_qq per sample. */
 void fw_start_saliency_means(const fw_start_t *s, uint32_t n_inj, float y[4]);
+/**
+ * End of the standstill saliency check: the monitor's judgement
+ * (fw_mon_saliency on the mean responses; dt_s the control period). An angle
+ * miss (FW_FAULT_EST_HF_ANGLE: the alignment ended on or near its unstable
+ * equilibrium pi/2 from the axis, where the PLL's error signal vanishes too)
+ * turns the estimate by the measured error (fw_obs_rotate), up to
+ * FW_SAL_RETRIES times: *again is then true, FW_FAULT_NONE returned, and the
+ * orchestrator aligns and checks again. A pass starts the polarity test
+ * (fw_start_polarity_begin). Returns the fault found, FW_FAULT_NONE when none.
+ */
+fw_fault_t fw_start_saliency_done(fw_start_t *s, const fw_config_t *cfg, uint32_t n_inj,
+                                  float dt_s, fw_mon_t *mon, fw_obs_t *obs, bool *again);
 
 /* ---- POLARITY ---- */
 void fw_start_polarity_begin(fw_start_t *s);
@@ -208,6 +254,14 @@ void fw_start_polarity_begin(fw_start_t *s);
  */
 float fw_start_polarity_step(fw_start_t *s, const fw_cfg_estimator_t *est, float i_d_A,
                              fw_pol_result_t *res);
+/**
+ * fw_start_polarity_step with its decision applied: FW_POL_FLIPPED adds pi to
+ * the estimate (fw_obs_flip) and sets *flipped, FW_POL_ALIGNED clears it
+ * (FW_POL_BUSY and FW_POL_UNDETERMINED leave it). Returns the result; *u_d_V is
+ * the d^ voltage to apply.
+ */
+fw_pol_result_t fw_start_polarity(fw_start_t *s, const fw_cfg_estimator_t *est, fw_obs_t *obs,
+                                  float i_d_A, float *u_d_V, uint8_t *flipped);
 
 #ifdef __cplusplus
 }

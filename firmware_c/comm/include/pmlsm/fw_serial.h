@@ -25,7 +25,7 @@
 #include <stdint.h>
 
 #include "fw_serial_signals.h"
-#include "pmlsm/fw_ctrl.h"
+#include "pmlsm/fw_snapshot.h"
 
 #ifdef __cplusplus
 extern "C" {
