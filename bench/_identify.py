@@ -38,6 +38,8 @@ from sim_fallback import truth_of
 
 #: Telemetry signals the probe asks for (one frame per millisecond).
 TEL_SIGNALS = (*PROBE_SIGNALS, "fault_code", "start_phase")
+#: The telemetry frame period the probe sets (s).
+TEL_PERIOD_S = 1e-3
 
 
 #: Units and descriptions of the identified values (report and motor file).
@@ -110,10 +112,19 @@ class WireProbe(Probe):
         return out
 
     def run(self, seconds: float) -> dict[str, np.ndarray]:
-        t0 = self._t_last()
-        self.drive.wait_until(self.clock.now() + seconds)
-        self._await(t0 + seconds)
+        # the window is cut on the drive's clock, where the command that precedes it took
+        # effect; not at the last telemetry sample the bench has read, which lags the
+        # drive by however busy the host is (and would make the result depend on it)
+        t0 = self.clock.now()
+        self._settle(t0 + seconds)
         return self._window(t0, t0 + seconds)
+
+    def _settle(self, t_end: float) -> None:
+        """Wait until the drive's clock is past ``t_end`` by two telemetry frames (the
+        frame that covers ``t_end`` is sent after it), then until the bench has read
+        telemetry up to it."""
+        self.drive.wait_until(t_end + 2 * TEL_PERIOD_S)
+        self._await(t_end)
 
     # ---- commands ---------------------------------------------------------------------
     def _enable_force(self) -> None:
@@ -157,14 +168,13 @@ class WireProbe(Probe):
         point, at the point's time on the drive clock)."""
         d = self.drive
         d.set_mode("speed")
-        t0_tel = self._t_last()
-        c0 = self.clock.now()
+        c0 = self.clock.now()  # the drive's time: the window does not depend on reader lag
         for k in range(len(t_s) - 1):
             d.set_speed_mps(float(v_mps[k]))
             d.wait_until(c0 + float(t_s[k + 1]))
         T = float(t_s[-1])
-        self._await(t0_tel + T)
-        return self._window(t0_tel, t0_tel + T)
+        self._settle(c0 + T)
+        return self._window(c0, c0 + T)
 
     def ramp_speed(self, v_from: float, v_to: float, seconds: float) -> None:
         n = max(1, int(round(seconds / 0.01)))
@@ -233,7 +243,7 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
         drive.write(od.TELEMETRY__SIGNAL_COUNT, len(ids))
         for k, i in enumerate(ids):
             drive.write_raw(od.INDEX_TELEMETRY, od.TELEMETRY__SIGNAL_1.sub + k, i)
-        drive.write(od.TELEMETRY__DECIMATION, max(1, int(round(cfg0.f_pwm_Hz / 1000.0))))
+        drive.write(od.TELEMETRY__DECIMATION, max(1, int(round(cfg0.f_pwm_Hz * TEL_PERIOD_S))))
         # the bias sweep reads the raw HF response (E_d = T_s u_inj / L_dd): the
         # pseudo-filter extraction, whatever the drive normally uses
         drive.set("extractor", float(extractor_id("pseudo")))
