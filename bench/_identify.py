@@ -86,12 +86,19 @@ class WireProbe(Probe):
         return float(t[-1]) if t.size else -math.inf
 
     def _await(self, t_end: float) -> None:
+        """Until the bench has read telemetry up to ``t_end``. A link that stops is an
+        error after :attr:`wait_s` without progress; a reader that is behind but reading
+        (a busy host) is waited for."""
+        last = self._t_last()
         deadline = time.monotonic() + self.wait_s
-        while self._t_last() < t_end - 1e-6:
+        while last < t_end - 1e-6:
             if time.monotonic() > deadline:
                 raise IdentifyError(f"no telemetry up to t = {t_end:.3f} s on the serial "
-                                    f"link (last {self._t_last():.3f} s)")
+                                    f"link (last {last:.3f} s, none for {self.wait_s:g} s)")
             time.sleep(0.001)
+            now = self._t_last()
+            if now > last:
+                last, deadline = now, time.monotonic() + self.wait_s
 
     def _window(self, t0: float, t1: float) -> dict[str, np.ndarray]:
         out: dict[str, np.ndarray] = {}
