@@ -556,8 +556,8 @@ def _emu_state(args: argparse.Namespace) -> Any:
 
     try:
         st = check_running()
-    except EmuError as e:
-        raise UserError(str(e), EXIT_DRIVE) from None
+    except EmuError as e:  # its own exit code where it has one (a bad state folder: 2)
+        raise UserError(str(e), getattr(e, "exit_code", EXIT_DRIVE)) from None
     if args.node_id != st.node_id:
         raise UserError(f"--node-id {args.node_id}: the emulated board's drive is node "
                         f"{st.node_id}")
@@ -574,8 +574,8 @@ def _sim_server_state(args: argparse.Namespace) -> Any:
 
     try:
         st = check_running()
-    except SimServerError as e:
-        raise UserError(str(e), EXIT_DRIVE) from None
+    except SimServerError as e:  # its own exit code where it has one (a bad state folder: 2)
+        raise UserError(str(e), getattr(e, "exit_code", EXIT_DRIVE)) from None
     if args.node_id != st.node_id:
         raise UserError(f"--node-id {args.node_id}: the simulated drive server's drive is "
                         f"node {st.node_id}")

@@ -189,3 +189,18 @@ def test_an_unusable_state_folder_is_one_line_for_the_emulated_board_too(
     assert r.returncode == 2, r.stderr
     (line,) = r.stderr.strip().splitlines()
     assert "afile is not a folder" in line and "internal error" not in line
+
+
+@pytest.mark.parametrize("option", ["--sim-server", "--emu"])
+def test_an_unusable_state_folder_is_input_error_when_connecting_too(
+        tmp_path: Path, option: str) -> None:
+    """`bench run --sim-server|--emu` with `BENCH_SIM_DIR` under a regular file: the
+    connection mapped every server error to 3 ("no drive"), and the emulated board's
+    called the unreadable folder a stale state file; now the folder's own error, exit 2."""
+    (tmp_path / "afile").write_text("")
+    r = subprocess.run([sys.executable, "-m", "bench", "run", str(PASSING), option],
+                       cwd=tmp_path, env={**ENV, "BENCH_SIM_DIR": str(tmp_path / "afile" / "x")},
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr
+    (line,) = r.stderr.strip().splitlines()
+    assert "afile is not a folder" in line and "stale" not in line
