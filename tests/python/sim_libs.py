@@ -51,3 +51,32 @@ def stand_in_drive() -> Iterator[tuple[Any, Any]]:
     finally:
         net.disconnect()
         fake.close()
+
+
+@contextlib.contextmanager
+def rig_maker(rig_class: Any) -> Iterator[Any]:
+    """``make(motor)``: rigs of ``rig_class`` (a canopen master and the drive application
+    on one virtual bus; motor None: the null plant), all closed afterwards. Skips when the
+    drive application cannot be built, or the simulator library is missing for a motor."""
+    import subprocess
+
+    from protocols import clib
+
+    try:
+        clib.load_app()
+    except (OSError, subprocess.CalledProcessError) as e:  # pragma: no cover - no compiler
+        pytest.skip(f"drive application cannot be built: {e}")
+    rigs: list[Any] = []
+
+    def make(motor: str | None) -> Any:
+        r = rig_class(motor)
+        rigs.append(r)
+        if motor and r.bridge.sim is None:  # pragma: no cover
+            pytest.skip("sim_fallback library not available")
+        return r
+
+    try:
+        yield make
+    finally:
+        for r in rigs:
+            r.close()

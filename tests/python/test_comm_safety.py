@@ -12,7 +12,6 @@ runs with the thread stopped, so no wall-clock speed enters any assertion.
 
 from __future__ import annotations
 
-import subprocess
 import time
 import uuid
 from collections.abc import Callable, Iterator
@@ -23,8 +22,8 @@ import canopen
 import numpy as np
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError
+from sim_libs import rig_maker
 
-from protocols import clib
 from protocols.generated.od_names import FAULT_CODES
 from sim_fallback import DriveBridge
 
@@ -95,22 +94,10 @@ class Rig:
 
 @pytest.fixture
 def make_rig() -> Iterator[Callable[[str | None], Rig]]:
-    try:
-        clib.load_app()
-    except (OSError, subprocess.CalledProcessError) as e:  # pragma: no cover - no compiler
-        pytest.skip(f"drive application cannot be built: {e}")
-    rigs: list[Rig] = []
-
-    def make(motor: str | None) -> Rig:
-        r = Rig(motor)
-        if motor and r.bridge.sim is None:  # pragma: no cover
-            pytest.skip("sim_fallback library not available")
-        rigs.append(r)
-        return r
-
-    yield make
-    for r in rigs:
-        r.close()
+    """Rigs (the canopen master and the drive on one virtual bus; None: the null
+    plant), closed after the test (sim_libs.rig_maker)."""
+    with rig_maker(Rig) as make:
+        yield make
 
 
 def _sdo(rig: Rig, fn: Callable[[], object]) -> object:

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import math
 import re
-import subprocess
 import sys
 import time
 import uuid
@@ -43,9 +42,9 @@ import canopen
 import numpy as np
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError
+from sim_libs import rig_maker
 from test_comm_safety import MASTER, MS, NID, REC, Rig, _sdo
 
-from protocols import clib
 from protocols.generated.od_names import FAULT_CODES, Reaction
 from sim_fallback import DriveBridge
 
@@ -65,21 +64,10 @@ TABLE_END = "<!-- end of the brake table -->"
 
 @pytest.fixture
 def make_rig() -> Iterator[Callable[[str | None], Rig]]:
-    """Rigs of test_comm_safety.py (the canopen master and the drive on one virtual
-    bus; None: the null plant), closed after the test."""
-    try:
-        clib.load_app()
-    except (OSError, subprocess.CalledProcessError) as e:  # pragma: no cover - no compiler
-        pytest.skip(f"drive application cannot be built: {e}")
-    rigs: list[Rig] = []
-
-    def make(motor: str | None) -> Rig:
-        rigs.append(Rig(motor))
-        return rigs[-1]
-
-    yield make
-    for r in rigs:
-        r.close()
+    """Rigs (the canopen master and the drive on one virtual bus; None: the null
+    plant), closed after the test (sim_libs.rig_maker)."""
+    with rig_maker(Rig) as make:
+        yield make
 
 
 @dataclass(frozen=True)
