@@ -481,12 +481,19 @@ def definitions_markdown() -> str:
 
 
 
+#: What the injection costs in audible noise and heat (docs/audible_noise.md), over a
+#: window: the A-weighted level of the thrust ripple (dB(A) re 1 N) and of the phase
+#: currents (dB(A) re 1 A) in the audible band, and the copper loss of the HF current (W).
+#: Defined in :data:`AUDIBLE_DEFS`; a campaign that asks for them records every sample
+#: (``base.record_decimation: 1``: the band reaches the record's Nyquist frequency).
+AUDIBLE_METRICS = ("thrust_ripple_dBA", "phase_current_dBA", "inj_copper_loss_W")
 #: Statistics over a window: position error (el. rad) RMS / max |.| / mean, speed
 #: error (r/min) max |.| / RMS, RMS of the true d / q current minus its mean over one
-#: injection period (A, the HF ripple), and the position error RMS over the samples in
-#: the window in which the drive was in closed loop (RUN; for refused or faulted runs).
+#: injection period (A, the HF ripple), the position error RMS over the samples in
+#: the window in which the drive was in closed loop (RUN; for refused or faulted runs),
+#: and the :data:`AUDIBLE_METRICS`.
 WINDOW_METRICS = ("pos_rms", "pos_max", "pos_mean", "spd_max", "spd_rms", "ripple_d",
-                  "ripple_q", "run_err_rms")
+                  "ripple_q", "run_err_rms") + AUDIBLE_METRICS
 #: Campaign short names of :mod:`sim_fallback.metrics` metrics (one definition each).
 WINDOW_ALIASES = {"pos_rms": "position_error_rms_rad", "pos_max": "position_error_max_rad",
                   "pos_mean": "position_error_mean_rad",
@@ -513,7 +520,7 @@ EST_PEAK_S = 0.2            # the estimation and position errors' in [event, eve
 #: Channels the analyses read (the run records them at full rate).
 SCENARIO_CHANNELS = ("t_s", "theta_e_rad", "theta_hat_rad", "omega_e_radps", "omega_f_radps",
             "omega_hat_radps", "speed_ref_radps_e", "i_d_A", "i_q_A", "fault_code",
-            "start_phase", "sogi_k_eff")
+            "start_phase", "sogi_k_eff", "force_N")
 
 
 def is_window_metric(name: str, windows: Iterable[str]) -> bool:
@@ -552,17 +559,300 @@ def window_metrics(res: Any, t0: float, t1: float) -> dict[str, float]:
     return {short: got[name] for short, name in WINDOW_ALIASES.items()}
 
 
+def hf_part(x: np.ndarray, n_inj: int) -> np.ndarray:
+    """The HF part of a signal sampled at the control rate: ``x`` minus its moving mean
+    over one injection period of ``n_inj`` samples (centred; the ``n_inj - 1`` samples
+    whose period does not fit in ``x`` are left out). The moving mean is an exact notch
+    at the injection frequency and its harmonics, so the injection's whole response is
+    in the HF part and the fundamental (a few Hz) is not."""
+    x = np.asarray(x, dtype=float)
+    m = np.convolve(x, np.ones(n_inj) / n_inj, mode="valid")
+    return x[n_inj // 2: n_inj // 2 + m.size] - m
+
+
 def hf_ripple(res: Any, t0: float, t1: float, n_inj: int) -> tuple[float, float]:
     """RMS of the HF current ripple (true d and q current minus its mean over one
-    injection period of ``n_inj`` samples) over [t0, t1], A."""
+    injection period of ``n_inj`` samples, :func:`hf_part`) over [t0, t1], A."""
     k = window_mask(res.data["t_s"], t0, t1)
     out = []
     for ch in ("i_d_A", "i_q_A"):
-        x = res.data[ch][k]
-        m = np.convolve(x, np.ones(n_inj) / n_inj, mode="valid")
-        h = x[n_inj // 2: n_inj // 2 + m.size] - m
+        h = hf_part(res.data[ch][k], n_inj)
         out.append(float(np.sqrt(np.mean(h**2))))
     return out[0], out[1]
+
+
+# ---- audible noise ------------------------------------------------------------------
+#
+# docs/audible_noise.md. A linear motor's audible emission is driven by its force
+# ripple (the mover, the secondary and the frame vibrate under it; magnetostriction, the
+# other source, is not modelled). How loud that is depends on the mechanics (the
+# structure's transfer from force to surface velocity, radiation, the listener), which
+# the simulator does not model: the levels below are *relative* figures for comparing
+# drive settings on one machine, in dB(A) re 1 N (thrust) and re 1 A (phase current),
+# not sound pressure levels.
+
+#: The audible band (Hz). The record (one sample per control period) is read as the
+#: straight-line signal through its samples (:data:`AUDIBLE_HOLD`), which reaches it whole.
+AUDIBLE_BAND_HZ = (20.0, 20000.0)
+#: Reference of the thrust ripple level (N): 0 dB(A) is an A-weighted RMS of 1 N.
+THRUST_REF_N = 1.0
+#: Reference of the phase current level (A): 0 dB(A) is an A-weighted RMS of 1 A.
+CURRENT_REF_A = 1.0
+
+#: The audible metrics' definitions (:data:`AUDIBLE_METRICS`; the window is the
+#: campaign's ``<window>``, as for every window metric). Rendered by
+#: :func:`audible_definitions_markdown` into docs/audible_noise.md.
+AUDIBLE_DEFS: dict[str, MetricDef] = {d.name: d for d in (
+    MetricDef("thrust_ripple_dBA",
+              "the thrust ripple: the true electromagnetic thrust force_N minus its mean and "
+              "linear trend over the window (the steady thrust and the slow motion), Hann "
+              "window",
+              "A-weighted power in the audible band, 20 Hz to 20 kHz, of the straight-line "
+              "signal through the control-rate samples (band_level_db, hold linear: the "
+              "samples' PSD times sinc^4 at each image), as 10 log10(P_A / (1 N)^2)",
+              "dB(A) re 1 N", "<window>", ("force_N",)),
+    MetricDef("phase_current_dBA",
+              "the true phase currents i_a, i_b, i_c (from i_d, i_q and theta_e, "
+              "amplitude-invariant), each minus its mean and linear trend, Hann window",
+              "A-weighted power in the audible band as above, averaged over the three "
+              "phases, as 10 log10(P_A / (1 A)^2); the fundamental (a few Hz) lies below "
+              "the band",
+              "dB(A) re 1 A", "<window>", ("i_d_A", "i_q_A", "theta_e_rad")),
+    MetricDef("inj_copper_loss_W",
+              "the HF part of the true d and q currents (hf_part: minus the moving mean over "
+              "one injection period)",
+              "3/2 R mean(i_d_hf^2 + i_q_hf^2), the mean square of the straight-line signal "
+              "through the samples (mean_square, hold linear), R the plant's phase "
+              "resistance (the run's plant.R_ohm, else the motor file's)", "W", "<window>",
+              ("i_d_A", "i_q_A")),
+)}
+
+
+def a_weighting_db(f_hz: np.ndarray | float) -> np.ndarray:
+    """The A weighting of IEC 61672-1 (dB), the standard's analytic form:
+    ``20 log10 R_A(f) + 2.00`` with ``R_A(f) = f_4^2 f^4 / ((f^2 + f_1^2)
+    sqrt((f^2 + f_2^2)(f^2 + f_3^2)) (f^2 + f_4^2))``, f_1 = 20.6, f_2 = 107.7,
+    f_3 = 737.9, f_4 = 12194 Hz (0.0 dB at 1 kHz, -19.1 dB at 100 Hz, +1.2 dB at 2.5 kHz).
+
+    Parameters
+    ----------
+    f_hz : array_like
+        Frequencies (Hz), > 0.
+
+    Returns
+    -------
+    ndarray
+        Weighting (dB); -inf at 0 Hz.
+    """
+    f2 = np.asarray(f_hz, dtype=float) ** 2
+    f1, fb, fc, f4 = 20.598997, 107.65265, 737.86223, 12194.217
+    with np.errstate(divide="ignore"):
+        ra = (f4**2 * f2**2) / ((f2 + f1**2) * np.sqrt((f2 + fb**2) * (f2 + fc**2))
+                                * (f2 + f4**2))
+        return 20.0 * np.log10(ra) + 2.0
+
+
+def _detrend(x: np.ndarray) -> np.ndarray:
+    n = np.arange(x.size, dtype=float)
+    if x.size < 2:
+        return x - np.mean(x)
+    return x - np.polyval(np.polyfit(n, x, 1), n)
+
+
+def psd(x: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided power spectral density of ``x`` minus its mean and linear trend, Hann
+    window: ``(f, S)`` with ``sum(S) * fs / N`` the window-corrected mean power (exactly
+    ``a^2 / 2`` for a sine of amplitude a on a frequency bin; Parseval).
+
+    Parameters
+    ----------
+    x : ndarray
+        Samples at ``fs_hz``.
+    fs_hz : float
+        Sample rate (Hz).
+
+    Returns
+    -------
+    f : ndarray
+        Bin frequencies (Hz), 0 to fs/2.
+    S : ndarray
+        PSD (unit^2 / Hz).
+    """
+    x = _detrend(np.asarray(x, dtype=float))
+    n = x.size
+    w = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)  # periodic Hann
+    X = np.fft.rfft(w * x)
+    S = np.abs(X) ** 2 / (fs_hz * np.sum(w**2))
+    S[1: (n + 1) // 2] *= 2.0  # one-sided: every bin but DC (and Nyquist, n even)
+    return np.fft.rfftfreq(n, 1.0 / fs_hz), S
+
+
+def band_weights(f_hz: np.ndarray, fs_hz: float, band_hz: tuple[float, float] = AUDIBLE_BAND_HZ,
+                 weighted: bool = True, hold: str = "none") -> np.ndarray:
+    """Power gain of each bin of a sampled signal's one-sided PSD (bins 0..fs/2) into the
+    (A-weighted) band.
+
+    ``hold="none"``: the samples alone, ``|A(f)|^2`` on the bins inside ``band_hz``
+    (the band cut at fs/2). ``hold="linear"``: the continuous signal that joins the
+    samples by straight lines (what a current driven by a voltage held over each control
+    period is, to within its time constant), whose spectrum is the samples' times
+    ``sinc^2(f / fs)`` at every image ``m fs +- f``: a bin's gain is the sum of
+    ``|A|^2 sinc^4`` over its images inside the band (up to 20 kHz, so beyond fs/2).
+    A triangle wave sampled at its corners is reproduced exactly (fundamental 8/pi^2,
+    third harmonic 1/9 of it).
+    """
+    f = np.asarray(f_hz, dtype=float)
+    lo, hi = band_hz
+
+    def gain(fi: np.ndarray) -> np.ndarray:
+        inside = (fi >= lo) & (fi <= hi)
+        g = 10.0 ** (a_weighting_db(np.where(inside, fi, 1e3)) / 10.0) if weighted else 1.0
+        return np.where(inside, g, 0.0)
+
+    if hold == "none":
+        return gain(f) * (f <= 0.5 * fs_hz)
+    if hold != "linear":
+        raise ValueError(f"hold {hold!r}: 'none' or 'linear'")
+    out = np.zeros_like(f)
+    distinct = (f > 0.0) & (f < 0.5 * fs_hz)  # +f and -f images coincide at 0 and fs/2
+    for m in range(int(hi // fs_hz) + 2):
+        fi = m * fs_hz + f
+        out += gain(fi) * np.sinc(fi / fs_hz) ** 4
+        if m >= 1:
+            fi = m * fs_hz - f
+            out += np.where(distinct, gain(fi) * np.sinc(fi / fs_hz) ** 4, 0.0)
+    return out
+
+
+def band_level_db(x: np.ndarray, fs_hz: float, ref: float = 1.0,
+                  band_hz: tuple[float, float] = AUDIBLE_BAND_HZ,
+                  weighted: bool = True, hold: str = "none") -> float:
+    """The (A-weighted) level of ``x`` in a band: ``10 log10(P / ref^2)`` with ``P`` the
+    sum over the bins of the PSD (:func:`psd`) times the bin width times the bin's gain
+    into the band (:func:`band_weights`: ``|A(f)|^2`` (:func:`a_weighting_db`, unless
+    ``weighted`` is False) inside ``band_hz``, both ends included; with ``hold="linear"``
+    of the straight-line continuous signal through the samples). A sine of amplitude a
+    at 1 kHz gives ``20 log10(a / sqrt(2) / ref)`` (``hold="none"``); at 100 Hz 19.1 dB
+    less.
+
+    Parameters
+    ----------
+    x : ndarray
+        Samples at ``fs_hz``.
+    fs_hz : float
+        Sample rate (Hz).
+    ref : float
+        Reference RMS of 0 dB (the signal's unit).
+    band_hz : tuple of float
+        ``(f_lo, f_hi)`` (Hz).
+    weighted : bool
+        A-weighted (default) or flat.
+    hold : {"none", "linear"}
+        The samples alone, or the straight-line signal through them.
+
+    Returns
+    -------
+    float
+        Level (dB re ``ref``); -inf for no power; NaN for fewer than 4 samples or a
+        non-finite one.
+    """
+    x = np.asarray(x, dtype=float)
+    if x.size < 4 or not np.all(np.isfinite(x)):
+        return math.nan
+    f, S = psd(x, fs_hz)
+    p = float(np.sum(S * band_weights(f, fs_hz, band_hz, weighted, hold))) * fs_hz / x.size
+    with np.errstate(divide="ignore"):
+        return float(10.0 * np.log10(p / ref**2))
+
+
+#: How the audible metrics read the control-rate record: as the straight-line signal
+#: through the samples (:func:`band_weights`, :func:`mean_square`). The plant holds the
+#: inverter's voltage over each control period (average model), so its current, and the
+#: thrust made of it, runs nearly straight between samples (L / R = 12.5 ms against a
+#: 42 us period, paper_salient); the samples alone would overstate a 6 kHz triangle's
+#: fundamental by 1.8 dB and its mean square by 1.8 dB too.
+AUDIBLE_HOLD = "linear"
+
+
+def phase_currents(i_d: np.ndarray, i_q: np.ndarray, theta_e: np.ndarray) -> np.ndarray:
+    """The phase currents (n x 3, A) from the d/q currents and the electrical angle
+    (amplitude-invariant: ``i_a = i_d cos(theta) - i_q sin(theta)``, b and c 120 deg
+    later)."""
+    th = np.asarray(theta_e, dtype=float)[:, None] - np.array([0.0, 2.0, -2.0]) * np.pi / 3
+    return (np.asarray(i_d, dtype=float)[:, None] * np.cos(th)
+            - np.asarray(i_q, dtype=float)[:, None] * np.sin(th))
+
+
+def phase_current_level_db(i_d: np.ndarray, i_q: np.ndarray, theta_e: np.ndarray,
+                           fs_hz: float, band_hz: tuple[float, float] = AUDIBLE_BAND_HZ
+                           ) -> float:
+    """``phase_current_dBA``: the A-weighted audible-band power of the three phase
+    currents (:func:`phase_currents`), averaged over the phases, dB re 1 A."""
+    iabc = phase_currents(i_d, i_q, theta_e)
+    p = [10.0 ** (band_level_db(iabc[:, j], fs_hz, CURRENT_REF_A, band_hz,
+                                hold=AUDIBLE_HOLD) / 10.0) for j in range(3)]
+    with np.errstate(divide="ignore"):
+        return float(10.0 * np.log10(np.mean(p)))
+
+
+def mean_square(x: np.ndarray, hold: str = "none") -> float:
+    """Mean square of a sampled signal: of the samples (``hold="none"``) or of the
+    straight lines through them (``"linear"``: each interval's ``(a^2 + a b + b^2) / 3``;
+    a triangle wave with its corners on samples gives its a^2 / 3 exactly, where its
+    samples at 4 per period give a^2 / 2)."""
+    x = np.asarray(x, dtype=float)
+    if hold == "none" or x.size < 2:
+        return float(np.mean(x**2)) if x.size else math.nan
+    if hold != "linear":
+        raise ValueError(f"hold {hold!r}: 'none' or 'linear'")
+    a, b = x[:-1], x[1:]
+    return float(np.mean(a * a + a * b + b * b) / 3.0)
+
+
+def injection_copper_loss_W(i_d: np.ndarray, i_q: np.ndarray, n_inj: int, R_ohm: float,
+                            hold: str = "none") -> float:
+    """``inj_copper_loss_W``: ``3/2 R mean(i_d_hf^2 + i_q_hf^2)`` with the HF parts of
+    :func:`hf_part` (W; amplitude-invariant d/q currents, as the plant's), the mean
+    square of the samples or of the straight lines through them (:func:`mean_square`)."""
+    hd, hq = hf_part(i_d, n_inj), hf_part(i_q, n_inj)
+    if hd.size == 0:
+        return math.nan
+    return float(1.5 * R_ohm * (mean_square(hd, hold) + mean_square(hq, hold)))
+
+
+def audible_metrics(data: Mapping[str, np.ndarray], t0: float, t1: float, n_inj: int,
+                    R_ohm: float, names: Iterable[str] = AUDIBLE_METRICS
+                    ) -> dict[str, float]:
+    """The :data:`AUDIBLE_METRICS` of a record over [t0, t1] (its sample rate from
+    ``t_s``); a metric whose channels were not recorded is NaN."""
+    k = window_mask(np.asarray(data["t_s"]), t0, t1)
+    t = np.asarray(data["t_s"], dtype=float)[k]
+    fs = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else math.nan
+    out: dict[str, float] = {}
+    for name in names:
+        d = AUDIBLE_DEFS[name]
+        if t.size < 4 or any(c not in data for c in d.channels):
+            out[name] = math.nan
+        elif name == "thrust_ripple_dBA":
+            out[name] = band_level_db(np.asarray(data["force_N"])[k], fs, THRUST_REF_N,
+                                      hold=AUDIBLE_HOLD)
+        elif name == "phase_current_dBA":
+            out[name] = phase_current_level_db(np.asarray(data["i_d_A"])[k],
+                                               np.asarray(data["i_q_A"])[k],
+                                               np.asarray(data["theta_e_rad"])[k], fs)
+        else:
+            out[name] = injection_copper_loss_W(np.asarray(data["i_d_A"])[k],
+                                                np.asarray(data["i_q_A"])[k], n_inj, R_ohm,
+                                                AUDIBLE_HOLD)
+    return out
+
+
+def audible_definitions_markdown() -> str:
+    """The :data:`AUDIBLE_DEFS` as a Markdown table (docs/audible_noise.md)."""
+    lines = ["| metric | signal | statistic | unit |", "|---|---|---|---|"]
+    lines += [f"| `<window>.{d.name}` | {d.signal} | {d.statistic} | {d.unit} |"
+              for d in AUDIBLE_DEFS.values()]
+    return "\n".join(lines)
 
 
 def _back_after_peak(t: np.ndarray, y: np.ndarray, t_ev: float, band: float,
@@ -641,8 +931,10 @@ def trace(res: Any, signals: Iterable[str], decimation: int) -> dict[str, list[f
 
 
 def analyse(res: Any, metrics: Iterable[str], windows: Mapping[str, list[float]],
-            event_s: float | None, n_inj: int) -> dict[str, float]:
-    """The requested analysis metrics of one run (see the module docstring)."""
+            event_s: float | None, n_inj: int, R_ohm: float | None = None
+            ) -> dict[str, float]:
+    """The requested analysis metrics of one run (see the module docstring); ``R_ohm``:
+    the plant's phase resistance for ``inj_copper_loss_W`` (default: the motor file's)."""
     want = list(metrics)
     out: dict[str, float] = {}
     if any(m in RUN_METRICS for m in want):
@@ -660,6 +952,9 @@ def analyse(res: Any, metrics: Iterable[str], windows: Mapping[str, list[float]]
                       else float("nan"))
         elif not res.valid:
             out[m] = float("nan")
+        elif name in AUDIBLE_METRICS:
+            r_ohm = float(res.motor.plant["R_ohm"]) if R_ohm is None else float(R_ohm)
+            out[m] = audible_metrics(res.data, t0, t1, n_inj, r_ohm, (name,))[name]
         elif name in ("ripple_d", "ripple_q"):
             rd, rq = hf_ripple(res, t0, t1, n_inj)
             out[m] = rd if name == "ripple_d" else rq

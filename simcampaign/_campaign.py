@@ -986,7 +986,8 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
         f_inj = float(fw_abs.get("f_inj_Hz", nominal_fw.f_inj_Hz))
         f_pwm = float(plant_abs.get("f_pwm_Hz", motor.plant["f_pwm_Hz"]))
         out.update(SM.analyse(r, metrics, windows, base.get("event_s"),
-                              int(round(f_pwm / f_inj))))
+                              int(round(f_pwm / f_inj)),
+                              float(plant_abs.get("R_ohm", motor.plant["R_ohm"]))))
     if tr:
         keep = tr.get("seeds") is None or seed in tr["seeds"]
         sig = SM.trace(r, tr["signals"], int(tr.get("decimation", 8))) if keep else {}
