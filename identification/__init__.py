@@ -15,8 +15,11 @@ from ._procedure import (
     Identified,
     Probe,
     ident_overrides,
+    run_cross_saturation,
     run_identification,
+    xsat_fields,
 )
 
 __all__ = ["IDENT_FW", "IDENT_RESTORED", "IDENT_SPEED_BW", "PROBE_SIGNALS", "START_WINDOWS",
-           "Identified", "Probe", "ident_overrides", "run_identification"]
+           "Identified", "Probe", "ident_overrides", "run_cross_saturation", "run_identification",
+           "xsat_fields"]

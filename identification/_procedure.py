@@ -183,6 +183,11 @@ class Probe:
         """d-axis current reference (A), applied in closed loop."""
         raise NotImplementedError
 
+    def set_iq(self, amps: float) -> None:
+        """q-axis (thrust) current reference (A) in FORCE mode, applied in closed loop.
+        Only :func:`run_cross_saturation` uses it, on a clamped mover."""
+        raise NotImplementedError
+
     def reconfigure(self, fields: dict[str, float]) -> None:
         """Drive off, write configuration fields (fw_config_t names), :meth:`start`."""
         raise NotImplementedError
@@ -459,6 +464,131 @@ def _fit_friction(passes: list[dict[str, Any]], dt: float, K_F: float, mass: flo
         log=["friction from constant-speed windows (whole electrical periods): "
              + ", ".join(f"{r[1]:+.3f} m/s {r[2]:+.2f} N" for r in rows)
              + f"; F = {F_c:.3f} N sgn(v) + {b:.3f} N s/m v"])
+
+
+#: Cross-saturation map (:func:`run_cross_saturation`): map points (the firmware's
+#: FW_XSAT_POINTS), the i_q ramp between levels, the settling and averaging windows (s)
+XSAT_POINTS = 6
+
+
+XSAT_RAMP_S = 0.06
+
+
+XSAT_SETTLE_S = 0.10
+
+
+XSAT_AVG_S = 0.05
+
+
+#: the map's last point as a share of i_max_A (the map is held beyond it)
+XSAT_TOP = 0.6
+
+
+#: The drive's settings while the mover is clamped: the gains as they are (not derived
+#: again), no thrust feed-forward in the observer (the clamp takes the thrust: the
+#: model's acceleration would drive the speed estimate away until the disturbance
+#: integrator caught up) and the back-EMF witness off (a speed estimate that wanders
+#: while the thrust current ramps is no motion to check).
+XSAT_FW = {"gains_auto": 0, "pll_accel_per_A": 0.0, "mon_bemf_min_mps": 1000.0}
+
+
+def xsat_fields(step_A: float, offsets: list[float] | np.ndarray) -> dict[str, float]:
+    """The drive's cross-saturation map fields (fw_config_t names) for the offsets at
+    1..6 x ``step_A``."""
+    return {"xsat_di_A": float(step_A),
+            **{f"xsat_off{k + 1}_rad": float(np.clip(o, -0.8, 0.8))
+               for k, o in enumerate(offsets)}}
+
+
+def _xsat_sweep(probe: Probe, levels: np.ndarray, k_e: float) -> np.ndarray:
+    """The estimate's shift (el. rad) at each thrust current level, odd part: the
+    position estimate averaged at +I and at -I, half their difference. On a clamped
+    mover the true angle does not move, so the estimate's move is the move of the axis
+    the observer locks onto; constant and even-in-i_q offsets (a secondary saliency at
+    this position, the sensor offsets) cancel."""
+    out = []
+    i_prev = 0.0
+    for i in levels:
+        x = []
+        for target in (float(i), -float(i)):
+            _ramp_iq(probe, i_prev, target, XSAT_RAMP_S * (1.0 + abs(target - i_prev) /
+                                                           max(float(levels[-1]), 1e-9)))
+            i_prev = target
+            probe.run(XSAT_SETTLE_S)
+            x.append(float(np.mean(probe.run(XSAT_AVG_S)["pos_hat_m"])))
+        out.append(0.5 * k_e * (x[0] - x[1]))
+    _ramp_iq(probe, i_prev, 0.0, XSAT_RAMP_S)
+    return np.array(out)
+
+
+def run_cross_saturation(probe: Probe, cfg0: Any, tau_m: float, passes: int = 3
+                         ) -> Identified:
+    """Step 7 (optional): the cross-saturation angle map, on a CLAMPED mover (a fixture
+    or a brake that holds the peak thrust; the simulated probe locks its plant). No
+    position sensor: the drive's own position estimate is the measurement.
+
+    Under thrust current the HF saliency axis turns (cross-saturation, L_dq != 0), and
+    the injection observer, which locks onto that axis, turns with it. With the mover
+    held, the true angle stays put, so the estimate's shift between +I and -I of FORCE-
+    mode thrust current is twice the axis's turn delta(I) (odd part: constant and even
+    offsets cancel). The map the drive needs is in units of its HF angle error: the
+    error eps it sees at the true angle, o(I) = k(I) delta(I) with k the local slope of
+    eps over the angle (below 1 where saturation lowers the saliency; 0.6-0.8 on
+    realistic_linear). So: pass 0 measures delta with the map off; pass 1 runs with the
+    map o_1 = delta and measures what it leaves, r_1 = delta - o_1 / k, whence k and
+    o = k delta; each further pass corrects o by k times its residual. The result:
+    ``xsat_di_A`` (the points at 1..6 x i_max / 6) and ``xsat_off1_rad`` ..
+    ``xsat_off6_rad``, plus the measured axis turns ``xsat_axis{k}_rad`` (comparable
+    with the closed form 1/2 atan2(-2 L_dq, L_qq - L_dd)) and the last pass's residuals
+    ``xsat_resid{k}_rad`` (sigma)."""
+    res = Identified()
+    k_e = electrical_rad_per_m(tau_m)
+    step = XSAT_TOP * float(cfg0.i_max_A) / XSAT_POINTS
+    levels = step * np.arange(1, XSAT_POINTS + 1)
+    off = np.zeros(XSAT_POINTS)
+    probe.reconfigure({**XSAT_FW, **xsat_fields(0.0, off)})
+    delta = _xsat_sweep(probe, levels, k_e)
+    res.log.append("cross-saturation, clamped mover, map off: axis turn "
+                   + ", ".join(f"{i:.3g} A {d:+.4f}"
+                               for i, d in zip(levels, delta, strict=True)) + " rad")
+    k = np.ones(XSAT_POINTS)
+    resid = delta.copy()
+    for n in range(1, max(passes, 1)):
+        trial = off + k * resid if n > 1 else delta.copy()
+        probe.reconfigure({**XSAT_FW, **xsat_fields(step, trial)})
+        r = _xsat_sweep(probe, levels, k_e)
+        if n == 1:
+            # the local slope of the error per radian: o_1 / (delta - r_1); where the turn is
+            # too small to tell (< 2 mrad), the median of the others
+            ok = np.abs(delta - r) > 2e-3
+            k = np.where(ok, trial / np.where(ok, delta - r, 1.0), np.nan)
+            k_med = float(np.nanmedian(k)) if np.any(ok) else 1.0
+            k = np.clip(np.where(np.isnan(k), k_med, k), 0.2, 1.5)
+            off = k * delta
+            resid = np.zeros(XSAT_POINTS)
+            res.log.append("slope of the HF error per radian at the points: "
+                           + ", ".join(f"{x:.3f}" for x in k))
+        else:
+            off = trial
+            resid = r
+        res.log.append(f"pass {n}: residual "
+                       + ", ".join(f"{x:+.4f}" for x in r) + " rad")
+    if passes > 2:
+        off = off + k * resid  # the last residual's correction
+    res.values.update(xsat_fields(step, off))
+    for j in range(XSAT_POINTS):
+        res.values[f"xsat_axis{j + 1}_rad"] = float(delta[j])
+        res.sigma[f"xsat_off{j + 1}_rad"] = float(abs(k[j] * resid[j]))
+    _ramp_iq(probe, 0.0, 0.0, 0.001)
+    return res
+
+
+def _ramp_iq(probe: Probe, start: float, target_A: float, seconds: float) -> None:
+    """The thrust current reference in 1 ms steps from ``start`` to ``target_A``."""
+    n = max(1, int(round(seconds / 0.001)))
+    for k in range(1, n + 1):
+        probe.set_iq(start + (target_A - start) * k / n)
+        probe.run(0.001)
 
 
 def _ramp_id(probe: Probe, target_A: float, seconds: float = 0.03) -> None:

@@ -23,7 +23,15 @@ Metrics (one definition for the simulator, the bench and the reports):
 
 from ._emu_blob import EMU_BLOB_ADDR, emu_boot_blob, write_emu_boot_blob
 from ._firmware import ConfigError, Firmware, RefError, config_error
-from ._identify import SimProbe, identify, randomized_plant, seed_range, truth_of
+from ._identify import (
+    SimProbe,
+    cross_saturation_truth,
+    identify,
+    identify_cross_saturation,
+    randomized_plant,
+    seed_range,
+    truth_of,
+)
 from ._lib import FwConfig, FwSnapshot, SimPlantParams, lib_path
 from ._motors import (
     MOTOR_DIR,
@@ -71,7 +79,8 @@ def __getattr__(name: str):
 
 __all__ = [
     "DriveBridge", "SimDrive", "SimLoad", "SimClock", "FwCanFrame", "FakeDrive402",
-    "SimProbe", "identify", "randomized_plant", "seed_range", "truth_of",
+    "SimProbe", "cross_saturation_truth", "identify", "identify_cross_saturation",
+    "randomized_plant", "seed_range", "truth_of",
     "PLANT_FIELD_SOURCES", "extractor_id", "machine_params", "plant_field_range",
     "plant_params_refused", "X0_MAX_M",
     "CHANNELS", "ConfigError", "EMU_BLOB_ADDR", "drive_params", "emu_boot_blob",

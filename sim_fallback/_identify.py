@@ -17,6 +17,7 @@ from identification import (
     Identified,
     Probe,
     ident_overrides,
+    run_cross_saturation,
     run_identification,
 )
 from protocols.generated.od_names import StartPhase
@@ -97,6 +98,10 @@ class SimProbe(Probe):
         assert self.sim is not None
         self.sim._L.fw_set_id_ref(self.sim.firmware.handle, float(amps))
 
+    def set_iq(self, amps: float) -> None:
+        assert self.sim is not None
+        self.sim._L.fw_set_iq_ref(self.sim.firmware.handle, float(amps))
+
     def reconfigure(self, fields: dict[str, float]) -> None:
         import ctypes as C
 
@@ -109,7 +114,7 @@ class SimProbe(Probe):
         self._snaps(0.01)
         cfg = _lib.FwConfig.from_buffer_copy(bytes(sim.cfg))
         for k, v in fields.items():
-            setattr(cfg, k, float(v))
+            setattr(cfg, k, type(getattr(cfg, k))(v))  # int fields (gains_auto) as ints
         issue = _lib.FwConfigIssue()
         if L.fw_set_config(h, C.byref(cfg), C.byref(issue)) != 0:
             raise RuntimeError("the drive refused the identified electrical parameters")
@@ -158,6 +163,23 @@ def identify(motor: Motor, seed: int = 0, travel_m: float = 0.3, n_starts: int =
         return run_identification(probe, cfg0, motor.tau_m, travel_m, n_starts, restore)
 
 
+def identify_cross_saturation(motor: Motor, seed: int = 0, plant: dict[str, Any] | None = None,
+                              fw: dict[str, float] | None = None, x0_m: float = 0.0,
+                              passes: int = 3) -> Identified:
+    """Step 7 of the identification (:func:`identification.run_cross_saturation`) on the
+    simulated drive: the plant's mover locked (``locked`` = 1, the rig's clamp) at
+    ``x0_m``; the drive runs the motor file's configuration (``fw`` over it) with its
+    compensation map replaced by the one being measured."""
+    pl = dict(plant or {})
+    pl["locked"] = 1
+    fw = dict(fw or {})
+    cfg0 = fw_config(motor, "sogi_adaptive", **fw)
+    with SimProbe(motor, fw, pl, seed) as probe:
+        probe.sim = Sim(motor, seed=seed * 100 + 98, plant=pl, fw=fw, x0_m=x0_m)
+        probe._start()
+        return run_cross_saturation(probe, cfg0, motor.tau_m, passes)
+
+
 def seed_range(text: str) -> range:
     """Seeds from a command line: ``"a-b"`` (both included) or ``"a"``; an argparse
     ``type`` (a malformed value is its one-line error)."""
@@ -191,3 +213,28 @@ def truth_of(motor: Motor, plant: dict[str, Any] | None = None) -> dict[str, flo
             "psi_f_Wb": pl["psi_f_Wb"], "mass_kg": pl["mass_kg"],
             "b_visc_Ns_per_m": pl["b_visc_Ns_per_m"], "F_coulomb_N": pl["F_coulomb_N"],
             "dL_sat_H": pl["dL_sat_H"], "I_sat_A": pl["I_sat_A"]}
+
+
+def cross_saturation_truth(motor: Motor, i_q_A: Any, plant: dict[str, Any] | None = None,
+                           L_d_cfg: float | None = None, L_q_cfg: float | None = None
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """The simulated motor's cross-saturation at i_d = 0 (test verdicts and tools only):
+    the HF axis turn delta = 1/2 atan2(-2 L_dq, L_qq - L_dd) (docs/simulator.md) and the
+    HF angle error the drive sees at the true angle, eps = -L_dq / L_qq x L_q / (L_q -
+    L_d) with the drive's configured L_d, L_q (default: the motor file's): what its map
+    must subtract."""
+    r = dict(motor.realism)
+    pl = dict(motor.plant)
+    for k, v in (plant or {}).items():
+        (r if k in r else pl)[k] = v
+    i = np.asarray(i_q_A, dtype=float)
+    Lx, Ix = float(r["cross_L_H"]), float(r["cross_I_A"]) or 1.0
+    dLq, Iq = float(r["dLq_sat_H"]), float(r["Iq_sat_A"]) or 1.0
+    L_dq = -Lx * np.tanh(i / Ix)
+    L_qq = pl["L_q_H"] - dLq * np.tanh(i / Iq) ** 2
+    L_dd = pl["L_d0_H"] + 0.0 * i
+    delta = 0.5 * np.arctan2(-2.0 * L_dq, L_qq - L_dd)
+    Ld = float(L_d_cfg if L_d_cfg is not None else motor.plant["L_d0_H"])
+    Lq = float(L_q_cfg if L_q_cfg is not None else motor.plant["L_q_H"])
+    eps = -L_dq / L_qq * Lq / (Lq - Ld)
+    return delta, eps

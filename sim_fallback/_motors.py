@@ -73,7 +73,8 @@ class MotorFileErrors(MotorFileError):
 
 _FW_NAMES = {"R_ohm", "L_d_H", "L_q_H", "psi_f_Wb", "pole_pitch_m", "pole_pairs", "f_pwm_Hz",
              "i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz", "bemf_v_on_mps",
-             "bemf_v_off_mps", "mon_bemf_min_mps"}
+             "bemf_v_off_mps", "mon_bemf_min_mps", "dt_comp_s", "dt_comp_band_A",
+             "dt_comp_drop_V", "xsat_di_A", *(f"xsat_off{k}_rad" for k in range(1, 7))}
 
 
 def firmware_field_ranges() -> dict[str, tuple[float, float, str]]:
@@ -220,6 +221,15 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float | None, float | None, str, Any]
     ("controller", "bemf_v_on_mps"): (False, None, None, "m/s", None),
     ("controller", "bemf_v_off_mps"): (False, None, None, "m/s", None),
     ("controller", "mon_bemf_min_mps"): (False, None, None, "m/s", None),
+    # the drive's compensations (docs/method.md section 6; not given: off): what the drive
+    # is told about its inverter and what identification measured, never the plant's own
+    # [inverter] / [electrical] fields, which are the simulated truth
+    ("controller", "dt_comp_s"): (False, None, None, "s", None),
+    ("controller", "dt_comp_band_A"): (False, None, None, "A", None),
+    ("controller", "dt_comp_drop_V"): (False, None, None, "V", None),
+    ("controller", "xsat_di_A"): (False, None, None, "A", None),
+    **{("controller", f"xsat_off{k}_rad"): (False, None, None, "rad", None)
+       for k in range(1, 7)},
     # the rig's reference position sensor (a quadrature scale), modelled as the true
     # position quantised to its resolution; 0 = no sensor fitted
     ("reference_sensor", "resolution_m"): (False, 0.0, 0.01, "m (0: none)", 1e-6),
@@ -228,7 +238,11 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float | None, float | None, str, Any]
 #: ``[controller]`` keys that are fw_config_t fields of the same name, set as given (the
 #: back-EMF speeds only when the file gives them: else the firmware's defaults).
 _CTRL_FW_FIELDS = ("i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz",
-                   "bemf_v_on_mps", "bemf_v_off_mps", "mon_bemf_min_mps")
+                   "bemf_v_on_mps", "bemf_v_off_mps", "mon_bemf_min_mps",
+                   "dt_comp_s", "dt_comp_band_A", "dt_comp_drop_V", "xsat_di_A",
+                   *(f"xsat_off{k}_rad" for k in range(1, 7)))
+#: the compensation keys of ``[controller]`` (docs/method.md section 6)
+COMPENSATION_KEYS = _CTRL_FW_FIELDS[8:]
 _TEXT_FIELDS = {("motor", "name"), ("motor", "description"), ("motor", "parameterization")}
 
 

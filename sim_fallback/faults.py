@@ -278,6 +278,16 @@ CASES: list[FaultCase] = [
     FaultCase("mover_blocked", "the mover hits a hard stop at 0.5 s while running at "
               "0.3 m/s (held there): the estimate cannot follow the sudden stop",
               events=[(0.5, {"locked": 1})], t_end=1.5, expect="fault"),
+    # plant realism (issue 33): the drive's compensations (dead time, cross-saturation map
+    # of realistic_linear's [controller]) against physics they do not cover
+    FaultCase("xsat_beyond_map", "realistic_linear whose cross-saturation is twice what "
+              "the drive's map compensates (cross_L_H 1 mH), 300 N load at 0.5 s, 0.1 m/s",
+              motor="realistic_linear", speed=0.1, plant={"cross_L_H": 0.001},
+              load_N=[(0.0, 0.0), (0.5, 300.0)], rms_max_rad=0.25, max_max_rad=0.45),
+    FaultCase("end_of_travel", "realistic_linear at 0.4 m/s from mid-track over its end "
+              "(x = +0.3 m at 0.75 s: the end effect's exposure rises over 20 mm)",
+              motor="realistic_linear", speed=0.4, t_end=1.2, rms_max_rad=0.15,
+              max_max_rad=0.4),
     FaultCase("position_limit", "software limits +-0.2 m, 0.5 m/s towards +",
               speed=0.5, fw={"pos_limit_min_m": -0.2, "pos_limit_max_m": 0.2},
               expect="fault", fault=0x8612),

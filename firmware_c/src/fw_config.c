@@ -176,6 +176,11 @@ fw_status_t fw_config_check(const fw_config_t *cfg, fw_config_issue_t *issue) {
     return report(issue, FW_ERR_INCONSISTENT, "pll_kd", cfg->estimator.pll_kd, 0.0f,
                   cfg->estimator.pll_kp * cfg->estimator.pll_ki);
   }
+  /* Dead-time compensation: at most 10 % of the PWM period (a duty correction of 0.1) */
+  if (cfg->compensation.dt_comp_s * cfg->sensing.f_pwm_Hz > 0.1f) {
+    return report(issue, FW_ERR_INCONSISTENT, "dt_comp_s", cfg->compensation.dt_comp_s, 0.0f,
+                  0.1f / cfg->sensing.f_pwm_Hz);
+  }
   /* Saliency: injection needs |Lq - Ld| / Ld >= saliency_min (method.md 3.1). */
   float sal = (cfg->machine.L_q_H - cfg->machine.L_d_H) / cfg->machine.L_d_H;
   if (sal < 0.0f) {

@@ -17,7 +17,9 @@
  *   foc     speed PI (fw_foc_speed_update), current PIs (fw_foc_current_update)
  *   mon     the integrity monitor's inputs, staged (stage_supervision)
  *   inj     the injection sign (fw_inj_output)
- *   foc     modulation (fw_foc_output)
+ *   foc     modulation (fw_foc_output); xsat: dead-time compensation of the duties
+ *           (fw_xsat_deadtime) and the cross-saturation map's next offset (fw_xsat_update),
+ *           which the observer subtracts from its HF error
  * and writes the snapshot, which nothing reads back. That is fw_step_into,
  * the control half: ADC to duties. fw_supervise, the supervision half, then
  * writes the current loop's snapshot fields, does what the period left to it
@@ -102,6 +104,7 @@ static void reset_dynamics(fw_ctrl_t *c) {
   fw_foc_reset(&c->foc, &fp);
   fw_inj_reset(&c->inj, &cfg->estimator);
   fw_obs_reset(&c->obs, cfg);
+  fw_xsat_reset(&c->comp);
   c->phase = FW_START_IDLE;
   c->phase_time_s = 0.0f;
   c->qs_left_s = 0.0f;
@@ -154,6 +157,7 @@ static void apply_config(fw_ctrl_t *c, const fw_config_t *cfg, fw_status_t st) {
   c->dt_s = 1.0f / cfg->sensing.f_pwm_Hz;
   fw_inj_init(&c->inj, cfg, c->dt_s);
   fw_obs_init(&c->obs, cfg, c->dt_s);
+  fw_xsat_init(&c->comp, cfg, c->dt_s);
   fw_protect_config(&c->prot, cfg, c->dt_s);
   c->e_start_max_V = fw_units_bemf_V(cfg, cfg->protection.start_speed_max_mps);
   fw_mon_init(&c->mon, cfg, c->dt_s);
@@ -468,6 +472,7 @@ typedef struct {
   float i_abc[3];          /**< phase currents, checked and offset-compensated */
   float u_dc_V;            /**< DC link, checked */
   fw_vec2_f32_t i_ab;      /**< measured alpha/beta current */
+  fw_vec2_f32_t i_f_ab;    /**< its fundamental (the extraction's; dead-time compensation) */
   bool braking;            /**< controlled braking after a fault */
   bool quick_stop;         /**< quick stop or fault braking */
   bool pulses;             /**< polarity pulses instead of injection and current loop */
@@ -654,6 +659,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p,
     oi.hold = (uint8_t)(c->phase == FW_START_SALIENCY);
     oi.bemf_active = c->bemf.active;
     oi.bemf_err_rad = c->bemf.active ? fw_bemf_error(&c->bemf) : 0.0f;
+    oi.ang_off_rad = fw_xsat_offset(&c->comp); /* cross-saturation map (0: off) */
     oi.settled =
         (uint8_t)FW_LIKELY(!(!fw_inj_settled(&c->inj) || c->phase_time_s < FW_EST_SETTLE_S));
     oi.running = (uint8_t)(c->phase == FW_START_RUN);
@@ -669,6 +675,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p,
     snap->i_h_ab_A[0] = hf->i_h_ab_A.x;
     snap->i_h_ab_A[1] = hf->i_h_ab_A.y;
   }
+  p->i_f_ab = hf->i_f_ab_A;
   p->i_dq = fw_foc_measure(hf->i_f_ab_A, p->sc);
   if (FW_LIKELY(c->phase == FW_START_RUN && !p->pulses)) {
     const float i_dq_arr[2] = {p->i_dq.x, p->i_dq.y};
@@ -807,6 +814,7 @@ static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_ou
   const fw_sincos_f32_t sc_out =
       fw_foc_output(u_cmd, p->sc, c->theta_k, c->obs.pll.w_hat_radps, c->dt_s, u_dc_V,
                     out->duty_abc);
+  fw_xsat_deadtime(&c->comp, p->i_f_ab, u_dc_V, out->duty_abc); /* nothing when off */
   snapshot_duties(snap, out);
   if (c->phase == FW_START_ALIGN) { /* fundamental only, for the flying-start observer */
     fw_start_fly_set_u(&c->start, fw_inv_park_f32(u_dq, sc_out));
@@ -814,6 +822,7 @@ static void stage_output(fw_ctrl_t *c, const fw_period_t *p, float u_dc_V, fw_ou
   out->pwm_enable = 1u;
 
   fw_obs_set_iq(&c->obs, p->i_dq.y);
+  fw_xsat_update(&c->comp, p->i_dq.y); /* the map's offset for the next period */
   fw_foc_commit_ref(&c->foc, p->i_ref.y);
   /* the current loop's snapshot fields (i_dq, references, u_dq, u_inj): written
    * by the supervision half (snapshot_loops), from the monitor's inputs staged

@@ -201,7 +201,7 @@ float fw_obs_update_pll(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
   } else if (in->bemf_active) {
     eps = in->bemf_err_rad; /* above injection speeds (the HF error is not formed) */
   } else if (FW_LIKELY(!switched && in->E_d_A > floor_A)) {
-    eps = (in->E_q_A / in->E_d_A) * o->eps_gain;
+    eps = (in->E_q_A / in->E_d_A) * o->eps_gain - in->ang_off_rad;
     eps = fw_clamp_symf(eps, 1.0f);
   }
   /* Low-passed *signed* error: its magnitude is the tracking error. The

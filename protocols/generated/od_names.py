@@ -17,7 +17,7 @@ from enum import IntEnum
 from typing import Any, NamedTuple
 
 #: the firmware's version (device.firmware_version; 0x100A, 0x2040 packed)
-FW_VERSION_STRING = '0.5.0'
+FW_VERSION_STRING = '0.6.0'
 
 FAULTS: dict[int, tuple[str, str]] = {
     0x2310: ('OVERCURRENT', '|phase current| above i_trip_A'),
@@ -200,7 +200,7 @@ class ObsMode(IntEnum):
 
 
 #: fw_config_t's parts in struct order (od.yaml fw_config_parts:)
-FW_CONFIG_PARTS: tuple[str, ...] = ('machine', 'sensing', 'loops', 'estimator', 'protection')
+FW_CONFIG_PARTS: tuple[str, ...] = ('machine', 'sensing', 'loops', 'estimator', 'protection', 'compensation')
 #: every fw_config_t field as (name, part, integer?) in the firmware's field-table
 #: order (od.yaml fw_config:; within a part, the struct's order); integer: a
 #: 32-bit integer field, uint32_t, or int32_t when in FW_CONFIG_SIGNED (else float)
@@ -284,6 +284,16 @@ FW_CONFIG_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ('bemf_e_on_V', 'estimator', False),
     ('bemf_e_off_V', 'estimator', False),
     ('mon_bemf_min_V', 'protection', False),
+    ('dt_comp_s', 'compensation', False),
+    ('dt_comp_band_A', 'compensation', False),
+    ('dt_comp_drop_V', 'compensation', False),
+    ('xsat_di_A', 'compensation', False),
+    ('xsat_off1_rad', 'compensation', False),
+    ('xsat_off2_rad', 'compensation', False),
+    ('xsat_off3_rad', 'compensation', False),
+    ('xsat_off4_rad', 'compensation', False),
+    ('xsat_off5_rad', 'compensation', False),
+    ('xsat_off6_rad', 'compensation', False),
 )
 #: the fw_config_t fields stored as int32_t (od.yaml i32: true): option codes
 FW_CONFIG_SIGNED: frozenset[str] = frozenset(['fault_reaction_option', 'quick_stop_option'])
@@ -333,6 +343,7 @@ INDEX_BACK_EMF_OBSERVER = 0x2053
 INDEX_MACHINE_AND_LOOP_BANDWIDTHS = 0x2054
 INDEX_START_UP_AND_ESTIMATE_SUPERVISION = 0x2055
 INDEX_BOARD_SENSING = 0x2056
+INDEX_COMPENSATION = 0x2057
 INDEX_TELEMETRY = 0x2060
 INDEX_TRACE = 0x2070
 INDEX_IDENTIFICATION = 0x2080
@@ -596,6 +607,17 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2056, 2): 'Current zero',
     (0x2056, 3): 'DC link volts per count',
     (0x2056, 4): 'Full-scale count',
+    (0x2057, 0): 'Highest sub-index supported',
+    (0x2057, 1): 'Dead time',
+    (0x2057, 2): 'Dead-time sign band',
+    (0x2057, 3): 'Device drop',
+    (0x2057, 4): 'Cross-saturation map step',
+    (0x2057, 5): 'Cross-saturation offset 1',
+    (0x2057, 6): 'Cross-saturation offset 2',
+    (0x2057, 7): 'Cross-saturation offset 3',
+    (0x2057, 8): 'Cross-saturation offset 4',
+    (0x2057, 9): 'Cross-saturation offset 5',
+    (0x2057, 10): 'Cross-saturation offset 6',
     (0x2060, 0): 'Highest sub-index supported',
     (0x2060, 1): 'Decimation',
     (0x2060, 2): 'Signal count',
@@ -885,6 +907,16 @@ BOARD_SENSING__ADC_A_PER_COUNT = Entry(0x2056, 1, unit='A')
 BOARD_SENSING__ADC_OFFSET_COUNTS = Entry(0x2056, 2)
 BOARD_SENSING__ADC_V_PER_COUNT = Entry(0x2056, 3, unit='V')
 BOARD_SENSING__ADC_MAX_COUNT = Entry(0x2056, 4)
+COMPENSATION__DT_COMP_S = Entry(0x2057, 1, unit='s')
+COMPENSATION__DT_COMP_BAND_A = Entry(0x2057, 2, unit='A')
+COMPENSATION__DT_COMP_DROP_V = Entry(0x2057, 3, unit='V')
+COMPENSATION__XSAT_DI_A = Entry(0x2057, 4, unit='A')
+COMPENSATION__XSAT_OFF1_RAD = Entry(0x2057, 5, unit='rad')
+COMPENSATION__XSAT_OFF2_RAD = Entry(0x2057, 6, unit='rad')
+COMPENSATION__XSAT_OFF3_RAD = Entry(0x2057, 7, unit='rad')
+COMPENSATION__XSAT_OFF4_RAD = Entry(0x2057, 8, unit='rad')
+COMPENSATION__XSAT_OFF5_RAD = Entry(0x2057, 9, unit='rad')
+COMPENSATION__XSAT_OFF6_RAD = Entry(0x2057, 10, unit='rad')
 TELEMETRY__DECIMATION = Entry(0x2060, 1)
 TELEMETRY__SIGNAL_COUNT = Entry(0x2060, 2)
 TELEMETRY__SIGNAL_1 = Entry(0x2060, 3)

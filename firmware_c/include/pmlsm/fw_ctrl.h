@@ -45,6 +45,7 @@
 #include "fw_start.h"
 #include "fw_types.h"
 #include "fw_units.h"
+#include "fw_xsat.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -100,6 +101,7 @@ struct fw_ctrl {
   fw_obs_t obs;
   fw_foc_t foc;
   fw_mon_t mon;
+  fw_xsat_t comp; /**< cross-saturation map and dead-time compensation */
   /** The period's supervision (fw_supervise), staged by fw_step_into: the
    *  integrity monitor's inputs, the quick stop, and whether they wait; and the
    *  work of the period that nothing before the duties needs, left to it. */

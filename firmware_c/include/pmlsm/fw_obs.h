@@ -82,6 +82,8 @@ typedef struct {
 typedef struct {
   float E_d_A, E_q_A;     /**< demodulated one-period HF averages */
   float bemf_err_rad;     /**< back-EMF angle error (read when bemf_active) */
+  float ang_off_rad;      /**< subtracted from the HF angle error: the cross-saturation
+                               map's offset (fw_xsat.h; 0 = none) */
   uint8_t hold;           /**< 1: estimate held (saliency check: injection on q^) */
   uint8_t bemf_active;    /**< 1: track the back-EMF error instead of the HF one */
   uint8_t settled;        /**< 0: extraction still settling: extrapolate, do not correct */
