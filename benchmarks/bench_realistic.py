@@ -5,13 +5,17 @@ cross-saturation, q saturation, a 4th-order secondary saliency, back-EMF harmoni
 effect, dead time with the zero-current clamp, device drops) at 0, 50 and 100 % of the
 rated thrust (600 N = K_f x 10 A), a load step at 0.4 s while the speed loop holds
 0.1 m/s (and 0.5 m/s, above the back-EMF witness's speed), for each combination of the
-two compensations (docs/method.md section 6): the motor file's configuration (both on),
-without the cross-saturation map (xsat_di_A = 0), without the dead-time compensation
-(dt_comp_s = dt_comp_drop_V = 0), and neither. Per case the median over the seeds of the
-true angle error's RMS and maximum over 0.8-1.2 s (0.4-0.8 s after the step) and the
-faults. Writes benchmarks/results/bench_realistic.json and prints a markdown table.
+two compensations (docs/method.md section 6): the motor file's configuration (both on,
+with the bumpless SOGI gain), the same without the bumpless gain (sogi_bumpless = 0: the
+configuration before it), without the cross-saturation map (xsat_di_A = 0), without the
+dead-time compensation (dt_comp_s = dt_comp_drop_V = 0), and none of the three; on request
+(--variants) also both with the back-EMF handover off (both_inj_only). Per case the
+median over the seeds of the true angle error's RMS and maximum over 0.8-1.2 s (0.4-0.8 s
+after the step) and the faults. Writes benchmarks/results/bench_realistic.json and prints
+a markdown table.
 
-Usage: python benchmarks/bench_realistic.py [--seeds 0-4] [--quick]
+Usage: python benchmarks/bench_realistic.py [--seeds 0-4] [--quick] [--variants a,b]
+[--jobs N]
 """
 
 from __future__ import annotations
@@ -33,9 +37,16 @@ RATED_N = 600.0
 #: configuration overrides of each variant over the motor file's (both compensations on)
 VARIANTS = {
     "both": {},
+    # the configuration before the bumpless SOGI gain (sogi_bumpless = 0: the HF lock
+    # oscillates above ~13 A; docs/method.md section 6)
+    "both_not_bumpless": {"sogi_bumpless": 0},
     "no_xsat": {"xsat_di_A": 0.0},
     "no_deadtime": {"dt_comp_s": 0.0, "dt_comp_drop_V": 0.0},
-    "none": {"xsat_di_A": 0.0, "dt_comp_s": 0.0, "dt_comp_drop_V": 0.0},
+    "none": {"xsat_di_A": 0.0, "dt_comp_s": 0.0, "dt_comp_drop_V": 0.0, "sogi_bumpless": 0},
+    # both, with the back-EMF handover off: the injection observer alone through the
+    # load step's transient (the step drives the mover back to about -1 m/s, through
+    # the handover; --inj-only adds this variant)
+    "both_inj_only": {"bemf_v_on_mps": 5.0, "bemf_v_off_mps": 4.0},
 }
 T_STEP, T_END, T_FROM = 0.4, 1.2, 0.8
 #: the issue's target at rated thrust with the compensations (rad el.)
@@ -82,10 +93,23 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=seed_range, default=seed_range("0-4"))
     ap.add_argument("--quick", action="store_true", help="0.1 m/s only")
+    ap.add_argument("--variants", default=",".join(v for v in VARIANTS if v != "both_inj_only"),
+                    help="comma-separated subset of " + ", ".join(VARIANTS))
+    ap.add_argument("--jobs", type=int, default=1, help="worker processes")
     a = ap.parse_args()
     speeds = (0.1,) if a.quick else (0.1, 0.5)
-    rows = [run_one(v, lf, sp, s) for sp in speeds for lf in (0.0, 0.5, 1.0)
-            for v in VARIANTS for s in a.seeds]
+    variants = [v.strip() for v in a.variants.split(",") if v.strip()]
+    bad = [v for v in variants if v not in VARIANTS]
+    if bad:
+        ap.error(f"unknown variant(s) {bad}")
+    cases = [(v, lf, sp, s) for sp in speeds for lf in (0.0, 0.5, 1.0)
+             for v in variants for s in a.seeds]
+    if a.jobs > 1:
+        from multiprocessing import Pool
+        with Pool(a.jobs) as pool:
+            rows = pool.starmap(run_one, cases)
+    else:
+        rows = [run_one(*c) for c in cases]
     out = ROOT / "benchmarks" / "results"
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench_realistic.json").write_text(json.dumps(rows, indent=1) + "\n")

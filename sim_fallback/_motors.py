@@ -74,7 +74,8 @@ class MotorFileErrors(MotorFileError):
 _FW_NAMES = {"R_ohm", "L_d_H", "L_q_H", "psi_f_Wb", "pole_pitch_m", "pole_pairs", "f_pwm_Hz",
              "i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz", "bemf_v_on_mps",
              "bemf_v_off_mps", "mon_bemf_min_mps", "dt_comp_s", "dt_comp_band_A",
-             "dt_comp_drop_V", "xsat_di_A", *(f"xsat_off{k}_rad" for k in range(1, 7))}
+             "dt_comp_drop_V", "xsat_di_A", *(f"xsat_off{k}_rad" for k in range(1, 7)),
+             "sogi_bumpless"}
 
 
 def firmware_field_ranges() -> dict[str, tuple[float, float, str]]:
@@ -230,6 +231,7 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float | None, float | None, str, Any]
     ("controller", "xsat_di_A"): (False, None, None, "A", None),
     **{("controller", f"xsat_off{k}_rad"): (False, None, None, "rad", None)
        for k in range(1, 7)},
+    ("controller", "sogi_bumpless"): (False, None, None, "0/1", None),
     # the rig's reference position sensor (a quadrature scale), modelled as the true
     # position quantised to its resolution; 0 = no sensor fitted
     ("reference_sensor", "resolution_m"): (False, 0.0, 0.01, "m (0: none)", 1e-6),
@@ -240,7 +242,7 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float | None, float | None, str, Any]
 _CTRL_FW_FIELDS = ("i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz",
                    "bemf_v_on_mps", "bemf_v_off_mps", "mon_bemf_min_mps",
                    "dt_comp_s", "dt_comp_band_A", "dt_comp_drop_V", "xsat_di_A",
-                   *(f"xsat_off{k}_rad" for k in range(1, 7)))
+                   *(f"xsat_off{k}_rad" for k in range(1, 7)), "sogi_bumpless")
 #: the compensation keys of ``[controller]`` (docs/method.md section 6)
 COMPENSATION_KEYS = _CTRL_FW_FIELDS[8:]
 _TEXT_FIELDS = {("motor", "name"), ("motor", "description"), ("motor", "parameterization")}
@@ -730,7 +732,7 @@ def fw_config(motor: Motor, extractor: int | str = "sogi_adaptive",
     c = motor.controller
     for k in _CTRL_FW_FIELDS:
         if k in c:
-            setattr(cfg, k, c[k])
+            setattr(cfg, k, type(getattr(cfg, k))(c[k]))  # sogi_bumpless: uint32_t
     if motor.parameterization == "rotary":
         # the paper's speed PI, 0.1 A/(r/min) and 0.6 A/(r/min s), and its PLL, kept
         L.fw_config_derive(cfg)

@@ -16,6 +16,7 @@ static float reset_k(const fw_cfg_estimator_t *est) {
 void fw_inj_init(fw_inj_t *j, const fw_config_t *cfg, float dt_s) {
   j->dt_s = dt_s;
   j->n_inj = (uint32_t)(cfg->sensing.f_pwm_Hz / cfg->estimator.f_inj_Hz + 0.5f);
+  j->bumpless = (uint8_t)(cfg->compensation.sogi_bumpless != 0u);
   j->inv_n_inj = 1.0f / (float)j->n_inj;
   /* Group delay of the pre-warped discrete SOGI at its centre: the analog
    * 2/(k w0) times the warping slope dW/dw = (w0 T/2) sec^2(w0 T/2) / tan(w0 T/2). */
@@ -84,6 +85,14 @@ void fw_inj_set_k(fw_inj_t *j, float k) {
   fw_sogi_set_k_f32(&j->sogi_a, k);
   fw_sogi_copy_gain_f32(&j->sogi_b, &j->sogi_a);
   j->sogi_gd_s = j->sogi_gd_s_k / j->sogi_a.k; /* k is clamped > 0 by set_k */
+}
+
+void fw_inj_set_k_bumpless(fw_inj_t *j, float k) {
+  const float k0 = j->sogi_a.k;
+  fw_inj_set_k(j, k);
+  const float dk = j->sogi_a.k - k0; /* the change made (set_k clamps k) */
+  fw_sogi_bump_k_f32(&j->sogi_a, dk);
+  fw_sogi_bump_k_f32(&j->sogi_b, dk);
 }
 
 void fw_inj_set_extractor(fw_inj_t *j, const fw_cfg_estimator_t *est, fw_extractor_t ex) {

@@ -84,6 +84,14 @@ void fw_sogi_copy_gain_f32(fw_sogi_f32_t *dst, const fw_sogi_f32_t *src) {
   dst->r = src->r;
 }
 
+void fw_sogi_bump_k_f32(fw_sogi_f32_t *s, float dk) {
+  /* trapezoid steady state for a DC input c: x1 = 0 and p 2 c = r x2, x2 = k c */
+  const float c = s->v_prev - s->x1;
+  if (fw_isfinite_f32(dk) && fw_isfinite_f32(c)) {
+    s->x2 += dk * c;
+  }
+}
+
 void fw_sogi_reset_f32(fw_sogi_f32_t *s) {
   s->x1 = 0.0f;
   s->x2 = 0.0f;

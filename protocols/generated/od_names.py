@@ -17,7 +17,7 @@ from enum import IntEnum
 from typing import Any, NamedTuple
 
 #: the firmware's version (device.firmware_version; 0x100A, 0x2040 packed)
-FW_VERSION_STRING = '0.6.0'
+FW_VERSION_STRING = '0.7.0'
 
 FAULTS: dict[int, tuple[str, str]] = {
     0x2310: ('OVERCURRENT', '|phase current| above i_trip_A'),
@@ -294,6 +294,7 @@ FW_CONFIG_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ('xsat_off4_rad', 'compensation', False),
     ('xsat_off5_rad', 'compensation', False),
     ('xsat_off6_rad', 'compensation', False),
+    ('sogi_bumpless', 'compensation', True),
 )
 #: the fw_config_t fields stored as int32_t (od.yaml i32: true): option codes
 FW_CONFIG_SIGNED: frozenset[str] = frozenset(['fault_reaction_option', 'quick_stop_option'])
@@ -618,6 +619,7 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2057, 8): 'Cross-saturation offset 4',
     (0x2057, 9): 'Cross-saturation offset 5',
     (0x2057, 10): 'Cross-saturation offset 6',
+    (0x2057, 11): 'Bumpless SOGI gain',
     (0x2060, 0): 'Highest sub-index supported',
     (0x2060, 1): 'Decimation',
     (0x2060, 2): 'Signal count',
@@ -917,6 +919,7 @@ COMPENSATION__XSAT_OFF3_RAD = Entry(0x2057, 7, unit='rad')
 COMPENSATION__XSAT_OFF4_RAD = Entry(0x2057, 8, unit='rad')
 COMPENSATION__XSAT_OFF5_RAD = Entry(0x2057, 9, unit='rad')
 COMPENSATION__XSAT_OFF6_RAD = Entry(0x2057, 10, unit='rad')
+COMPENSATION__SOGI_BUMPLESS = Entry(0x2057, 11)
 TELEMETRY__DECIMATION = Entry(0x2060, 1)
 TELEMETRY__SIGNAL_COUNT = Entry(0x2060, 2)
 TELEMETRY__SIGNAL_1 = Entry(0x2060, 3)

@@ -108,6 +108,7 @@ static const layout_row_t k_rows[] = {
     ROW(fw_config_t, compensation.xsat_off4_rad),
     ROW(fw_config_t, compensation.xsat_off5_rad),
     ROW(fw_config_t, compensation.xsat_off6_rad),
+    ROW(fw_config_t, compensation.sogi_bumpless),
     ROW(fw_inputs_t, i_abc_A),
     ROW(fw_inputs_t, u_dc_V),
     ROW(fw_adc_inputs_t, i_abc_counts),

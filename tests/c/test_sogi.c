@@ -3,7 +3,8 @@
  * (continuous and pre-warped discrete), unity gain / zero phase at the
  * centre, -3 dB band edges, time-domain run vs the numpy state-space
  * recursion with a k switch and k toggling, continuity of the output under
- * k toggling (where the former DF2T form fails), fw_sogi_copy_gain_f32. */
+ * k toggling (where the former DF2T form fails), fw_sogi_copy_gain_f32,
+ * fw_sogi_bump_k_f32 (a gain change bumpless for a DC input: closed form). */
 #include <math.h>
 #include <string.h>
 
@@ -404,6 +405,55 @@ static void test_reset_and_nan(void) {
   TT_CHECK(same);
 }
 
+/* fw_sogi_bump_k_f32 against the closed form: for a DC input c the trapezoid's steady
+ * state is x1 = 0, x2 = 2 p c / r = k c. A change of k alone leaves x2 (k' - k) c off
+ * and the output rings at the centre in proportion to c; with the bump it stays 0. With
+ * a carrier at the centre on top, the output stays the carrier (unity, zero phase)
+ * through the change. */
+static void test_bump_k_dc(void) {
+  const float f0 = 2000.0f, dt = 1.0f / 16000.0f, c = 14.0f, amp = 0.5f;
+  const double w0dt = 2.0 * PI_D * (double)f0 * (double)dt;
+  for (int carrier = 0; carrier < 2; carrier++) {
+    fw_sogi_f32_t s;
+    TT_CHECK(fw_sogi_init_f32(&s, f0, 0.5f, dt));
+    int n = 0;
+    for (; n < 6000; n++) {
+      const float v = c + (carrier ? amp * (float)sin(w0dt * n) : 0.0f);
+      (void)fw_sogi_step_f32(&s, v, NULL);
+    }
+    if (!carrier) {
+      TT_CHECK(fabsf(s.x1) < 1e-4f * c);
+      TT_CHECK(fabsf(s.x2 - 2.0f * s.p * c / s.r) < 1e-4f * c);
+      TT_CHECK(fabsf(s.x2 - s.k * c) < 1e-4f * c);
+    }
+    fw_sogi_f32_t plain = s, bump = s;
+    fw_sogi_set_k_f32(&plain, 0.8f);
+    fw_sogi_set_k_f32(&bump, 0.8f);
+    fw_sogi_bump_k_f32(&bump, bump.k - s.k);
+    if (!carrier) {
+      TT_CHECK(fabsf(bump.x2 - bump.k * c) < 1e-4f * c); /* the new steady state */
+    }
+    double dev_plain = 0.0, dev_bump = 0.0;
+    for (int m = 0; m < 400; m++, n++) {
+      const double car = carrier ? (double)amp * sin(w0dt * n) : 0.0;
+      const float v = c + (float)car;
+      dev_plain = fmax(dev_plain, fabs((double)fw_sogi_step_f32(&plain, v, NULL) - car));
+      dev_bump = fmax(dev_bump, fabs((double)fw_sogi_step_f32(&bump, v, NULL) - car));
+    }
+    TT_CHECK(dev_plain > 0.3 * 0.3 * (double)c * 0.5); /* rings: of order dk c */
+    TT_CHECK(dev_bump < 2e-3 * (double)c);
+  }
+  /* NaN change or non-finite state: nothing moves */
+  fw_sogi_f32_t s;
+  TT_CHECK(fw_sogi_init_f32(&s, f0, 0.5f, dt));
+  (void)fw_sogi_step_f32(&s, c, NULL);
+  const float x2 = s.x2;
+  fw_sogi_bump_k_f32(&s, NAN);
+  TT_CHECK(s.x2 == x2);
+  fw_sogi_bump_k_f32(&s, 0.0f);
+  TT_CHECK(s.x2 == x2);
+}
+
 int main(void) {
   TT_RUN(test_init_validation);
   TT_RUN(test_freq_response_ref);
@@ -414,5 +464,6 @@ int main(void) {
   TT_RUN(test_k_toggle_continuity);
   TT_RUN(test_copy_gain);
   TT_RUN(test_reset_and_nan);
+  TT_RUN(test_bump_k_dc);
   return TT_SUMMARY();
 }

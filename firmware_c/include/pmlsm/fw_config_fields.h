@@ -11,7 +11,7 @@
  *   - loops (fw_cfg_loops_t, 10 fields): current and speed loops: limits, PI gains, bandwidths for the derived gains
  *   - estimator (fw_cfg_estimator_t, 27 fields): injection, HF extraction, PLL observer, start-up (align, polarity), back-EMF observer and handover
  *   - protection (fw_cfg_protection_t, 28 fields): trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h)
- *   - compensation (fw_cfg_compensation_t, 10 fields): inverter dead-time compensation (modulation) and the cross-saturation angle map (fw_xsat.h); all 0 = off
+ *   - compensation (fw_cfg_compensation_t, 11 fields): inverter dead-time compensation (modulation) and the cross-saturation angle map (fw_xsat.h); all 0 = off
  *
  * Field names are unique across the parts: the object dictionary, the field
  * table and the Python side use the flat name ("R_ohm"), C code the path
@@ -127,16 +127,17 @@ typedef struct {
 
 /** Configuration part compensation: inverter dead-time compensation (modulation) and the cross-saturation angle map (fw_xsat.h); all 0 = off. */
 typedef struct {
-  float dt_comp_s;      /**< inverter dead time to compensate: each phase's duty gets + (dt_comp_s f_pwm + dt_comp_drop_V / u_dc) s(i) with s the smooth sign of its fundamental current (0: off) [s] */
-  float dt_comp_band_A; /**< current band of the smooth sign s(i) = i / sqrt(i^2 + band^2) of the dead-time compensation (0: the hard sign); about the inverter's zero-current clamp plus the injection's ripple [A] */
-  float dt_comp_drop_V; /**< device threshold drop compensated with the dead time (same smooth sign; 0: none) [V] */
-  float xsat_di_A;      /**< cross-saturation map: breakpoint spacing in |i_q| (the map's points at 1..6 x this; 0: off) [A] */
-  float xsat_off1_rad;  /**< cross-saturation map: HF angle-error offset at i_q = 1 x xsat_di_A (odd in i_q, linear between points, 0 at 0, held beyond point 6) [rad] */
-  float xsat_off2_rad;  /**< ... at i_q = 2 x xsat_di_A [rad] */
-  float xsat_off3_rad;  /**< ... at i_q = 3 x xsat_di_A [rad] */
-  float xsat_off4_rad;  /**< ... at i_q = 4 x xsat_di_A [rad] */
-  float xsat_off5_rad;  /**< ... at i_q = 5 x xsat_di_A [rad] */
-  float xsat_off6_rad;  /**< ... at i_q = 6 x xsat_di_A [rad] */
+  float dt_comp_s;        /**< inverter dead time to compensate: each phase's duty gets + (dt_comp_s f_pwm + dt_comp_drop_V / u_dc) s(i) with s the smooth sign of its fundamental current (0: off) [s] */
+  float dt_comp_band_A;   /**< current band of the smooth sign s(i) = i / sqrt(i^2 + band^2) of the dead-time compensation (0: the hard sign); about the inverter's zero-current clamp plus the injection's ripple [A] */
+  float dt_comp_drop_V;   /**< device threshold drop compensated with the dead time (same smooth sign; 0: none) [V] */
+  float xsat_di_A;        /**< cross-saturation map: breakpoint spacing in |i_q| (the map's points at 1..6 x this; 0: off) [A] */
+  float xsat_off1_rad;    /**< cross-saturation map: HF angle-error offset at i_q = 1 x xsat_di_A (odd in i_q, linear between points, 0 at 0, held beyond point 6) [rad] */
+  float xsat_off2_rad;    /**< ... at i_q = 2 x xsat_di_A [rad] */
+  float xsat_off3_rad;    /**< ... at i_q = 3 x xsat_di_A [rad] */
+  float xsat_off4_rad;    /**< ... at i_q = 4 x xsat_di_A [rad] */
+  float xsat_off5_rad;    /**< ... at i_q = 5 x xsat_di_A [rad] */
+  float xsat_off6_rad;    /**< ... at i_q = 6 x xsat_di_A [rad] */
+  uint32_t sogi_bumpless; /**< 1: the adaptive SOGI's gain changes move its quadrature state by the change times the fundamental current, so a change of k does not ring the filter at the carrier in proportion to the current (docs/method.md section 6; 0: off, the drive as before) */
 } fw_cfg_compensation_t;
 
 /**
@@ -243,9 +244,10 @@ typedef struct {
   F32(compensation, xsat_off3_rad, "rad", -0.8f, 0.8f, 0.0f) \
   F32(compensation, xsat_off4_rad, "rad", -0.8f, 0.8f, 0.0f) \
   F32(compensation, xsat_off5_rad, "rad", -0.8f, 0.8f, 0.0f) \
-  F32(compensation, xsat_off6_rad, "rad", -0.8f, 0.8f, 0.0f)
+  F32(compensation, xsat_off6_rad, "rad", -0.8f, 0.8f, 0.0f) \
+  U32(compensation, sogi_bumpless, "", 0.0f, 1.0f, 0u)
 /* clang-format on */
 
-#define FW_CONFIG_FIELD_COUNT 89u
+#define FW_CONFIG_FIELD_COUNT 90u
 
 #endif /* PMLSM_FW_CONFIG_FIELDS_H */

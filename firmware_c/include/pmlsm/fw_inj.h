@@ -65,6 +65,9 @@ typedef struct {
   float k_reset;
   float gain_reset[8];
   float gd_reset;
+  /** constant from the configuration (compensation.sogi_bumpless): the adaptive
+   *  gain's changes move the SOGIs' quadrature states with them (fw_inj_set_k_bumpless) */
+  uint8_t bumpless;
 } fw_inj_t;
 
 /** Results of one sample. */
@@ -85,6 +88,10 @@ void fw_inj_init(fw_inj_t *j, const fw_config_t *cfg, float dt_s);
 void fw_inj_reset(fw_inj_t *j, const fw_cfg_estimator_t *est);
 /** Same k on both SOGIs (coefficients computed once). */
 void fw_inj_set_k(fw_inj_t *j, float k);
+/** fw_inj_set_k, then each SOGI's quadrature state moved by the change of k times
+ *  its input's low-frequency part (fw_sogi_bump_k_f32): a gain change does not ring
+ *  the filters in proportion to the fundamental current. */
+void fw_inj_set_k_bumpless(fw_inj_t *j, float k);
 /** Extractor switched: k for the new path, the one-period averages restart. */
 void fw_inj_set_extractor(fw_inj_t *j, const fw_cfg_estimator_t *est, fw_extractor_t ex);
 /**
@@ -104,7 +111,11 @@ static inline void fw_inj_adapt(fw_inj_t *j, const fw_cfg_estimator_t *est, floa
   const float k = est->sogi_k_adapt_min + (est->sogi_k_adapt_max - est->sogi_k_adapt_min) * r;
   const float dk = k - j->sogi_a.k;
   if (FW_UNLIKELY(fabsf(dk) > FW_INJ_SOGI_K_STEP)) { /* |dk| exact: dk > step or dk < -step */
-    fw_inj_set_k(j, k);
+    if (FW_UNLIKELY(j->bumpless)) {
+      fw_inj_set_k_bumpless(j, k);
+    } else {
+      fw_inj_set_k(j, k);
+    }
   }
 }
 /** Sign to command this period (+1/-1 by half injection period, 0 when off);

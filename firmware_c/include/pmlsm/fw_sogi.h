@@ -79,6 +79,19 @@ void fw_sogi_set_k_f32(fw_sogi_f32_t *s, float k);
  */
 void fw_sogi_copy_gain_f32(fw_sogi_f32_t *dst, const fw_sogi_f32_t *src);
 
+/**
+ * After a change of k by dk: move the quadrature state by dk times the input's
+ * low-frequency part, estimated as the last input minus the band-pass output
+ * (v_prev - v'). For an input c + (a carrier) in steady state the state holds
+ * qv' = k c + (the carrier's quadrature): with the state kept as it is, a new k
+ * leaves it dk c off the new steady state, and the filter rings at its centre
+ * frequency with an amplitude proportional to dk c (a DC or slow fundamental
+ * current c of several amperes under a band-pass for the injection carrier).
+ * With the move the change is bumpless for the low-frequency part, and the
+ * carrier's state (unity gain at the centre, whatever k) is kept.
+ */
+void fw_sogi_bump_k_f32(fw_sogi_f32_t *s, float dk);
+
 /** Clear the state (outputs and the stored previous input). */
 void fw_sogi_reset_f32(fw_sogi_f32_t *s);
 
