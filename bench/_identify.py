@@ -9,13 +9,23 @@ drive; on the simulated drive the plant's truth is added to the report, never us
 
 The drive is left as it was found: the configuration read at the start is written back
 at the end (also after a fault or Ctrl-C), unless ``apply`` asks for the identified one.
+
+Step 7 (``clamped``, ``bench identify --clamped``): the cross-saturation map
+(:func:`identification.run_cross_saturation`) after the usual steps, on a mover held by a
+clamp or a brake (``hold``: the operator's confirmation, or on the simulated drive the
+plant's lock, the fixture's action). The thrust current goes to the drive as the CiA 402
+target torque (0x6071, per mille of ``i_max_A`` in FORCE mode); the position estimate comes
+from the telemetry, the speed estimate for the safety check from the TPDO (0x606C). A mover
+that moves stops the step (:class:`identification.MoverMoved`); steps 1-6 are kept.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -27,13 +37,16 @@ from identification import (
     IDENT_RESTORED,
     PROBE_SIGNALS,
     START_WINDOWS,
+    XSAT_POINTS,
     Identified,
     Probe,
     ident_overrides,
+    run_cross_saturation,
     run_identification,
 )
 from protocols.generated import od_names as od
 from protocols.generated.od_names import StartPhase
+from protocols.units import force_constant_N_per_A
 from sim_fallback import truth_of
 
 #: Telemetry signals the probe asks for (one frame per millisecond).
@@ -55,10 +68,20 @@ QUANTITIES: dict[str, tuple[str, str]] = {
     "F_coulomb_N": ("N", "Coulomb friction"),
 }
 
-#: Identified value -> drive configuration field (fw_config_t, the OD parameter name).
+#: The cross-saturation map (step 7, ``--clamped``; object 0x2057): value -> unit, what.
+XSAT_QUANTITIES: dict[str, tuple[str, str]] = {
+    "xsat_di_A": ("A", "cross-saturation map step (points at 1..6 x)"),
+    **{f"xsat_off{k}_rad": ("rad", f"cross-saturation HF angle-error offset at {k} x step")
+       for k in range(1, XSAT_POINTS + 1)},
+    **{f"xsat_axis{k}_rad": ("rad", f"HF axis turn measured at {k} x step (map off)")
+       for k in range(1, XSAT_POINTS + 1)}}
+
+#: Identified value -> drive configuration field (fw_config_t, the OD parameter name). The
+#: map's fields only when step 7 measured them (else the drive's map stays as it was).
 CONFIG_FIELDS = {"R_ohm": "R_ohm", "L_d_H": "L_d_H", "L_q_H": "L_q_H", "psi_f_Wb": "psi_f_Wb",
                  "mass_kg": "mass_kg", "b_visc_Ns_per_m": "visc_Ns_per_m",
-                 "F_coulomb_N": "coulomb_N"}
+                 "F_coulomb_N": "coulomb_N", "xsat_di_A": "xsat_di_A",
+                 **{f"xsat_off{k}_rad": f"xsat_off{k}_rad" for k in range(1, XSAT_POINTS + 1)}}
 
 
 class IdentifyError(RuntimeError):
@@ -73,12 +96,48 @@ class WireProbe(Probe):
     time base (control steps), so the bench's clock and SDO latency do not matter.
     """
 
-    def __init__(self, conn: Any, logger: Any, wait_s: float = 2.0) -> None:
+    def __init__(self, conn: Any, logger: Any, wait_s: float = 2.0,
+                 i_max_A: float | None = None) -> None:
         self.conn = conn
         self.drive = conn.drive
         self.clock = conn.drive.clock
         self.logger = logger
         self.wait_s = wait_s
+        #: the drive's i_max_A: 1000 per mille of the target torque in FORCE mode (set_iq)
+        self.i_max_A = i_max_A
+        self._speed: list[float] = []  # speed estimates (m/s) from the TPDO, not yet returned
+        self._speed_lock = threading.Lock()
+        self._speed_maps: list[Any] = []
+
+    # ---- the speed estimate from the TPDO (step 7's safety check) --------------------
+    def watch_speed(self) -> bool:
+        """Collect the drive's speed estimate (velocity actual value 0x606C) from the TPDO
+        that carries it (SYNC-triggered: every millisecond on the simulated drive, every
+        SYNC period on a rig); :meth:`run` then adds ``speed_hat_mps``: every sample
+        received since the last window. False if no enabled TPDO maps it."""
+        e = od.VELOCITY_ACTUAL_VALUE
+        for tpdo in self.drive.node.tpdo.values():
+            if tpdo.enabled and any(v.index == e.index and v.subindex == e.sub for v in tpdo):
+                tpdo.add_callback(self._on_speed)
+                self._speed_maps.append(tpdo)
+        self.conn.start_sync()  # a rig's TPDOs are SYNC-triggered (idempotent)
+        return bool(self._speed_maps)
+
+    def unwatch_speed(self) -> None:
+        for tpdo in self._speed_maps:
+            if self._on_speed in tpdo.callbacks:
+                tpdo.callbacks.remove(self._on_speed)
+        self._speed_maps = []
+
+    def _on_speed(self, pdo_map: Any) -> None:
+        from bench._units import wire_to_si
+
+        e = od.VELOCITY_ACTUAL_VALUE
+        for v in pdo_map:
+            if v.index == e.index and v.subindex == e.sub:
+                val = float(wire_to_si(e, int(v.raw)))
+                with self._speed_lock:
+                    self._speed.append(val)
 
     # ---- telemetry windows ----------------------------------------------------------
     def _t_last(self) -> float:
@@ -116,6 +175,10 @@ class WireProbe(Probe):
 
             raise DriveFault(f"drive fault {fault_text(int(codes[0]))} during "
                              "identification", int(codes[0]))
+        if self._speed_maps:
+            with self._speed_lock:
+                got, self._speed = self._speed, []
+            out["speed_hat_mps"] = np.asarray(got, dtype=np.float64)
         return out
 
     def run(self, seconds: float) -> dict[str, np.ndarray]:
@@ -164,6 +227,21 @@ class WireProbe(Probe):
     def set_id(self, amps: float) -> None:
         self.drive.write(od.IDENTIFICATION__D_AXIS_CURRENT_REFERENCE, float(amps))
 
+    def set_iq(self, amps: float) -> None:
+        """The thrust current as the CiA 402 target torque (0x6071): in FORCE mode the
+        drive takes it as per mille of its i_max_A (i_q reference; 0.1 % steps). Written
+        in per mille of i_max_A, not through :meth:`Drive.set_force_N`, whose rated force
+        uses the drive's psi_f (changed while identifying)."""
+        from bench._units import si_to_wire
+
+        if not self.i_max_A:
+            raise IdentifyError("set_iq: the drive's i_max_A is not known to the probe")
+        pm = si_to_wire(od.TARGET_TORQUE, float(amps) / float(self.i_max_A))
+        if not -1000 <= pm <= 1000:
+            raise IdentifyError(f"thrust current {amps:.3g} A beyond i_max_A {self.i_max_A:g} A")
+        self.drive.write(od.TARGET_TORQUE, pm)
+        self.drive._sync_rpdo_cache(od.TARGET_TORQUE, pm)  # canopen's RPDO image
+
     def reconfigure(self, fields: dict[str, float]) -> None:
         self.drive.disable()
         self.run(0.01)
@@ -211,19 +289,84 @@ def _cfg_view(drive: Any) -> SimpleNamespace:
     return SimpleNamespace(**{
         name: float(drive.get(name)[0])
         for name in ("i_max_A", "f_pwm_Hz", "u_inj_V", "L_d_H", "L_q_H", "spd_bw_radps",
-                     "spd_kp_A_per_radps", "spd_ki_A_per_rad", "pole_pitch_m", "v_max_mps")})
+                     "spd_kp_A_per_radps", "spd_ki_A_per_rad", "pole_pitch_m", "v_max_mps",
+                     "psi_f_Wb")})
+
+
+def _telemetry_on(drive: Any, f_pwm_Hz: float) -> None:
+    """The probe's telemetry: :data:`TEL_SIGNALS`, one frame per :data:`TEL_PERIOD_S`."""
+    from protocols.serial_link import signal_names
+
+    names = signal_names()
+    ids = [names.index(s) for s in TEL_SIGNALS]
+    drive.write(od.TELEMETRY__DECIMATION, 0)  # telemetry off while it is reconfigured
+    drive.write(od.TELEMETRY__SIGNAL_COUNT, len(ids))
+    for k, i in enumerate(ids):
+        drive.write_raw(od.INDEX_TELEMETRY, od.TELEMETRY__SIGNAL_1.sub + k, i)
+    drive.write(od.TELEMETRY__DECIMATION, max(1, int(round(f_pwm_Hz * TEL_PERIOD_S))))
+
+
+def peak_thrust_N(cfg0: Any) -> float:
+    """The thrust step 7 applies at its last point (N): the map's top current
+    (:data:`identification.XSAT_TOP` x i_max_A) x K_F from the drive's configured psi_f;
+    what the clamp must hold, for the operator's prompt."""
+    from identification import XSAT_TOP
+
+    return XSAT_TOP * float(cfg0.i_max_A) * force_constant_N_per_A(float(cfg0.psi_f_Wb),
+                                                                   float(cfg0.pole_pitch_m))
+
+
+def _cross_saturation(conn: Any, probe: WireProbe, cfg0: Any, backup: dict[str, Any],
+                      res: Identified, hold: Callable[[], bool] | None) -> None:
+    """Step 7 over the wire, after steps 1-6 (the drive off in between): ``hold`` (the
+    fixture: an operator's confirmation or the simulated plant's lock) may decline (False:
+    skipped, noted); then the drive runs the identified configuration (the motor file's,
+    gains derived from it, the user's extractor) with the map being measured, and the
+    result joins ``res``. :class:`identification.MoverMoved` or a fault leave ``res`` as
+    steps 1-6 made it."""
+    drive = conn.drive
+    drive.disable()
+    if hold is not None and not hold():
+        res.log.append("step 7 (cross-saturation map) skipped: the mover was not clamped")
+        return
+    code = drive.fault_code()
+    if code:  # latched in step 6, which keeps what it measured before (see its note)
+        from bench._drive import fault_text
+
+        drive.reset_faults()
+        res.log.append(f"step 7: the drive's fault {fault_text(code)} from steps 1-6 reset "
+                       "before it")
+    drive.restore(identified_config(backup, res))
+    _telemetry_on(drive, cfg0.f_pwm_Hz)
+    watched = probe.watch_speed()
+    try:
+        probe.run(0.02)  # telemetry flowing again
+        xs = run_cross_saturation(probe, cfg0, float(cfg0.pole_pitch_m))
+    finally:
+        probe.unwatch_speed()
+    res.values.update(xs.values)
+    res.sigma.update(xs.sigma)
+    res.log += xs.log
+    if not watched:
+        res.log.append("step 7's safety check had the position estimate only (no TPDO "
+                       "maps the speed estimate 0x606C)")
 
 
 def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
-                   name: str = "identified", apply: bool = False, n_starts: int = 4
+                   name: str = "identified", apply: bool = False, n_starts: int = 4,
+                   clamped: bool = False, hold: Callable[[], bool] | None = None
                    ) -> IdentifyOutput:
     """Run the identification on a connected drive; write the run folder (motor file,
     drive configuration, report, summary, logs). The drive's configuration is restored
-    at the end unless ``apply`` (then the identified configuration stays)."""
+    at the end unless ``apply`` (then the identified configuration stays).
+
+    ``clamped``: step 7, the cross-saturation map, after the usual steps; ``hold`` is
+    called first with the drive off, the fixture's action that holds the mover (True: go
+    on, False: skip the step). A mover that moves during it stops the step with a one-line
+    error (``out.error``; the drive is disabled; steps 1-6 are kept and written)."""
     from bench._drive import DriveError, DriveLost
     from bench._logging import RunLogger, run_dir_for
     from bench._session import TelemetryReader
-    from protocols.serial_link import signal_names
     from sim_fallback import extractor_id
 
     if conn.serial is None:
@@ -244,23 +387,22 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
     keep = backup
     lost = False
     try:
-        names = signal_names()
-        ids = [names.index(s) for s in TEL_SIGNALS]
-        drive.write(od.TELEMETRY__DECIMATION, 0)  # telemetry off while it is reconfigured
-        drive.write(od.TELEMETRY__SIGNAL_COUNT, len(ids))
-        for k, i in enumerate(ids):
-            drive.write_raw(od.INDEX_TELEMETRY, od.TELEMETRY__SIGNAL_1.sub + k, i)
-        drive.write(od.TELEMETRY__DECIMATION, max(1, int(round(cfg0.f_pwm_Hz * TEL_PERIOD_S))))
+        _telemetry_on(drive, cfg0.f_pwm_Hz)
         # the bias sweep reads the raw HF response (E_d = T_s u_inj / L_dd): the
         # pseudo-filter extraction, whatever the drive normally uses
         drive.set("extractor", float(extractor_id("pseudo")))
         restore = {k: float(backup["parameters"][k]["value"]) for k in IDENT_RESTORED}
         drive.set_many({k: float(v) for k, v in ident_overrides(cfg0).items()})
-        probe = WireProbe(conn, logger)
+        probe = WireProbe(conn, logger, i_max_A=cfg0.i_max_A)
         probe.run(0.02)  # telemetry flowing
         res = run_identification(probe, cfg0, cfg0.pole_pitch_m, travel_m, n_starts,
                                  restore)
         out.result = res
+        if clamped:
+            _cross_saturation(conn, probe, cfg0, backup, res, hold)
+        else:
+            res.log.append("step 7 (cross-saturation map) not run: it needs a clamped mover "
+                           "(--clamped)")
     except (IdentifyError, DriveError, RuntimeError) as e:
         out.error = " ".join(str(e).split())
         out.drive_error = isinstance(e, DriveError)
@@ -290,8 +432,24 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
                                         "error": out.error}, "logging": logstats})
     if conn.sim is not None:
         out.truth = truth_of(conn.sim.motor, conn.sim.plant_overrides)
+        if out.result is not None and "xsat_di_A" in out.result.values:
+            out.truth.update(xsat_truth(conn.sim, out.result))
     _write_outputs(out, backup, name, conn)
     return out
+
+
+def xsat_truth(sim: Any, res: Identified) -> dict[str, float]:
+    """The simulated plant's closed forms at the map's points (report only, never used):
+    the HF axis turn and the HF angle error at the true angle with the identified L_d, L_q
+    (the configuration step 7 ran with)."""
+    from sim_fallback import cross_saturation_truth
+
+    levels = float(res.values["xsat_di_A"]) * np.arange(1, XSAT_POINTS + 1)
+    delta, eps = cross_saturation_truth(sim.motor, levels, sim.plant_overrides,
+                                        L_d_cfg=res.values.get("L_d_H"),
+                                        L_q_cfg=res.values.get("L_q_H"))
+    return {**{f"xsat_axis{k + 1}_rad": float(delta[k]) for k in range(XSAT_POINTS)},
+            **{f"xsat_off{k + 1}_rad": float(eps[k]) for k in range(XSAT_POINTS)}}
 
 
 def identified_config(backup: dict[str, Any], res: Identified) -> dict[str, Any]:
@@ -322,7 +480,7 @@ def _write_outputs(out: IdentifyOutput, backup: dict[str, Any], name: str, conn:
         (d / "drive_config.json").write_text(
             json.dumps(identified_config(backup, res), indent=2) + "\n")
         out.files = {"motor": str(d / "motor.toml"), "config": str(d / "drive_config.json")}
-        for k, (unit, what) in QUANTITIES.items():
+        for k, (unit, what) in {**QUANTITIES, **XSAT_QUANTITIES}.items():
             if k not in res.values:
                 continue
             row = {"quantity": k, "what": what, "value": res.values[k],

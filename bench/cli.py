@@ -176,8 +176,10 @@ def build_parser() -> argparse.ArgumentParser:
                        "motor.toml, drive_config.json (for `bench config restore`), "
                        "report.html and summary.json. The drive's configuration is restored "
                        "afterwards unless --apply. The mover travels about --travel in each "
-                       "direction: the axis must be free. Exit 0 identified, 1 the "
-                       "identification stopped (a drive fault, named), 2 bad input, 3 "
+                       "direction: the axis must be free. With --clamped, step 7 follows: "
+                       "the cross-saturation map on the mover held by a clamp or brake. "
+                       "Exit 0 identified, 1 the identification stopped (a drive fault, "
+                       "named; or the clamped mover moved: steps 1-6 kept), 2 bad input, 3 "
                        "connection error, 130 interrupted (drive disabled, configuration "
                        "restored).")
     _conn_args(p)
@@ -189,6 +191,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--apply", action="store_true",
                    help="leave the identified configuration in the drive (gains derived "
                         "from it); `bench config save` then stores it")
+    p.add_argument("--clamped", action="store_true",
+                   help="after the usual steps, step 7: the cross-saturation map (object "
+                        "0x2057, motor file [controller] xsat_*) on a HELD mover: the bench "
+                        "stops the drive and asks you to clamp or brake the mover (it applies "
+                        "thrust up to 0.6 x i_max_A; the peak thrust is printed), Enter goes "
+                        "on, 'skip' skips. Needs an operator at the terminal; on --sim the "
+                        "simulated mover is locked instead. A mover that moves stops the step "
+                        "(exit 1, drive disabled, steps 1-6 kept). Without it the map is not "
+                        "measured (the motor file says so)")
     p.add_argument("--runs", default="runs", metavar="DIR", help="run folder root")
 
     p = sub.add_parser("info", help="connection, identity, firmware check, state",
@@ -1078,27 +1089,45 @@ def cmd_identify(args: argparse.Namespace) -> int:
         raise UserError(f"--starts {args.starts}: allowed range [1, 20]")
     if not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}", args.name):
         raise UserError(f"--name {args.name!r}: 1-64 letters, digits, '_', '.', '-'")
+    if args.clamped:
+        for flag, on, what in (("--sim-server", getattr(args, "sim_server", False),
+                                "the simulated drive server"),
+                               ("--emu", getattr(args, "emu", False), "the emulated board")):
+            if on:
+                raise UserError(f"--clamped with {flag}: {what}'s mover cannot be held from "
+                                "the bench (no remote plant lock); use --sim, or a rig with a "
+                                "clamp")
     conn = _connect(args)
     try:
+        hold = _clamp_fixture(args, conn) if args.clamped else None
         out = identify_drive(conn, runs_root=args.runs, travel_m=args.travel,
-                             name=args.name, apply=args.apply, n_starts=args.starts)
+                             name=args.name, apply=args.apply, n_starts=args.starts,
+                             clamped=args.clamped, hold=hold)
     except IdentifyError as e:
         raise UserError(f"identify: {e}", EXIT_USAGE) from None
     finally:
         conn.close()
     res = out.result
     if res is not None:
-        from bench._identify import QUANTITIES
+        from bench._identify import QUANTITIES, XSAT_QUANTITIES
 
         sim = out.truth is not None
         print(f"identified{' [SIMULATED drive]' if sim else ''}: {out.run_dir}")
-        for k, (unit, _what) in QUANTITIES.items():
+        shown = {**QUANTITIES, **{k: v for k, v in XSAT_QUANTITIES.items()
+                                  if not k.startswith("xsat_axis")}}
+        if "xsat_di_A" not in res.values:
+            print("  cross-saturation map not measured (" + (
+                "step 7 did not complete" if args.clamped else "step 7 needs --clamped") + ")")
+        for k, (unit, _what) in shown.items():
             if k not in res.values:
                 continue
             sig = res.sigma.get(k)
             line = f"  {k:16s} {res.values[k]:12.5g} {unit:6s}" + (
                 f" +- {sig:<8.2g}" if sig is not None else " " * 12)
-            if sim and out.truth and out.truth.get(k):
+            if sim and out.truth and out.truth.get(k) and k.startswith("xsat_off"):
+                line += f"   (closed form {out.truth[k]:.4f}, " \
+                        f"{res.values[k] - out.truth[k]:+.4f} rad)"
+            elif sim and out.truth and out.truth.get(k):
                 line += f"   (simulator truth {out.truth[k]:.5g}, " \
                         f"{100 * (res.values[k] / out.truth[k] - 1):+.2f} %)"
             print(line)
@@ -1114,6 +1143,40 @@ def cmd_identify(args: argparse.Namespace) -> int:
         print(f"bench: identify: {out.error}{tail} ({out.run_dir})", file=sys.stderr)
         return EXIT_DRIVE if out.drive_error else EXIT_FAIL
     return EXIT_OK
+
+
+def _clamp_fixture(args: argparse.Namespace, conn: Any) -> Any:
+    """``bench identify --clamped``: what holds the mover before step 7. The in-process
+    simulated drive: its plant's lock (:func:`sim_fallback.hold_mover`, the fixture's
+    action, never read by the probe). A rig: the operator, asked on the terminal once
+    steps 1-6 are done and the drive is off (refused up front without a terminal)."""
+    if conn.sim is not None:
+        from sim_fallback import hold_mover
+
+        def lock() -> bool:
+            hold_mover(conn.sim, True)
+            print("bench: identify: step 7: the simulated mover is held (plant locked)",
+                  file=sys.stderr)
+            return True
+        return lock
+    if not sys.stdin.isatty():
+        raise UserError("--clamped on a drive needs an operator at the terminal to confirm "
+                        "the clamp before step 7 (stdin is not a terminal); nothing was moved")
+    from bench._identify import _cfg_view, peak_thrust_N
+
+    peak = peak_thrust_N(_cfg_view(conn.drive))
+
+    def ask() -> bool:
+        print(f"bench: identify: steps 1-6 done, the drive is off. Step 7 applies thrust up "
+              f"to {peak:.0f} N in both directions: clamp or brake the mover now so that it "
+              "holds that, then press Enter ('skip' + Enter skips the step, Ctrl-C stops)",
+              file=sys.stderr)
+        try:
+            ans = input()
+        except EOFError:
+            return False
+        return ans.strip().lower() not in ("skip", "s", "n", "no")
+    return ask
 
 
 def cmd_info(args: argparse.Namespace) -> int:

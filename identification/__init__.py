@@ -12,7 +12,12 @@ from ._procedure import (
     IDENT_SPEED_BW,
     PROBE_SIGNALS,
     START_WINDOWS,
+    XSAT_MAX_DRIFT_RAD,
+    XSAT_MAX_SPEED_MPS,
+    XSAT_POINTS,
+    XSAT_PREFIX,
     Identified,
+    MoverMoved,
     Probe,
     ident_overrides,
     run_cross_saturation,
@@ -21,5 +26,6 @@ from ._procedure import (
 )
 
 __all__ = ["IDENT_FW", "IDENT_RESTORED", "IDENT_SPEED_BW", "PROBE_SIGNALS", "START_WINDOWS",
-           "Identified", "Probe", "ident_overrides", "run_cross_saturation", "run_identification",
+           "XSAT_MAX_DRIFT_RAD", "XSAT_MAX_SPEED_MPS", "XSAT_POINTS", "XSAT_PREFIX", "Identified",
+           "MoverMoved", "Probe", "ident_overrides", "run_cross_saturation", "run_identification",
            "xsat_fields"]

@@ -27,6 +27,9 @@ simulator's truth is used by the tests only, to judge the result.
 6. Viscous and Coulomb friction: trapezoidal speed passes at two speeds in each
    direction within the travel; F = F_c sgn(v) + b v by weighted least squares over
    constant-speed windows of whole electrical periods (see _fit_friction).
+7. Optional, on a CLAMPED mover (:func:`run_cross_saturation`, a separate call): the
+   cross-saturation angle map from the position estimate under thrust current, with a
+   safety check that stops it when the mover moves (:class:`MoverMoved`).
 """
 
 from __future__ import annotations
@@ -143,14 +146,32 @@ class Identified:
             f"static_friction_N = {max(v['F_coulomb_N'], 0.0):.6g}",
             f"pole_pairs = {pole_pairs:g}", "",
             "[controller]",
-            *[f"{k} = {val!r}" for k, val in c.items() if isinstance(val, (int, float))],
+            *[f"{k} = {val!r}" for k, val in c.items() if isinstance(val, (int, float))
+              and not k.startswith(XSAT_PREFIX)],
+            *self._xsat_lines(),
             "",
         ])
+
+    def _xsat_lines(self) -> list[str]:
+        """The cross-saturation map (step 7) in the ``[controller]`` section, or a comment
+        that it was not measured (the drive then runs without it: all 0 = off)."""
+        v = self.values
+        if "xsat_di_A" not in v:
+            return ["# cross-saturation map (xsat_*) not measured: step 7 needs a clamped "
+                    "mover (bench identify --clamped, docs/identify.md); off"]
+        return ["# cross-saturation map measured on the clamped mover (step 7): HF angle-"
+                "error offsets (rad) at 1..6 x xsat_di_A, held beyond",
+                f"xsat_di_A = {v['xsat_di_A']:.6g}",
+                *[f"xsat_off{k}_rad = {v[f'xsat_off{k}_rad']:.5f}  # +- "
+                  f"{self.sigma.get(f'xsat_off{k}_rad', 0.0):.2g}"
+                  for k in range(1, XSAT_POINTS + 1)]]
 
 
 #: What a probe's ``run`` returns, one sample per millisecond (the drive's telemetry):
 #: d/q current (A), commanded d/q voltage (V), HF response amplitude (A), position
-#: estimate (m).
+#: estimate (m). A probe may add the drive's speed estimate ``speed_hat_mps`` (m/s, any
+#: number of samples in the window: the wire's TPDO at the SYNC rate), which the safety
+#: check of step 7 uses where it is given.
 PROBE_SIGNALS = ("i_d_A", "i_q_A", "u_d_V", "u_q_V", "hf_amp_A", "pos_hat_m")
 
 
@@ -466,6 +487,10 @@ def _fit_friction(passes: list[dict[str, Any]], dt: float, K_F: float, mass: flo
              + f"; F = {F_c:.3f} N sgn(v) + {b:.3f} N s/m v"])
 
 
+#: Names of the cross-saturation map's values (configuration and motor file).
+XSAT_PREFIX = "xsat_"
+
+
 #: Cross-saturation map (:func:`run_cross_saturation`): map points (the firmware's
 #: FW_XSAT_POINTS), the i_q ramp between levels, the settling and averaging windows (s)
 XSAT_POINTS = 6
@@ -490,6 +515,69 @@ XSAT_TOP = 0.6
 #: integrator caught up) and the back-EMF witness off (a speed estimate that wanders
 #: while the thrust current ramps is no motion to check).
 XSAT_FW = {"gains_auto": 0, "pll_accel_per_A": 0.0, "mon_bemf_min_mps": 1000.0}
+
+
+#: Step 7's safety check (:class:`MoverMoved`): the largest move of the position estimate
+#: from where a sweep began (el. rad: the estimate moves by the axis turn on a held mover,
+#: at most the map's range of 0.8 rad; on the clamp up to 0.35 rad on realistic_linear)
+#: and the largest speed estimate (m/s; on the clamp its jitter reaches 0.1 m/s at 10-12 A
+#: on realistic_linear, where the HF lock nears its limit). A free mover at the first
+#: level (2 A, 120 N on 6 kg) passes 0.3 m/s within 15 ms, 2.3 mm.
+XSAT_MAX_DRIFT_RAD = 1.0
+
+
+XSAT_MAX_SPEED_MPS = 0.3
+
+
+class MoverMoved(RuntimeError):
+    """Step 7 stopped: the mover moved (it is not held). One line; the caller disables the
+    drive."""
+
+
+class _HeldGuard(Probe):
+    """The probe of step 7 with its safety check: every window :meth:`run` returns is
+    checked against where the position estimate was at the first window after the last
+    (re)start, and the speed estimate where the probe gives it; beyond
+    :data:`XSAT_MAX_DRIFT_RAD` or :data:`XSAT_MAX_SPEED_MPS` the thrust reference goes to 0
+    and :class:`MoverMoved` is raised."""
+
+    def __init__(self, probe: Probe, k_e: float) -> None:
+        self.probe = probe
+        self.max_dx = XSAT_MAX_DRIFT_RAD / k_e
+        self.x_ref: float | None = None
+
+    def reconfigure(self, fields: dict[str, float]) -> None:
+        self.probe.reconfigure(fields)
+        self.x_ref = None  # a start aligns the estimate again
+
+    def set_iq(self, amps: float) -> None:
+        self.probe.set_iq(amps)
+
+    def run(self, seconds: float) -> dict[str, np.ndarray]:
+        r = self.probe.run(seconds)
+        x = np.asarray(r["pos_hat_m"], dtype=float)
+        v = np.asarray(r.get("speed_hat_mps", ()), dtype=float)
+        why = None
+        if x.size:
+            if self.x_ref is None:
+                self.x_ref = float(x[0])
+            dx = x - self.x_ref
+            j = int(np.argmax(np.abs(dx)))
+            if not abs(dx[j]) <= self.max_dx:
+                why = (f"position estimate {dx[j] * 1e3:+.2f} mm from where the sweep began "
+                       f"(limit {self.max_dx * 1e3:.2f} mm)")
+        if why is None and v.size:
+            j = int(np.argmax(np.abs(v)))
+            if not abs(v[j]) <= XSAT_MAX_SPEED_MPS:
+                why = f"speed estimate {v[j]:+.3f} m/s (limit {XSAT_MAX_SPEED_MPS:g} m/s)"
+        if why is not None:
+            try:
+                self.probe.set_iq(0.0)
+            except Exception:  # noqa: BLE001 - the caller disables the drive anyway
+                pass
+            raise MoverMoved(f"the mover moved during step 7 (cross-saturation): {why}; "
+                             "it is not held (clamp or brake it for --clamped)")
+        return r
 
 
 def xsat_fields(step_A: float, offsets: list[float] | np.ndarray) -> dict[str, float]:
@@ -521,8 +609,8 @@ def _xsat_sweep(probe: Probe, levels: np.ndarray, k_e: float) -> np.ndarray:
     return np.array(out)
 
 
-def run_cross_saturation(probe: Probe, cfg0: Any, tau_m: float, passes: int = 3
-                         ) -> Identified:
+def run_cross_saturation(probe: Probe, cfg0: Any, tau_m: float, passes: int = 3,
+                         guard: bool = True) -> Identified:
     """Step 7 (optional): the cross-saturation angle map, on a CLAMPED mover (a fixture
     or a brake that holds the peak thrust; the simulated probe locks its plant). No
     position sensor: the drive's own position estimate is the measurement.
@@ -540,9 +628,15 @@ def run_cross_saturation(probe: Probe, cfg0: Any, tau_m: float, passes: int = 3
     ``xsat_di_A`` (the points at 1..6 x i_max / 6) and ``xsat_off1_rad`` ..
     ``xsat_off6_rad``, plus the measured axis turns ``xsat_axis{k}_rad`` (comparable
     with the closed form 1/2 atan2(-2 L_dq, L_qq - L_dd)) and the last pass's residuals
-    ``xsat_resid{k}_rad`` (sigma)."""
+    ``xsat_resid{k}_rad`` (sigma).
+
+    ``guard`` (default): the safety check of :class:`_HeldGuard`, a mover that moves
+    stops the step with :class:`MoverMoved` (the thrust reference back to 0; the caller
+    disables the drive)."""
     res = Identified()
     k_e = electrical_rad_per_m(tau_m)
+    if guard:
+        probe = _HeldGuard(probe, k_e)
     step = XSAT_TOP * float(cfg0.i_max_A) / XSAT_POINTS
     levels = step * np.arange(1, XSAT_POINTS + 1)
     off = np.zeros(XSAT_POINTS)

@@ -26,6 +26,7 @@ from ._firmware import ConfigError, Firmware, RefError, config_error
 from ._identify import (
     SimProbe,
     cross_saturation_truth,
+    hold_mover,
     identify,
     identify_cross_saturation,
     randomized_plant,
@@ -79,7 +80,7 @@ def __getattr__(name: str):
 
 __all__ = [
     "DriveBridge", "SimDrive", "SimLoad", "SimClock", "FwCanFrame", "FakeDrive402",
-    "SimProbe", "cross_saturation_truth", "identify", "identify_cross_saturation",
+    "SimProbe", "cross_saturation_truth", "hold_mover", "identify", "identify_cross_saturation",
     "randomized_plant", "seed_range", "truth_of",
     "PLANT_FIELD_SOURCES", "extractor_id", "machine_params", "plant_field_range",
     "plant_params_refused", "X0_MAX_M",

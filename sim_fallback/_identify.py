@@ -90,7 +90,7 @@ class SimProbe(Probe):
         snaps = self._snaps(seconds)
         pick = {"i_d_A": ("i_dq_A", 0), "i_q_A": ("i_dq_A", 1), "u_d_V": ("u_dq_V", 0),
                 "u_q_V": ("u_dq_V", 1), "hf_amp_A": ("hf_amp_A", None),
-                "pos_hat_m": ("pos_hat_m", None)}
+                "pos_hat_m": ("pos_hat_m", None), "speed_hat_mps": ("speed_hat_mps", None)}
         return {k: np.array([q[key][j] if j is not None else q[key] for q in snaps])
                 for k, (key, j) in pick.items()}
 
@@ -178,6 +178,22 @@ def identify_cross_saturation(motor: Motor, seed: int = 0, plant: dict[str, Any]
         probe.sim = Sim(motor, seed=seed * 100 + 98, plant=pl, fw=fw, x0_m=x0_m)
         probe._start()
         return run_cross_saturation(probe, cfg0, motor.tau_m, passes)
+
+
+def hold_mover(drive: Any, held: bool = True) -> None:
+    """The rig's clamp on the simulated drive (``bench identify --clamped --sim``): the
+    plant's mover stopped and held (``locked`` = 1) or released, from the next control
+    period on.
+    ``drive``: the bench's in-process :class:`SimDrive` (``conn.sim``); the change is made
+    under its stepping lock, between two chunks. A fixture's action on the plant (truth
+    side), never a measurement: the drive only feels that its mover does not move."""
+    sim = drive.sim
+    with drive._lock:
+        if held:  # the clamp stops what is left of a coast (the lock keeps the speed)
+            st = sim.state()
+            sim.set_state(x0_m=float(st["x_m"]), v0_mps=0.0, i_d_A=float(st["i_d_A"]),
+                          i_q_A=float(st["i_q_A"]))
+        sim.set_plant(locked=1 if held else 0)
 
 
 def seed_range(text: str) -> range:
