@@ -494,3 +494,39 @@ def paper_scenario(name: str, extractor: int | str = "sogi_adaptive",
     args = dict(PAPER_SCENARIO_ARGS[name])
     args.update(kw)
     return run_scenario(motor=motor, extractor=extractor, seed=seed, **args)
+
+
+# ---- linear-units scenarios (campaigns on the linear motors) ------------------
+
+LINEAR_SCENARIOS = ("linear_load_step",)
+
+
+def rated_thrust_N(motor: str | Path | Motor) -> float:
+    """The motor's rated thrust K_f i_rated (N): the unsaturated force constant
+    (:attr:`Motor.force_const_N_per_A`) times ``[controller] i_rated_A``."""
+    m = motor if isinstance(motor, Motor) else load_motor(motor)
+    return float(m.force_const_N_per_A * float(m.controller["i_rated_A"]))
+
+
+def linear_scenario_args(name: str, speed_mps: float, event_s: float, t_end: float,
+                         load_N: float = 0.0) -> dict[str, Any]:
+    """:func:`run_scenario` arguments of a linear-units scenario. ``linear_load_step``:
+    the speed loop holds ``speed_mps`` (m/s) from the enable, an external load of
+    ``load_N`` (N, opposing positive motion) steps on at ``event_s``, the run lasts
+    ``t_end`` (s)."""
+    if name not in LINEAR_SCENARIOS:
+        raise ValueError(f"unknown linear scenario '{name}'; choose from {LINEAR_SCENARIOS}")
+    return {"speed_ref": float(speed_mps), "speed_unit": "mps",
+            "load": [(0.0, 0.0), (float(event_s), float(load_N))], "load_unit": "N",
+            "t_end": float(t_end)}
+
+
+def linear_scenario(name: str, extractor: int | str = "sogi_adaptive",
+                    motor: str | Path | Motor = "realistic_linear", seed: int = 0, *,
+                    speed_mps: float, event_s: float, t_end: float, load_N: float = 0.0,
+                    **kw: Any) -> Result:
+    """Run a linear-units scenario (:func:`linear_scenario_args`); ``kw`` as for
+    :func:`run_scenario` (``x0_m``, ``plant``, ``fw``, ``metrics``, ...)."""
+    args = linear_scenario_args(name, speed_mps, event_s, t_end, load_N)
+    args.update(kw)
+    return run_scenario(motor=motor, extractor=extractor, seed=seed, **args)

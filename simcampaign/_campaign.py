@@ -44,14 +44,23 @@ import yaml
 
 from sim_fallback import metrics as SM
 
-SCENARIOS = ("load_step", "speed_reversal", "startup", "fault_case")
+SCENARIOS = ("load_step", "speed_reversal", "startup", "linear_load_step", "fault_case")
+#: Scenarios in linear units (sim_fallback.linear_scenario_args): the speed loop holds
+#: ``speed_mps`` and a load of ``load_N`` (or ``load_rated`` x the motor's rated thrust)
+#: steps on at ``base.event_s``.
+LINEAR_SCENARIOS = ("linear_load_step",)
 #: Axis targets that are plain run arguments (besides plant.<field> and fw.<field>).
 DIRECT_TARGETS = ("seed", "noise", "x0_m")
-#: What a named axis's case may set.
+#: ... and those of a linear-units scenario (base keys too).
+LINEAR_TARGETS = ("speed_mps", "load_N", "load_rated")
+#: What a named axis's case may set (LINEAR_TARGETS too, in a linear-units scenario).
 CASE_TARGETS = ("extractor", "noise", "x0_m")
 #: Keys of ``base``.
 BASE_KEYS = ("scenario", "motor", "extractor", "t_end", "record_decimation", "case",
-             "windows", "event_s", "trace")
+             "windows", "event_s", "trace", "x0_m") + LINEAR_TARGETS
+#: What a linear-units scenario accepts (|value| at most): speeds in m/s, loads in N and
+#: in rated thrusts (K_f i_rated_A; a drive holds 2x at its peak current).
+LINEAR_MAX = {"speed_mps": 20.0, "load_N": 1.0e5, "load_rated": 10.0}
 #: ``base.motor`` and ``base.extractor`` when the file does not give them.
 BASE_MOTOR = "paper_salient"
 BASE_EXTRACTOR = "sogi_adaptive"
@@ -208,14 +217,21 @@ def _valid_extractor(v: Any) -> bool:
 @functools.lru_cache(maxsize=32)
 def _motor_loaded(name: str) -> tuple[dict[str, Any] | None, str]:
     """(plant parameters, "") or (None, why the motor file cannot be loaded; "" when
-    there is no such motor)."""
+    there is no such motor). The plant parameters include the plant realism ones
+    (``sim_realism_t``: cross_L_H, emf_h5, ...), which run_scenario's ``plant`` sets too."""
     from sim_fallback import load_motor
     try:
-        return dict(load_motor(name).plant), ""
+        return _all_plant(load_motor(name)), ""
     except FileNotFoundError:
         return None, ""
     except Exception as e:  # noqa: BLE001 - MotorFileError, TOML errors: said, one line
         return None, (str(e).splitlines() or [type(e).__name__])[0]
+
+
+def _all_plant(motor: Any) -> dict[str, Any]:
+    """A motor's nominal plant parameters: ``sim_plant_params_t``'s and the plant
+    realism's (``sim_realism_t``)."""
+    return {**motor.plant, **motor.realism}
 
 
 def _motor_plant(name: Any) -> dict[str, Any] | None:
@@ -248,7 +264,7 @@ def _field_error(t: str, plant: dict[str, Any] | None) -> str | None:
     """Why ``plant.<f>`` / ``fw.<f>`` names no parameter (None: it does)."""
     kind, _, f = t.partition(".")
     if kind == "plant" and plant is not None and f not in plant:
-        return f"no plant parameter {f!r} (sim_plant_params_t; docs/simulator.md)"
+        return f"no plant parameter {f!r} (sim_plant_params_t, sim_realism_t; docs/simulator.md)"
     if kind == "fw":
         from sim_fallback import FwConfig
         if f not in FwConfig.field_names():
@@ -264,6 +280,10 @@ def _value_error(t: str, kind: str, vals: list[float], motor: Any, extractor: An
     (_plant_value_error), fw.<field> the firmware's own range (fw_config_field(); a
     scale times the motor's nominal configuration)."""
     lo_hi = [min(vals), max(vals)]
+    if t in LINEAR_MAX and max(abs(lo_hi[0]), abs(lo_hi[1])) > LINEAR_MAX[t]:
+        return f"{_span(lo_hi)}: allowed [{-LINEAR_MAX[t]:g}, {LINEAR_MAX[t]:g}]" + (
+            " m/s" if t == "speed_mps" else " N" if t == "load_N" else
+            " x the motor's rated thrust")
     if t == "noise" and lo_hi[0] < 0:
         return f"{lo_hi[0]:g}: noise scales the sensor noise; allowed >= 0"
     if t == "x0_m":
@@ -281,6 +301,11 @@ def _value_error(t: str, kind: str, vals: list[float], motor: Any, extractor: An
     if rng is None:
         return None
     lo, hi, unit = rng
+    if _fw_is_int(f) and (kind == "range" or (kind == "values"
+                                              and not all(float(v).is_integer()
+                                                          for v in vals))):
+        return (f"{_span(sorted(vals))}: an integer field; need values: [...] of integers "
+                f"in [{lo:g}, {hi:g}]")
     if kind == "scale":
         if _motor_plant(motor) is None or not _valid_extractor(extractor):
             return None  # reported on base
@@ -326,6 +351,9 @@ def _plant_value_error(f: str, kind: str, vals: list[float], motor: Any) -> str 
         plant_field_range,
         plant_params,
         plant_params_refused,
+        realism_params,
+        realism_refused,
+        split_plant_overrides,
     )
     plant = _motor_plant(motor)
     if plant is None or f not in plant:
@@ -349,8 +377,9 @@ def _plant_value_error(f: str, kind: str, vals: list[float], motor: Any) -> str 
     try:
         mot = _motor_and_config(motor, BASE_EXTRACTOR)[0]
         for x in (xs[0], xs[-1]):
-            bad = plant_params_refused(plant_params(mot, **{f: int(x) if isinstance(
-                nominal, int) else x}))
+            ov, real = split_plant_overrides({f: int(x) if isinstance(nominal, int) else x})
+            pp = plant_params(mot, **ov)
+            bad = plant_params_refused(pp) or realism_refused(pp, realism_params(mot, **real))
             if bad is not None:
                 return (f"{x:g} with motor {motor}'s other plant parameters: the simulator "
                         f"refuses {bad} (sim_params_check: dL_sat_H < L_d0_H, F_coulomb_N "
@@ -411,12 +440,14 @@ def _node_at(node: yaml.Node | None, path: str) -> yaml.Node | None:
 
 def _is_named_axis(tgt: Any, spec: Any) -> bool:
     return (isinstance(tgt, str) and bool(_NAME.match(tgt)) and tgt not in DIRECT_TARGETS
+            and tgt not in LINEAR_TARGETS
             and isinstance(spec, dict) and ("set" in spec or "cases" in spec))
 
 
 def _parse_named_axis(name: str, spec: dict[str, Any], plant: dict[str, Any] | None,
                       err: Callable[[str, str], None], motor: Any = BASE_MOTOR,
-                      extractor: Any = BASE_EXTRACTOR) -> Axis | None:
+                      extractor: Any = BASE_EXTRACTOR, scenario: Any = "load_step"
+                      ) -> Axis | None:
     """``name: {values: [...], set: {target: expr}}`` or ``name: {cases: {label: {...}}}``;
     the values a case or an expression gives are checked as an axis's (_value_error)."""
     fld = f"axes.{name}"
@@ -437,14 +468,18 @@ def _parse_named_axis(name: str, spec: dict[str, Any], plant: dict[str, Any] | N
                 if t == "extractor":
                     good = _valid_extractor(v)
                     why = None if good else f"{v!r} not one of {_choices('extractor')}"
-                elif t in CASE_TARGETS or _is_field(t):
+                elif t in LINEAR_TARGETS and scenario not in LINEAR_SCENARIOS:
+                    why = _LINEAR_ONLY
+                elif t in CASE_TARGETS or t in LINEAR_TARGETS or _is_field(t):
                     rng = _allowed(str(t), motor)
                     why = (_field_error(t, plant) if _is_field(t) else None) or (
                         None if _finite(v) else f"{v!r}: need a finite number" + (
                             f"; the simulator allows {rng}" if rng else "")) or \
                         _value_error(t, "values", [float(v)], motor, extractor)
                 else:
-                    why = "target must be extractor, noise, x0_m, plant.<field> or fw.<field>"
+                    why = ("target must be extractor, noise, x0_m, plant.<field> or "
+                           f"fw.<field> ({', '.join(LINEAR_TARGETS)} with base.scenario: "
+                           f"{' or '.join(LINEAR_SCENARIOS)})")
                 if why:
                     err(f"{cf}.{t}", why)
                     ok = False
@@ -483,6 +518,10 @@ def _parse_named_axis(name: str, spec: dict[str, Any], plant: dict[str, Any] | N
     return Axis(name, "values", [float(v) for v in vals], sets={str(k): str(v) for k, v
                                                                   in sets.items()}) if ok \
         else None
+
+
+_LINEAR_ONLY = ("a linear-units scenario's argument; needs base.scenario: "
+                + " or ".join(LINEAR_SCENARIOS))
 
 
 def _check_base(base: dict[str, Any], bnode: yaml.Node | None, sc: str,
@@ -530,6 +569,24 @@ def _check_base(base: dict[str, Any], bnode: yaml.Node | None, sc: str,
     if event_s is not None and not (_finite(event_s) and 0 <= event_s < t_end):
         err(node("event_s"), "base.event_s", f"{event_s!r}: need a time in [0, t_end) s")
         event_s = None
+    for k in LINEAR_TARGETS:
+        if k not in base:
+            continue
+        v = base[k]
+        if sc not in LINEAR_SCENARIOS:
+            err(node(k), f"base.{k}", _LINEAR_ONLY)
+        elif not _finite(v):
+            err(node(k), f"base.{k}", f"{v!r}: need a finite number")
+        else:
+            why = _value_error(k, "values", [float(v)], base_motor, None)
+            if why:
+                err(node(k), f"base.{k}", why)
+    x0 = base.get("x0_m")
+    if x0 is not None and x0 != "random":
+        from sim_fallback import X0_MAX_M
+        if not (_finite(x0) and abs(x0) <= X0_MAX_M):
+            err(node("x0_m"), "base.x0_m", f"{x0!r}: need random or an initial position in "
+                f"[{-X0_MAX_M:g}, {X0_MAX_M:g}] m")
     tr = base.get("trace")
     if tr is not None:
         sig = tr.get("signals") if isinstance(tr, dict) else None
@@ -729,15 +786,19 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             ax = _parse_named_axis(str(tgt), spec, motor_plant,
                                    lambda f, m, n=node, t=str(tgt):
                                    err(_node_at(n, f[len("axes." + t) + 1:]), f, m),
-                                   base_motor, base_extractor)
+                                   base_motor, base_extractor, sc)
             if ax is not None:
                 axes.append(ax)
             continue
-        ok_target = tgt in DIRECT_TARGETS or _is_field(tgt)
+        if tgt in LINEAR_TARGETS and sc not in LINEAR_SCENARIOS:
+            err(node, fld, _LINEAR_ONLY)
+            continue
+        ok_target = tgt in DIRECT_TARGETS or tgt in LINEAR_TARGETS or _is_field(tgt)
         if not ok_target:
             err(node, fld, "target must be seed, noise, x0_m, case, extractor, motor, "
                 "plant.<field> or fw.<field>, or a named axis with values and set, or "
-                "cases")
+                f"cases ({', '.join(LINEAR_TARGETS)} with base.scenario: "
+                f"{' or '.join(LINEAR_SCENARIOS)})")
             continue
         if not isinstance(spec, dict) or len(spec) != 1:
             err(node, fld, "need exactly one of values: [...], range: [lo, hi], "
@@ -773,6 +834,19 @@ def parse_campaign(data: Any, root: yaml.Node | None, p: Path | None,
             if t in seen:
                 err(anode, f"axes.{ax.target}", f"sets {t}, which axis {seen[t]} sets too")
             seen.setdefault(t, ax.target)
+    if sc in LINEAR_SCENARIOS:
+        if "speed_mps" not in base and "speed_mps" not in seen:
+            err(bnode, "base.speed_mps", f"missing: {sc} needs the speed reference (m/s), "
+                "in base or on an axis")
+        if base.get("event_s") is None:
+            err(bnode, "base.event_s", f"missing: {sc} steps its load at event_s (s)")
+        loads = {"load_N", "load_rated"}
+        options = [[set(c) & loads for c in ax.cases.values()] if ax.cases is not None
+                   else [set(ax.targets()) & loads] for ax in axes]
+        if any(set().union(base.keys() & loads, *combo) == loads
+               for combo in itertools.product(*options)):
+            err(bnode, "base.load_N", "give the load as load_N (N) or load_rated (x the "
+                "rated thrust), not both (in base or on axes)")
     metrics = data.get("metrics", [])
     mnode = _find(root, "metrics")
     known = set(metric_names) if metric_names is not None else None
@@ -899,6 +973,14 @@ def _expand(base: dict[str, Any], params: dict[str, Any],
     return out
 
 
+@functools.lru_cache(maxsize=256)
+def _fw_is_int(name: str) -> bool:
+    """Whether configuration field ``name`` is an integer in fw_config_t (obs_mode)."""
+    from sim_fallback import FwConfig
+    leaf = FwConfig.leaves().get(name)
+    return leaf is not None and getattr(leaf[2], "_type_", "f") in "bBhHiIlLqQ"
+
+
 @functools.lru_cache(maxsize=16)
 def _motor_and_config(motor: str, extractor: str) -> tuple[Any, Any]:
     """Motor file and its nominal configuration, parsed once per worker process."""
@@ -927,19 +1009,38 @@ def resolve_run(base: dict[str, Any], params: dict[str, Any]) -> ResolvedRun:
     scales = base.get("_scales", {})
     motor_name = str(params.get("motor", base.get("motor", BASE_MOTOR)))
     motor, _ = _motor_and_config(motor_name, BASE_EXTRACTOR)
-    plant, fw, rest = _split(_expand(base, params, motor.plant))
+    nominal = _all_plant(motor)
+    plant, fw, rest = _split(_expand(base, params, nominal))
     extractor = str(rest.get("extractor", base.get("extractor", BASE_EXTRACTOR)))
     # scale axes multiply the nominal value (motor plant / derived configuration)
     motor, nominal_fw = _motor_and_config(motor_name, extractor)
     fw_abs = {k: (float(getattr(nominal_fw, k)) * v if scales.get("fw." + k) else v)
               for k, v in fw.items()}
-    plant_abs = {k: (float(motor.plant[k]) * v if scales.get("plant." + k) else v)
+    for k, v in fw_abs.items():  # integer configuration fields (obs_mode) from an axis
+        if _fw_is_int(k) and float(v).is_integer():
+            fw_abs[k] = int(v)
+    plant_abs = {k: (float(nominal[k]) * v if scales.get("plant." + k) else v)
                  for k, v in plant.items()}
     for k, v in plant_abs.items():  # integer plant fields (adc_bits, n_sub) from a float axis
-        if isinstance(motor.plant.get(k), int) and float(v).is_integer():
+        if isinstance(nominal.get(k), int) and float(v).is_integer():
             plant_abs[k] = int(v)
     return ResolvedRun(motor_name, motor, nominal_fw, extractor, int(params.get("seed", 0)),
                        plant_abs, fw_abs, rest)
+
+
+def linear_args(base: dict[str, Any], rest: dict[str, Any], motor: Any) -> dict[str, float]:
+    """A linear-units run's speed (m/s), load (N), event and end times: an axis's value
+    (``rest``) before the base's; ``load_rated`` times the motor's rated thrust
+    (sim_fallback.rated_thrust_N)."""
+    from sim_fallback import rated_thrust_N
+
+    def get(k: str, default: Any = None) -> Any:
+        return rest.get(k, base.get(k, default))
+
+    load = (float(get("load_rated")) * rated_thrust_N(motor)
+            if get("load_rated") is not None else float(get("load_N", 0.0)))
+    return {"speed_mps": float(get("speed_mps")), "load_N": load,
+            "event_s": float(base["event_s"]), "t_end": float(base.get("t_end", 1.0))}
 
 
 def _simulate(base: dict[str, Any], params: dict[str, Any],
@@ -972,13 +1073,21 @@ def _simulate(base: dict[str, Any], params: dict[str, Any],
         kw["noise"] = float(rest["noise"])
     if "x0_m" in rest:
         kw["x0_m"] = float(rest["x0_m"])
+    elif base.get("x0_m") is not None:
+        kw["x0_m"] = base["x0_m"] if base["x0_m"] == "random" else float(base["x0_m"])
     scenario = base.get("scenario", "load_step")
     if not analysis and not tr:
         # the lean run: only the requested metrics and the channels they need
         kw.pop("channels")
         kw["metrics"] = metrics
-    r = paper_scenario(scenario, extractor=extractor, motor=motor,
-                       seed=seed, plant=plant_abs or None, fw=fw_abs or None, **kw)
+    if scenario in LINEAR_SCENARIOS:
+        from sim_fallback import linear_scenario
+        kw.update(linear_args(base, rest, motor))
+        r = linear_scenario(scenario, extractor=extractor, motor=motor, seed=seed,
+                            plant=plant_abs or None, fw=fw_abs or None, **kw)
+    else:
+        r = paper_scenario(scenario, extractor=extractor, motor=motor,
+                           seed=seed, plant=plant_abs or None, fw=fw_abs or None, **kw)
     out: dict[str, Any] = {"fault": int(r.fault_code)}
     for m in metrics:
         out[m] = float(r.metrics.get(m, float("nan")))

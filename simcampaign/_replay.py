@@ -21,8 +21,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-#: scenario schedules are in the units of sim_fallback.run_scenario's defaults
+#: the paper scenarios' schedules are in the units of sim_fallback.run_scenario's
+#: defaults; a linear-units scenario's in m/s and N (the sequence language's units)
 _SPEED_UNIT, _LOAD_UNIT = "r/min", "N*m"
+_LINEAR_UNITS = ("m/s", "N")
 
 
 class ReplayError(ValueError):
@@ -41,18 +43,26 @@ def _schedule(s: Any) -> list[tuple[float, float]]:
 
 
 def sequence_text(name: str, scenario: str, motor: str, extractor: str, seed: int,
-                  t_end: float, x0: float | str) -> str:
-    """The scenario (``sim_fallback.PAPER_SCENARIO_ARGS``) as a bench sequence."""
-    from sim_fallback import PAPER_SCENARIO_ARGS
+                  t_end: float, x0: float | str, linear: dict[str, float] | None = None
+                  ) -> str:
+    """The scenario as a bench sequence: a paper scenario's schedules
+    (``sim_fallback.PAPER_SCENARIO_ARGS``, r/min and N*m), or a linear-units scenario's
+    (``sim_fallback.linear_scenario_args`` of ``linear``: speed_mps, load_N, event_s,
+    t_end; m/s and N)."""
+    from sim_fallback import LINEAR_SCENARIOS, PAPER_SCENARIO_ARGS, linear_scenario_args
 
-    if scenario not in PAPER_SCENARIO_ARGS:
+    if scenario in LINEAR_SCENARIOS and linear is not None:
+        args = linear_scenario_args(scenario, **linear)
+        su, lu = _LINEAR_UNITS
+    elif scenario in PAPER_SCENARIO_ARGS:
+        args, su, lu = PAPER_SCENARIO_ARGS[scenario], _SPEED_UNIT, _LOAD_UNIT
+    else:
         raise ReplayError(f"scenario {scenario!r}: a fault case injects faults inside the "
                           "simulation, which a bench sequence cannot; --replay without "
                           "--full prints its row")
-    args = PAPER_SCENARIO_ARGS[scenario]
-    events = [(t, 0, f"set_speed: {{value: {v!r}, unit: {_SPEED_UNIT}}}")
+    events = [(t, 0, f"set_speed: {{value: {v!r}, unit: {su}}}")
               for t, v in _schedule(args.get("speed_ref"))]
-    events += [(t, 1, f"load_step: {{value: {v!r}, unit: '{_LOAD_UNIT}'}}")
+    events += [(t, 1, f"load_step: {{value: {v!r}, unit: '{lu}'}}")
                for t, v in _schedule(args.get("load")) if not (t == 0.0 and v == 0.0)]
     steps = ["  - enable: {mode: speed}"]
     now = 0.0
@@ -86,15 +96,17 @@ def replay_full(c: Any, params: dict[str, Any], runs_root: str = "runs") -> Repl
     from bench import open_sim, run_sequence, validate_sequence
     from sim_fallback import PAPER_SCENARIO_ARGS
 
-    from ._campaign import resolve_run
+    from ._campaign import LINEAR_SCENARIOS, linear_args, resolve_run
 
     base = c.run_base()
     scenario = str(base.get("scenario", "load_step"))
     rr = resolve_run(base, params)
     t_end = float(base.get("t_end", PAPER_SCENARIO_ARGS.get(scenario, {}).get("t_end", 1.0)))
-    x0 = rr.rest.get("x0_m", PAPER_SCENARIO_ARGS.get(scenario, {}).get("x0_m", 0.0))
+    x0 = rr.rest.get("x0_m", base.get("x0_m", PAPER_SCENARIO_ARGS.get(scenario, {}).get(
+        "x0_m", 0.0)))
+    linear = linear_args(base, rr.rest, rr.motor) if scenario in LINEAR_SCENARIOS else None
     text = sequence_text(f"{c.name}_run{int(params['run'])}", scenario, rr.motor_name,
-                         rr.extractor, rr.seed, t_end, x0)
+                         rr.extractor, rr.seed, t_end, x0, linear)
     seq = validate_sequence(text, f"<campaign {c.name} run {int(params['run'])}>")
     conn = open_sim(motor=rr.motor_name, extractor=rr.extractor, seed=rr.seed, x0=seq.x0,
                     plant=rr.plant or None, noise=float(rr.rest.get("noise", 1.0)))

@@ -30,7 +30,8 @@ SC_LABEL = {"load_step": "load step", "speed_reversal": "speed reversal", "start
 SWEEPS = ("mm_L_d", "mm_L_q", "mm_R", "noise", "u_inj", "f_inj", "sogi_k", "saliency", "pll_bw")
 #: Campaign names under the results root.
 CAMPAIGNS = tuple(f"reproduction_{s}" for s in SCENARIOS) + tuple(
-    f"reproduction_sweep_{k}" for k in SWEEPS) + ("reproduction_floor", "reproduction_table1")
+    f"reproduction_sweep_{k}" for k in SWEEPS) + ("reproduction_floor", "reproduction_table1",
+                                                  "reproduction_realistic")
 MOTOR = "paper_salient"
 # method.md section 2: the paper's numbers (radians not stated el./mech.)
 PAPER_POS = {"pseudo": 0.04, "sogi": 0.02, "sogi_adaptive": 0.01}
@@ -121,6 +122,8 @@ class Reproduction:
     table1: list[dict[str, Any]]
     seeds: list[int]
     runs: dict[str, int] = field(default_factory=dict)
+    #: the comparison on realistic_linear (campaign reproduction_realistic)
+    realistic: Any = None
 
 
 def read_results(rdir: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
@@ -241,8 +244,12 @@ def load(root: Path) -> Reproduction:
                "err_max": _num(r["run_err_max_rad"]),
                "err_rms_tail": _num(r["tail.run_err_rms"]), "pwm_on": bool(r["pwm_on"]),
                "trace": _trace(r) if r["reached_run"] else None} for r in rows]
+    from ._reproduction_realistic import CAMPAIGN, load_realistic
+    meta, rows = read_results(root / CAMPAIGN)
+    runs[meta["name"]] = len(rows)
+    realistic = load_realistic(meta, rows)
     return Reproduction(cases, windows, event_s, sweeps, floor, floor_cases, table1, seeds,
-                        runs)
+                        runs, realistic)
 
 
 # ---- the paper's claims -------------------------------------------------------------
@@ -872,6 +879,10 @@ def markdown(rep: Reproduction, figs: dict[str, Any], quick: bool = False,
         a(f"![{name}](figures/{name})")
         a("")
 
+    if rep.realistic is not None:
+        from ._reproduction_realistic import markdown as realistic_md
+        L.extend(realistic_md(rep.realistic))
+
     # discussion
     a("## Discussion: where our numbers differ from the paper's, and why")
     a("")
@@ -1142,6 +1153,9 @@ def reproduction_data(rep: Reproduction) -> dict[str, Any]:
                       if k != "trace"} for r in rep.table1]
     out["claims"] = [{k: v for k, v in c.items() if k not in ("cell", "band_text")}
                      for c in claims(rep)]
+    if rep.realistic is not None:
+        from ._reproduction_realistic import data as realistic_data
+        out["realistic"] = realistic_data(rep.realistic)
     return out
 
 

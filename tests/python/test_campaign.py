@@ -291,7 +291,7 @@ def test_report_shows_limits_worst_runs_and_comparison(tmp_path):
 
 def test_every_reproduction_campaign_is_valid():
     files = sorted((ROOT / "campaigns/reproduction").glob("*.yaml"))
-    assert len(files) == 14
+    assert len(files) == 15
     from sim_fallback.metrics import METRIC_NAMES
     names = {load_campaign(f, METRIC_NAMES).name for f in files}
     assert len(names) == len(files)  # each its own results folder
@@ -425,3 +425,116 @@ def test_seeds_are_integers_as_the_runs_use_them(tmp_path) -> None:
     runs = load_campaign(f).runs()
     assert all(type(r["seed"]) is int for r in runs)
     assert len({r["seed"] for r in runs}) == 4 and all(0 <= r["seed"] < 100000 for r in runs)
+
+
+# ---- the linear-units scenario (linear_load_step) ----------------------------------
+
+LINEAR = """
+name: lin
+base: {scenario: linear_load_step, motor: realistic_linear, speed_mps: 0.1, event_s: 0.2,
+       t_end: 0.35, x0_m: random}
+sampling: {method: grid}
+axes:
+  load:
+    cases:
+      none: {}
+      half: {load_rated: 0.5}
+      newtons: {load_N: 120.0, speed_mps: -0.1}
+  fw.obs_mode: {values: [1, 2]}
+  seed: {values: [3]}
+metrics: [position_error_rms_rad, position_error_max_rad]
+"""
+
+
+def test_linear_load_step_runs_what_it_says(tmp_path):
+    """Each run of a linear_load_step campaign equals the direct simulator call in m/s and
+    N (run_scenario with speed_unit="mps", load_unit="N"); load_rated is a fraction of
+    K_f i_rated (600 N on realistic_linear); an integer configuration field (obs_mode)
+    from an axis; the base's x0_m: random."""
+    import sim_fallback as sf
+    c = _parse(LINEAR)
+    runs = c.runs()
+    assert len(runs) == 6
+    res = load_results(run_campaign(c, tmp_path, serial=True))
+    assert not any(res["error"])
+    got = dict(zip(res["run"].astype(int), res["position_error_rms_rad"].astype(float),
+                   strict=True))
+    assert sf.rated_thrust_N("realistic_linear") == pytest.approx(600.0, rel=1e-4)
+    valid = 0
+    for r in runs:
+        load, speed = {"none": (0.0, 0.1), "half": (0.5 * sf.rated_thrust_N(
+            "realistic_linear"), 0.1), "newtons": (120.0, -0.1)}[r["load"]]
+        ref = sf.run_scenario("realistic_linear", "sogi_adaptive", speed_ref=speed,
+                              speed_unit="mps", load=[(0.0, 0.0), (0.2, load)],
+                              load_unit="N", t_end=0.35, seed=3, x0_m="random",
+                              record_decimation=8, fw={"obs_mode": int(r["fw.obs_mode"])},
+                              metrics=["position_error_rms_rad", "position_error_max_rad"])
+        want = ref.metrics["position_error_rms_rad"]
+        assert got[r["run"]] == want or (math.isnan(want) and math.isnan(got[r["run"]])), r
+        valid += ref.valid
+    assert valid >= 4  # most track (a fault is a result: NaN in both)
+
+
+def test_linear_load_step_replays_as_a_sequence_in_m_per_s_and_newtons():
+    """--replay N --full maps a linear_load_step run to a bench sequence: set_speed in
+    m/s, the load step in N at event_s, the run's start position."""
+    from bench import validate_sequence
+    from simcampaign._campaign import linear_args, resolve_run
+    from simcampaign._replay import sequence_text
+    c = _parse(LINEAR)
+    run = c.runs()[2]  # half rated thrust, obs_mode 1
+    rr = resolve_run(c.run_base(), run)
+    lin = linear_args(c.run_base(), rr.rest, rr.motor)
+    assert lin == {"speed_mps": 0.1, "load_N": pytest.approx(300.0, rel=1e-4),
+                   "event_s": 0.2, "t_end": 0.35}
+    text = sequence_text("lin_run2", "linear_load_step", rr.motor_name, rr.extractor,
+                         rr.seed, 0.35, "random", lin)
+    assert "set_speed: {value: 0.1, unit: m/s}" in text
+    assert f"load_step: {{value: {lin['load_N']!r}, unit: 'N'}}" in text
+    assert "wait: {duration_s: 0.2}" in text and "x0: random" in text
+    seq = validate_sequence(text, "<lin>")
+    assert seq.x0 == "random"
+
+
+@pytest.mark.parametrize("base,axes,where", [
+    ("scenario: linear_load_step, motor: realistic_linear, event_s: 0.2",
+     "  seed: {values: [0]}", "c.yaml:2: base.speed_mps: missing: linear_load_step needs"),
+    ("scenario: linear_load_step, motor: realistic_linear, speed_mps: 0.1",
+     "  seed: {values: [0]}", "c.yaml:2: base.event_s: missing: linear_load_step steps"),
+    ("scenario: load_step, load_N: 100",
+     "  seed: {values: [0]}", "c.yaml:2: base.load_N: a linear-units scenario's argument"),
+    ("scenario: load_step",
+     "  speed_mps: {values: [0.1]}", "c.yaml:4: axes.speed_mps: a linear-units scenario's"),
+    ("scenario: linear_load_step, motor: realistic_linear, speed_mps: 50, event_s: 0.2",
+     "  seed: {values: [0]}", "c.yaml:2: base.speed_mps: 50: allowed [-20, 20] m/s"),
+    ("scenario: linear_load_step, motor: realistic_linear, speed_mps: 0.1, event_s: 0.2, "
+     "load_N: 10", "  load_rated: {values: [0.5]}", "base.load_N: give the load as load_N"),
+    ("scenario: linear_load_step, motor: realistic_linear, speed_mps: 0.1, event_s: 0.2",
+     "  load_rated: {range: [0, 20]}", "c.yaml:4: axes.load_rated: [0, 20]: allowed [-10, 10]"),
+    ("scenario: load_step",
+     "  v:\n    cases:\n      a: {load_N: 3}",
+     "c.yaml:6: axes.v.cases.a.load_N: a linear-units scenario's argument"),
+    ("scenario: load_step, x0_m: far", "  seed: {values: [0]}",
+     "c.yaml:2: base.x0_m: 'far': need random or an initial position"),
+    ("scenario: load_step", "  fw.obs_mode: {values: [1, 1.5]}",
+     "c.yaml:4: axes.fw.obs_mode: [1, 1.5]: an integer field; need values: [...] of integers"),
+    ("scenario: load_step, motor: realistic_linear", "  plant.emf_h5: {values: [0.9]}",
+     "c.yaml:4: axes.plant.emf_h5: 0.9; the simulator allows [0, 0.5]"),
+])
+def test_linear_scenario_errors_name_file_line_field(base, axes, where):
+    text = f"name: x\nbase: {{{base}}}\naxes:\n{axes}\nmetrics: [position_error_rms_rad]\n"
+    with pytest.raises(CampaignError) as ei:
+        _parse(text)
+    assert where in str(ei.value)
+    assert all(ln.startswith("c.yaml:") for ln in str(ei.value).splitlines())
+
+
+def test_plant_realism_fields_are_axis_targets():
+    """The plant realism (sim_realism_t: emf_h5, cross_L_H, ...) is a plant.<field> target
+    like sim_plant_params_t's, scaled by the motor's nominal value."""
+    from simcampaign._campaign import resolve_run
+    c = _parse("name: r\nbase: {scenario: load_step, motor: realistic_linear}\n"
+               "axes:\n  plant.emf_h5: {scale: [0.5, 1.5]}\n  plant.cross_L_H: {values: [0]}\n"
+               "metrics: [position_error_rms_rad]\n")
+    rr = resolve_run(c.run_base(), c.runs()[0])
+    assert rr.plant == {"emf_h5": pytest.approx(0.015), "cross_L_H": 0.0}

@@ -14,6 +14,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
+import re
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -199,3 +200,181 @@ def test_a_failed_run_is_named_with_its_replay_command(rp: ModuleType, tmp_path:
     failed = rp.run(tmp_path / "results", serial=True, log=lambda _m: None)
     assert failed == [f"tiny: 1 runs failed (the first: bench campaign {cfile.resolve()} "
                       "--replay 1)"]
+
+
+# ---- the comparison on a realistic linear motor (campaign reproduction_realistic) -----
+
+REAL_SECTION = "## The comparison on a realistic linear motor"
+EX_BY_LABEL = {"pseudo-filter": "pseudo", "SOGI k = 0.5": "sogi", "adaptive SOGI": "sogi_adaptive"}
+PM = re.compile(r"^([-+]?\d+\.\d+) ± (\d+\.\d+)")
+
+
+def _section(md: str) -> list[str]:
+    start = md.index(REAL_SECTION)
+    end = md.index("\n## ", start + 1)
+    return md[start:end].splitlines()
+
+
+def _pm(cell: str) -> tuple[float, float, int] | None:
+    """'0.0715 ± 0.0012' -> (mean, sd, decimals); 'n/a' -> None."""
+    m = PM.match(cell.strip())
+    if m is None:
+        assert cell.strip().startswith("n/a"), cell
+        return None
+    return float(m.group(1)), float(m.group(2)), len(m.group(1).split(".")[1])
+
+
+def _load_key(cell: str) -> str:
+    return f"{float(cell.split('%')[0]) / 100:g}"
+
+
+def _check_realistic_md_against_json(md: str, data: dict) -> int:
+    """Every number of the section's case and paired tables equals reproduction.json's, as
+    numbers (to the digits printed); returns how many were compared."""
+    real = data["realistic"]
+    checked = 0
+    for ln in _section(md):
+        cells = [c.strip() for c in ln.strip().strip("|").split("|")]
+        if len(cells) == 9 and cells[3] in EX_BY_LABEL:  # case table
+            key = f"{cells[0]}/{_load_key(cells[1])}/{cells[2]}/{EX_BY_LABEL[cells[3]]}"
+            case = real["cases"][key]
+            valid, total = (int(x) for x in cells[4].split("/"))
+            assert valid == case["valid"] and total == len(case["faults"]), key
+            assert (cells[5] == "none") == (not any(case["faults"])), key
+            for cell, k in zip(cells[6:], ("steady_rms", "steady_max", "transient_max"),
+                               strict=True):
+                got = _pm(cell)
+                if got is None:
+                    assert case[k]["mean"] is None, (key, k)
+                    continue
+                tol = 0.51 * 10.0 ** -got[2]
+                assert got[0] == pytest.approx(case[k]["mean"], abs=tol), (key, k)
+                assert got[1] == pytest.approx(case[k]["sd"], abs=tol), (key, k)
+                checked += 2
+        elif len(cells) == 6 and cells[2].isdigit() and "(n " in ln:  # paired table
+            pairs = ("pseudo-sogi", "pseudo-sogi_adaptive", "sogi-sogi_adaptive")
+            for cell, pair in zip(cells[3:], pairs, strict=True):
+                key = f"{cells[0]}/{_load_key(cells[1])}/{cells[2]}/{pair}"
+                got = _pm(cell)
+                if got is None:
+                    assert key not in real["paired"] or real["paired"][key]["n"] == 0
+                    continue
+                d = real["paired"][key]
+                assert got[0] == pytest.approx(d["mean"], abs=0.51e-4), key
+                assert got[1] == pytest.approx(d["sd"], abs=0.51e-4), key
+                assert f"(n {d['n']}, " in cell
+                assert ("**significant**" in cell) == d["significant"], key
+                checked += 2
+    return checked
+
+
+def test_realistic_section_numbers_are_the_parquet_results(quick: tuple[Path, Path]) -> None:
+    """The realistic section: its case means are the Parquet rows' (read here with
+    pyarrow), and the markdown's tables print the JSON's numbers."""
+    import pyarrow.parquet as pq
+
+    out, results = quick
+    md = (out / "reproduction.md").read_text()
+    data = json.loads((out / "reproduction.json").read_text())
+    rows = [r for f in sorted((results / "reproduction_realistic").glob("part-*.parquet"))
+            for r in pq.read_table(f).to_pylist()]
+    assert rows and not any(r["error"] for r in rows)
+    n = 0
+    for r in rows:
+        p = json.loads(r["params"])
+        key = f"{p['plant']}/{p['load_rated']:g}/{int(p['fw.obs_mode'])}/{p['extractor']}"
+        case = data["realistic"]["cases"][key]
+        assert case["faults"] == [r["fault"]]  # one seed in the quick run
+        if r["valid"]:
+            assert case["steady_rms"]["mean"] == pytest.approx(r["steady.pos_rms"], rel=1e-12)
+            assert case["transient_max"]["mean"] == pytest.approx(r["transient.pos_max"],
+                                                                 rel=1e-12)
+            n += 1
+        else:
+            assert case["steady_rms"]["mean"] is None and r["fault"] != 0
+    assert n >= 20
+    assert _check_realistic_md_against_json(md, data) >= 2 * n
+    assert "**Verdict on the paper's ranking.**" in md
+
+
+def test_committed_realistic_section_prints_its_json() -> None:
+    """docs/reproduction.md's realistic section shows docs/reproduction.json's numbers, and
+    the JSON's verdict counts follow from its paired differences."""
+    md = (REPO / "docs" / "reproduction.md").read_text()
+    data = json.loads((REPO / "docs" / "reproduction.json").read_text())
+    assert _check_realistic_md_against_json(md, data) > 200
+    real = data["realistic"]
+    v = real["verdict"]
+    main = next(iter(v["plants"]))
+    for e2 in ("sogi", "sogi_adaptive"):
+        better = worse = cases = 0
+        for key, d in real["paired"].items():
+            plant, load, obs, pair = key.split("/")
+            if plant != main or pair != f"pseudo-{e2}":
+                continue
+            cs = [real["cases"][f"{plant}/{load}/{obs}/{e}"] for e in EXTRACTORS]
+            # a case tracks when every extractor ran without a fault in >= 3/4 of the seeds
+            tracks = all(c["valid"] >= max(2, 0.75 * len(c["faults"])) for c in cs)
+            if not tracks:
+                continue
+            cases += 1
+            sig = d["n"] > 1 and abs(d["mean"]) > 2 * d["sd"] / math.sqrt(d["n"])
+            assert sig == d["significant"], key
+            better += sig and d["mean"] > 0
+            worse += sig and d["mean"] < 0
+        assert v["plants"][main]["cases"] == cases
+        assert v["plants"][main][e2]["better"] == better
+        assert v["plants"][main][e2]["worse"] == worse
+
+
+def _synthetic(gain: float, grow: bool) -> tuple[dict, list[dict]]:
+    """A reproduction_realistic result with known answers: the pseudo-filter's steady RMS
+    0.10 (+ seed noise), the SOGIs ``gain`` lower on the realistic plant; on the ideal
+    plant all equal (``grow``) or the same gain."""
+    rng = np.random.default_rng(1)
+    meta = {"name": "reproduction_realistic", "base": {
+        "motor": "realistic_linear", "speed_mps": 0.1, "event_s": 0.4,
+        "windows": {"transient": [0.4, 0.8], "steady": [0.8, 1.2]}}, "axes": []}
+    rows = []
+    for plant in ("realistic, compensated", "ideal plant"):
+        for load in (0.0, 1.0):
+            for obs in (1, 2):
+                for seed in range(10):
+                    noise = rng.normal(0, 0.002)
+                    for ex in EXTRACTORS:
+                        k = 0.0 if ex == "pseudo" or (plant == "ideal plant" and grow) \
+                            else gain
+                        v = 0.10 * (1 - k) + noise + rng.normal(0, 0.0005)
+                        fault = 0xFF01 if load == 1.0 and ex == "sogi" and seed < 2 else 0
+                        rows.append({"p": {"plant": plant, "load_rated": load,
+                                           "fw.obs_mode": obs, "extractor": ex, "seed": seed},
+                                     "fault": fault, "valid": not fault,
+                                     "steady.pos_rms": v, "steady.pos_max": 3 * v,
+                                     "transient.pos_max": 4 * v})
+    return meta, rows
+
+
+def test_realistic_verdict_follows_the_paired_differences() -> None:
+    from simcampaign._reproduction_realistic import load_realistic, markdown, verdict
+
+    rl = load_realistic(*_synthetic(0.8, grow=True))
+    v = verdict(rl)
+    main = v["plants"]["realistic, compensated"]
+    assert main["cases"] == 4
+    assert main["sogi_adaptive"] == {"better": 4, "worse": 0,
+                                     "gain_min_pct": pytest.approx(80, abs=3),
+                                     "gain_max_pct": pytest.approx(80, abs=3)}
+    assert main["faults_rated"] == {"pseudo": 0, "sogi": 4, "sogi_adaptive": 0}
+    assert v["faults"]["realistic, compensated"]["1"] == main["faults_rated"]
+    assert v["ranking_holds"] and v["sogi_advantage_grows"]
+    assert v["growth"]["realistic, compensated"]["sogi_adaptive"] == {
+        "cases": 4, "grows": 4, "shrinks": 0}
+    text = "\n".join(markdown(rl))
+    assert "**reproduced**" in text and "**Yes, measurably**" in text
+    # no gain at all, and the same on both plants: neither
+    v = verdict(load_realistic(*_synthetic(0.0, grow=False)))
+    assert not v["ranking_holds"] and not v["sogi_advantage_grows"]
+    assert v["plants"]["realistic, compensated"]["sogi_adaptive"]["better"] <= 1
+    # a gain, but the same on the ideal plant: the ranking holds, the advantage does not grow
+    v = verdict(load_realistic(*_synthetic(0.8, grow=False)))
+    assert v["ranking_holds"] and not v["sogi_advantage_grows"]
