@@ -66,6 +66,8 @@ void fw_mon_init(fw_mon_t *m, const fw_config_t *cfg, float dt_s) {
   m->angle_max_rad = cfg->protection.mon_angle_max_rad;
   m->bemf_max_rad = cfg->protection.mon_bemf_max_rad;
   m->bemf_min_V = cfg->protection.mon_bemf_min_V;
+  m->bemf_i_tol = cfg->protection.mon_bemf_i_tol;
+  m->L_q_psi = cfg->machine.L_q_H / cfg->machine.psi_f_Wb;
   m->detect_s = cfg->protection.mon_detect_time_s;
   m->i_sum_max_A = cfg->protection.i_sum_max_A;
   m->i_offset_max_A = cfg->protection.i_offset_max_A;
@@ -255,8 +257,14 @@ FW_NOINLINE void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float acce
   float e_hat = fabsf(m->w_f) * m->psi_f_Wb;
   m->e_bemf_V = e_meas;
   bool bad = false;
-  if (e_hat > m->bemf_min_V || e_meas > m->bemf_min_V) {
-    if (e_hat * MON_BEMF_RATIO < e_meas || e_meas * MON_BEMF_RATIO < e_hat) {
+  /* the model's error grows with the current (R, L_q off by bemf_i_tol): the
+   * witness judges above it, and allows it in the magnitude and the angle */
+  const float i_abs = 0.5f * m->imag_f; /* (|i_a| + |i_b| + |i_c|) / 2 ~ |i| */
+  const float e_tol = m->bemf_i_tol * (m->R_ohm + fabsf(m->w_f) * m->L_q_H) * i_abs;
+  const float e_min = m->bemf_min_V + e_tol;
+  if (e_hat > e_min || e_meas > e_min) {
+    if (e_hat * MON_BEMF_RATIO + e_tol < e_meas ||
+        (e_meas + e_tol) * MON_BEMF_RATIO < e_hat) {
       bad = true;
       m->angle_bemf_rad = FW_PI_F32; /* magnitude disagrees: no angle to speak of */
     } else {
@@ -265,7 +273,7 @@ FW_NOINLINE void fw_mon_block(fw_mon_t *m, bool pwm_on, bool running, float acce
         ang = fw_wrap_pi_f32(ang + FW_PI_F32);
       }
       m->angle_bemf_rad = fabsf(ang);
-      bad = m->angle_bemf_rad > m->bemf_max_rad;
+      bad = m->angle_bemf_rad > m->bemf_max_rad + m->bemf_i_tol * m->L_q_psi * i_abs;
     }
   } else {
     m->angle_bemf_rad = 0.0f;

@@ -17,7 +17,7 @@ from enum import IntEnum
 from typing import Any, NamedTuple
 
 #: the firmware's version (device.firmware_version; 0x100A, 0x2040 packed)
-FW_VERSION_STRING = '0.7.0'
+FW_VERSION_STRING = '0.8.0'
 
 FAULTS: dict[int, tuple[str, str]] = {
     0x2310: ('OVERCURRENT', '|phase current| above i_trip_A'),
@@ -284,6 +284,8 @@ FW_CONFIG_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ('bemf_e_on_V', 'estimator', False),
     ('bemf_e_off_V', 'estimator', False),
     ('mon_bemf_min_V', 'protection', False),
+    ('bemf_xc_comp', 'estimator', True),
+    ('mon_bemf_i_tol', 'protection', False),
     ('dt_comp_s', 'compensation', False),
     ('dt_comp_band_A', 'compensation', False),
     ('dt_comp_drop_V', 'compensation', False),
@@ -581,12 +583,14 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2052, 7): 'Current offset limit',
     (0x2052, 8): 'Start speed limit',
     (0x2052, 9): 'Back-EMF minimum',
+    (0x2052, 10): 'Back-EMF current tolerance',
     (0x2053, 0): 'Highest sub-index supported',
     (0x2053, 1): 'Handover up speed',
     (0x2053, 2): 'Handover down speed',
     (0x2053, 3): 'Injection share',
     (0x2053, 4): 'Handover up',
     (0x2053, 5): 'Handover down',
+    (0x2053, 6): 'Saliency cross-coupling',
     (0x2054, 0): 'Highest sub-index supported',
     (0x2054, 1): 'Mover mass',
     (0x2054, 2): 'Viscous friction',
@@ -886,11 +890,13 @@ INTEGRITY_MONITOR__I_SUM_MAX_A = Entry(0x2052, 6, unit='A')
 INTEGRITY_MONITOR__I_OFFSET_MAX_A = Entry(0x2052, 7, unit='A')
 INTEGRITY_MONITOR__START_SPEED_MAX_MPS = Entry(0x2052, 8, unit='m/s')
 INTEGRITY_MONITOR__MON_BEMF_MIN_V = Entry(0x2052, 9, unit='V')
+INTEGRITY_MONITOR__MON_BEMF_I_TOL = Entry(0x2052, 10)
 BACK_EMF_OBSERVER__BEMF_V_ON_MPS = Entry(0x2053, 1, unit='m/s')
 BACK_EMF_OBSERVER__BEMF_V_OFF_MPS = Entry(0x2053, 2, unit='m/s')
 BACK_EMF_OBSERVER__BEMF_INJ_SHARE = Entry(0x2053, 3)
 BACK_EMF_OBSERVER__BEMF_E_ON_V = Entry(0x2053, 4, unit='V')
 BACK_EMF_OBSERVER__BEMF_E_OFF_V = Entry(0x2053, 5, unit='V')
+BACK_EMF_OBSERVER__BEMF_XC_COMP = Entry(0x2053, 6)
 MACHINE_AND_LOOP_BANDWIDTHS__MASS_KG = Entry(0x2054, 1, unit='kg')
 MACHINE_AND_LOOP_BANDWIDTHS__VISC_NS_PER_M = Entry(0x2054, 2, unit='N s/m')
 MACHINE_AND_LOOP_BANDWIDTHS__COULOMB_N = Entry(0x2054, 3, unit='N')

@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 312u
-#define CO_OD_RAM_SIZE 1060u
+#define CO_OD_COUNT 314u
+#define CO_OD_RAM_SIZE 1068u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -222,106 +222,108 @@
 #define CO_OD_2052_07 209u /* Integrity monitor: Current offset limit */
 #define CO_OD_2052_08 210u /* Integrity monitor: Start speed limit */
 #define CO_OD_2052_09 211u /* Integrity monitor: Back-EMF minimum */
-#define CO_OD_2053_00 212u /* Back-EMF observer: Highest sub-index supported */
-#define CO_OD_2053_01 213u /* Back-EMF observer: Handover up speed */
-#define CO_OD_2053_02 214u /* Back-EMF observer: Handover down speed */
-#define CO_OD_2053_03 215u /* Back-EMF observer: Injection share */
-#define CO_OD_2053_04 216u /* Back-EMF observer: Handover up */
-#define CO_OD_2053_05 217u /* Back-EMF observer: Handover down */
-#define CO_OD_2054_00 218u /* Machine and loop bandwidths: Highest sub-index supported */
-#define CO_OD_2054_01 219u /* Machine and loop bandwidths: Mover mass */
-#define CO_OD_2054_02 220u /* Machine and loop bandwidths: Viscous friction */
-#define CO_OD_2054_03 221u /* Machine and loop bandwidths: Coulomb friction */
-#define CO_OD_2054_04 222u /* Machine and loop bandwidths: Current loop bandwidth */
-#define CO_OD_2054_05 223u /* Machine and loop bandwidths: Speed loop bandwidth */
-#define CO_OD_2054_06 224u /* Machine and loop bandwidths: Gains automatic */
-#define CO_OD_2055_00 225u /* Start-up and estimate supervision: Highest sub-index supported */
-#define CO_OD_2055_01 226u /* Start-up and estimate supervision: Alignment time */
-#define CO_OD_2055_02 227u /* Start-up and estimate supervision: Polarity pulse voltage */
-#define CO_OD_2055_03 228u /* Start-up and estimate supervision: Polarity pulse samples */
-#define CO_OD_2055_04 229u /* Start-up and estimate supervision: Polarity pulse pairs */
-#define CO_OD_2055_05 230u /* Start-up and estimate supervision: Polarity margin */
-#define CO_OD_2055_06 231u /* Start-up and estimate supervision: HF amplitude minimum ratio */
-#define CO_OD_2055_07 232u /* Start-up and estimate supervision: PLL error limit */
-#define CO_OD_2055_08 233u /* Start-up and estimate supervision: PLL error time */
-#define CO_OD_2056_00 234u /* Board sensing: Highest sub-index supported */
-#define CO_OD_2056_01 235u /* Board sensing: Current per count */
-#define CO_OD_2056_02 236u /* Board sensing: Current zero */
-#define CO_OD_2056_03 237u /* Board sensing: DC link volts per count */
-#define CO_OD_2056_04 238u /* Board sensing: Full-scale count */
-#define CO_OD_2057_00 239u /* Compensation: Highest sub-index supported */
-#define CO_OD_2057_01 240u /* Compensation: Dead time */
-#define CO_OD_2057_02 241u /* Compensation: Dead-time sign band */
-#define CO_OD_2057_03 242u /* Compensation: Device drop */
-#define CO_OD_2057_04 243u /* Compensation: Cross-saturation map step */
-#define CO_OD_2057_05 244u /* Compensation: Cross-saturation offset 1 */
-#define CO_OD_2057_06 245u /* Compensation: Cross-saturation offset 2 */
-#define CO_OD_2057_07 246u /* Compensation: Cross-saturation offset 3 */
-#define CO_OD_2057_08 247u /* Compensation: Cross-saturation offset 4 */
-#define CO_OD_2057_09 248u /* Compensation: Cross-saturation offset 5 */
-#define CO_OD_2057_0A 249u /* Compensation: Cross-saturation offset 6 */
-#define CO_OD_2057_0B 250u /* Compensation: Bumpless SOGI gain */
-#define CO_OD_2060_00 251u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 252u /* Telemetry: Decimation */
-#define CO_OD_2060_02 253u /* Telemetry: Signal count */
-#define CO_OD_2060_03 254u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 255u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 256u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 257u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 258u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 259u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 260u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 261u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 262u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 263u /* Trace: Command */
-#define CO_OD_2070_02 264u /* Trace: State */
-#define CO_OD_2070_03 265u /* Trace: Trigger signal */
-#define CO_OD_2070_04 266u /* Trace: Trigger level */
-#define CO_OD_2070_05 267u /* Trace: Trigger edge */
-#define CO_OD_2070_06 268u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 269u /* Trace: Signal count */
-#define CO_OD_2070_08 270u /* Trace: Signal 1 */
-#define CO_OD_2070_09 271u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 272u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 273u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 274u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 275u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 276u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 277u /* Trace: Signal 8 */
-#define CO_OD_2080_00 278u /* Identification: Highest sub-index supported */
-#define CO_OD_2080_01 279u /* Identification: d-axis current reference */
-#define CO_OD_2080_02 280u /* Identification: Measured smaller inductance */
-#define CO_OD_2080_03 281u /* Identification: Measured larger inductance */
-#define CO_OD_2090_00 282u /* Board: Highest sub-index supported */
-#define CO_OD_2090_01 283u /* Board: Drive kind */
-#define CO_OD_2090_02 284u /* Board: Board name */
-#define CO_OD_2090_03 285u /* Board: Drive time */
-#define CO_OD_2091_00 286u /* Reference sensor: Highest sub-index supported */
-#define CO_OD_2091_01 287u /* Reference sensor: Status */
-#define CO_OD_2091_02 288u /* Reference sensor: Resolution */
-#define CO_OD_2091_03 289u /* Reference sensor: Electrical zero */
-#define CO_OD_2091_04 290u /* Reference sensor: Count */
-#define CO_OD_2091_05 291u /* Reference sensor: Position */
-#define CO_OD_2091_06 292u /* Reference sensor: Faults seen */
-#define CO_OD_603F_00 293u /* Error code: Error code */
-#define CO_OD_6040_00 294u /* Controlword: Controlword */
-#define CO_OD_6041_00 295u /* Statusword: Statusword */
-#define CO_OD_605A_00 296u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 297u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 298u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 299u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 300u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 301u /* Following error window: Following error window */
-#define CO_OD_6066_00 302u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 303u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 304u /* Target torque: Target torque */
-#define CO_OD_6077_00 305u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 306u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 307u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 308u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 309u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 310u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 311u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2052_0A 212u /* Integrity monitor: Back-EMF current tolerance */
+#define CO_OD_2053_00 213u /* Back-EMF observer: Highest sub-index supported */
+#define CO_OD_2053_01 214u /* Back-EMF observer: Handover up speed */
+#define CO_OD_2053_02 215u /* Back-EMF observer: Handover down speed */
+#define CO_OD_2053_03 216u /* Back-EMF observer: Injection share */
+#define CO_OD_2053_04 217u /* Back-EMF observer: Handover up */
+#define CO_OD_2053_05 218u /* Back-EMF observer: Handover down */
+#define CO_OD_2053_06 219u /* Back-EMF observer: Saliency cross-coupling */
+#define CO_OD_2054_00 220u /* Machine and loop bandwidths: Highest sub-index supported */
+#define CO_OD_2054_01 221u /* Machine and loop bandwidths: Mover mass */
+#define CO_OD_2054_02 222u /* Machine and loop bandwidths: Viscous friction */
+#define CO_OD_2054_03 223u /* Machine and loop bandwidths: Coulomb friction */
+#define CO_OD_2054_04 224u /* Machine and loop bandwidths: Current loop bandwidth */
+#define CO_OD_2054_05 225u /* Machine and loop bandwidths: Speed loop bandwidth */
+#define CO_OD_2054_06 226u /* Machine and loop bandwidths: Gains automatic */
+#define CO_OD_2055_00 227u /* Start-up and estimate supervision: Highest sub-index supported */
+#define CO_OD_2055_01 228u /* Start-up and estimate supervision: Alignment time */
+#define CO_OD_2055_02 229u /* Start-up and estimate supervision: Polarity pulse voltage */
+#define CO_OD_2055_03 230u /* Start-up and estimate supervision: Polarity pulse samples */
+#define CO_OD_2055_04 231u /* Start-up and estimate supervision: Polarity pulse pairs */
+#define CO_OD_2055_05 232u /* Start-up and estimate supervision: Polarity margin */
+#define CO_OD_2055_06 233u /* Start-up and estimate supervision: HF amplitude minimum ratio */
+#define CO_OD_2055_07 234u /* Start-up and estimate supervision: PLL error limit */
+#define CO_OD_2055_08 235u /* Start-up and estimate supervision: PLL error time */
+#define CO_OD_2056_00 236u /* Board sensing: Highest sub-index supported */
+#define CO_OD_2056_01 237u /* Board sensing: Current per count */
+#define CO_OD_2056_02 238u /* Board sensing: Current zero */
+#define CO_OD_2056_03 239u /* Board sensing: DC link volts per count */
+#define CO_OD_2056_04 240u /* Board sensing: Full-scale count */
+#define CO_OD_2057_00 241u /* Compensation: Highest sub-index supported */
+#define CO_OD_2057_01 242u /* Compensation: Dead time */
+#define CO_OD_2057_02 243u /* Compensation: Dead-time sign band */
+#define CO_OD_2057_03 244u /* Compensation: Device drop */
+#define CO_OD_2057_04 245u /* Compensation: Cross-saturation map step */
+#define CO_OD_2057_05 246u /* Compensation: Cross-saturation offset 1 */
+#define CO_OD_2057_06 247u /* Compensation: Cross-saturation offset 2 */
+#define CO_OD_2057_07 248u /* Compensation: Cross-saturation offset 3 */
+#define CO_OD_2057_08 249u /* Compensation: Cross-saturation offset 4 */
+#define CO_OD_2057_09 250u /* Compensation: Cross-saturation offset 5 */
+#define CO_OD_2057_0A 251u /* Compensation: Cross-saturation offset 6 */
+#define CO_OD_2057_0B 252u /* Compensation: Bumpless SOGI gain */
+#define CO_OD_2060_00 253u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 254u /* Telemetry: Decimation */
+#define CO_OD_2060_02 255u /* Telemetry: Signal count */
+#define CO_OD_2060_03 256u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 257u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 258u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 259u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 260u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 261u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 262u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 263u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 264u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 265u /* Trace: Command */
+#define CO_OD_2070_02 266u /* Trace: State */
+#define CO_OD_2070_03 267u /* Trace: Trigger signal */
+#define CO_OD_2070_04 268u /* Trace: Trigger level */
+#define CO_OD_2070_05 269u /* Trace: Trigger edge */
+#define CO_OD_2070_06 270u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 271u /* Trace: Signal count */
+#define CO_OD_2070_08 272u /* Trace: Signal 1 */
+#define CO_OD_2070_09 273u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 274u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 275u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 276u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 277u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 278u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 279u /* Trace: Signal 8 */
+#define CO_OD_2080_00 280u /* Identification: Highest sub-index supported */
+#define CO_OD_2080_01 281u /* Identification: d-axis current reference */
+#define CO_OD_2080_02 282u /* Identification: Measured smaller inductance */
+#define CO_OD_2080_03 283u /* Identification: Measured larger inductance */
+#define CO_OD_2090_00 284u /* Board: Highest sub-index supported */
+#define CO_OD_2090_01 285u /* Board: Drive kind */
+#define CO_OD_2090_02 286u /* Board: Board name */
+#define CO_OD_2090_03 287u /* Board: Drive time */
+#define CO_OD_2091_00 288u /* Reference sensor: Highest sub-index supported */
+#define CO_OD_2091_01 289u /* Reference sensor: Status */
+#define CO_OD_2091_02 290u /* Reference sensor: Resolution */
+#define CO_OD_2091_03 291u /* Reference sensor: Electrical zero */
+#define CO_OD_2091_04 292u /* Reference sensor: Count */
+#define CO_OD_2091_05 293u /* Reference sensor: Position */
+#define CO_OD_2091_06 294u /* Reference sensor: Faults seen */
+#define CO_OD_603F_00 295u /* Error code: Error code */
+#define CO_OD_6040_00 296u /* Controlword: Controlword */
+#define CO_OD_6041_00 297u /* Statusword: Statusword */
+#define CO_OD_605A_00 298u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 299u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 300u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 301u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 302u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 303u /* Following error window: Following error window */
+#define CO_OD_6066_00 304u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 305u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 306u /* Target torque: Target torque */
+#define CO_OD_6077_00 307u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 308u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 309u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 310u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 311u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 312u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 313u /* Supported drive modes: Supported drive modes */
 
 /** Where each entry's value lives in the OD RAM (compile-time handles for the
  *  application's per-period access, co_node.h CO_NODE_PUT/CO_NODE_GET):
@@ -752,205 +754,209 @@
 #define CO_OD_LEN_2052_08 4u
 #define CO_OD_OFF_2052_09 766u
 #define CO_OD_LEN_2052_09 4u
-#define CO_OD_OFF_2053_00 770u
+#define CO_OD_OFF_2052_0A 770u
+#define CO_OD_LEN_2052_0A 4u
+#define CO_OD_OFF_2053_00 774u
 #define CO_OD_LEN_2053_00 1u
-#define CO_OD_OFF_2053_01 771u
+#define CO_OD_OFF_2053_01 775u
 #define CO_OD_LEN_2053_01 4u
-#define CO_OD_OFF_2053_02 775u
+#define CO_OD_OFF_2053_02 779u
 #define CO_OD_LEN_2053_02 4u
-#define CO_OD_OFF_2053_03 779u
+#define CO_OD_OFF_2053_03 783u
 #define CO_OD_LEN_2053_03 4u
-#define CO_OD_OFF_2053_04 783u
+#define CO_OD_OFF_2053_04 787u
 #define CO_OD_LEN_2053_04 4u
-#define CO_OD_OFF_2053_05 787u
+#define CO_OD_OFF_2053_05 791u
 #define CO_OD_LEN_2053_05 4u
-#define CO_OD_OFF_2054_00 791u
+#define CO_OD_OFF_2053_06 795u
+#define CO_OD_LEN_2053_06 4u
+#define CO_OD_OFF_2054_00 799u
 #define CO_OD_LEN_2054_00 1u
-#define CO_OD_OFF_2054_01 792u
+#define CO_OD_OFF_2054_01 800u
 #define CO_OD_LEN_2054_01 4u
-#define CO_OD_OFF_2054_02 796u
+#define CO_OD_OFF_2054_02 804u
 #define CO_OD_LEN_2054_02 4u
-#define CO_OD_OFF_2054_03 800u
+#define CO_OD_OFF_2054_03 808u
 #define CO_OD_LEN_2054_03 4u
-#define CO_OD_OFF_2054_04 804u
+#define CO_OD_OFF_2054_04 812u
 #define CO_OD_LEN_2054_04 4u
-#define CO_OD_OFF_2054_05 808u
+#define CO_OD_OFF_2054_05 816u
 #define CO_OD_LEN_2054_05 4u
-#define CO_OD_OFF_2054_06 812u
+#define CO_OD_OFF_2054_06 820u
 #define CO_OD_LEN_2054_06 4u
-#define CO_OD_OFF_2055_00 816u
+#define CO_OD_OFF_2055_00 824u
 #define CO_OD_LEN_2055_00 1u
-#define CO_OD_OFF_2055_01 817u
+#define CO_OD_OFF_2055_01 825u
 #define CO_OD_LEN_2055_01 4u
-#define CO_OD_OFF_2055_02 821u
+#define CO_OD_OFF_2055_02 829u
 #define CO_OD_LEN_2055_02 4u
-#define CO_OD_OFF_2055_03 825u
+#define CO_OD_OFF_2055_03 833u
 #define CO_OD_LEN_2055_03 4u
-#define CO_OD_OFF_2055_04 829u
+#define CO_OD_OFF_2055_04 837u
 #define CO_OD_LEN_2055_04 4u
-#define CO_OD_OFF_2055_05 833u
+#define CO_OD_OFF_2055_05 841u
 #define CO_OD_LEN_2055_05 4u
-#define CO_OD_OFF_2055_06 837u
+#define CO_OD_OFF_2055_06 845u
 #define CO_OD_LEN_2055_06 4u
-#define CO_OD_OFF_2055_07 841u
+#define CO_OD_OFF_2055_07 849u
 #define CO_OD_LEN_2055_07 4u
-#define CO_OD_OFF_2055_08 845u
+#define CO_OD_OFF_2055_08 853u
 #define CO_OD_LEN_2055_08 4u
-#define CO_OD_OFF_2056_00 849u
+#define CO_OD_OFF_2056_00 857u
 #define CO_OD_LEN_2056_00 1u
-#define CO_OD_OFF_2056_01 850u
+#define CO_OD_OFF_2056_01 858u
 #define CO_OD_LEN_2056_01 4u
-#define CO_OD_OFF_2056_02 854u
+#define CO_OD_OFF_2056_02 862u
 #define CO_OD_LEN_2056_02 4u
-#define CO_OD_OFF_2056_03 858u
+#define CO_OD_OFF_2056_03 866u
 #define CO_OD_LEN_2056_03 4u
-#define CO_OD_OFF_2056_04 862u
+#define CO_OD_OFF_2056_04 870u
 #define CO_OD_LEN_2056_04 4u
-#define CO_OD_OFF_2057_00 866u
+#define CO_OD_OFF_2057_00 874u
 #define CO_OD_LEN_2057_00 1u
-#define CO_OD_OFF_2057_01 867u
+#define CO_OD_OFF_2057_01 875u
 #define CO_OD_LEN_2057_01 4u
-#define CO_OD_OFF_2057_02 871u
+#define CO_OD_OFF_2057_02 879u
 #define CO_OD_LEN_2057_02 4u
-#define CO_OD_OFF_2057_03 875u
+#define CO_OD_OFF_2057_03 883u
 #define CO_OD_LEN_2057_03 4u
-#define CO_OD_OFF_2057_04 879u
+#define CO_OD_OFF_2057_04 887u
 #define CO_OD_LEN_2057_04 4u
-#define CO_OD_OFF_2057_05 883u
+#define CO_OD_OFF_2057_05 891u
 #define CO_OD_LEN_2057_05 4u
-#define CO_OD_OFF_2057_06 887u
+#define CO_OD_OFF_2057_06 895u
 #define CO_OD_LEN_2057_06 4u
-#define CO_OD_OFF_2057_07 891u
+#define CO_OD_OFF_2057_07 899u
 #define CO_OD_LEN_2057_07 4u
-#define CO_OD_OFF_2057_08 895u
+#define CO_OD_OFF_2057_08 903u
 #define CO_OD_LEN_2057_08 4u
-#define CO_OD_OFF_2057_09 899u
+#define CO_OD_OFF_2057_09 907u
 #define CO_OD_LEN_2057_09 4u
-#define CO_OD_OFF_2057_0A 903u
+#define CO_OD_OFF_2057_0A 911u
 #define CO_OD_LEN_2057_0A 4u
-#define CO_OD_OFF_2057_0B 907u
+#define CO_OD_OFF_2057_0B 915u
 #define CO_OD_LEN_2057_0B 4u
-#define CO_OD_OFF_2060_00 911u
+#define CO_OD_OFF_2060_00 919u
 #define CO_OD_LEN_2060_00 1u
-#define CO_OD_OFF_2060_01 912u
+#define CO_OD_OFF_2060_01 920u
 #define CO_OD_LEN_2060_01 2u
-#define CO_OD_OFF_2060_02 914u
+#define CO_OD_OFF_2060_02 922u
 #define CO_OD_LEN_2060_02 1u
-#define CO_OD_OFF_2060_03 915u
+#define CO_OD_OFF_2060_03 923u
 #define CO_OD_LEN_2060_03 1u
-#define CO_OD_OFF_2060_04 916u
+#define CO_OD_OFF_2060_04 924u
 #define CO_OD_LEN_2060_04 1u
-#define CO_OD_OFF_2060_05 917u
+#define CO_OD_OFF_2060_05 925u
 #define CO_OD_LEN_2060_05 1u
-#define CO_OD_OFF_2060_06 918u
+#define CO_OD_OFF_2060_06 926u
 #define CO_OD_LEN_2060_06 1u
-#define CO_OD_OFF_2060_07 919u
+#define CO_OD_OFF_2060_07 927u
 #define CO_OD_LEN_2060_07 1u
-#define CO_OD_OFF_2060_08 920u
+#define CO_OD_OFF_2060_08 928u
 #define CO_OD_LEN_2060_08 1u
-#define CO_OD_OFF_2060_09 921u
+#define CO_OD_OFF_2060_09 929u
 #define CO_OD_LEN_2060_09 1u
-#define CO_OD_OFF_2060_0A 922u
+#define CO_OD_OFF_2060_0A 930u
 #define CO_OD_LEN_2060_0A 1u
-#define CO_OD_OFF_2070_00 923u
+#define CO_OD_OFF_2070_00 931u
 #define CO_OD_LEN_2070_00 1u
-#define CO_OD_OFF_2070_01 924u
+#define CO_OD_OFF_2070_01 932u
 #define CO_OD_LEN_2070_01 1u
-#define CO_OD_OFF_2070_02 925u
+#define CO_OD_OFF_2070_02 933u
 #define CO_OD_LEN_2070_02 1u
-#define CO_OD_OFF_2070_03 926u
+#define CO_OD_OFF_2070_03 934u
 #define CO_OD_LEN_2070_03 1u
-#define CO_OD_OFF_2070_04 927u
+#define CO_OD_OFF_2070_04 935u
 #define CO_OD_LEN_2070_04 4u
-#define CO_OD_OFF_2070_05 931u
+#define CO_OD_OFF_2070_05 939u
 #define CO_OD_LEN_2070_05 1u
-#define CO_OD_OFF_2070_06 932u
+#define CO_OD_OFF_2070_06 940u
 #define CO_OD_LEN_2070_06 2u
-#define CO_OD_OFF_2070_07 934u
+#define CO_OD_OFF_2070_07 942u
 #define CO_OD_LEN_2070_07 1u
-#define CO_OD_OFF_2070_08 935u
+#define CO_OD_OFF_2070_08 943u
 #define CO_OD_LEN_2070_08 1u
-#define CO_OD_OFF_2070_09 936u
+#define CO_OD_OFF_2070_09 944u
 #define CO_OD_LEN_2070_09 1u
-#define CO_OD_OFF_2070_0A 937u
+#define CO_OD_OFF_2070_0A 945u
 #define CO_OD_LEN_2070_0A 1u
-#define CO_OD_OFF_2070_0B 938u
+#define CO_OD_OFF_2070_0B 946u
 #define CO_OD_LEN_2070_0B 1u
-#define CO_OD_OFF_2070_0C 939u
+#define CO_OD_OFF_2070_0C 947u
 #define CO_OD_LEN_2070_0C 1u
-#define CO_OD_OFF_2070_0D 940u
+#define CO_OD_OFF_2070_0D 948u
 #define CO_OD_LEN_2070_0D 1u
-#define CO_OD_OFF_2070_0E 941u
+#define CO_OD_OFF_2070_0E 949u
 #define CO_OD_LEN_2070_0E 1u
-#define CO_OD_OFF_2070_0F 942u
+#define CO_OD_OFF_2070_0F 950u
 #define CO_OD_LEN_2070_0F 1u
-#define CO_OD_OFF_2080_00 943u
+#define CO_OD_OFF_2080_00 951u
 #define CO_OD_LEN_2080_00 1u
-#define CO_OD_OFF_2080_01 944u
+#define CO_OD_OFF_2080_01 952u
 #define CO_OD_LEN_2080_01 4u
-#define CO_OD_OFF_2080_02 948u
+#define CO_OD_OFF_2080_02 956u
 #define CO_OD_LEN_2080_02 4u
-#define CO_OD_OFF_2080_03 952u
+#define CO_OD_OFF_2080_03 960u
 #define CO_OD_LEN_2080_03 4u
-#define CO_OD_OFF_2090_00 956u
+#define CO_OD_OFF_2090_00 964u
 #define CO_OD_LEN_2090_00 1u
-#define CO_OD_OFF_2090_01 957u
+#define CO_OD_OFF_2090_01 965u
 #define CO_OD_LEN_2090_01 1u
-#define CO_OD_OFF_2090_02 958u
+#define CO_OD_OFF_2090_02 966u
 #define CO_OD_LEN_2090_02 24u
-#define CO_OD_OFF_2090_03 983u
+#define CO_OD_OFF_2090_03 991u
 #define CO_OD_LEN_2090_03 4u
-#define CO_OD_OFF_2091_00 987u
+#define CO_OD_OFF_2091_00 995u
 #define CO_OD_LEN_2091_00 1u
-#define CO_OD_OFF_2091_01 988u
+#define CO_OD_OFF_2091_01 996u
 #define CO_OD_LEN_2091_01 1u
-#define CO_OD_OFF_2091_02 989u
+#define CO_OD_OFF_2091_02 997u
 #define CO_OD_LEN_2091_02 4u
-#define CO_OD_OFF_2091_03 993u
+#define CO_OD_OFF_2091_03 1001u
 #define CO_OD_LEN_2091_03 4u
-#define CO_OD_OFF_2091_04 997u
+#define CO_OD_OFF_2091_04 1005u
 #define CO_OD_LEN_2091_04 4u
-#define CO_OD_OFF_2091_05 1001u
+#define CO_OD_OFF_2091_05 1009u
 #define CO_OD_LEN_2091_05 4u
-#define CO_OD_OFF_2091_06 1005u
+#define CO_OD_OFF_2091_06 1013u
 #define CO_OD_LEN_2091_06 4u
-#define CO_OD_OFF_603F_00 1009u
+#define CO_OD_OFF_603F_00 1017u
 #define CO_OD_LEN_603F_00 2u
-#define CO_OD_OFF_6040_00 1011u
+#define CO_OD_OFF_6040_00 1019u
 #define CO_OD_LEN_6040_00 2u
-#define CO_OD_OFF_6041_00 1013u
+#define CO_OD_OFF_6041_00 1021u
 #define CO_OD_LEN_6041_00 2u
-#define CO_OD_OFF_605A_00 1015u
+#define CO_OD_OFF_605A_00 1023u
 #define CO_OD_LEN_605A_00 2u
-#define CO_OD_OFF_605E_00 1017u
+#define CO_OD_OFF_605E_00 1025u
 #define CO_OD_LEN_605E_00 2u
-#define CO_OD_OFF_6060_00 1019u
+#define CO_OD_OFF_6060_00 1027u
 #define CO_OD_LEN_6060_00 1u
-#define CO_OD_OFF_6061_00 1020u
+#define CO_OD_OFF_6061_00 1028u
 #define CO_OD_LEN_6061_00 1u
-#define CO_OD_OFF_6064_00 1021u
+#define CO_OD_OFF_6064_00 1029u
 #define CO_OD_LEN_6064_00 4u
-#define CO_OD_OFF_6065_00 1025u
+#define CO_OD_OFF_6065_00 1033u
 #define CO_OD_LEN_6065_00 4u
-#define CO_OD_OFF_6066_00 1029u
+#define CO_OD_OFF_6066_00 1037u
 #define CO_OD_LEN_6066_00 2u
-#define CO_OD_OFF_606C_00 1031u
+#define CO_OD_OFF_606C_00 1039u
 #define CO_OD_LEN_606C_00 4u
-#define CO_OD_OFF_6071_00 1035u
+#define CO_OD_OFF_6071_00 1043u
 #define CO_OD_LEN_6071_00 2u
-#define CO_OD_OFF_6077_00 1037u
+#define CO_OD_OFF_6077_00 1045u
 #define CO_OD_LEN_6077_00 2u
-#define CO_OD_OFF_607D_00 1039u
+#define CO_OD_OFF_607D_00 1047u
 #define CO_OD_LEN_607D_00 1u
-#define CO_OD_OFF_607D_01 1040u
+#define CO_OD_OFF_607D_01 1048u
 #define CO_OD_LEN_607D_01 4u
-#define CO_OD_OFF_607D_02 1044u
+#define CO_OD_OFF_607D_02 1052u
 #define CO_OD_LEN_607D_02 4u
-#define CO_OD_OFF_6080_00 1048u
+#define CO_OD_OFF_6080_00 1056u
 #define CO_OD_LEN_6080_00 4u
-#define CO_OD_OFF_60FF_00 1052u
+#define CO_OD_OFF_60FF_00 1060u
 #define CO_OD_LEN_60FF_00 4u
-#define CO_OD_OFF_6502_00 1056u
+#define CO_OD_OFF_6502_00 1064u
 #define CO_OD_LEN_6502_00 4u
 
 /** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */
@@ -1167,12 +1173,14 @@
   X(2052_07) \
   X(2052_08) \
   X(2052_09) \
+  X(2052_0A) \
   X(2053_00) \
   X(2053_01) \
   X(2053_02) \
   X(2053_03) \
   X(2053_04) \
   X(2053_05) \
+  X(2053_06) \
   X(2054_00) \
   X(2054_01) \
   X(2054_02) \
@@ -1271,7 +1279,7 @@
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 97u
+#define CO_OD_CFG_COUNT 99u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 

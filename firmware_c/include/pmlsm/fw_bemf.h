@@ -34,6 +34,8 @@ extern "C" {
 /** Observer and handover state (caller-owned). */
 typedef struct {
   float R_ohm, L_d_H, L_q_H, psi_f_Wb, dt_s, a_f;
+  float inv_psi;        /**< 1 / psi_f */
+  float dL_H;           /**< L_q - L_d with bemf_xc_comp, else 0 (fw_bemf_update) */
   float w_on, w_off;    /**< handover band, el. rad/s (w_on = 0: handover off) */
   float e_on2, e_off2;  /**< the same band in back-EMF, squared (V^2) */
   float e_min2;         /**< (half the switch-off back-EMF)^2: below it, no angle */

@@ -9,8 +9,8 @@
  *   - machine (fw_cfg_machine_t, 9 fields): nominal machine parameters the controller uses (electrical and mechanical)
  *   - sensing (fw_cfg_sensing_t, 5 fields): sampling rate and ADC scaling (fw_step_adc)
  *   - loops (fw_cfg_loops_t, 10 fields): current and speed loops: limits, PI gains, bandwidths for the derived gains
- *   - estimator (fw_cfg_estimator_t, 27 fields): injection, HF extraction, PLL observer, start-up (align, polarity), back-EMF observer and handover
- *   - protection (fw_cfg_protection_t, 28 fields): trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h)
+ *   - estimator (fw_cfg_estimator_t, 28 fields): injection, HF extraction, PLL observer, start-up (align, polarity), back-EMF observer and handover
+ *   - protection (fw_cfg_protection_t, 29 fields): trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h)
  *   - compensation (fw_cfg_compensation_t, 11 fields): inverter dead-time compensation (modulation) and the cross-saturation angle map (fw_xsat.h); all 0 = off
  *
  * Field names are unique across the parts: the object dictionary, the field
@@ -91,6 +91,7 @@ typedef struct {
   float bemf_inj_share;       /**< injection kept on back-EMF, share of u_inj_V */
   float bemf_e_on_V;          /**< back-EMF at bemf_v_on_mps (derived by fw_config_derive: w psi_f at that speed; read-only in the object dictionary) [V] */
   float bemf_e_off_V;         /**< back-EMF at bemf_v_off_mps (derived by fw_config_derive: w psi_f at that speed; read-only in the object dictionary) [V] */
+  uint32_t bemf_xc_comp;      /**< 1: the back-EMF residual takes out the saliency's (L_q - L_d) i (w - w_frame) term, with w from the residual's own e_q / psi_f: with the frame's speed alone it feeds the angle error's rate back at a gain (L_q - L_d) i / (w psi_f) that destabilises the observer braking at rated current near the handover (docs/bemf.md; 0: off, the drive as before) */
 } fw_cfg_estimator_t;
 
 /** Configuration part protection: trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h). */
@@ -123,6 +124,7 @@ typedef struct {
   float i_offset_max_A;          /**< limit on each standstill offset [A] */
   float start_speed_max_mps;     /**< refuse to enable above this mover speed [m/s] */
   float mon_bemf_min_V;          /**< back-EMF at mon_bemf_min_mps (derived by fw_config_derive: w psi_f at that speed; read-only in the object dictionary) [V] */
+  float mon_bemf_i_tol;          /**< back-EMF witness: share of the model's current terms (R + |w| L_q) |i| the residual may be off by (resistance drift, dead time, saturation); it judges above mon_bemf_min_V plus that and allows it in the magnitude, and that share of L_q |i| / psi_f in the angle (docs/integrity.md; 0: off, the witness as before) */
 } fw_cfg_protection_t;
 
 /** Configuration part compensation: inverter dead-time compensation (modulation) and the cross-saturation angle map (fw_xsat.h); all 0 = off. */
@@ -235,6 +237,8 @@ typedef struct {
   F32(estimator, bemf_e_on_V, "V", 0.0f, 1000000000.0f, 10.044456f) \
   F32(estimator, bemf_e_off_V, "V", 0.0f, 1000000000.0f, 6.935458f) \
   F32(protection, mon_bemf_min_V, "V", 0.0f, 1000000000.0f, 5.022228f) \
+  U32(estimator, bemf_xc_comp, "", 0.0f, 1.0f, 0u) \
+  F32(protection, mon_bemf_i_tol, "", 0.0f, 2.0f, 0.0f) \
   F32(compensation, dt_comp_s, "s", 0.0f, 5.0e-06f, 0.0f) \
   F32(compensation, dt_comp_band_A, "A", 0.0f, 100.0f, 0.3f) \
   F32(compensation, dt_comp_drop_V, "V", 0.0f, 10.0f, 0.0f) \
@@ -248,6 +252,6 @@ typedef struct {
   U32(compensation, sogi_bumpless, "", 0.0f, 1.0f, 0u)
 /* clang-format on */
 
-#define FW_CONFIG_FIELD_COUNT 90u
+#define FW_CONFIG_FIELD_COUNT 92u
 
 #endif /* PMLSM_FW_CONFIG_FIELDS_H */

@@ -95,6 +95,8 @@ typedef struct {
   float off_time_s;   /**< time with PWM off (offset learning starts after 50 ms) */
   float offset_A[3];  /**< offsets in use (latched at enable) */
   /* outputs */
+  float bemf_i_tol;   /**< mon_bemf_i_tol (0: the witness as before) */
+  float L_q_psi;      /**< L_q / psi_f: the angle allowance per A */
   float angle_hf_rad, angle_bemf_rad, e_bemf_V;
   float sal_meas, L_small_meas_H, L_large_meas_H, sal_axis_rad;
   /* persistence timers */
