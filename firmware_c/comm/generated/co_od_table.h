@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 312u
-#define CO_OD_RAM_SIZE 1060u
+#define CO_OD_COUNT 316u
+#define CO_OD_RAM_SIZE 1076u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -261,67 +261,71 @@
 #define CO_OD_2057_09 248u /* Compensation: Cross-saturation offset 5 */
 #define CO_OD_2057_0A 249u /* Compensation: Cross-saturation offset 6 */
 #define CO_OD_2057_0B 250u /* Compensation: Bumpless SOGI gain */
-#define CO_OD_2060_00 251u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 252u /* Telemetry: Decimation */
-#define CO_OD_2060_02 253u /* Telemetry: Signal count */
-#define CO_OD_2060_03 254u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 255u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 256u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 257u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 258u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 259u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 260u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 261u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 262u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 263u /* Trace: Command */
-#define CO_OD_2070_02 264u /* Trace: State */
-#define CO_OD_2070_03 265u /* Trace: Trigger signal */
-#define CO_OD_2070_04 266u /* Trace: Trigger level */
-#define CO_OD_2070_05 267u /* Trace: Trigger edge */
-#define CO_OD_2070_06 268u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 269u /* Trace: Signal count */
-#define CO_OD_2070_08 270u /* Trace: Signal 1 */
-#define CO_OD_2070_09 271u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 272u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 273u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 274u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 275u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 276u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 277u /* Trace: Signal 8 */
-#define CO_OD_2080_00 278u /* Identification: Highest sub-index supported */
-#define CO_OD_2080_01 279u /* Identification: d-axis current reference */
-#define CO_OD_2080_02 280u /* Identification: Measured smaller inductance */
-#define CO_OD_2080_03 281u /* Identification: Measured larger inductance */
-#define CO_OD_2090_00 282u /* Board: Highest sub-index supported */
-#define CO_OD_2090_01 283u /* Board: Drive kind */
-#define CO_OD_2090_02 284u /* Board: Board name */
-#define CO_OD_2090_03 285u /* Board: Drive time */
-#define CO_OD_2091_00 286u /* Reference sensor: Highest sub-index supported */
-#define CO_OD_2091_01 287u /* Reference sensor: Status */
-#define CO_OD_2091_02 288u /* Reference sensor: Resolution */
-#define CO_OD_2091_03 289u /* Reference sensor: Electrical zero */
-#define CO_OD_2091_04 290u /* Reference sensor: Count */
-#define CO_OD_2091_05 291u /* Reference sensor: Position */
-#define CO_OD_2091_06 292u /* Reference sensor: Faults seen */
-#define CO_OD_603F_00 293u /* Error code: Error code */
-#define CO_OD_6040_00 294u /* Controlword: Controlword */
-#define CO_OD_6041_00 295u /* Statusword: Statusword */
-#define CO_OD_605A_00 296u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 297u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 298u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 299u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 300u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 301u /* Following error window: Following error window */
-#define CO_OD_6066_00 302u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 303u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 304u /* Target torque: Target torque */
-#define CO_OD_6077_00 305u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 306u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 307u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 308u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 309u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 310u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 311u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2057_0C 251u /* Compensation: Position ripple cos 2 */
+#define CO_OD_2057_0D 252u /* Compensation: Position ripple sin 2 */
+#define CO_OD_2057_0E 253u /* Compensation: Position ripple cos 4 */
+#define CO_OD_2057_0F 254u /* Compensation: Position ripple sin 4 */
+#define CO_OD_2060_00 255u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 256u /* Telemetry: Decimation */
+#define CO_OD_2060_02 257u /* Telemetry: Signal count */
+#define CO_OD_2060_03 258u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 259u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 260u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 261u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 262u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 263u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 264u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 265u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 266u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 267u /* Trace: Command */
+#define CO_OD_2070_02 268u /* Trace: State */
+#define CO_OD_2070_03 269u /* Trace: Trigger signal */
+#define CO_OD_2070_04 270u /* Trace: Trigger level */
+#define CO_OD_2070_05 271u /* Trace: Trigger edge */
+#define CO_OD_2070_06 272u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 273u /* Trace: Signal count */
+#define CO_OD_2070_08 274u /* Trace: Signal 1 */
+#define CO_OD_2070_09 275u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 276u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 277u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 278u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 279u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 280u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 281u /* Trace: Signal 8 */
+#define CO_OD_2080_00 282u /* Identification: Highest sub-index supported */
+#define CO_OD_2080_01 283u /* Identification: d-axis current reference */
+#define CO_OD_2080_02 284u /* Identification: Measured smaller inductance */
+#define CO_OD_2080_03 285u /* Identification: Measured larger inductance */
+#define CO_OD_2090_00 286u /* Board: Highest sub-index supported */
+#define CO_OD_2090_01 287u /* Board: Drive kind */
+#define CO_OD_2090_02 288u /* Board: Board name */
+#define CO_OD_2090_03 289u /* Board: Drive time */
+#define CO_OD_2091_00 290u /* Reference sensor: Highest sub-index supported */
+#define CO_OD_2091_01 291u /* Reference sensor: Status */
+#define CO_OD_2091_02 292u /* Reference sensor: Resolution */
+#define CO_OD_2091_03 293u /* Reference sensor: Electrical zero */
+#define CO_OD_2091_04 294u /* Reference sensor: Count */
+#define CO_OD_2091_05 295u /* Reference sensor: Position */
+#define CO_OD_2091_06 296u /* Reference sensor: Faults seen */
+#define CO_OD_603F_00 297u /* Error code: Error code */
+#define CO_OD_6040_00 298u /* Controlword: Controlword */
+#define CO_OD_6041_00 299u /* Statusword: Statusword */
+#define CO_OD_605A_00 300u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 301u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 302u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 303u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 304u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 305u /* Following error window: Following error window */
+#define CO_OD_6066_00 306u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 307u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 308u /* Target torque: Target torque */
+#define CO_OD_6077_00 309u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 310u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 311u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 312u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 313u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 314u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 315u /* Supported drive modes: Supported drive modes */
 
 /** Where each entry's value lives in the OD RAM (compile-time handles for the
  *  application's per-period access, co_node.h CO_NODE_PUT/CO_NODE_GET):
@@ -830,127 +834,135 @@
 #define CO_OD_LEN_2057_0A 4u
 #define CO_OD_OFF_2057_0B 907u
 #define CO_OD_LEN_2057_0B 4u
-#define CO_OD_OFF_2060_00 911u
+#define CO_OD_OFF_2057_0C 911u
+#define CO_OD_LEN_2057_0C 4u
+#define CO_OD_OFF_2057_0D 915u
+#define CO_OD_LEN_2057_0D 4u
+#define CO_OD_OFF_2057_0E 919u
+#define CO_OD_LEN_2057_0E 4u
+#define CO_OD_OFF_2057_0F 923u
+#define CO_OD_LEN_2057_0F 4u
+#define CO_OD_OFF_2060_00 927u
 #define CO_OD_LEN_2060_00 1u
-#define CO_OD_OFF_2060_01 912u
+#define CO_OD_OFF_2060_01 928u
 #define CO_OD_LEN_2060_01 2u
-#define CO_OD_OFF_2060_02 914u
+#define CO_OD_OFF_2060_02 930u
 #define CO_OD_LEN_2060_02 1u
-#define CO_OD_OFF_2060_03 915u
+#define CO_OD_OFF_2060_03 931u
 #define CO_OD_LEN_2060_03 1u
-#define CO_OD_OFF_2060_04 916u
+#define CO_OD_OFF_2060_04 932u
 #define CO_OD_LEN_2060_04 1u
-#define CO_OD_OFF_2060_05 917u
+#define CO_OD_OFF_2060_05 933u
 #define CO_OD_LEN_2060_05 1u
-#define CO_OD_OFF_2060_06 918u
+#define CO_OD_OFF_2060_06 934u
 #define CO_OD_LEN_2060_06 1u
-#define CO_OD_OFF_2060_07 919u
+#define CO_OD_OFF_2060_07 935u
 #define CO_OD_LEN_2060_07 1u
-#define CO_OD_OFF_2060_08 920u
+#define CO_OD_OFF_2060_08 936u
 #define CO_OD_LEN_2060_08 1u
-#define CO_OD_OFF_2060_09 921u
+#define CO_OD_OFF_2060_09 937u
 #define CO_OD_LEN_2060_09 1u
-#define CO_OD_OFF_2060_0A 922u
+#define CO_OD_OFF_2060_0A 938u
 #define CO_OD_LEN_2060_0A 1u
-#define CO_OD_OFF_2070_00 923u
+#define CO_OD_OFF_2070_00 939u
 #define CO_OD_LEN_2070_00 1u
-#define CO_OD_OFF_2070_01 924u
+#define CO_OD_OFF_2070_01 940u
 #define CO_OD_LEN_2070_01 1u
-#define CO_OD_OFF_2070_02 925u
+#define CO_OD_OFF_2070_02 941u
 #define CO_OD_LEN_2070_02 1u
-#define CO_OD_OFF_2070_03 926u
+#define CO_OD_OFF_2070_03 942u
 #define CO_OD_LEN_2070_03 1u
-#define CO_OD_OFF_2070_04 927u
+#define CO_OD_OFF_2070_04 943u
 #define CO_OD_LEN_2070_04 4u
-#define CO_OD_OFF_2070_05 931u
+#define CO_OD_OFF_2070_05 947u
 #define CO_OD_LEN_2070_05 1u
-#define CO_OD_OFF_2070_06 932u
+#define CO_OD_OFF_2070_06 948u
 #define CO_OD_LEN_2070_06 2u
-#define CO_OD_OFF_2070_07 934u
+#define CO_OD_OFF_2070_07 950u
 #define CO_OD_LEN_2070_07 1u
-#define CO_OD_OFF_2070_08 935u
+#define CO_OD_OFF_2070_08 951u
 #define CO_OD_LEN_2070_08 1u
-#define CO_OD_OFF_2070_09 936u
+#define CO_OD_OFF_2070_09 952u
 #define CO_OD_LEN_2070_09 1u
-#define CO_OD_OFF_2070_0A 937u
+#define CO_OD_OFF_2070_0A 953u
 #define CO_OD_LEN_2070_0A 1u
-#define CO_OD_OFF_2070_0B 938u
+#define CO_OD_OFF_2070_0B 954u
 #define CO_OD_LEN_2070_0B 1u
-#define CO_OD_OFF_2070_0C 939u
+#define CO_OD_OFF_2070_0C 955u
 #define CO_OD_LEN_2070_0C 1u
-#define CO_OD_OFF_2070_0D 940u
+#define CO_OD_OFF_2070_0D 956u
 #define CO_OD_LEN_2070_0D 1u
-#define CO_OD_OFF_2070_0E 941u
+#define CO_OD_OFF_2070_0E 957u
 #define CO_OD_LEN_2070_0E 1u
-#define CO_OD_OFF_2070_0F 942u
+#define CO_OD_OFF_2070_0F 958u
 #define CO_OD_LEN_2070_0F 1u
-#define CO_OD_OFF_2080_00 943u
+#define CO_OD_OFF_2080_00 959u
 #define CO_OD_LEN_2080_00 1u
-#define CO_OD_OFF_2080_01 944u
+#define CO_OD_OFF_2080_01 960u
 #define CO_OD_LEN_2080_01 4u
-#define CO_OD_OFF_2080_02 948u
+#define CO_OD_OFF_2080_02 964u
 #define CO_OD_LEN_2080_02 4u
-#define CO_OD_OFF_2080_03 952u
+#define CO_OD_OFF_2080_03 968u
 #define CO_OD_LEN_2080_03 4u
-#define CO_OD_OFF_2090_00 956u
+#define CO_OD_OFF_2090_00 972u
 #define CO_OD_LEN_2090_00 1u
-#define CO_OD_OFF_2090_01 957u
+#define CO_OD_OFF_2090_01 973u
 #define CO_OD_LEN_2090_01 1u
-#define CO_OD_OFF_2090_02 958u
+#define CO_OD_OFF_2090_02 974u
 #define CO_OD_LEN_2090_02 24u
-#define CO_OD_OFF_2090_03 983u
+#define CO_OD_OFF_2090_03 999u
 #define CO_OD_LEN_2090_03 4u
-#define CO_OD_OFF_2091_00 987u
+#define CO_OD_OFF_2091_00 1003u
 #define CO_OD_LEN_2091_00 1u
-#define CO_OD_OFF_2091_01 988u
+#define CO_OD_OFF_2091_01 1004u
 #define CO_OD_LEN_2091_01 1u
-#define CO_OD_OFF_2091_02 989u
+#define CO_OD_OFF_2091_02 1005u
 #define CO_OD_LEN_2091_02 4u
-#define CO_OD_OFF_2091_03 993u
+#define CO_OD_OFF_2091_03 1009u
 #define CO_OD_LEN_2091_03 4u
-#define CO_OD_OFF_2091_04 997u
+#define CO_OD_OFF_2091_04 1013u
 #define CO_OD_LEN_2091_04 4u
-#define CO_OD_OFF_2091_05 1001u
+#define CO_OD_OFF_2091_05 1017u
 #define CO_OD_LEN_2091_05 4u
-#define CO_OD_OFF_2091_06 1005u
+#define CO_OD_OFF_2091_06 1021u
 #define CO_OD_LEN_2091_06 4u
-#define CO_OD_OFF_603F_00 1009u
+#define CO_OD_OFF_603F_00 1025u
 #define CO_OD_LEN_603F_00 2u
-#define CO_OD_OFF_6040_00 1011u
+#define CO_OD_OFF_6040_00 1027u
 #define CO_OD_LEN_6040_00 2u
-#define CO_OD_OFF_6041_00 1013u
+#define CO_OD_OFF_6041_00 1029u
 #define CO_OD_LEN_6041_00 2u
-#define CO_OD_OFF_605A_00 1015u
+#define CO_OD_OFF_605A_00 1031u
 #define CO_OD_LEN_605A_00 2u
-#define CO_OD_OFF_605E_00 1017u
+#define CO_OD_OFF_605E_00 1033u
 #define CO_OD_LEN_605E_00 2u
-#define CO_OD_OFF_6060_00 1019u
+#define CO_OD_OFF_6060_00 1035u
 #define CO_OD_LEN_6060_00 1u
-#define CO_OD_OFF_6061_00 1020u
+#define CO_OD_OFF_6061_00 1036u
 #define CO_OD_LEN_6061_00 1u
-#define CO_OD_OFF_6064_00 1021u
+#define CO_OD_OFF_6064_00 1037u
 #define CO_OD_LEN_6064_00 4u
-#define CO_OD_OFF_6065_00 1025u
+#define CO_OD_OFF_6065_00 1041u
 #define CO_OD_LEN_6065_00 4u
-#define CO_OD_OFF_6066_00 1029u
+#define CO_OD_OFF_6066_00 1045u
 #define CO_OD_LEN_6066_00 2u
-#define CO_OD_OFF_606C_00 1031u
+#define CO_OD_OFF_606C_00 1047u
 #define CO_OD_LEN_606C_00 4u
-#define CO_OD_OFF_6071_00 1035u
+#define CO_OD_OFF_6071_00 1051u
 #define CO_OD_LEN_6071_00 2u
-#define CO_OD_OFF_6077_00 1037u
+#define CO_OD_OFF_6077_00 1053u
 #define CO_OD_LEN_6077_00 2u
-#define CO_OD_OFF_607D_00 1039u
+#define CO_OD_OFF_607D_00 1055u
 #define CO_OD_LEN_607D_00 1u
-#define CO_OD_OFF_607D_01 1040u
+#define CO_OD_OFF_607D_01 1056u
 #define CO_OD_LEN_607D_01 4u
-#define CO_OD_OFF_607D_02 1044u
+#define CO_OD_OFF_607D_02 1060u
 #define CO_OD_LEN_607D_02 4u
-#define CO_OD_OFF_6080_00 1048u
+#define CO_OD_OFF_6080_00 1064u
 #define CO_OD_LEN_6080_00 4u
-#define CO_OD_OFF_60FF_00 1052u
+#define CO_OD_OFF_60FF_00 1068u
 #define CO_OD_LEN_60FF_00 4u
-#define CO_OD_OFF_6502_00 1056u
+#define CO_OD_OFF_6502_00 1072u
 #define CO_OD_LEN_6502_00 4u
 
 /** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */
@@ -1206,6 +1218,10 @@
   X(2057_09) \
   X(2057_0A) \
   X(2057_0B) \
+  X(2057_0C) \
+  X(2057_0D) \
+  X(2057_0E) \
+  X(2057_0F) \
   X(2060_00) \
   X(2060_01) \
   X(2060_02) \
@@ -1271,7 +1287,7 @@
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 97u
+#define CO_OD_CFG_COUNT 101u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 
