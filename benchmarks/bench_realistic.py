@@ -6,13 +6,14 @@ effect, dead time with the zero-current clamp, device drops) at 0, 50 and 100 % 
 rated thrust (600 N = K_f x 10 A), a load step at 0.4 s while the speed loop holds
 0.1 m/s (and 0.5 m/s, above the back-EMF witness's speed), for each combination of the
 two compensations (docs/method.md section 6): the motor file's configuration (both on,
-with the bumpless SOGI gain), the same without the bumpless gain (sogi_bumpless = 0: the
-configuration before it), without the cross-saturation map (xsat_di_A = 0), without the
-dead-time compensation (dt_comp_s = dt_comp_drop_V = 0), and none of the three; on request
-(--variants) also both with the back-EMF handover off (both_inj_only). Per case the
-median over the seeds of the true angle error's RMS and maximum over 0.8-1.2 s (0.4-0.8 s
-after the step) and the faults. Writes benchmarks/results/bench_realistic.json and prints
-a markdown table.
+with the bumpless SOGI gain and the position-ripple correction), the same without the
+bumpless gain (sogi_bumpless = 0: the configuration before it), without the ripple
+correction (rip_a2_rad = rip_b2_rad = 0: the configuration before it), without the
+cross-saturation map (xsat_di_A = 0), without the dead-time compensation (dt_comp_s =
+dt_comp_drop_V = 0), and none of them; on request (--variants) also both with the
+back-EMF handover off (both_inj_only). Per case the median over the seeds of the true
+angle error's RMS and maximum over 0.8-1.2 s (0.4-0.8 s after the step) and the faults.
+Writes benchmarks/results/bench_realistic.json and prints a markdown table.
 
 Usage: python benchmarks/bench_realistic.py [--seeds 0-4] [--quick] [--variants a,b]
 [--jobs N]
@@ -40,9 +41,12 @@ VARIANTS = {
     # the configuration before the bumpless SOGI gain (sogi_bumpless = 0: the HF lock
     # oscillates above ~13 A; docs/method.md section 6)
     "both_not_bumpless": {"sogi_bumpless": 0},
+    # the configuration before the position-ripple correction (docs/method.md section 6)
+    "no_ripple": {"rip_a2_rad": 0.0, "rip_b2_rad": 0.0},
     "no_xsat": {"xsat_di_A": 0.0},
     "no_deadtime": {"dt_comp_s": 0.0, "dt_comp_drop_V": 0.0},
-    "none": {"xsat_di_A": 0.0, "dt_comp_s": 0.0, "dt_comp_drop_V": 0.0, "sogi_bumpless": 0},
+    "none": {"xsat_di_A": 0.0, "dt_comp_s": 0.0, "dt_comp_drop_V": 0.0, "sogi_bumpless": 0,
+             "rip_a2_rad": 0.0, "rip_b2_rad": 0.0},
     # both, with the back-EMF handover off: the injection observer alone through the
     # load step's transient (the step drives the mover back to about -1 m/s, through
     # the handover; --inj-only adds this variant)

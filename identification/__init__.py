@@ -11,6 +11,8 @@ from ._procedure import (
     IDENT_RESTORED,
     IDENT_SPEED_BW,
     PROBE_SIGNALS,
+    RIP_ORDERS,
+    RIP_PREFIX,
     START_WINDOWS,
     XSAT_MAX_DRIFT_RAD,
     XSAT_MAX_SPEED_MPS,
@@ -20,12 +22,14 @@ from ._procedure import (
     MoverMoved,
     Probe,
     ident_overrides,
+    rip_fields,
     run_cross_saturation,
     run_identification,
+    run_ripple,
     xsat_fields,
 )
 
 __all__ = ["IDENT_FW", "IDENT_RESTORED", "IDENT_SPEED_BW", "PROBE_SIGNALS", "START_WINDOWS",
            "XSAT_MAX_DRIFT_RAD", "XSAT_MAX_SPEED_MPS", "XSAT_POINTS", "XSAT_PREFIX", "Identified",
            "MoverMoved", "Probe", "ident_overrides", "run_cross_saturation", "run_identification",
-           "xsat_fields"]
+           "RIP_ORDERS", "RIP_PREFIX", "run_ripple", "rip_fields", "xsat_fields"]

@@ -30,6 +30,10 @@ simulator's truth is used by the tests only, to judge the result.
 7. Optional, on a CLAMPED mover (:func:`run_cross_saturation`, a separate call): the
    cross-saturation angle map from the position estimate under thrust current, with a
    safety check that stops it when the mover moves (:class:`MoverMoved`).
+8. Optional, on a FREE mover (:func:`run_ripple`, a separate call): the position-periodic
+   ripple of the HF angle error at 2 and 4 theta_hat (secondary saliency, end effect)
+   from constant-speed passes under a soft speed loop: the position estimate's ripple
+   plus what the thrust current's ripple moved the mass.
 """
 
 from __future__ import annotations
@@ -147,8 +151,9 @@ class Identified:
             f"pole_pairs = {pole_pairs:g}", "",
             "[controller]",
             *[f"{k} = {val!r}" for k, val in c.items() if isinstance(val, (int, float))
-              and not k.startswith(XSAT_PREFIX)],
+              and not k.startswith((XSAT_PREFIX, RIP_PREFIX))],
             *self._xsat_lines(),
+            *self._rip_lines(),
             "",
         ])
 
@@ -165,6 +170,19 @@ class Identified:
                 *[f"xsat_off{k}_rad = {v[f'xsat_off{k}_rad']:.5f}  # +- "
                   f"{self.sigma.get(f'xsat_off{k}_rad', 0.0):.2g}"
                   for k in range(1, XSAT_POINTS + 1)]]
+
+
+    def _rip_lines(self) -> list[str]:
+        """The position-ripple correction (step 8) in the ``[controller]`` section, or a
+        comment that it was not measured (off)."""
+        v = self.values
+        names = [f"rip_{c}{n}_rad" for n in RIP_ORDERS for c in "ab"]
+        if names[0] not in v:
+            return ["# position-ripple correction (rip_*) not measured: step 8 needs free "
+                    "travel (docs/identify.md); off"]
+        return ["# position-ripple correction measured at constant speed (step 8): the HF "
+                "angle error's 2 (4) theta_hat series (rad)",
+                *[f"{k} = {v[k]:.5f}  # +- {self.sigma.get(k, 0.0):.2g}" for k in names]]
 
 
 #: What a probe's ``run`` returns, one sample per millisecond (the drive's telemetry):
@@ -512,9 +530,12 @@ XSAT_TOP = 0.6
 #: The drive's settings while the mover is clamped: the gains as they are (not derived
 #: again), no thrust feed-forward in the observer (the clamp takes the thrust: the
 #: model's acceleration would drive the speed estimate away until the disturbance
-#: integrator caught up) and the back-EMF witness off (a speed estimate that wanders
-#: while the thrust current ramps is no motion to check).
-XSAT_FW = {"gains_auto": 0, "pll_accel_per_A": 0.0, "mon_bemf_min_mps": 1000.0}
+#: integrator caught up), the back-EMF witness off (a speed estimate that wanders
+#: while the thrust current ramps is no motion to check) and the ripple correction off.
+XSAT_FW = {"gains_auto": 0, "pll_accel_per_A": 0.0, "mon_bemf_min_mps": 1000.0,
+           # the position-ripple correction off (step 8): on a held mover its slope in
+           # theta_hat would scale the estimate's shift the map is measured from
+           "rip_a2_rad": 0.0, "rip_b2_rad": 0.0, "rip_a4_rad": 0.0, "rip_b4_rad": 0.0}
 
 
 #: Step 7's safety check (:class:`MoverMoved`): the largest move of the position estimate
@@ -788,3 +809,127 @@ def _fit_motion(runs: list[dict[str, np.ndarray]], dt: float, R: float, L_q: flo
         log=[f"psi_f {psi:.5f} Wb from {len(Yp)} samples (u_q offset {c0:+.3f} V); "
              f"mass/friction fit over {len(y)} samples, K_F = {K_F:.3f} N/A; Gaussian "
              f"filter sigma {sigma_s * 1e3:.0f} ms on both sides"])
+
+
+#: Position-periodic ripple (:func:`run_ripple`): the orders of the series (theta_hat
+#: multiples; the firmware's rip_a2_rad, rip_b2_rad, rip_a4_rad, rip_b4_rad)
+RIP_ORDERS = (2, 4)
+#: the drive's field range of the coefficients (rad)
+RIP_MAX = 0.5
+RIP_PREFIX = "rip_"
+#: the orders written by default: the 4 theta terms are measured (and logged) but not
+#: written (on realistic_linear their estimate does not settle over the passes: a few
+#: mrad against a closed form of 5 mrad; the drive's fields exist for a rig that
+#: resolves them)
+RIP_WRITE = (2,)
+#: further orders in the regression only (6 theta: cogging and the back-EMF harmonics'
+#: thrust ripple, kept out of the others)
+RIP_EXTRA = (6,)
+#: constant speed of the passes (m/s): under the back-EMF handover; the 2 theta ripple is
+#: then at 2 k_e v = 39 rad/s on tau = 16 mm
+RIP_SPEED_MPS = 0.1
+#: the ramps to and from the constant speed (s), the settling skipped at its start (s)
+RIP_RAMP_S = 0.2
+RIP_SKIP_S = 0.3
+
+
+def rip_fields(coef: np.ndarray | list[float]) -> dict[str, float]:
+    """The drive's ripple fields (fw_config_t names) from the coefficients
+    (a2, b2, a4, b4), clamped to the drive's range."""
+    names = [f"rip_{c}{n}_rad" for n in RIP_ORDERS for c in "ab"]
+    return {k: float(np.clip(v, -RIP_MAX, RIP_MAX)) for k, v in zip(names, coef, strict=True)}
+
+
+def _ripple_pass(probe: Probe, tau_m: float, dist_m: float, K_F: float, mass: float
+                 ) -> np.ndarray:
+    """One pass there and back at :data:`RIP_SPEED_MPS`: the HF axis's ripple the
+    estimate carries, (a2, b2, a4, b4) of r(theta_hat) = theta_hat - theta (el. rad),
+    the mean of the two directions (the observer's lag turns the phase one way in each;
+    the mean cancels it to first order).
+
+    Over the constant-speed window, with theta_hat = k_e x_hat (the estimate's position):
+    k_e x_hat = poly3(t) + sum X_n (cos, sin)(n theta_hat) and i_q = poly3(t) + sum I_n
+    (...) by least squares (n = 2, 4 and :data:`RIP_EXTRA`). The true motion's deviation
+    from the smooth one is what the thrust current's ripple makes of the mass (Newton,
+    at n k_e v): x - x_ref = -K_F I_n / (m (n k_e v)^2) per component, so the axis's
+    ripple r_n = X_n + k_e K_F I_n / (m (n k_e v)^2) needs no position sensor: the
+    speed loop splits the ripple between the estimate's deviation (X_n) and the
+    mover's (the current term) and the sum does not depend on how."""
+    k_e = electrical_rad_per_m(tau_m)
+    v = RIP_SPEED_MPS
+    hold = max(dist_m / v - RIP_RAMP_S, RIP_SKIP_S + 0.5)
+    out = []
+    for sgn in (1.0, -1.0):
+        t_pts = np.array([0.0, RIP_RAMP_S, RIP_RAMP_S + hold, 2 * RIP_RAMP_S + hold])
+        v_pts = sgn * v * np.array([0.0, 1.0, 1.0, 0.0])
+        r = probe.follow_speed(t_pts, v_pts)
+        probe.run(0.1)
+        n = len(r["pos_hat_m"])
+        t = np.arange(n) * 0.001
+        k = (t >= RIP_RAMP_S + RIP_SKIP_S) & (t <= RIP_RAMP_S + hold)
+        th = k_e * np.asarray(r["pos_hat_m"], dtype=float)[k]
+        tt = t[k] - float(np.mean(t[k]))
+        cols = [np.ones_like(tt), tt, tt ** 2, tt ** 3]
+        for o in (*RIP_ORDERS, *RIP_EXTRA):
+            cols += [np.cos(o * th), np.sin(o * th)]
+        A = np.vstack(cols).T
+        m = 4 + 2 * len(RIP_ORDERS)
+        cx = np.linalg.lstsq(A, th, rcond=None)[0][4:m]
+        ci = np.linalg.lstsq(A, np.asarray(r["i_q_A"], dtype=float)[k], rcond=None)[0][4:m]
+        w2 = np.repeat([(o * k_e * v) ** 2 for o in RIP_ORDERS], 2)
+        out.append(cx + k_e * K_F * ci / (mass * w2))
+    return 0.5 * (out[0] + out[1])
+
+
+def run_ripple(probe: Probe, cfg0: Any, tau_m: float, travel_m: float = 0.3,
+               passes: int = 3, K_F: float | None = None, mass: float | None = None
+               ) -> Identified:
+    """Step 8 (optional, a FREE mover with ``travel_m`` of travel): the position-periodic
+    ripple of the HF angle error (secondary saliency, end effect; docs/method.md section
+    6), no position sensor.
+
+    The speed loop (as configured) moves the mover at constant speed there and back;
+    :func:`_ripple_pass` measures the ripple r_n of the HF axis the estimate follows at
+    2 and 4 theta_hat; the orders of :data:`RIP_WRITE` are corrected and written (the
+    others 0). The drive needs it in its error's units,
+    rip = k r with k the slope of the HF error per radian (as step 7's map): pass 0
+    measures r_0 with the correction off; pass 1 runs with rip = r_0 and measures
+    what it leaves, r_1 = r_0 - r_0 / k, whence k (least squares over the coefficients)
+    and rip = k r_0; each further pass adds k times its residual. ``K_F`` and ``mass``:
+    the identified ones (steps 4-5), by default the configured (cfg0: psi_f_Wb,
+    mass_kg). Returns ``rip_a2_rad`` .. ``rip_b4_rad`` with the last residual as
+    sigma, the measured axis ripple ``rip_axis_{a,b}{2,4}_rad`` and the slope
+    ``rip_slope``."""
+    res = Identified()
+    if K_F is None:
+        K_F = force_constant_N_per_A(float(cfg0.psi_f_Wb), tau_m)
+    if mass is None:
+        mass = float(cfg0.mass_kg)
+    base: dict[str, float] = {}
+    mask = np.repeat([1.0 if o in RIP_WRITE else 0.0 for o in RIP_ORDERS], 2)
+    dist = 0.8 * travel_m
+    zero = np.zeros(2 * len(RIP_ORDERS))
+    probe.reconfigure({**base, **rip_fields(zero)})
+    r0 = _ripple_pass(probe, tau_m, dist, K_F, mass)
+    m0 = mask * r0
+    res.log.append("ripple, correction off: axis " + ", ".join(f"{x:+.4f}" for x in r0)
+                   + " rad (a2, b2, a4, b4)")
+    rip, k, resid = m0.copy(), 1.0, np.zeros_like(r0)
+    for n in range(1, max(passes, 1)):
+        probe.reconfigure({**base, **rip_fields(rip)})
+        r = _ripple_pass(probe, tau_m, dist, K_F, mass)
+        if n == 1:
+            g = float(np.dot(m0, m0 - mask * r) / max(float(np.dot(m0, m0)), 1e-12))
+            k = float(np.clip(1.0 / g, 0.3, 2.0)) if g > 0 else 1.0
+            rip = k * m0
+            res.log.append(f"slope of the HF error per radian: {k:.3f}")
+        else:
+            resid = mask * r
+            rip = rip + k * resid
+        res.log.append(f"pass {n}: residual " + ", ".join(f"{x:+.4f}" for x in r) + " rad")
+    res.values.update(rip_fields(rip))
+    for j, name in enumerate(rip_fields(zero)):
+        res.sigma[name] = float(abs(k * resid[j]))
+        res.values[name.replace("rip_", "rip_axis_")] = float(r0[j])
+    res.values["rip_slope"] = k
+    return res

@@ -19,6 +19,7 @@ from identification import (
     ident_overrides,
     run_cross_saturation,
     run_identification,
+    run_ripple,
 )
 from protocols.generated.od_names import StartPhase
 
@@ -178,6 +179,20 @@ def identify_cross_saturation(motor: Motor, seed: int = 0, plant: dict[str, Any]
         probe.sim = Sim(motor, seed=seed * 100 + 98, plant=pl, fw=fw, x0_m=x0_m)
         probe._start()
         return run_cross_saturation(probe, cfg0, motor.tau_m, passes)
+
+
+def identify_ripple(motor: Motor, seed: int = 0, plant: dict[str, Any] | None = None,
+                    fw: dict[str, float] | None = None, x0_m: float = 0.0,
+                    travel_m: float = 0.3, passes: int = 3) -> Identified:
+    """Step 8 of the identification (:func:`identification.run_ripple`) on the simulated
+    drive: a free mover from ``x0_m``, the motor file's configuration (``fw`` over it)
+    with its ripple correction replaced by the one being measured."""
+    fw = dict(fw or {})
+    cfg0 = fw_config(motor, "sogi_adaptive", **fw)
+    with SimProbe(motor, fw, plant, seed) as probe:
+        probe.sim = Sim(motor, seed=seed * 100 + 97, plant=plant, fw=fw, x0_m=x0_m)
+        probe._start()
+        return run_ripple(probe, cfg0, motor.tau_m, travel_m, passes)
 
 
 def hold_mover(drive: Any, held: bool = True) -> None:

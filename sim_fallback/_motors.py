@@ -75,7 +75,8 @@ _FW_NAMES = {"R_ohm", "L_d_H", "L_q_H", "psi_f_Wb", "pole_pitch_m", "pole_pairs"
              "i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz", "bemf_v_on_mps",
              "bemf_v_off_mps", "mon_bemf_min_mps", "dt_comp_s", "dt_comp_band_A",
              "dt_comp_drop_V", "xsat_di_A", *(f"xsat_off{k}_rad" for k in range(1, 7)),
-             "sogi_bumpless", "bemf_xc_comp", "mon_bemf_i_tol"}
+             "sogi_bumpless", "rip_a2_rad", "rip_b2_rad", "rip_a4_rad", "rip_b4_rad",
+             "bemf_xc_comp", "mon_bemf_i_tol"}
 
 
 def firmware_field_ranges() -> dict[str, tuple[float, float, str]]:
@@ -232,6 +233,8 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float | None, float | None, str, Any]
     **{("controller", f"xsat_off{k}_rad"): (False, None, None, "rad", None)
        for k in range(1, 7)},
     ("controller", "sogi_bumpless"): (False, None, None, "0/1", None),
+    **{("controller", f"rip_{c}{n}_rad"): (False, None, None, "rad", None)
+       for n in (2, 4) for c in "ab"},
     ("controller", "bemf_xc_comp"): (False, None, None, "0/1", None),
     ("controller", "mon_bemf_i_tol"): (False, None, None, "", None),
     # the rig's reference position sensor (a quadrature scale), modelled as the true
@@ -245,6 +248,7 @@ _CTRL_FW_FIELDS = ("i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz",
                    "bemf_v_on_mps", "bemf_v_off_mps", "mon_bemf_min_mps",
                    "dt_comp_s", "dt_comp_band_A", "dt_comp_drop_V", "xsat_di_A",
                    *(f"xsat_off{k}_rad" for k in range(1, 7)), "sogi_bumpless",
+                   "rip_a2_rad", "rip_b2_rad", "rip_a4_rad", "rip_b4_rad",
                    "bemf_xc_comp", "mon_bemf_i_tol")
 #: the compensation keys of ``[controller]`` (docs/method.md section 6); the back-EMF
 #: observer's saliency term and the witness's current tolerance are not compensations

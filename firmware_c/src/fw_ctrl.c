@@ -659,7 +659,8 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p,
     oi.hold = (uint8_t)(c->phase == FW_START_SALIENCY);
     oi.bemf_active = c->bemf.active;
     oi.bemf_err_rad = c->bemf.active ? fw_bemf_error(&c->bemf) : 0.0f;
-    oi.ang_off_rad = fw_xsat_offset(&c->comp); /* cross-saturation map (0: off) */
+    /* cross-saturation map and position ripple at theta_hat (0: off) */
+    oi.ang_off_rad = fw_xsat_offset_at(&c->comp, p->sc);
     oi.settled =
         (uint8_t)FW_LIKELY(!(!fw_inj_settled(&c->inj) || c->phase_time_s < FW_EST_SETTLE_S));
     oi.running = (uint8_t)(c->phase == FW_START_RUN);

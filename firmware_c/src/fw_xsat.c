@@ -1,6 +1,6 @@
 /**
  * @file fw_xsat.c
- * @brief Cross-saturation angle map and dead-time compensation (see fw_xsat.h).
+ * @brief Cross-saturation angle map, position ripple and dead-time compensation (see fw_xsat.h).
  */
 #include <math.h>
 
@@ -17,6 +17,12 @@ void fw_xsat_init(fw_xsat_t *x, const fw_config_t *cfg, float dt_s) {
   x->off[4] = c->xsat_off4_rad;
   x->off[5] = c->xsat_off5_rad;
   x->off[6] = c->xsat_off6_rad;
+  x->rip_c[0] = c->rip_a2_rad;
+  x->rip_c[1] = c->rip_b2_rad;
+  x->rip_c[2] = c->rip_a4_rad;
+  x->rip_c[3] = c->rip_b4_rad;
+  x->rip_on = (uint8_t)(c->rip_a2_rad != 0.0f || c->rip_b2_rad != 0.0f ||
+                        c->rip_a4_rad != 0.0f || c->rip_b4_rad != 0.0f);
   /* time constant: half an injection period (f_inj_Hz >= 100, checked) */
   const float tau_s = 0.5f / cfg->estimator.f_inj_Hz;
   x->iq_alpha = 1.0f - expf(-dt_s / tau_s);

@@ -17,7 +17,7 @@ from enum import IntEnum
 from typing import Any, NamedTuple
 
 #: the firmware's version (device.firmware_version; 0x100A, 0x2040 packed)
-FW_VERSION_STRING = '0.8.0'
+FW_VERSION_STRING = '0.9.0'
 
 FAULTS: dict[int, tuple[str, str]] = {
     0x2310: ('OVERCURRENT', '|phase current| above i_trip_A'),
@@ -297,6 +297,10 @@ FW_CONFIG_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ('xsat_off5_rad', 'compensation', False),
     ('xsat_off6_rad', 'compensation', False),
     ('sogi_bumpless', 'compensation', True),
+    ('rip_a2_rad', 'compensation', False),
+    ('rip_b2_rad', 'compensation', False),
+    ('rip_a4_rad', 'compensation', False),
+    ('rip_b4_rad', 'compensation', False),
 )
 #: the fw_config_t fields stored as int32_t (od.yaml i32: true): option codes
 FW_CONFIG_SIGNED: frozenset[str] = frozenset(['fault_reaction_option', 'quick_stop_option'])
@@ -624,6 +628,10 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2057, 9): 'Cross-saturation offset 5',
     (0x2057, 10): 'Cross-saturation offset 6',
     (0x2057, 11): 'Bumpless SOGI gain',
+    (0x2057, 12): 'Position ripple cos 2',
+    (0x2057, 13): 'Position ripple sin 2',
+    (0x2057, 14): 'Position ripple cos 4',
+    (0x2057, 15): 'Position ripple sin 4',
     (0x2060, 0): 'Highest sub-index supported',
     (0x2060, 1): 'Decimation',
     (0x2060, 2): 'Signal count',
@@ -926,6 +934,10 @@ COMPENSATION__XSAT_OFF4_RAD = Entry(0x2057, 8, unit='rad')
 COMPENSATION__XSAT_OFF5_RAD = Entry(0x2057, 9, unit='rad')
 COMPENSATION__XSAT_OFF6_RAD = Entry(0x2057, 10, unit='rad')
 COMPENSATION__SOGI_BUMPLESS = Entry(0x2057, 11)
+COMPENSATION__RIP_A2_RAD = Entry(0x2057, 12, unit='rad')
+COMPENSATION__RIP_B2_RAD = Entry(0x2057, 13, unit='rad')
+COMPENSATION__RIP_A4_RAD = Entry(0x2057, 14, unit='rad')
+COMPENSATION__RIP_B4_RAD = Entry(0x2057, 15, unit='rad')
 TELEMETRY__DECIMATION = Entry(0x2060, 1)
 TELEMETRY__SIGNAL_COUNT = Entry(0x2060, 2)
 TELEMETRY__SIGNAL_1 = Entry(0x2060, 3)

@@ -15,8 +15,10 @@ import pytest
 from sim_fallback import Sim, fw_config, load_motor
 from sim_fallback._sim import SIM_REF_FORCE
 
-#: clamped-mover settings as identification step 7's (no thrust feed-forward, no witness)
-CLAMP_FW = {"pll_accel_per_A": 0.0, "mon_bemf_min_mps": 1000.0}
+#: clamped-mover settings as identification step 7's (no thrust feed-forward, no witness,
+#: no position-ripple correction: docs/method.md section 6)
+CLAMP_FW = {"pll_accel_per_A": 0.0, "mon_bemf_min_mps": 1000.0,
+            "rip_a2_rad": 0.0, "rip_b2_rad": 0.0}
 
 
 def _clamped(motor: str, fw: dict, i_q_A: float) -> tuple[int, float]:

@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 314u
-#define CO_OD_RAM_SIZE 1068u
+#define CO_OD_COUNT 318u
+#define CO_OD_RAM_SIZE 1084u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -263,67 +263,71 @@
 #define CO_OD_2057_09 250u /* Compensation: Cross-saturation offset 5 */
 #define CO_OD_2057_0A 251u /* Compensation: Cross-saturation offset 6 */
 #define CO_OD_2057_0B 252u /* Compensation: Bumpless SOGI gain */
-#define CO_OD_2060_00 253u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 254u /* Telemetry: Decimation */
-#define CO_OD_2060_02 255u /* Telemetry: Signal count */
-#define CO_OD_2060_03 256u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 257u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 258u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 259u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 260u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 261u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 262u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 263u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 264u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 265u /* Trace: Command */
-#define CO_OD_2070_02 266u /* Trace: State */
-#define CO_OD_2070_03 267u /* Trace: Trigger signal */
-#define CO_OD_2070_04 268u /* Trace: Trigger level */
-#define CO_OD_2070_05 269u /* Trace: Trigger edge */
-#define CO_OD_2070_06 270u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 271u /* Trace: Signal count */
-#define CO_OD_2070_08 272u /* Trace: Signal 1 */
-#define CO_OD_2070_09 273u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 274u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 275u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 276u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 277u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 278u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 279u /* Trace: Signal 8 */
-#define CO_OD_2080_00 280u /* Identification: Highest sub-index supported */
-#define CO_OD_2080_01 281u /* Identification: d-axis current reference */
-#define CO_OD_2080_02 282u /* Identification: Measured smaller inductance */
-#define CO_OD_2080_03 283u /* Identification: Measured larger inductance */
-#define CO_OD_2090_00 284u /* Board: Highest sub-index supported */
-#define CO_OD_2090_01 285u /* Board: Drive kind */
-#define CO_OD_2090_02 286u /* Board: Board name */
-#define CO_OD_2090_03 287u /* Board: Drive time */
-#define CO_OD_2091_00 288u /* Reference sensor: Highest sub-index supported */
-#define CO_OD_2091_01 289u /* Reference sensor: Status */
-#define CO_OD_2091_02 290u /* Reference sensor: Resolution */
-#define CO_OD_2091_03 291u /* Reference sensor: Electrical zero */
-#define CO_OD_2091_04 292u /* Reference sensor: Count */
-#define CO_OD_2091_05 293u /* Reference sensor: Position */
-#define CO_OD_2091_06 294u /* Reference sensor: Faults seen */
-#define CO_OD_603F_00 295u /* Error code: Error code */
-#define CO_OD_6040_00 296u /* Controlword: Controlword */
-#define CO_OD_6041_00 297u /* Statusword: Statusword */
-#define CO_OD_605A_00 298u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 299u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 300u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 301u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 302u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 303u /* Following error window: Following error window */
-#define CO_OD_6066_00 304u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 305u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 306u /* Target torque: Target torque */
-#define CO_OD_6077_00 307u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 308u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 309u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 310u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 311u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 312u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 313u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2057_0C 253u /* Compensation: Position ripple cos 2 */
+#define CO_OD_2057_0D 254u /* Compensation: Position ripple sin 2 */
+#define CO_OD_2057_0E 255u /* Compensation: Position ripple cos 4 */
+#define CO_OD_2057_0F 256u /* Compensation: Position ripple sin 4 */
+#define CO_OD_2060_00 257u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 258u /* Telemetry: Decimation */
+#define CO_OD_2060_02 259u /* Telemetry: Signal count */
+#define CO_OD_2060_03 260u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 261u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 262u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 263u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 264u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 265u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 266u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 267u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 268u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 269u /* Trace: Command */
+#define CO_OD_2070_02 270u /* Trace: State */
+#define CO_OD_2070_03 271u /* Trace: Trigger signal */
+#define CO_OD_2070_04 272u /* Trace: Trigger level */
+#define CO_OD_2070_05 273u /* Trace: Trigger edge */
+#define CO_OD_2070_06 274u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 275u /* Trace: Signal count */
+#define CO_OD_2070_08 276u /* Trace: Signal 1 */
+#define CO_OD_2070_09 277u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 278u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 279u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 280u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 281u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 282u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 283u /* Trace: Signal 8 */
+#define CO_OD_2080_00 284u /* Identification: Highest sub-index supported */
+#define CO_OD_2080_01 285u /* Identification: d-axis current reference */
+#define CO_OD_2080_02 286u /* Identification: Measured smaller inductance */
+#define CO_OD_2080_03 287u /* Identification: Measured larger inductance */
+#define CO_OD_2090_00 288u /* Board: Highest sub-index supported */
+#define CO_OD_2090_01 289u /* Board: Drive kind */
+#define CO_OD_2090_02 290u /* Board: Board name */
+#define CO_OD_2090_03 291u /* Board: Drive time */
+#define CO_OD_2091_00 292u /* Reference sensor: Highest sub-index supported */
+#define CO_OD_2091_01 293u /* Reference sensor: Status */
+#define CO_OD_2091_02 294u /* Reference sensor: Resolution */
+#define CO_OD_2091_03 295u /* Reference sensor: Electrical zero */
+#define CO_OD_2091_04 296u /* Reference sensor: Count */
+#define CO_OD_2091_05 297u /* Reference sensor: Position */
+#define CO_OD_2091_06 298u /* Reference sensor: Faults seen */
+#define CO_OD_603F_00 299u /* Error code: Error code */
+#define CO_OD_6040_00 300u /* Controlword: Controlword */
+#define CO_OD_6041_00 301u /* Statusword: Statusword */
+#define CO_OD_605A_00 302u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 303u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 304u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 305u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 306u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 307u /* Following error window: Following error window */
+#define CO_OD_6066_00 308u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 309u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 310u /* Target torque: Target torque */
+#define CO_OD_6077_00 311u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 312u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 313u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 314u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 315u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 316u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 317u /* Supported drive modes: Supported drive modes */
 
 /** Where each entry's value lives in the OD RAM (compile-time handles for the
  *  application's per-period access, co_node.h CO_NODE_PUT/CO_NODE_GET):
@@ -836,127 +840,135 @@
 #define CO_OD_LEN_2057_0A 4u
 #define CO_OD_OFF_2057_0B 915u
 #define CO_OD_LEN_2057_0B 4u
-#define CO_OD_OFF_2060_00 919u
+#define CO_OD_OFF_2057_0C 919u
+#define CO_OD_LEN_2057_0C 4u
+#define CO_OD_OFF_2057_0D 923u
+#define CO_OD_LEN_2057_0D 4u
+#define CO_OD_OFF_2057_0E 927u
+#define CO_OD_LEN_2057_0E 4u
+#define CO_OD_OFF_2057_0F 931u
+#define CO_OD_LEN_2057_0F 4u
+#define CO_OD_OFF_2060_00 935u
 #define CO_OD_LEN_2060_00 1u
-#define CO_OD_OFF_2060_01 920u
+#define CO_OD_OFF_2060_01 936u
 #define CO_OD_LEN_2060_01 2u
-#define CO_OD_OFF_2060_02 922u
+#define CO_OD_OFF_2060_02 938u
 #define CO_OD_LEN_2060_02 1u
-#define CO_OD_OFF_2060_03 923u
+#define CO_OD_OFF_2060_03 939u
 #define CO_OD_LEN_2060_03 1u
-#define CO_OD_OFF_2060_04 924u
+#define CO_OD_OFF_2060_04 940u
 #define CO_OD_LEN_2060_04 1u
-#define CO_OD_OFF_2060_05 925u
+#define CO_OD_OFF_2060_05 941u
 #define CO_OD_LEN_2060_05 1u
-#define CO_OD_OFF_2060_06 926u
+#define CO_OD_OFF_2060_06 942u
 #define CO_OD_LEN_2060_06 1u
-#define CO_OD_OFF_2060_07 927u
+#define CO_OD_OFF_2060_07 943u
 #define CO_OD_LEN_2060_07 1u
-#define CO_OD_OFF_2060_08 928u
+#define CO_OD_OFF_2060_08 944u
 #define CO_OD_LEN_2060_08 1u
-#define CO_OD_OFF_2060_09 929u
+#define CO_OD_OFF_2060_09 945u
 #define CO_OD_LEN_2060_09 1u
-#define CO_OD_OFF_2060_0A 930u
+#define CO_OD_OFF_2060_0A 946u
 #define CO_OD_LEN_2060_0A 1u
-#define CO_OD_OFF_2070_00 931u
+#define CO_OD_OFF_2070_00 947u
 #define CO_OD_LEN_2070_00 1u
-#define CO_OD_OFF_2070_01 932u
+#define CO_OD_OFF_2070_01 948u
 #define CO_OD_LEN_2070_01 1u
-#define CO_OD_OFF_2070_02 933u
+#define CO_OD_OFF_2070_02 949u
 #define CO_OD_LEN_2070_02 1u
-#define CO_OD_OFF_2070_03 934u
+#define CO_OD_OFF_2070_03 950u
 #define CO_OD_LEN_2070_03 1u
-#define CO_OD_OFF_2070_04 935u
+#define CO_OD_OFF_2070_04 951u
 #define CO_OD_LEN_2070_04 4u
-#define CO_OD_OFF_2070_05 939u
+#define CO_OD_OFF_2070_05 955u
 #define CO_OD_LEN_2070_05 1u
-#define CO_OD_OFF_2070_06 940u
+#define CO_OD_OFF_2070_06 956u
 #define CO_OD_LEN_2070_06 2u
-#define CO_OD_OFF_2070_07 942u
+#define CO_OD_OFF_2070_07 958u
 #define CO_OD_LEN_2070_07 1u
-#define CO_OD_OFF_2070_08 943u
+#define CO_OD_OFF_2070_08 959u
 #define CO_OD_LEN_2070_08 1u
-#define CO_OD_OFF_2070_09 944u
+#define CO_OD_OFF_2070_09 960u
 #define CO_OD_LEN_2070_09 1u
-#define CO_OD_OFF_2070_0A 945u
+#define CO_OD_OFF_2070_0A 961u
 #define CO_OD_LEN_2070_0A 1u
-#define CO_OD_OFF_2070_0B 946u
+#define CO_OD_OFF_2070_0B 962u
 #define CO_OD_LEN_2070_0B 1u
-#define CO_OD_OFF_2070_0C 947u
+#define CO_OD_OFF_2070_0C 963u
 #define CO_OD_LEN_2070_0C 1u
-#define CO_OD_OFF_2070_0D 948u
+#define CO_OD_OFF_2070_0D 964u
 #define CO_OD_LEN_2070_0D 1u
-#define CO_OD_OFF_2070_0E 949u
+#define CO_OD_OFF_2070_0E 965u
 #define CO_OD_LEN_2070_0E 1u
-#define CO_OD_OFF_2070_0F 950u
+#define CO_OD_OFF_2070_0F 966u
 #define CO_OD_LEN_2070_0F 1u
-#define CO_OD_OFF_2080_00 951u
+#define CO_OD_OFF_2080_00 967u
 #define CO_OD_LEN_2080_00 1u
-#define CO_OD_OFF_2080_01 952u
+#define CO_OD_OFF_2080_01 968u
 #define CO_OD_LEN_2080_01 4u
-#define CO_OD_OFF_2080_02 956u
+#define CO_OD_OFF_2080_02 972u
 #define CO_OD_LEN_2080_02 4u
-#define CO_OD_OFF_2080_03 960u
+#define CO_OD_OFF_2080_03 976u
 #define CO_OD_LEN_2080_03 4u
-#define CO_OD_OFF_2090_00 964u
+#define CO_OD_OFF_2090_00 980u
 #define CO_OD_LEN_2090_00 1u
-#define CO_OD_OFF_2090_01 965u
+#define CO_OD_OFF_2090_01 981u
 #define CO_OD_LEN_2090_01 1u
-#define CO_OD_OFF_2090_02 966u
+#define CO_OD_OFF_2090_02 982u
 #define CO_OD_LEN_2090_02 24u
-#define CO_OD_OFF_2090_03 991u
+#define CO_OD_OFF_2090_03 1007u
 #define CO_OD_LEN_2090_03 4u
-#define CO_OD_OFF_2091_00 995u
+#define CO_OD_OFF_2091_00 1011u
 #define CO_OD_LEN_2091_00 1u
-#define CO_OD_OFF_2091_01 996u
+#define CO_OD_OFF_2091_01 1012u
 #define CO_OD_LEN_2091_01 1u
-#define CO_OD_OFF_2091_02 997u
+#define CO_OD_OFF_2091_02 1013u
 #define CO_OD_LEN_2091_02 4u
-#define CO_OD_OFF_2091_03 1001u
+#define CO_OD_OFF_2091_03 1017u
 #define CO_OD_LEN_2091_03 4u
-#define CO_OD_OFF_2091_04 1005u
+#define CO_OD_OFF_2091_04 1021u
 #define CO_OD_LEN_2091_04 4u
-#define CO_OD_OFF_2091_05 1009u
+#define CO_OD_OFF_2091_05 1025u
 #define CO_OD_LEN_2091_05 4u
-#define CO_OD_OFF_2091_06 1013u
+#define CO_OD_OFF_2091_06 1029u
 #define CO_OD_LEN_2091_06 4u
-#define CO_OD_OFF_603F_00 1017u
+#define CO_OD_OFF_603F_00 1033u
 #define CO_OD_LEN_603F_00 2u
-#define CO_OD_OFF_6040_00 1019u
+#define CO_OD_OFF_6040_00 1035u
 #define CO_OD_LEN_6040_00 2u
-#define CO_OD_OFF_6041_00 1021u
+#define CO_OD_OFF_6041_00 1037u
 #define CO_OD_LEN_6041_00 2u
-#define CO_OD_OFF_605A_00 1023u
+#define CO_OD_OFF_605A_00 1039u
 #define CO_OD_LEN_605A_00 2u
-#define CO_OD_OFF_605E_00 1025u
+#define CO_OD_OFF_605E_00 1041u
 #define CO_OD_LEN_605E_00 2u
-#define CO_OD_OFF_6060_00 1027u
+#define CO_OD_OFF_6060_00 1043u
 #define CO_OD_LEN_6060_00 1u
-#define CO_OD_OFF_6061_00 1028u
+#define CO_OD_OFF_6061_00 1044u
 #define CO_OD_LEN_6061_00 1u
-#define CO_OD_OFF_6064_00 1029u
+#define CO_OD_OFF_6064_00 1045u
 #define CO_OD_LEN_6064_00 4u
-#define CO_OD_OFF_6065_00 1033u
+#define CO_OD_OFF_6065_00 1049u
 #define CO_OD_LEN_6065_00 4u
-#define CO_OD_OFF_6066_00 1037u
+#define CO_OD_OFF_6066_00 1053u
 #define CO_OD_LEN_6066_00 2u
-#define CO_OD_OFF_606C_00 1039u
+#define CO_OD_OFF_606C_00 1055u
 #define CO_OD_LEN_606C_00 4u
-#define CO_OD_OFF_6071_00 1043u
+#define CO_OD_OFF_6071_00 1059u
 #define CO_OD_LEN_6071_00 2u
-#define CO_OD_OFF_6077_00 1045u
+#define CO_OD_OFF_6077_00 1061u
 #define CO_OD_LEN_6077_00 2u
-#define CO_OD_OFF_607D_00 1047u
+#define CO_OD_OFF_607D_00 1063u
 #define CO_OD_LEN_607D_00 1u
-#define CO_OD_OFF_607D_01 1048u
+#define CO_OD_OFF_607D_01 1064u
 #define CO_OD_LEN_607D_01 4u
-#define CO_OD_OFF_607D_02 1052u
+#define CO_OD_OFF_607D_02 1068u
 #define CO_OD_LEN_607D_02 4u
-#define CO_OD_OFF_6080_00 1056u
+#define CO_OD_OFF_6080_00 1072u
 #define CO_OD_LEN_6080_00 4u
-#define CO_OD_OFF_60FF_00 1060u
+#define CO_OD_OFF_60FF_00 1076u
 #define CO_OD_LEN_60FF_00 4u
-#define CO_OD_OFF_6502_00 1064u
+#define CO_OD_OFF_6502_00 1080u
 #define CO_OD_LEN_6502_00 4u
 
 /** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */
@@ -1214,6 +1226,10 @@
   X(2057_09) \
   X(2057_0A) \
   X(2057_0B) \
+  X(2057_0C) \
+  X(2057_0D) \
+  X(2057_0E) \
+  X(2057_0F) \
   X(2060_00) \
   X(2060_01) \
   X(2060_02) \
@@ -1279,7 +1295,7 @@
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 99u
+#define CO_OD_CFG_COUNT 103u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 

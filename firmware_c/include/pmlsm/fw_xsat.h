@@ -26,6 +26,18 @@
  * with i_x the phase's fundamental current (the HF extraction's), the duty
  * clamped to [0, 1]. dt_comp_s = dt_comp_drop_V = 0: off (the duties untouched).
  *
+ * Position-periodic ripple: a secondary saliency of stator-frame order n moves the
+ * HF axis at (n - 2) theta in the rotor frame, the end effect's fixed stator-frame
+ * saliency (order 0) at 2 theta; both land at 2 theta for n = 4 (docs/method.md
+ * section 6). The observer subtracts, besides the map's offset, the HF error it
+ * sees at the true angle as a short series in the estimate,
+ *
+ *   rip(theta^) = a2 cos 2 theta^ + b2 sin 2 theta^ + a4 cos 4 theta^ + b4 sin 4 theta^
+ *
+ * (rip_a2_rad .. rip_b4_rad, in the error's units like the map), from the sine and
+ * cosine of theta^ the period already has (double-angle formulas, no libm). All four
+ * 0: off (nothing added, the observer as before).
+ *
  * Needs the bottom layer (fw_types.h, fw_math.h) only.
  */
 #ifndef PMLSM_FW_XSAT_H
@@ -52,6 +64,9 @@ typedef struct {
   float iq_alpha;                  /**< low-pass coefficient of i_q */
   float iq_f;                      /**< low-passed fundamental i_q (A) */
   float off_rad;                   /**< the offset of the next period (rad) */
+  /* position-periodic ripple */
+  uint8_t rip_on;                  /**< any of rip_a2_rad .. rip_b4_rad != 0 */
+  float rip_c[4];                  /**< a2, b2, a4, b4 (rad) */
   /* dead time */
   uint8_t dt_on;                   /**< dt_comp_s > 0 or dt_comp_drop_V > 0 */
   float dt_duty;                   /**< dt_comp_s f_pwm */
@@ -74,6 +89,25 @@ static inline void fw_xsat_update(fw_xsat_t *x, float i_q_A) {
 }
 /** The offset the observer subtracts this period (rad). */
 static inline float fw_xsat_offset(const fw_xsat_t *x) { return x->off_rad; }
+
+/** The ripple correction rip(theta^) of the header at the estimate's cosine and sine
+ *  (sc.c = cos theta^, sc.s = sin theta^); 0 when off. */
+static inline float fw_xsat_ripple(const fw_xsat_t *x, fw_sincos_f32_t sc) {
+  if (FW_LIKELY(!x->rip_on)) {
+    return 0.0f;
+  }
+  const float c2 = sc.c * sc.c - sc.s * sc.s;
+  const float s2 = 2.0f * sc.c * sc.s;
+  const float c4 = c2 * c2 - s2 * s2;
+  const float s4 = 2.0f * c2 * s2;
+  return x->rip_c[0] * c2 + x->rip_c[1] * s2 + x->rip_c[2] * c4 + x->rip_c[3] * s4;
+}
+/** The offset the observer subtracts this period with the ripple correction at the
+ *  estimate sc (rad): the map's offset, plus rip(theta^) when the ripple is on (the
+ *  map's offset alone, bit for bit, when off). */
+static inline float fw_xsat_offset_at(const fw_xsat_t *x, fw_sincos_f32_t sc) {
+  return FW_UNLIKELY(x->rip_on) ? x->off_rad + fw_xsat_ripple(x, sc) : x->off_rad;
+}
 
 /** Dead-time compensation of the duties (header): i_ab_A the fundamental current
  *  in the stationary frame, u_dc_V the DC link. Nothing when off. */
