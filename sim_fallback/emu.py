@@ -31,7 +31,6 @@ at a time, as with a USB-CAN adapter.
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import shutil
 import socket
@@ -46,8 +45,8 @@ from .server import (
     log_tail,
     motor_key,
     process_is,
+    read_state_file,
     state_dir,
-    state_error,
     state_lock,
     stop_process,
     write_state_file,
@@ -281,22 +280,13 @@ def _listening(port: int) -> bool:
 
 
 def read_state(folder: Path | None = None) -> EmuState | None:
-    """The state file, or None when there is none (or a stale placeholder when it is
-    half-written or foreign); raises the state folder's :class:`SetupError` (exit 2 or 3)
-    when the folder or file cannot be read at all, as the server's does."""
-    folder = folder or state_dir()
-    f = folder / STATE_FILE
-    try:
-        return EmuState(**json.loads(f.read_text(encoding="utf-8")))
-    except FileNotFoundError:
-        return None
-    except OSError as e:  # not a folder, a folder where the file should be, permissions
-        raise state_error(folder, f, e) from None
-    except (ValueError, TypeError):  # half-written or foreign: stale
-        return EmuState(pid=-1, host=HOST, can_port=0, serial_port=0, load_port=0, motor="?",
-                        plant="?", extractor="?", seed=0, node_id=1, x0_m=0.0,
-                        ref_sensor=False, image="", nvm="", log="", started=0.0,
-                        bench_version="?")
+    """The state file (the server's :func:`read_state_file`): None when there is none, a
+    stale placeholder when it is half-written or foreign, the state folder's
+    :class:`SetupError` (exit 2 or 3) when the folder or file cannot be read at all."""
+    return read_state_file(folder or state_dir(), STATE_FILE, EmuState, lambda: EmuState(
+        pid=-1, host=HOST, can_port=0, serial_port=0, load_port=0, motor="?", plant="?",
+        extractor="?", seed=0, node_id=1, x0_m=0.0, ref_sensor=False, image="", nvm="",
+        log="", started=0.0, bench_version="?"))
 
 
 def _write_state(folder: Path, st: EmuState) -> None:

@@ -216,23 +216,29 @@ class ServerState:
                f"{self.motor}"
 
 
-def read_state(folder: Path | None = None) -> ServerState | None:
-    """The state file, or None when there is none (or it is unreadable: stale); raises
-    :class:`SetupError` when the state folder or file cannot be read (not a folder, a
-    folder where the file should be, permissions)."""
-    folder = folder or state_dir()
-    f = folder / STATE_FILE
+def read_state_file(folder: Path, name: str, build: Any, stale: Any) -> Any:
+    """``build(**doc)`` of the JSON state file ``folder/name``; None when there is none;
+    ``stale()`` when it is half-written or foreign (its process is then judged dead);
+    raises :class:`SetupError` when the folder or file cannot be read at all (not a folder,
+    a folder where the file should be, permissions). The server's and the emulated
+    board's state files are read with it."""
+    f = folder / name
     try:
-        doc = json.loads(f.read_text(encoding="utf-8"))
-        return ServerState(**doc)
+        return build(**json.loads(f.read_text(encoding="utf-8")))
     except FileNotFoundError:
         return None
     except OSError as e:
         raise state_error(folder, f, e) from None
     except (ValueError, TypeError):  # half-written or foreign: treat as stale
-        return ServerState(pid=-1, host=HOST, port=0, channel=CAN_CHANNEL, motor="?",
-                           extractor="?", seed=0, node_id=1, nvm="", nvm_state="", log="",
-                           started=0.0, bench_version="?")
+        return stale()
+
+
+def read_state(folder: Path | None = None) -> ServerState | None:
+    """The state file (:func:`read_state_file`): None when there is none, a stale
+    placeholder when it is unreadable, :class:`SetupError` when the folder is unusable."""
+    return read_state_file(folder or state_dir(), STATE_FILE, ServerState, lambda: ServerState(
+        pid=-1, host=HOST, port=0, channel=CAN_CHANNEL, motor="?", extractor="?", seed=0,
+        node_id=1, nvm="", nvm_state="", log="", started=0.0, bench_version="?"))
 
 
 @contextlib.contextmanager
