@@ -522,6 +522,22 @@ typedef struct {
 
 /** dy/dt for y = {i_d, i_q, x, v} with the full magnetic model (plant realism, libm):
  * M di/dt = u_dq - R i - e v (M, e: mag_eval); returns the net drive force. */
+/** The mechanical half of dy/dt (dx/dt, dv/dt) from the net drive force: viscous and
+ *  kinetic friction against it; both 0 while the mover sticks or is held (!slide). One
+ *  definition for the fast model (deriv_t) and the full magnetic one (deriv_real). */
+SIM_INLINE void mech_deriv(const sim_t *s, const double y[4], const substep_in_t *in,
+                           double F_drive, double dy[4], const int slide) {
+  const sim_plant_params_t *p = &s->p;
+  if (slide) {
+    dy[2] = y[3];
+    dy[3] = ((F_drive - p->b_visc_Ns_per_m * y[3]) - p->F_coulomb_N * (double)in->mech_dir) *
+            s->inv_mass;
+  } else {
+    dy[2] = 0.0;
+    dy[3] = 0.0;
+  }
+}
+
 static double deriv_real(const sim_t *s, const double y[4], const substep_in_t *in,
                          double dy[4], const int elec, const int slide) {
   const sim_plant_params_t *p = &s->p;
@@ -544,14 +560,7 @@ static double deriv_real(const sim_t *s, const double y[4], const substep_in_t *
   const double F_cog =
       p->cog_amp_N != 0.0 ? p->cog_amp_N * sin(s->k_cog * y[2] + p->cog_phase_rad) : 0.0;
   const double F_drive = (m.force_N + F_cog) - in->F_load_N;
-  if (slide) {
-    dy[2] = y[3];
-    dy[3] = ((F_drive - p->b_visc_Ns_per_m * y[3]) - p->F_coulomb_N * (double)in->mech_dir) *
-            s->inv_mass;
-  } else {
-    dy[2] = 0.0;
-    dy[3] = 0.0;
-  }
+  mech_deriv(s, y, in, F_drive, dy, slide);
   return F_drive;
 }
 
@@ -604,14 +613,7 @@ SIM_INLINE double deriv_t(const sim_t *s, const double y[4], const substep_in_t 
   }
   /* without cogging one addition instead of two, the same value (see load_add) */
   const double F_drive = cog ? (F_em + F_cog) - in->F_load_N : F_em + in->load_add;
-  if (slide) {
-    dy[2] = y[3];
-    dy[3] = ((F_drive - p->b_visc_Ns_per_m * y[3]) - p->F_coulomb_N * (double)in->mech_dir) *
-            s->inv_mass;
-  } else {
-    dy[2] = 0.0;
-    dy[3] = 0.0;
-  }
+  mech_deriv(s, y, in, F_drive, dy, slide);
   return F_drive;
 }
 
