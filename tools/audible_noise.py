@@ -97,55 +97,54 @@ def run(results: Path, serial: bool, workers: int) -> tuple[Path, Path]:
 def deadtime_rows(res: dict[str, Any]) -> list[dict[str, Any]]:
     """The dead-time check: one row per (inverter, setting) case, in the campaign's order:
     valid seeds, faults, and mean (sd) of its metrics over the valid seeds."""
-    params = [json.loads(p) for p in res["params"]]
-    valid = np.asarray(res["valid"], dtype=float)
-    errors = [e for e in res["error"] if e]
-    if errors:
-        raise RuntimeError(f"{len(errors)} runs failed; the first: {errors[0]}")
+    params = _params(res)
     keys = list(dict.fromkeys((p["inverter"], p["setting"]) for p in params))
-    rows = []
-    for inv, sett in keys:
-        k = np.array([(p["inverter"], p["setting"]) == (inv, sett) for p in params])
-        ok = k & (valid == 1.0)
-        faults = sorted({int(x) for x in np.asarray(res["fault"])[k] if int(x)})
-        row: dict[str, Any] = {"inverter": inv, "setting": sett, "seeds": int(k.sum()),
-                               "valid": int(ok.sum()),
-                               "faults": [f"0x{x:04X}" for x in faults]}
-        for col in (ERROR, "steady.pos_max", "transient.pos_max", NOISE, LOSS):
-            v = np.asarray(res[col], dtype=float)[ok]
-            row[col] = float(np.mean(v)) if v.size else math.nan
-            row[col + ".sd"] = float(np.std(v, ddof=1)) if v.size > 1 else math.nan
-        rows.append(row)
-    return rows
+    cols = (ERROR, "steady.pos_max", "transient.pos_max", NOISE, LOSS)
+    return [{"inverter": inv, "setting": sett, **_case_stats(
+        res, np.array([(p["inverter"], p["setting"]) == (inv, sett) for p in params]), cols)}
+        for inv, sett in keys]
 
 
 def summarise(res: dict[str, Any]) -> list[dict[str, Any]]:
     """One row per (u_inj_V, f_inj_Hz): seeds, valid seeds, faults, and mean and
     standard deviation over the valid seeds of every campaign metric."""
-    params = [json.loads(p) for p in res["params"]]
+    params = _params(res)
     u = np.array([p["fw.u_inj_V"] for p in params])
     f = np.array([p["fw.f_inj_Hz"] for p in params])
-    valid = np.asarray(res["valid"], dtype=float)
-    errors = [e for e in res["error"] if e]
-    if errors:
-        raise RuntimeError(f"{len(errors)} runs failed; the first: {errors[0]}")
     rows = []
     for uu in sorted(set(u)):
         for ff in sorted(set(f)):
             k = (u == uu) & (f == ff)
-            ok = k & (valid == 1.0)
-            faults = sorted({int(x) for x in np.asarray(res["fault"])[k] if int(x)})
-            row: dict[str, Any] = {"u_inj_V": float(uu), "f_inj_Hz": float(ff),
-                                   "seeds": int(k.sum()), "valid": int(ok.sum()),
-                                   "faults": [f"0x{x:04X}" for x in faults]}
-            for col, _, _ in COLUMNS:
-                v = np.asarray(res[col], dtype=float)[ok]
-                row[col] = float(np.mean(v)) if v.size else math.nan
-                row[col + ".sd"] = float(np.std(v, ddof=1)) if v.size > 1 else math.nan
+            row = {"u_inj_V": float(uu), "f_inj_Hz": float(ff),
+                   **_case_stats(res, k, [col for col, _, _ in COLUMNS])}
+            ok = k & (np.asarray(res["valid"], dtype=float) == 1.0)
             row[ERROR + ".max"] = (float(np.max(np.asarray(res[ERROR], dtype=float)[ok]))
                                    if ok.any() else math.nan)
             rows.append(row)
     return rows
+
+
+def _params(res: dict[str, Any]) -> list[dict[str, Any]]:
+    """The runs' parameters; raises RuntimeError when a run failed (not a drive fault:
+    an error of the run itself)."""
+    errors = [e for e in res["error"] if e]
+    if errors:
+        raise RuntimeError(f"{len(errors)} runs failed; the first: {errors[0]}")
+    return [json.loads(p) for p in res["params"]]
+
+
+def _case_stats(res: dict[str, Any], k: np.ndarray, cols: Sequence[str]) -> dict[str, Any]:
+    """The runs ``k`` of one case: seeds, valid seeds, the faults' codes, and each column's
+    mean (``col``) and standard deviation (``col.sd``) over the valid ones."""
+    ok = k & (np.asarray(res["valid"], dtype=float) == 1.0)
+    faults = sorted({int(x) for x in np.asarray(res["fault"])[k] if int(x)})
+    row: dict[str, Any] = {"seeds": int(k.sum()), "valid": int(ok.sum()),
+                           "faults": [f"0x{x:04X}" for x in faults]}
+    for col in cols:
+        v = np.asarray(res[col], dtype=float)[ok]
+        row[col] = float(np.mean(v)) if v.size else math.nan
+        row[col + ".sd"] = float(np.std(v, ddof=1)) if v.size > 1 else math.nan
+    return row
 
 
 def pareto(rows: list[dict[str, Any]], x: str, y: str) -> list[dict[str, Any]]:
