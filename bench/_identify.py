@@ -17,6 +17,12 @@ plant's lock, the fixture's action). The thrust current goes to the drive as the
 target torque (0x6071, per mille of ``i_max_A`` in FORCE mode); the position estimate comes
 from the telemetry, the speed estimate for the safety check from the TPDO (0x606C). A mover
 that moves stops the step (:class:`identification.MoverMoved`); steps 1-6 are kept.
+
+Step 8 (``ripple``, ``bench identify --ripple``): the position ripple of the HF axis
+(:func:`identification.run_ripple`, docs/method.md section 6) on a FREE mover, after steps
+1-6 and before step 7: constant-speed passes there and back within ``travel_m``, with the
+identified configuration (its K_F and mass for the motion the ripple causes), no position
+sensor. A fault stops the step; steps 1-6 are kept.
 """
 
 from __future__ import annotations
@@ -36,13 +42,16 @@ import numpy as np
 from identification import (
     IDENT_RESTORED,
     PROBE_SIGNALS,
+    RIP_ORDERS,
     START_WINDOWS,
     XSAT_POINTS,
     Identified,
     Probe,
     ident_overrides,
+    rip_fields,
     run_cross_saturation,
     run_identification,
+    run_ripple,
 )
 from protocols.generated import od_names as od
 from protocols.generated.od_names import StartPhase
@@ -76,12 +85,23 @@ XSAT_QUANTITIES: dict[str, tuple[str, str]] = {
     **{f"xsat_axis{k}_rad": ("rad", f"HF axis turn measured at {k} x step (map off)")
        for k in range(1, XSAT_POINTS + 1)}}
 
+#: The position-ripple correction (step 8, ``--ripple``; object 0x2057): value -> unit, what.
+RIP_QUANTITIES: dict[str, tuple[str, str]] = {
+    **{name: ("rad", f"position-ripple correction, {name[4]} coefficient at {name[5]} theta")
+       for name in rip_fields([0.0] * 2 * len(RIP_ORDERS))},
+    **{name.replace("rip_", "rip_axis_"): ("rad", f"HF axis ripple measured, {name[4]} "
+                                                  f"coefficient at {name[5]} theta")
+       for name in rip_fields([0.0] * 2 * len(RIP_ORDERS))},
+    "rip_slope": ("", "slope of the HF error per radian of axis ripple")}
+
 #: Identified value -> drive configuration field (fw_config_t, the OD parameter name). The
-#: map's fields only when step 7 measured them (else the drive's map stays as it was).
+#: map's and the ripple's fields only when steps 7 and 8 measured them (else the drive's
+#: stay as they were).
 CONFIG_FIELDS = {"R_ohm": "R_ohm", "L_d_H": "L_d_H", "L_q_H": "L_q_H", "psi_f_Wb": "psi_f_Wb",
                  "mass_kg": "mass_kg", "b_visc_Ns_per_m": "visc_Ns_per_m",
                  "F_coulomb_N": "coulomb_N", "xsat_di_A": "xsat_di_A",
-                 **{f"xsat_off{k}_rad": f"xsat_off{k}_rad" for k in range(1, XSAT_POINTS + 1)}}
+                 **{f"xsat_off{k}_rad": f"xsat_off{k}_rad" for k in range(1, XSAT_POINTS + 1)},
+                 **{k: k for k in rip_fields([0.0] * 2 * len(RIP_ORDERS))}}
 
 
 class IdentifyError(RuntimeError):
@@ -352,14 +372,49 @@ def _cross_saturation(conn: Any, probe: WireProbe, cfg0: Any, backup: dict[str, 
                        "maps the speed estimate 0x606C)")
 
 
+def _ripple(conn: Any, probe: WireProbe, cfg0: Any, backup: dict[str, Any],
+            res: Identified, travel_m: float) -> None:
+    """Step 8 over the wire, after steps 1-6 (the drive off in between): the drive runs the
+    identified configuration (gains derived from it, the user's extractor) and
+    :func:`identification.run_ripple` measures the ripple with the identified K_F and mass;
+    the result joins ``res``. A fault leaves ``res`` as steps 1-6 made it (noted)."""
+    drive = conn.drive
+    drive.disable()
+    code = drive.fault_code()
+    if code:
+        from bench._drive import fault_text
+
+        drive.reset_faults()
+        res.log.append(f"step 8: the drive's fault {fault_text(code)} from steps 1-6 reset "
+                       "before it")
+    drive.restore(identified_config(backup, res))
+    _telemetry_on(drive, cfg0.f_pwm_Hz)
+    probe.run(0.02)  # telemetry flowing again
+    v = res.values
+    tau = float(cfg0.pole_pitch_m)
+    K_F = force_constant_N_per_A(float(v.get("psi_f_Wb", cfg0.psi_f_Wb)), tau)
+    mass = float(v["mass_kg"]) if v.get("mass_kg", 0.0) > 0.0 else None
+    try:
+        rp = run_ripple(probe, cfg0, tau, travel_m, K_F=K_F, mass=mass)
+    except RuntimeError as e:  # a fault: steps 1-6 stand
+        res.log.append(f"step 8 (position ripple) stopped: {' '.join(str(e).split())}; "
+                       "steps 1-6 kept")
+        drive.disable()
+        return
+    res.values.update(rp.values)
+    res.sigma.update(rp.sigma)
+    res.log += rp.log
+
+
 def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
                    name: str = "identified", apply: bool = False, n_starts: int = 4,
-                   clamped: bool = False, hold: Callable[[], bool] | None = None
-                   ) -> IdentifyOutput:
+                   clamped: bool = False, hold: Callable[[], bool] | None = None,
+                   ripple: bool = False) -> IdentifyOutput:
     """Run the identification on a connected drive; write the run folder (motor file,
     drive configuration, report, summary, logs). The drive's configuration is restored
     at the end unless ``apply`` (then the identified configuration stays).
 
+    ``ripple``: step 8, the position ripple, on the free mover after the usual steps.
     ``clamped``: step 7, the cross-saturation map, after the usual steps; ``hold`` is
     called first with the drive off, the fixture's action that holds the mover (True: go
     on, False: skip the step). A mover that moves during it stops the step with a one-line
@@ -398,6 +453,11 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
         res = run_identification(probe, cfg0, cfg0.pole_pitch_m, travel_m, n_starts,
                                  restore)
         out.result = res
+        if ripple:
+            _ripple(conn, probe, cfg0, backup, res, travel_m)
+        else:
+            res.log.append("step 8 (position ripple) not run: --ripple asks for it (a free "
+                           "mover, constant-speed passes within --travel)")
         if clamped:
             _cross_saturation(conn, probe, cfg0, backup, res, hold)
         else:
@@ -480,7 +540,7 @@ def _write_outputs(out: IdentifyOutput, backup: dict[str, Any], name: str, conn:
         (d / "drive_config.json").write_text(
             json.dumps(identified_config(backup, res), indent=2) + "\n")
         out.files = {"motor": str(d / "motor.toml"), "config": str(d / "drive_config.json")}
-        for k, (unit, what) in {**QUANTITIES, **XSAT_QUANTITIES}.items():
+        for k, (unit, what) in {**QUANTITIES, **XSAT_QUANTITIES, **RIP_QUANTITIES}.items():
             if k not in res.values:
                 continue
             row = {"quantity": k, "what": what, "value": res.values[k],

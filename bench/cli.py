@@ -200,6 +200,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "simulated mover is locked instead. A mover that moves stops the step "
                         "(exit 1, drive disabled, steps 1-6 kept). Without it the map is not "
                         "measured (the motor file says so)")
+    p.add_argument("--ripple", action="store_true",
+                   help="after the usual steps (before --clamped's), step 8: the position "
+                        "ripple of the HF axis (object 0x2057 rip_*, motor file [controller]) "
+                        "from constant-speed passes at 0.1 m/s there and back within --travel "
+                        "on the FREE mover, with the identified configuration; no position "
+                        "sensor. A fault stops the step (steps 1-6 kept, noted)")
     p.add_argument("--runs", default="runs", metavar="DIR", help="run folder root")
 
     p = sub.add_parser("info", help="connection, identity, firmware check, state",
@@ -1102,22 +1108,26 @@ def cmd_identify(args: argparse.Namespace) -> int:
         hold = _clamp_fixture(args, conn) if args.clamped else None
         out = identify_drive(conn, runs_root=args.runs, travel_m=args.travel,
                              name=args.name, apply=args.apply, n_starts=args.starts,
-                             clamped=args.clamped, hold=hold)
+                             clamped=args.clamped, hold=hold, ripple=args.ripple)
     except IdentifyError as e:
         raise UserError(f"identify: {e}", EXIT_USAGE) from None
     finally:
         conn.close()
     res = out.result
     if res is not None:
-        from bench._identify import QUANTITIES, XSAT_QUANTITIES
+        from bench._identify import QUANTITIES, RIP_QUANTITIES, XSAT_QUANTITIES
 
         sim = out.truth is not None
         print(f"identified{' [SIMULATED drive]' if sim else ''}: {out.run_dir}")
         shown = {**QUANTITIES, **{k: v for k, v in XSAT_QUANTITIES.items()
-                                  if not k.startswith("xsat_axis")}}
+                                  if not k.startswith("xsat_axis")},
+                 **{k: v for k, v in RIP_QUANTITIES.items() if k.startswith("rip_")
+                    and not k.startswith("rip_axis")}}
         if "xsat_di_A" not in res.values:
             print("  cross-saturation map not measured (" + (
                 "step 7 did not complete" if args.clamped else "step 7 needs --clamped") + ")")
+        if args.ripple and "rip_a2_rad" not in res.values:
+            print("  position ripple not measured (step 8 did not complete; see the report)")
         for k, (unit, _what) in shown.items():
             if k not in res.values:
                 continue
