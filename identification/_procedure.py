@@ -108,6 +108,18 @@ PASS_MARGIN = 0.1
 #: Speed profile of the motion runs: relative amplitude and frequency (Hz) of the
 #: sinusoid around the mean speed.
 PROFILE = (0.6, 3.0)
+#: the profile runs (direction, scale of the mean speed): two mean speeds in each
+#: direction, so that the inverter's voltage error (one sign per direction) and the
+#: back-EMF (proportional to the speed) separate in the psi_f fit
+PROFILE_RUNS = ((1.0, 1.0), (-1.0, 1.0), (1.0, 0.5), (-1.0, 0.5))
+#: (the mass and friction fit uses the full-speed runs only: at half the speed the mover
+#: comes within a few cm/s of sticking, where the static friction biases the mass)
+#: current (A) over which the inverter's voltage error in the psi_f fit changes sign
+#: (tanh(i_q / band)): the zero-current clamp of a dead time is a fraction of an ampere
+DT_BAND_A = 0.3
+#: the inverter term stays in the psi_f fit when its estimate exceeds this many of its
+#: standard errors (the ideal motors: t = 1-3; realistic_linear's dead time: t ~ 16)
+DT_T_MIN = 5.0
 
 
 @dataclass
@@ -335,13 +347,14 @@ def run_identification(probe: Probe, cfg0: Any, tau_m: float, travel_m: float = 
     # q-axis voltage it commands and the currents it measures, one sample per ms
     v_mid = min(0.5, travel_m / 1.6)
     runs = []
-    for sgn in (1.0, -1.0):
+    for sgn, scale in PROFILE_RUNS:
         t_pts = np.arange(0.0, 0.9001, 0.01)
-        prof = sgn * v_mid * (1.0 + PROFILE[0] * np.sin(2 * math.pi * PROFILE[1] * t_pts)
-                              ) * np.minimum(1.0, t_pts / 0.1)
+        prof = sgn * scale * v_mid * (
+            1.0 + PROFILE[0] * np.sin(2 * math.pi * PROFILE[1] * t_pts)
+        ) * np.minimum(1.0, t_pts / 0.1)
         r = probe.follow_speed(t_pts, prof)
         runs.append({"x": r["pos_hat_m"], "i_q": r["i_q_A"], "i_d": r["i_d_A"],
-                     "u_q": r["u_q_V"]})
+                     "u_q": r["u_q_V"], "motion": scale == 1.0})
         probe.ramp_speed(float(prof[-1]), 0.0, 0.2)
         x_end = float(probe.run(0.45)["pos_hat_m"][-1])  # back to rest under control
     fit = _fit_motion(runs, dt=0.001, R=float(R), L_q=float(L_q_ss), L_d=float(L_d0),
@@ -752,6 +765,9 @@ def _fit_motion(runs: list[dict[str, np.ndarray]], dt: float, R: float, L_q: flo
     """psi_f, mass and friction from the speed-profile runs (drive signals only).
 
     Voltage equation, q axis, filtered: u_q - R i_q - L_q di_q/dt = w (psi_f + L_d i_d)
+    + c + u_dt tanh(i_q / DT_BAND_A), u_dt the inverter's voltage error (dead time and
+    device drops the drive's compensation leaves; kept when the data resolve it,
+    DT_T_MIN; the runs at two mean speeds per direction separate it from the back-EMF)
     Motion, filtered: K_F i_q = m a + b v + F_c sgn(v), K_F = 1.5 (pi / tau) psi_f
     with v, a the derivatives of the filtered position estimate (zero phase: the
     speed estimate of the observer lags during acceleration and biases both fits).
@@ -772,7 +788,10 @@ def _fit_motion(runs: list[dict[str, np.ndarray]], dt: float, R: float, L_q: flo
         sl = slice(n_skip, None)                 # after the initial ramp
         w = k_e * v[sl]
         Y_psi.append(uqf[sl] - R * iqf[sl] - L_q * diq[sl] - w * L_d * idf[sl])
-        X_psi.append(np.vstack([w, np.ones_like(w)]).T)  # + a constant (offsets)
+        # + a constant (offsets) + the inverter's voltage error against the current's sign
+        X_psi.append(np.vstack([w, np.ones_like(w), np.tanh(iqf[sl] / DT_BAND_A)]).T)
+        if not r.get("motion", True):
+            continue  # the voltage equation only (see PROFILE_RUNS)
         keep = np.abs(v[sl]) > 0.05                        # sgn(v) defined
         sgn = np.sign(v[sl])[keep]
         # cogging (and any other force periodic in the position): a Fourier series in
@@ -785,11 +804,23 @@ def _fit_motion(runs: list[dict[str, np.ndarray]], dt: float, R: float, L_q: flo
         rows.append(np.vstack([a[sl][keep], v[sl][keep], sgn, *harm]).T)
         iq_f.append(iqf[sl][keep])
     Xp, Yp = np.vstack(X_psi), np.concatenate(Y_psi)
-    (psi, c0), *_ = np.linalg.lstsq(Xp, Yp, rcond=None)
-    rp = Yp - Xp @ np.array([psi, c0])
     # residuals are correlated over the filter's width: effective sample count
     n_eff = max(len(Yp) * dt / (2.5 * sigma_s), 3.0)
-    cov_p = np.linalg.inv(Xp.T @ Xp) * float(np.var(rp)) * len(Yp) / n_eff
+
+    def lsq(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        coef, *_ = np.linalg.lstsq(X, Yp, rcond=None)
+        res_ = Yp - X @ coef
+        return coef, np.linalg.inv(X.T @ X) * float(np.var(res_)) * len(Yp) / n_eff
+
+    # with the inverter's voltage error when the data demand it (|t| > DT_T_MIN), else
+    # without (an ideal inverter, or one the drive compensates well)
+    coef, cov_p = lsq(Xp)
+    u_dt = float(coef[2])
+    t_dt = abs(u_dt) / max(math.sqrt(float(cov_p[2, 2])), 1e-12)
+    if t_dt <= DT_T_MIN:
+        coef, cov_p = lsq(Xp[:, :2])
+        u_dt = 0.0
+    psi, c0 = float(coef[0]), float(coef[1])
     K_F = force_constant_N_per_A(psi, tau)
     M = np.vstack(rows)
     y = K_F * np.concatenate(iq_f)
@@ -806,7 +837,10 @@ def _fit_motion(runs: list[dict[str, np.ndarray]], dt: float, R: float, L_q: flo
                "mass_kg": float(math.hypot(math.sqrt(cov[0, 0]), rel_psi * coef[0])),
                "b_visc_Ns_per_m": float(math.hypot(math.sqrt(cov[1, 1]), rel_psi * coef[1])),
                "F_coulomb_N": float(math.hypot(math.sqrt(cov[2, 2]), rel_psi * coef[2]))},
-        log=[f"psi_f {psi:.5f} Wb from {len(Yp)} samples (u_q offset {c0:+.3f} V); "
+        log=[f"psi_f {psi:.5f} Wb from {len(Yp)} samples (u_q offset {c0:+.3f} V; "
+             + (f"inverter voltage error {u_dt:+.3f} V against i_q's sign, t = {t_dt:.1f}); "
+                if u_dt else f"no inverter voltage error resolved, t = {t_dt:.1f}); ")
+             +
              f"mass/friction fit over {len(y)} samples, K_F = {K_F:.3f} N/A; Gaussian "
              f"filter sigma {sigma_s * 1e3:.0f} ms on both sides"])
 
