@@ -128,3 +128,19 @@ def test_fields_are_range_checked(field, bad, lo, hi):
     setattr(cfg, field, bad)
     st, msg = firmware_check(cfg)
     assert st == 2 and msg.startswith(f"{field} = ") and f"[{lo}, {hi}]" in msg, msg
+
+
+def test_identified_cogging_matches_the_closed_form():
+    """The drive's own measurement of the cogging coefficients (constant-speed passes
+    under the speed loop, no position sensor: identification.run_thrust_ripple) against
+    the plant's closed form: within 0.6 N (7.5 % of the 8 N), from a configuration
+    without them."""
+    from sim_fallback import identify_thrust_ripple
+    m = load_motor("iron_core_linear")
+    res = identify_thrust_ripple(m, seed=1, fw={"rip6_a0_N": 0.0, "rip6_b0_N": 0.0})
+    ref = closed_form("iron_core_linear")
+    got = [res.values["rip6_a0_N"], res.values["rip6_b0_N"]]
+    assert got == pytest.approx(ref[:2], abs=0.6), res.log
+    # without the model the estimate follows a third less of the ripple's motion: the
+    # first pass alone is biased, the correction is what brings it in
+    assert 0.15 < res.values["rip6_observer_gain_re"] < 0.6
