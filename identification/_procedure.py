@@ -967,3 +967,106 @@ def run_ripple(probe: Probe, cfg0: Any, tau_m: float, travel_m: float = 0.3,
         res.values[name.replace("rip_", "rip_axis_")] = float(r0[j])
     res.values["rip_slope"] = k
     return res
+
+
+#: Cogging thrust at 6 theta_e (:func:`run_thrust_ripple`): the drive's fields of the
+#: current-independent coefficients (cos, sin 6 theta_hat) and their range (N)
+RIP6_FIELDS = ("rip6_a0_N", "rip6_b0_N")
+RIP6_MAX_N = 10000.0
+#: constant speed of the passes (m/s): the ripple at 6 k_e v = 118 rad/s (19 Hz) on
+#: tau = 16 mm, above the speed loop's bandwidth (so the mover's motion shows it) and under
+#: the back-EMF handover
+RIP6_SPEED_MPS = 0.1
+
+
+def _thrust_ripple_pass(probe: Probe, tau_m: float, dist_m: float, K_F: float, mass: float,
+                        visc: float) -> complex:
+    """One pass there and back at :data:`RIP6_SPEED_MPS`: the thrust at 6 theta the
+    mover feels beyond K_F i_q, as the phasor F = a - j b of a cos 6 theta + b sin 6 theta
+    (N), the mean of the two directions (the i_q-proportional part, with i_q of the
+    friction's sign in each, cancels to first order).
+
+    Over the constant-speed window, with theta_hat = k_e x_hat: k_e x_hat and i_q =
+    poly3(t) + sum (cos, sin)(n theta_hat) (n = 2, 4, 6) by least squares; at 6 theta, with
+    the phasors X (m) and I (A) and w = 6 k_e v, Newton m x'' = K_F i_q + F - b x' gives
+    F = -K_F I - m w^2 X + j w b X. X is the estimate's motion: where the observer's
+    model lacks the ripple it follows the mover's only partly (:func:`run_thrust_ripple`
+    corrects for that)."""
+    k_e = electrical_rad_per_m(tau_m)
+    v = RIP6_SPEED_MPS
+    hold = max(dist_m / v - RIP_RAMP_S, RIP_SKIP_S + 0.5)
+    out = []
+    for sgn in (1.0, -1.0):
+        t_pts = np.array([0.0, RIP_RAMP_S, RIP_RAMP_S + hold, 2 * RIP_RAMP_S + hold])
+        r = probe.follow_speed(t_pts, sgn * v * np.array([0.0, 1.0, 1.0, 0.0]))
+        probe.run(0.1)
+        n = len(r["pos_hat_m"])
+        t = np.arange(n) * 0.001
+        k = (t >= RIP_RAMP_S + RIP_SKIP_S) & (t <= RIP_RAMP_S + hold)
+        th = k_e * np.asarray(r["pos_hat_m"], dtype=float)[k]
+        tt = t[k] - float(np.mean(t[k]))
+        cols = [np.ones_like(tt), tt, tt ** 2, tt ** 3]
+        for o in (*RIP_ORDERS, 6):
+            cols += [np.cos(o * th), np.sin(o * th)]
+        A = np.vstack(cols).T
+        m6 = 4 + 2 * len(RIP_ORDERS)
+        cx = np.linalg.lstsq(A, th, rcond=None)[0][m6:m6 + 2]
+        ci = np.linalg.lstsq(A, np.asarray(r["i_q_A"], dtype=float)[k], rcond=None)[0][m6:m6 + 2]
+        w = 6.0 * k_e * sgn * v
+        X = complex(cx[0], -cx[1]) / k_e
+        current = complex(ci[0], -ci[1])
+        out.append(-K_F * current + (-mass * w * w + 1j * w * visc) * X)
+    return 0.5 * (out[0] + out[1])
+
+
+def rip6_fields(F: complex) -> dict[str, float]:
+    """The drive's cogging fields (a0, b0) from the phasor F = a0 - j b0, clamped to
+    the drive's range."""
+    return {RIP6_FIELDS[0]: float(np.clip(F.real, -RIP6_MAX_N, RIP6_MAX_N)),
+            RIP6_FIELDS[1]: float(np.clip(-F.imag, -RIP6_MAX_N, RIP6_MAX_N))}
+
+
+def run_thrust_ripple(probe: Probe, cfg0: Any, tau_m: float, travel_m: float = 0.3,
+                      K_F: float | None = None, mass: float | None = None) -> Identified:
+    """Optional, a FREE mover with ``travel_m`` of travel: the current-independent thrust
+    ripple at 6 theta_e (cogging at tau / 3) for the observer's model (``rip6_a0_N``,
+    ``rip6_b0_N``; docs/method.md section 5), no position sensor.
+
+    The speed loop moves the mover at constant speed there and back
+    (:func:`_thrust_ripple_pass`); the thrust the mover feels at 6 theta_hat follows from
+    the thrust current's ripple and the estimate's motion. The estimate follows the
+    mover's ripple only as far as the observer's model knows it: with the model's ripple
+    c the measurement is F_m(c) = F + G (F - c), G a complex gain of the observer at
+    6 k_e v. Pass 0 (c = 0) gives F_0 = (1 + G) F, pass 1 (c = F_0) F_1 = F_0 - G F_0,
+    whence G = (F_0 - F_1) / F_0 and F = F_0 / (1 + G); pass 2 runs with c = F and its
+    change is the sigma. The i_q-proportional coefficients (back-EMF harmonics) are
+    left as configured: the drive's voltage at 6 theta carries the inverter's dead-time
+    distortion, larger than the harmonics' back-EMF at these speeds, so they come from a
+    back-EMF test. ``K_F``, ``mass``: the identified ones, by default the configured
+    (cfg0: psi_f_Wb, mass_kg; visc_Ns_per_m for the viscous term)."""
+    res = Identified()
+    if K_F is None:
+        K_F = force_constant_N_per_A(float(cfg0.psi_f_Wb), tau_m)
+    if mass is None:
+        mass = float(cfg0.mass_kg)
+    visc = float(cfg0.visc_Ns_per_m)
+    dist = 0.8 * travel_m
+    probe.reconfigure(rip6_fields(0j))
+    F0 = _thrust_ripple_pass(probe, tau_m, dist, K_F, mass, visc)
+    probe.reconfigure(rip6_fields(F0))
+    F1 = _thrust_ripple_pass(probe, tau_m, dist, K_F, mass, visc)
+    G = (F0 - F1) / F0 if abs(F0) > 1e-9 else 0j
+    F = F0 / (1.0 + G) if abs(1.0 + G) > 0.2 else F1
+    probe.reconfigure(rip6_fields(F))
+    F2 = _thrust_ripple_pass(probe, tau_m, dist, K_F, mass, visc)
+    res.values.update(rip6_fields(F))
+    sig = abs(F2 - F)
+    res.sigma.update({k: float(sig) for k in RIP6_FIELDS})
+    res.values["rip6_observer_gain_re"] = float(G.real)
+    res.values["rip6_observer_gain_im"] = float(G.imag)
+    res.log.append(f"thrust ripple at 6 theta, model off: a0 {F0.real:+.3f}, b0 {-F0.imag:+.3f} N; "
+                   f"with it: {F1.real:+.3f}, {-F1.imag:+.3f} N; observer gain G = "
+                   f"{G.real:+.3f}{G.imag:+.3f}j")
+    res.log.append(f"cogging: a0 {F.real:+.3f} N, b0 {-F.imag:+.3f} N (check pass at it: "
+                   f"{F2.real:+.3f}, {-F2.imag:+.3f} N)")
+    return res

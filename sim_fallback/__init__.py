@@ -30,6 +30,7 @@ from ._identify import (
     identify,
     identify_cross_saturation,
     identify_ripple,
+    identify_thrust_ripple,
     randomized_plant,
     seed_range,
     truth_of,
@@ -89,7 +90,7 @@ def __getattr__(name: str):
 __all__ = [
     "DriveBridge", "SimDrive", "SimLoad", "SimClock", "FwCanFrame", "FakeDrive402",
     "SimProbe", "cross_saturation_truth", "hold_mover", "identify", "identify_cross_saturation",
-    "identify_ripple", "randomized_plant", "seed_range", "truth_of",
+    "identify_ripple", "identify_thrust_ripple", "randomized_plant", "seed_range", "truth_of",
     "PLANT_FIELD_SOURCES", "extractor_id", "machine_params", "plant_field_range",
     "plant_params_refused", "realism_params", "realism_refused", "split_plant_overrides",
     "X0_MAX_M",

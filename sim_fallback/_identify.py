@@ -20,6 +20,7 @@ from identification import (
     run_cross_saturation,
     run_identification,
     run_ripple,
+    run_thrust_ripple,
 )
 from protocols.generated.od_names import StartPhase
 
@@ -193,6 +194,20 @@ def identify_ripple(motor: Motor, seed: int = 0, plant: dict[str, Any] | None = 
         probe.sim = Sim(motor, seed=seed * 100 + 97, plant=plant, fw=fw, x0_m=x0_m)
         probe._start()
         return run_ripple(probe, cfg0, motor.tau_m, travel_m, passes)
+
+
+def identify_thrust_ripple(motor: Motor, seed: int = 0, plant: dict[str, Any] | None = None,
+                           fw: dict[str, float] | None = None, x0_m: float = 0.0,
+                           travel_m: float = 0.3) -> Identified:
+    """The cogging thrust at 6 theta_e (:func:`identification.run_thrust_ripple`) on the
+    simulated drive: a free mover from ``x0_m``, the motor file's configuration (``fw``
+    over it) with its cogging coefficients replaced by the ones being measured."""
+    fw = dict(fw or {})
+    cfg0 = fw_config(motor, "sogi_adaptive", **fw)
+    with SimProbe(motor, fw, plant, seed) as probe:
+        probe.sim = Sim(motor, seed=seed * 100 + 96, plant=plant, fw=fw, x0_m=x0_m)
+        probe._start()
+        return run_thrust_ripple(probe, cfg0, motor.tau_m, travel_m)
 
 
 def hold_mover(drive: Any, held: bool = True) -> None:

@@ -76,6 +76,7 @@ _FW_NAMES = {"R_ohm", "L_d_H", "L_q_H", "psi_f_Wb", "pole_pitch_m", "pole_pairs"
              "bemf_v_off_mps", "mon_bemf_min_mps", "dt_comp_s", "dt_comp_band_A",
              "dt_comp_drop_V", "xsat_di_A", *(f"xsat_off{k}_rad" for k in range(1, 7)),
              "sogi_bumpless", "rip_a2_rad", "rip_b2_rad", "rip_a4_rad", "rip_b4_rad",
+             "rip6_a0_N", "rip6_b0_N", "rip6_a1_N_per_A", "rip6_b1_N_per_A",
              "bemf_xc_comp", "mon_bemf_i_tol"}
 
 
@@ -235,6 +236,10 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float | None, float | None, str, Any]
     ("controller", "sogi_bumpless"): (False, None, None, "0/1", None),
     **{("controller", f"rip_{c}{n}_rad"): (False, None, None, "rad", None)
        for n in (2, 4) for c in "ab"},
+    # the thrust ripple at 6 theta_e in the observer's model (fw_obs.h): cogging (N) and
+    # the back-EMF harmonics' thrust ripple per A of i_q, from a datasheet or a test
+    **{("controller", f"rip6_{c}0_N"): (False, None, None, "N", None) for c in "ab"},
+    **{("controller", f"rip6_{c}1_N_per_A"): (False, None, None, "N/A", None) for c in "ab"},
     ("controller", "bemf_xc_comp"): (False, None, None, "0/1", None),
     ("controller", "mon_bemf_i_tol"): (False, None, None, "", None),
     # the rig's reference position sensor (a quadrature scale), modelled as the true
@@ -249,6 +254,7 @@ _CTRL_FW_FIELDS = ("i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz",
                    "dt_comp_s", "dt_comp_band_A", "dt_comp_drop_V", "xsat_di_A",
                    *(f"xsat_off{k}_rad" for k in range(1, 7)), "sogi_bumpless",
                    "rip_a2_rad", "rip_b2_rad", "rip_a4_rad", "rip_b4_rad",
+                   "rip6_a0_N", "rip6_b0_N", "rip6_a1_N_per_A", "rip6_b1_N_per_A",
                    "bemf_xc_comp", "mon_bemf_i_tol")
 #: the compensation keys of ``[controller]`` (docs/method.md section 6); the back-EMF
 #: observer's saliency term and the witness's current tolerance are not compensations

@@ -664,6 +664,7 @@ static void stage_estimate(fw_ctrl_t *c, fw_inj_meas_t *hf, fw_period_t *p,
     oi.settled =
         (uint8_t)FW_LIKELY(!(!fw_inj_settled(&c->inj) || c->phase_time_s < FW_EST_SETTLE_S));
     oi.running = (uint8_t)(c->phase == FW_START_RUN);
+    oi.sc = p->sc; /* the thrust ripple's 6 theta_hat (read only when configured) */
     float adapt_r;
     /* the position follows in the supervision half (fw_obs_pos_flush) */
     const float eps = fw_obs_update_pll(&c->obs, &oi, &adapt_r);

@@ -84,6 +84,15 @@ void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s) {
   const float k_e = FW_PI_F32 / cfg->machine.pole_pitch_m;
   o->fric_c = k_e * cfg->machine.coulomb_N / cfg->machine.mass_kg;
   o->fric_v = cfg->machine.visc_Ns_per_m / cfg->machine.mass_kg;
+  /* the 6 theta thrust ripple (N, N/A) as el. acceleration: k_e / mass */
+  const fw_cfg_compensation_t *cp = &cfg->compensation;
+  const float k_acc = k_e / cfg->machine.mass_kg;
+  o->rip6_k[0] = k_acc * cp->rip6_a0_N;
+  o->rip6_k[1] = k_acc * cp->rip6_b0_N;
+  o->rip6_k[2] = k_acc * cp->rip6_a1_N_per_A;
+  o->rip6_k[3] = k_acc * cp->rip6_b1_N_per_A;
+  o->rip6_on = (uint8_t)(cp->rip6_a0_N != 0.0f || cp->rip6_b0_N != 0.0f ||
+                         cp->rip6_a1_N_per_A != 0.0f || cp->rip6_b1_N_per_A != 0.0f);
   o->inv_w_fric = 1.0f / FW_OBS_W_FRIC_RADPS;
 }
 
@@ -240,10 +249,15 @@ float fw_obs_update_pll(fw_obs_t *o, const fw_obs_in_t *in, float *adapt_r) {
   /* Mechanical observer extension of the PLL: the speed state also
    * integrates the acceleration the measured thrust current predicts, plus
    * an estimated disturbance (load, friction) driven by the same error.
-   * Error dynamics: e''' + kp e'' + ki e' + kd e = (disturbance changes). */
+   * Error dynamics: e''' + kp e'' + ki e' + kd e = (disturbance changes).
+   * The configured 6 theta thrust ripple (cogging, back-EMF harmonics) is in
+   * the model when set (rip6_on), at the estimate of this sample. */
   float accel = 0.0f;
   if (in->running) {
     accel = o->accel_per_A * o->i_q_ff_A + o->accel_dist;
+    if (FW_UNLIKELY(o->rip6_on)) {
+      accel += fw_obs_rip6_accel(o, in->sc, o->i_q_ff_A);
+    }
     if (adaptive) { /* the configured friction in the model: the disturbance is the rest */
       accel -= o->fric_v * w_i + o->fric_c * fw_clamp_symf(w_i * o->inv_w_fric, 1.0f);
     }

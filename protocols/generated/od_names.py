@@ -17,7 +17,7 @@ from enum import IntEnum
 from typing import Any, NamedTuple
 
 #: the firmware's version (device.firmware_version; 0x100A, 0x2040 packed)
-FW_VERSION_STRING = '0.9.0'
+FW_VERSION_STRING = '0.10.0'
 
 FAULTS: dict[int, tuple[str, str]] = {
     0x2310: ('OVERCURRENT', '|phase current| above i_trip_A'),
@@ -301,6 +301,10 @@ FW_CONFIG_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ('rip_b2_rad', 'compensation', False),
     ('rip_a4_rad', 'compensation', False),
     ('rip_b4_rad', 'compensation', False),
+    ('rip6_a0_N', 'compensation', False),
+    ('rip6_b0_N', 'compensation', False),
+    ('rip6_a1_N_per_A', 'compensation', False),
+    ('rip6_b1_N_per_A', 'compensation', False),
 )
 #: the fw_config_t fields stored as int32_t (od.yaml i32: true): option codes
 FW_CONFIG_SIGNED: frozenset[str] = frozenset(['fault_reaction_option', 'quick_stop_option'])
@@ -632,6 +636,10 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2057, 13): 'Position ripple sin 2',
     (0x2057, 14): 'Position ripple cos 4',
     (0x2057, 15): 'Position ripple sin 4',
+    (0x2057, 16): 'Thrust ripple cos 6',
+    (0x2057, 17): 'Thrust ripple sin 6',
+    (0x2057, 18): 'Thrust ripple cos 6 per A',
+    (0x2057, 19): 'Thrust ripple sin 6 per A',
     (0x2060, 0): 'Highest sub-index supported',
     (0x2060, 1): 'Decimation',
     (0x2060, 2): 'Signal count',
@@ -938,6 +946,10 @@ COMPENSATION__RIP_A2_RAD = Entry(0x2057, 12, unit='rad')
 COMPENSATION__RIP_B2_RAD = Entry(0x2057, 13, unit='rad')
 COMPENSATION__RIP_A4_RAD = Entry(0x2057, 14, unit='rad')
 COMPENSATION__RIP_B4_RAD = Entry(0x2057, 15, unit='rad')
+COMPENSATION__RIP6_A0_N = Entry(0x2057, 16, unit='N')
+COMPENSATION__RIP6_B0_N = Entry(0x2057, 17, unit='N')
+COMPENSATION__RIP6_A1_N_PER_A = Entry(0x2057, 18, unit='N/A')
+COMPENSATION__RIP6_B1_N_PER_A = Entry(0x2057, 19, unit='N/A')
 TELEMETRY__DECIMATION = Entry(0x2060, 1)
 TELEMETRY__SIGNAL_COUNT = Entry(0x2060, 2)
 TELEMETRY__SIGNAL_1 = Entry(0x2060, 3)

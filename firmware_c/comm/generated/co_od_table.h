@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 318u
-#define CO_OD_RAM_SIZE 1084u
+#define CO_OD_COUNT 322u
+#define CO_OD_RAM_SIZE 1100u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -267,67 +267,71 @@
 #define CO_OD_2057_0D 254u /* Compensation: Position ripple sin 2 */
 #define CO_OD_2057_0E 255u /* Compensation: Position ripple cos 4 */
 #define CO_OD_2057_0F 256u /* Compensation: Position ripple sin 4 */
-#define CO_OD_2060_00 257u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 258u /* Telemetry: Decimation */
-#define CO_OD_2060_02 259u /* Telemetry: Signal count */
-#define CO_OD_2060_03 260u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 261u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 262u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 263u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 264u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 265u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 266u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 267u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 268u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 269u /* Trace: Command */
-#define CO_OD_2070_02 270u /* Trace: State */
-#define CO_OD_2070_03 271u /* Trace: Trigger signal */
-#define CO_OD_2070_04 272u /* Trace: Trigger level */
-#define CO_OD_2070_05 273u /* Trace: Trigger edge */
-#define CO_OD_2070_06 274u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 275u /* Trace: Signal count */
-#define CO_OD_2070_08 276u /* Trace: Signal 1 */
-#define CO_OD_2070_09 277u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 278u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 279u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 280u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 281u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 282u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 283u /* Trace: Signal 8 */
-#define CO_OD_2080_00 284u /* Identification: Highest sub-index supported */
-#define CO_OD_2080_01 285u /* Identification: d-axis current reference */
-#define CO_OD_2080_02 286u /* Identification: Measured smaller inductance */
-#define CO_OD_2080_03 287u /* Identification: Measured larger inductance */
-#define CO_OD_2090_00 288u /* Board: Highest sub-index supported */
-#define CO_OD_2090_01 289u /* Board: Drive kind */
-#define CO_OD_2090_02 290u /* Board: Board name */
-#define CO_OD_2090_03 291u /* Board: Drive time */
-#define CO_OD_2091_00 292u /* Reference sensor: Highest sub-index supported */
-#define CO_OD_2091_01 293u /* Reference sensor: Status */
-#define CO_OD_2091_02 294u /* Reference sensor: Resolution */
-#define CO_OD_2091_03 295u /* Reference sensor: Electrical zero */
-#define CO_OD_2091_04 296u /* Reference sensor: Count */
-#define CO_OD_2091_05 297u /* Reference sensor: Position */
-#define CO_OD_2091_06 298u /* Reference sensor: Faults seen */
-#define CO_OD_603F_00 299u /* Error code: Error code */
-#define CO_OD_6040_00 300u /* Controlword: Controlword */
-#define CO_OD_6041_00 301u /* Statusword: Statusword */
-#define CO_OD_605A_00 302u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 303u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 304u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 305u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 306u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 307u /* Following error window: Following error window */
-#define CO_OD_6066_00 308u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 309u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 310u /* Target torque: Target torque */
-#define CO_OD_6077_00 311u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 312u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 313u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 314u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 315u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 316u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 317u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2057_10 257u /* Compensation: Thrust ripple cos 6 */
+#define CO_OD_2057_11 258u /* Compensation: Thrust ripple sin 6 */
+#define CO_OD_2057_12 259u /* Compensation: Thrust ripple cos 6 per A */
+#define CO_OD_2057_13 260u /* Compensation: Thrust ripple sin 6 per A */
+#define CO_OD_2060_00 261u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 262u /* Telemetry: Decimation */
+#define CO_OD_2060_02 263u /* Telemetry: Signal count */
+#define CO_OD_2060_03 264u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 265u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 266u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 267u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 268u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 269u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 270u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 271u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 272u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 273u /* Trace: Command */
+#define CO_OD_2070_02 274u /* Trace: State */
+#define CO_OD_2070_03 275u /* Trace: Trigger signal */
+#define CO_OD_2070_04 276u /* Trace: Trigger level */
+#define CO_OD_2070_05 277u /* Trace: Trigger edge */
+#define CO_OD_2070_06 278u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 279u /* Trace: Signal count */
+#define CO_OD_2070_08 280u /* Trace: Signal 1 */
+#define CO_OD_2070_09 281u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 282u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 283u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 284u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 285u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 286u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 287u /* Trace: Signal 8 */
+#define CO_OD_2080_00 288u /* Identification: Highest sub-index supported */
+#define CO_OD_2080_01 289u /* Identification: d-axis current reference */
+#define CO_OD_2080_02 290u /* Identification: Measured smaller inductance */
+#define CO_OD_2080_03 291u /* Identification: Measured larger inductance */
+#define CO_OD_2090_00 292u /* Board: Highest sub-index supported */
+#define CO_OD_2090_01 293u /* Board: Drive kind */
+#define CO_OD_2090_02 294u /* Board: Board name */
+#define CO_OD_2090_03 295u /* Board: Drive time */
+#define CO_OD_2091_00 296u /* Reference sensor: Highest sub-index supported */
+#define CO_OD_2091_01 297u /* Reference sensor: Status */
+#define CO_OD_2091_02 298u /* Reference sensor: Resolution */
+#define CO_OD_2091_03 299u /* Reference sensor: Electrical zero */
+#define CO_OD_2091_04 300u /* Reference sensor: Count */
+#define CO_OD_2091_05 301u /* Reference sensor: Position */
+#define CO_OD_2091_06 302u /* Reference sensor: Faults seen */
+#define CO_OD_603F_00 303u /* Error code: Error code */
+#define CO_OD_6040_00 304u /* Controlword: Controlword */
+#define CO_OD_6041_00 305u /* Statusword: Statusword */
+#define CO_OD_605A_00 306u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 307u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 308u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 309u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 310u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 311u /* Following error window: Following error window */
+#define CO_OD_6066_00 312u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 313u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 314u /* Target torque: Target torque */
+#define CO_OD_6077_00 315u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 316u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 317u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 318u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 319u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 320u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 321u /* Supported drive modes: Supported drive modes */
 
 /** Where each entry's value lives in the OD RAM (compile-time handles for the
  *  application's per-period access, co_node.h CO_NODE_PUT/CO_NODE_GET):
@@ -848,127 +852,135 @@
 #define CO_OD_LEN_2057_0E 4u
 #define CO_OD_OFF_2057_0F 931u
 #define CO_OD_LEN_2057_0F 4u
-#define CO_OD_OFF_2060_00 935u
+#define CO_OD_OFF_2057_10 935u
+#define CO_OD_LEN_2057_10 4u
+#define CO_OD_OFF_2057_11 939u
+#define CO_OD_LEN_2057_11 4u
+#define CO_OD_OFF_2057_12 943u
+#define CO_OD_LEN_2057_12 4u
+#define CO_OD_OFF_2057_13 947u
+#define CO_OD_LEN_2057_13 4u
+#define CO_OD_OFF_2060_00 951u
 #define CO_OD_LEN_2060_00 1u
-#define CO_OD_OFF_2060_01 936u
+#define CO_OD_OFF_2060_01 952u
 #define CO_OD_LEN_2060_01 2u
-#define CO_OD_OFF_2060_02 938u
+#define CO_OD_OFF_2060_02 954u
 #define CO_OD_LEN_2060_02 1u
-#define CO_OD_OFF_2060_03 939u
+#define CO_OD_OFF_2060_03 955u
 #define CO_OD_LEN_2060_03 1u
-#define CO_OD_OFF_2060_04 940u
+#define CO_OD_OFF_2060_04 956u
 #define CO_OD_LEN_2060_04 1u
-#define CO_OD_OFF_2060_05 941u
+#define CO_OD_OFF_2060_05 957u
 #define CO_OD_LEN_2060_05 1u
-#define CO_OD_OFF_2060_06 942u
+#define CO_OD_OFF_2060_06 958u
 #define CO_OD_LEN_2060_06 1u
-#define CO_OD_OFF_2060_07 943u
+#define CO_OD_OFF_2060_07 959u
 #define CO_OD_LEN_2060_07 1u
-#define CO_OD_OFF_2060_08 944u
+#define CO_OD_OFF_2060_08 960u
 #define CO_OD_LEN_2060_08 1u
-#define CO_OD_OFF_2060_09 945u
+#define CO_OD_OFF_2060_09 961u
 #define CO_OD_LEN_2060_09 1u
-#define CO_OD_OFF_2060_0A 946u
+#define CO_OD_OFF_2060_0A 962u
 #define CO_OD_LEN_2060_0A 1u
-#define CO_OD_OFF_2070_00 947u
+#define CO_OD_OFF_2070_00 963u
 #define CO_OD_LEN_2070_00 1u
-#define CO_OD_OFF_2070_01 948u
+#define CO_OD_OFF_2070_01 964u
 #define CO_OD_LEN_2070_01 1u
-#define CO_OD_OFF_2070_02 949u
+#define CO_OD_OFF_2070_02 965u
 #define CO_OD_LEN_2070_02 1u
-#define CO_OD_OFF_2070_03 950u
+#define CO_OD_OFF_2070_03 966u
 #define CO_OD_LEN_2070_03 1u
-#define CO_OD_OFF_2070_04 951u
+#define CO_OD_OFF_2070_04 967u
 #define CO_OD_LEN_2070_04 4u
-#define CO_OD_OFF_2070_05 955u
+#define CO_OD_OFF_2070_05 971u
 #define CO_OD_LEN_2070_05 1u
-#define CO_OD_OFF_2070_06 956u
+#define CO_OD_OFF_2070_06 972u
 #define CO_OD_LEN_2070_06 2u
-#define CO_OD_OFF_2070_07 958u
+#define CO_OD_OFF_2070_07 974u
 #define CO_OD_LEN_2070_07 1u
-#define CO_OD_OFF_2070_08 959u
+#define CO_OD_OFF_2070_08 975u
 #define CO_OD_LEN_2070_08 1u
-#define CO_OD_OFF_2070_09 960u
+#define CO_OD_OFF_2070_09 976u
 #define CO_OD_LEN_2070_09 1u
-#define CO_OD_OFF_2070_0A 961u
+#define CO_OD_OFF_2070_0A 977u
 #define CO_OD_LEN_2070_0A 1u
-#define CO_OD_OFF_2070_0B 962u
+#define CO_OD_OFF_2070_0B 978u
 #define CO_OD_LEN_2070_0B 1u
-#define CO_OD_OFF_2070_0C 963u
+#define CO_OD_OFF_2070_0C 979u
 #define CO_OD_LEN_2070_0C 1u
-#define CO_OD_OFF_2070_0D 964u
+#define CO_OD_OFF_2070_0D 980u
 #define CO_OD_LEN_2070_0D 1u
-#define CO_OD_OFF_2070_0E 965u
+#define CO_OD_OFF_2070_0E 981u
 #define CO_OD_LEN_2070_0E 1u
-#define CO_OD_OFF_2070_0F 966u
+#define CO_OD_OFF_2070_0F 982u
 #define CO_OD_LEN_2070_0F 1u
-#define CO_OD_OFF_2080_00 967u
+#define CO_OD_OFF_2080_00 983u
 #define CO_OD_LEN_2080_00 1u
-#define CO_OD_OFF_2080_01 968u
+#define CO_OD_OFF_2080_01 984u
 #define CO_OD_LEN_2080_01 4u
-#define CO_OD_OFF_2080_02 972u
+#define CO_OD_OFF_2080_02 988u
 #define CO_OD_LEN_2080_02 4u
-#define CO_OD_OFF_2080_03 976u
+#define CO_OD_OFF_2080_03 992u
 #define CO_OD_LEN_2080_03 4u
-#define CO_OD_OFF_2090_00 980u
+#define CO_OD_OFF_2090_00 996u
 #define CO_OD_LEN_2090_00 1u
-#define CO_OD_OFF_2090_01 981u
+#define CO_OD_OFF_2090_01 997u
 #define CO_OD_LEN_2090_01 1u
-#define CO_OD_OFF_2090_02 982u
+#define CO_OD_OFF_2090_02 998u
 #define CO_OD_LEN_2090_02 24u
-#define CO_OD_OFF_2090_03 1007u
+#define CO_OD_OFF_2090_03 1023u
 #define CO_OD_LEN_2090_03 4u
-#define CO_OD_OFF_2091_00 1011u
+#define CO_OD_OFF_2091_00 1027u
 #define CO_OD_LEN_2091_00 1u
-#define CO_OD_OFF_2091_01 1012u
+#define CO_OD_OFF_2091_01 1028u
 #define CO_OD_LEN_2091_01 1u
-#define CO_OD_OFF_2091_02 1013u
+#define CO_OD_OFF_2091_02 1029u
 #define CO_OD_LEN_2091_02 4u
-#define CO_OD_OFF_2091_03 1017u
+#define CO_OD_OFF_2091_03 1033u
 #define CO_OD_LEN_2091_03 4u
-#define CO_OD_OFF_2091_04 1021u
+#define CO_OD_OFF_2091_04 1037u
 #define CO_OD_LEN_2091_04 4u
-#define CO_OD_OFF_2091_05 1025u
+#define CO_OD_OFF_2091_05 1041u
 #define CO_OD_LEN_2091_05 4u
-#define CO_OD_OFF_2091_06 1029u
+#define CO_OD_OFF_2091_06 1045u
 #define CO_OD_LEN_2091_06 4u
-#define CO_OD_OFF_603F_00 1033u
+#define CO_OD_OFF_603F_00 1049u
 #define CO_OD_LEN_603F_00 2u
-#define CO_OD_OFF_6040_00 1035u
+#define CO_OD_OFF_6040_00 1051u
 #define CO_OD_LEN_6040_00 2u
-#define CO_OD_OFF_6041_00 1037u
+#define CO_OD_OFF_6041_00 1053u
 #define CO_OD_LEN_6041_00 2u
-#define CO_OD_OFF_605A_00 1039u
+#define CO_OD_OFF_605A_00 1055u
 #define CO_OD_LEN_605A_00 2u
-#define CO_OD_OFF_605E_00 1041u
+#define CO_OD_OFF_605E_00 1057u
 #define CO_OD_LEN_605E_00 2u
-#define CO_OD_OFF_6060_00 1043u
+#define CO_OD_OFF_6060_00 1059u
 #define CO_OD_LEN_6060_00 1u
-#define CO_OD_OFF_6061_00 1044u
+#define CO_OD_OFF_6061_00 1060u
 #define CO_OD_LEN_6061_00 1u
-#define CO_OD_OFF_6064_00 1045u
+#define CO_OD_OFF_6064_00 1061u
 #define CO_OD_LEN_6064_00 4u
-#define CO_OD_OFF_6065_00 1049u
+#define CO_OD_OFF_6065_00 1065u
 #define CO_OD_LEN_6065_00 4u
-#define CO_OD_OFF_6066_00 1053u
+#define CO_OD_OFF_6066_00 1069u
 #define CO_OD_LEN_6066_00 2u
-#define CO_OD_OFF_606C_00 1055u
+#define CO_OD_OFF_606C_00 1071u
 #define CO_OD_LEN_606C_00 4u
-#define CO_OD_OFF_6071_00 1059u
+#define CO_OD_OFF_6071_00 1075u
 #define CO_OD_LEN_6071_00 2u
-#define CO_OD_OFF_6077_00 1061u
+#define CO_OD_OFF_6077_00 1077u
 #define CO_OD_LEN_6077_00 2u
-#define CO_OD_OFF_607D_00 1063u
+#define CO_OD_OFF_607D_00 1079u
 #define CO_OD_LEN_607D_00 1u
-#define CO_OD_OFF_607D_01 1064u
+#define CO_OD_OFF_607D_01 1080u
 #define CO_OD_LEN_607D_01 4u
-#define CO_OD_OFF_607D_02 1068u
+#define CO_OD_OFF_607D_02 1084u
 #define CO_OD_LEN_607D_02 4u
-#define CO_OD_OFF_6080_00 1072u
+#define CO_OD_OFF_6080_00 1088u
 #define CO_OD_LEN_6080_00 4u
-#define CO_OD_OFF_60FF_00 1076u
+#define CO_OD_OFF_60FF_00 1092u
 #define CO_OD_LEN_60FF_00 4u
-#define CO_OD_OFF_6502_00 1080u
+#define CO_OD_OFF_6502_00 1096u
 #define CO_OD_LEN_6502_00 4u
 
 /** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */
@@ -1230,6 +1242,10 @@
   X(2057_0D) \
   X(2057_0E) \
   X(2057_0F) \
+  X(2057_10) \
+  X(2057_11) \
+  X(2057_12) \
+  X(2057_13) \
   X(2060_00) \
   X(2060_01) \
   X(2060_02) \
@@ -1295,7 +1311,7 @@
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 103u
+#define CO_OD_CFG_COUNT 107u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 

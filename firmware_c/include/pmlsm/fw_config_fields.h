@@ -11,7 +11,7 @@
  *   - loops (fw_cfg_loops_t, 10 fields): current and speed loops: limits, PI gains, bandwidths for the derived gains
  *   - estimator (fw_cfg_estimator_t, 28 fields): injection, HF extraction, PLL observer, start-up (align, polarity), back-EMF observer and handover
  *   - protection (fw_cfg_protection_t, 29 fields): trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h)
- *   - compensation (fw_cfg_compensation_t, 15 fields): inverter dead-time compensation (modulation), the cross-saturation angle map and the position-periodic ripple correction (fw_xsat.h); all 0 = off
+ *   - compensation (fw_cfg_compensation_t, 19 fields): inverter dead-time compensation (modulation), the cross-saturation angle map, the position-periodic ripple correction (fw_xsat.h) and the observer's position-harmonic thrust ripple (fw_obs.h); all 0 = off
  *
  * Field names are unique across the parts: the object dictionary, the field
  * table and the Python side use the flat name ("R_ohm"), C code the path
@@ -127,7 +127,7 @@ typedef struct {
   float mon_bemf_i_tol;          /**< back-EMF witness: share of the model's current terms (R + |w| L_q) |i| the residual may be off by (resistance drift, dead time, saturation); it judges above mon_bemf_min_V plus that and allows it in the magnitude, and that share of L_q |i| / psi_f in the angle (docs/integrity.md; 0: off, the witness as before) */
 } fw_cfg_protection_t;
 
-/** Configuration part compensation: inverter dead-time compensation (modulation), the cross-saturation angle map and the position-periodic ripple correction (fw_xsat.h); all 0 = off. */
+/** Configuration part compensation: inverter dead-time compensation (modulation), the cross-saturation angle map, the position-periodic ripple correction (fw_xsat.h) and the observer's position-harmonic thrust ripple (fw_obs.h); all 0 = off. */
 typedef struct {
   float dt_comp_s;        /**< inverter dead time to compensate: each phase's duty gets + (dt_comp_s f_pwm + dt_comp_drop_V / u_dc) s(i) with s the smooth sign of its fundamental current (0: off) [s] */
   float dt_comp_band_A;   /**< current band of the smooth sign s(i) = i / sqrt(i^2 + band^2) of the dead-time compensation (0: the hard sign); about the inverter's zero-current clamp plus the injection's ripple [A] */
@@ -144,6 +144,10 @@ typedef struct {
   float rip_b2_rad;       /**< ... of sin 2 theta_hat [rad] */
   float rip_a4_rad;       /**< ... of cos 4 theta_hat [rad] */
   float rip_b4_rad;       /**< ... of sin 4 theta_hat [rad] */
+  float rip6_a0_N;        /**< thrust ripple at 6 theta_e in the observer's model (fw_obs.h): F_rip = (a0 + a1 i_q) cos 6 theta_hat + (b0 + b1 i_q) sin 6 theta_hat, added to the thrust K_F i_q the observer integrates (load positive opposing motion, F_rip positive driving); a0: the current-independent (cogging) coefficient of cos 6 theta (0 with the three below: off) [N] */
+  float rip6_b0_N;        /**< ... cogging coefficient of sin 6 theta_hat [N] */
+  float rip6_a1_N_per_A;  /**< ... per A of i_q (back-EMF 5th / 7th harmonics): coefficient of i_q cos 6 theta_hat [N/A] */
+  float rip6_b1_N_per_A;  /**< ... per A of i_q: coefficient of i_q sin 6 theta_hat [N/A] */
 } fw_cfg_compensation_t;
 
 /**
@@ -157,7 +161,7 @@ typedef struct {
   fw_cfg_loops_t loops; /**< current and speed loops: limits, PI gains, bandwidths for the derived gains */
   fw_cfg_estimator_t estimator; /**< injection, HF extraction, PLL observer, start-up (align, polarity), back-EMF observer and handover */
   fw_cfg_protection_t protection; /**< trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h) */
-  fw_cfg_compensation_t compensation; /**< inverter dead-time compensation (modulation), the cross-saturation angle map and the position-periodic ripple correction (fw_xsat.h); all 0 = off */
+  fw_cfg_compensation_t compensation; /**< inverter dead-time compensation (modulation), the cross-saturation angle map, the position-periodic ripple correction (fw_xsat.h) and the observer's position-harmonic thrust ripple (fw_obs.h); all 0 = off */
 } fw_config_t;
 
 /* clang-format off */
@@ -257,9 +261,13 @@ typedef struct {
   F32(compensation, rip_a2_rad, "rad", -0.5f, 0.5f, 0.0f) \
   F32(compensation, rip_b2_rad, "rad", -0.5f, 0.5f, 0.0f) \
   F32(compensation, rip_a4_rad, "rad", -0.5f, 0.5f, 0.0f) \
-  F32(compensation, rip_b4_rad, "rad", -0.5f, 0.5f, 0.0f)
+  F32(compensation, rip_b4_rad, "rad", -0.5f, 0.5f, 0.0f) \
+  F32(compensation, rip6_a0_N, "N", -10000.0f, 10000.0f, 0.0f) \
+  F32(compensation, rip6_b0_N, "N", -10000.0f, 10000.0f, 0.0f) \
+  F32(compensation, rip6_a1_N_per_A, "N/A", -1000.0f, 1000.0f, 0.0f) \
+  F32(compensation, rip6_b1_N_per_A, "N/A", -1000.0f, 1000.0f, 0.0f)
 /* clang-format on */
 
-#define FW_CONFIG_FIELD_COUNT 96u
+#define FW_CONFIG_FIELD_COUNT 100u
 
 #endif /* PMLSM_FW_CONFIG_FIELDS_H */

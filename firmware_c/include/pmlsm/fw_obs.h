@@ -3,7 +3,8 @@
  * @brief Observer block: angle error from the demodulated HF response (or the
  *        back-EMF above injection speeds), its low-passed signed version, the
  *        quadrature PLL with bandwidth scheduling and the mechanical extension
- *        (thrust feed-forward + disturbance integrator), the unwrapped
+ *        (thrust feed-forward, the configured 6 theta thrust ripple, disturbance
+ *        integrator), the unwrapped
  *        position, the filtered speed for the loops, and the estimator
  *        supervision (HF loss, persistent PLL error).
  *
@@ -11,6 +12,16 @@
  *   (eq. 8-9 with the scale L_d/(T u) replaced by the measured d^ response,
  *   so the loop gain depends neither on u_inj, nor on the extractor's gain,
  *   nor on errors in L_d).
+ *
+ * Position-harmonic thrust ripple (rip6_*, object 0x2057:16-19; all 0 = off): the
+ * model's acceleration adds k_e F_rip / mass with k_e = pi / pole_pitch_m and
+ *
+ *   F_rip = (a0 + a1 i_q) cos 6 theta_hat + (b0 + b1 i_q) sin 6 theta_hat   (N)
+ *
+ * (cogging at tau / 3: a0, b0; the thrust ripple of the back-EMF's 5th and 7th
+ * harmonics: a1, b1 per A of the fundamental i_q), cos / sin 6 theta_hat from the
+ * period's cos / sin theta_hat (fw_obs_in_t.sc, the Park transform's) by the
+ * double- and triple-angle products: no libm.
  *
  * fw_obs_update() runs once per sample after the extraction; the estimate it
  * leaves (pll.theta_rad) belongs to the next sampling instant.
@@ -45,6 +56,10 @@ typedef struct {
   float kp0, ki0, ki0_dt; /**< pll_kp, pll_ki, pll_ki dt (scaled by lambda, lambda^2) */
   float kd_dt;            /**< dt pll_kd (scaled by lambda^3) */
   float accel_per_A;      /**< pll_accel_per_A */
+  uint8_t rip6_on;        /**< any of rip6_a0_N .. rip6_b1_N_per_A != 0 */
+  /** k_e / mass times rip6_a0_N, rip6_b0_N (rad/s^2), rip6_a1_N_per_A, rip6_b1_N_per_A
+   *  (rad/(s^2 A)): the thrust ripple as electrical acceleration */
+  float rip6_k[4];
   /* state */
   float est_hold_s;       /**< the error is held at 0 while > 0 (after an extractor switch) */
   float accel_dist;       /**< estimated disturbance acceleration (el. rad/s^2) */
@@ -88,6 +103,9 @@ typedef struct {
   uint8_t bemf_active;    /**< 1: track the back-EMF error instead of the HF one */
   uint8_t settled;        /**< 0: extraction still settling: extrapolate, do not correct */
   uint8_t running;        /**< 1: closed loop: mechanical extension on */
+  /** cos / sin of the estimate at this sampling instant (the Park transform's); read
+   *  only when the thrust ripple (rip6_*) is configured */
+  fw_sincos_f32_t sc;
 } fw_obs_in_t;
 
 /** Prior of fw_obs_t.inn_var at a reset, rad^2: large, so that the test does not
@@ -96,6 +114,19 @@ typedef struct {
 
 /** Constants from the configuration (the state is left as it is). */
 void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s);
+/** The configured thrust ripple as electrical acceleration (rad/s^2) at the estimate
+ *  sc = (cos, sin) theta_hat and the thrust current i_q_A (header; rip6_on). */
+static FW_ALWAYS_INLINE float fw_obs_rip6_accel(const fw_obs_t *o, fw_sincos_f32_t sc,
+                                                float i_q_A) {
+  const float c2 = sc.c * sc.c - sc.s * sc.s;
+  const float s2 = 2.0f * sc.c * sc.s;
+  const float c3 = sc.c * c2 - sc.s * s2;
+  const float s3 = sc.s * c2 + sc.c * s2;
+  const float c6 = c3 * c3 - s3 * s3;
+  const float s6 = 2.0f * c3 * s3;
+  return (o->rip6_k[0] + o->rip6_k[2] * i_q_A) * c6 + (o->rip6_k[1] + o->rip6_k[3] * i_q_A) * s6;
+}
+
 /** Observer restarts at angle 0, speed 0: PLL, error filter, disturbance,
  *  supervision timer and filtered speed cleared. The position is not touched:
  *  call fw_obs_keep_position first when the estimate restarts from 0. */
