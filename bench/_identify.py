@@ -18,11 +18,12 @@ target torque (0x6071, per mille of ``i_max_A`` in FORCE mode); the position est
 from the telemetry, the speed estimate for the safety check from the TPDO (0x606C). A mover
 that moves stops the step (:class:`identification.MoverMoved`); steps 1-6 are kept.
 
-Step 8 (``ripple``, ``bench identify --ripple``): the position ripple of the HF axis
-(:func:`identification.run_ripple`, docs/method.md section 6) on a FREE mover, after steps
-1-6 and before step 7: constant-speed passes there and back within ``travel_m``, with the
-identified configuration (its K_F and mass for the motion the ripple causes), no position
-sensor. A fault stops the step; steps 1-6 are kept.
+Steps 8 and 9 (``ripple``, ``bench identify --ripple``): the position ripple of the HF
+axis (:func:`identification.run_ripple`, docs/method.md section 6) and the cogging thrust
+at 6 theta (:func:`identification.run_thrust_ripple`, section 5) on a FREE mover, after
+steps 1-6 and before step 7: constant-speed passes there and back within ``travel_m``,
+with the identified configuration (its K_F, mass and friction), no position sensor. A
+fault stops them; what was measured before is kept.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ import numpy as np
 from identification import (
     IDENT_RESTORED,
     PROBE_SIGNALS,
+    RIP6_FIELDS,
     RIP_ORDERS,
     START_WINDOWS,
     XSAT_POINTS,
@@ -52,6 +54,7 @@ from identification import (
     run_cross_saturation,
     run_identification,
     run_ripple,
+    run_thrust_ripple,
 )
 from protocols.generated import od_names as od
 from protocols.generated.od_names import StartPhase
@@ -92,7 +95,9 @@ RIP_QUANTITIES: dict[str, tuple[str, str]] = {
     **{name.replace("rip_", "rip_axis_"): ("rad", f"HF axis ripple measured, {name[4]} "
                                                   f"coefficient at {name[5]} theta")
        for name in rip_fields([0.0] * 2 * len(RIP_ORDERS))},
-    "rip_slope": ("", "slope of the HF error per radian of axis ripple")}
+    "rip_slope": ("", "slope of the HF error per radian of axis ripple"),
+    "rip6_a0_N": ("N", "cogging thrust at 6 theta, cos coefficient"),
+    "rip6_b0_N": ("N", "cogging thrust at 6 theta, sin coefficient")}
 
 #: Identified value -> drive configuration field (fw_config_t, the OD parameter name). The
 #: map's and the ripple's fields only when steps 7 and 8 measured them (else the drive's
@@ -101,7 +106,8 @@ CONFIG_FIELDS = {"R_ohm": "R_ohm", "L_d_H": "L_d_H", "L_q_H": "L_q_H", "psi_f_Wb
                  "mass_kg": "mass_kg", "b_visc_Ns_per_m": "visc_Ns_per_m",
                  "F_coulomb_N": "coulomb_N", "xsat_di_A": "xsat_di_A",
                  **{f"xsat_off{k}_rad": f"xsat_off{k}_rad" for k in range(1, XSAT_POINTS + 1)},
-                 **{k: k for k in rip_fields([0.0] * 2 * len(RIP_ORDERS))}}
+                 **{k: k for k in rip_fields([0.0] * 2 * len(RIP_ORDERS))},
+                 **{k: k for k in RIP6_FIELDS}}
 
 
 class IdentifyError(RuntimeError):
@@ -310,7 +316,7 @@ def _cfg_view(drive: Any) -> SimpleNamespace:
         name: float(drive.get(name)[0])
         for name in ("i_max_A", "f_pwm_Hz", "u_inj_V", "L_d_H", "L_q_H", "spd_bw_radps",
                      "spd_kp_A_per_radps", "spd_ki_A_per_rad", "pole_pitch_m", "v_max_mps",
-                     "psi_f_Wb")})
+                     "psi_f_Wb", "mass_kg", "visc_Ns_per_m")})
 
 
 def _telemetry_on(drive: Any, f_pwm_Hz: float) -> None:
@@ -394,16 +400,21 @@ def _ripple(conn: Any, probe: WireProbe, cfg0: Any, backup: dict[str, Any],
     tau = float(cfg0.pole_pitch_m)
     K_F = force_constant_N_per_A(float(v.get("psi_f_Wb", cfg0.psi_f_Wb)), tau)
     mass = float(v["mass_kg"]) if v.get("mass_kg", 0.0) > 0.0 else None
-    try:
-        rp = run_ripple(probe, cfg0, tau, travel_m, K_F=K_F, mass=mass)
-    except RuntimeError as e:  # a fault: steps 1-6 stand
-        res.log.append(f"step 8 (position ripple) stopped: {' '.join(str(e).split())}; "
-                       "steps 1-6 kept")
-        drive.disable()
-        return
-    res.values.update(rp.values)
-    res.sigma.update(rp.sigma)
-    res.log += rp.log
+    cfg = SimpleNamespace(**{**vars(cfg0), "mass_kg": mass or float(cfg0.mass_kg),
+                             "visc_Ns_per_m": max(float(v.get("b_visc_Ns_per_m",
+                                                              cfg0.visc_Ns_per_m)), 0.0)})
+    for step, what, fn in ((8, "position ripple", run_ripple),
+                           (9, "cogging thrust", run_thrust_ripple)):
+        try:
+            rp = fn(probe, cfg, tau, travel_m, K_F=K_F, mass=mass)
+        except RuntimeError as e:  # a fault: what was measured before stands
+            res.log.append(f"step {step} ({what}) stopped: {' '.join(str(e).split())}; "
+                           f"steps before it kept")
+            drive.disable()
+            return
+        res.values.update(rp.values)
+        res.sigma.update(rp.sigma)
+        res.log += rp.log
 
 
 def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
@@ -456,8 +467,8 @@ def identify_drive(conn: Any, runs_root: str = "runs", travel_m: float = 0.3,
         if ripple:
             _ripple(conn, probe, cfg0, backup, res, travel_m)
         else:
-            res.log.append("step 8 (position ripple) not run: --ripple asks for it (a free "
-                           "mover, constant-speed passes within --travel)")
+            res.log.append("steps 8-9 (position ripple, cogging) not run: --ripple asks for "
+                           "them (a free mover, constant-speed passes within --travel)")
         if clamped:
             _cross_saturation(conn, probe, cfg0, backup, res, hold)
         else:

@@ -201,11 +201,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "(exit 1, drive disabled, steps 1-6 kept). Without it the map is not "
                         "measured (the motor file says so)")
     p.add_argument("--ripple", action="store_true",
-                   help="after the usual steps (before --clamped's), step 8: the position "
-                        "ripple of the HF axis (object 0x2057 rip_*, motor file [controller]) "
+                   help="after the usual steps (before --clamped's), steps 8 and 9: the "
+                        "position ripple of the HF axis (object 0x2057 rip_*) and the cogging "
+                        "thrust at 6 theta (rip6_a0_N, rip6_b0_N), motor file [controller], "
                         "from constant-speed passes at 0.1 m/s there and back within --travel "
                         "on the FREE mover, with the identified configuration; no position "
-                        "sensor. A fault stops the step (steps 1-6 kept, noted)")
+                        "sensor. A fault stops them (what was measured before is kept, noted)")
     p.add_argument("--runs", default="runs", metavar="DIR", help="run folder root")
 
     p = sub.add_parser("info", help="connection, identity, firmware check, state",
@@ -1121,13 +1122,14 @@ def cmd_identify(args: argparse.Namespace) -> int:
         print(f"identified{' [SIMULATED drive]' if sim else ''}: {out.run_dir}")
         shown = {**QUANTITIES, **{k: v for k, v in XSAT_QUANTITIES.items()
                                   if not k.startswith("xsat_axis")},
-                 **{k: v for k, v in RIP_QUANTITIES.items() if k.startswith("rip_")
+                 **{k: v for k, v in RIP_QUANTITIES.items() if k.startswith(("rip_", "rip6_"))
                     and not k.startswith("rip_axis")}}
         if "xsat_di_A" not in res.values:
             print("  cross-saturation map not measured (" + (
                 "step 7 did not complete" if args.clamped else "step 7 needs --clamped") + ")")
-        if args.ripple and "rip_a2_rad" not in res.values:
-            print("  position ripple not measured (step 8 did not complete; see the report)")
+        if args.ripple and "rip6_b0_N" not in res.values:
+            print("  position ripple / cogging not measured (steps 8-9 did not complete; see "
+                  "the report)")
         for k, (unit, _what) in shown.items():
             if k not in res.values:
                 continue

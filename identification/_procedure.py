@@ -163,9 +163,11 @@ class Identified:
             f"pole_pairs = {pole_pairs:g}", "",
             "[controller]",
             *[f"{k} = {val!r}" for k, val in c.items() if isinstance(val, (int, float))
-              and not k.startswith((XSAT_PREFIX, RIP_PREFIX))],
+              and not k.startswith((XSAT_PREFIX, RIP_PREFIX))
+              and not (k in RIP6_FIELDS and k in v)],
             *self._xsat_lines(),
             *self._rip_lines(),
+            *self._rip6_lines(),
             "",
         ])
 
@@ -195,6 +197,16 @@ class Identified:
         return ["# position-ripple correction measured at constant speed (step 8): the HF "
                 "angle error's 2 (4) theta_hat series (rad)",
                 *[f"{k} = {v[k]:.5f}  # +- {self.sigma.get(k, 0.0):.2g}" for k in names]]
+
+    def _rip6_lines(self) -> list[str]:
+        """The cogging thrust at 6 theta (step 9) in the ``[controller]`` section when
+        measured (else the given section's values, if any, stand)."""
+        v = self.values
+        if RIP6_FIELDS[0] not in v:
+            return []
+        return ["# cogging thrust at 6 theta_e measured at constant speed (step 9), N",
+                *[f"{k} = {v[k]:.4f}  # +- {self.sigma.get(k, 0.0):.2g}"
+                  for k in RIP6_FIELDS]]
 
 
 #: What a probe's ``run`` returns, one sample per millisecond (the drive's telemetry):
