@@ -57,10 +57,13 @@ T_STEP, T_END, T_FROM = 0.4, 1.2, 0.8
 TARGET_RMS, TARGET_MAX = 0.02, 0.08
 
 
-def run_one(variant: str, load_frac: float, speed: float, seed: int) -> dict:
+def run_one(variant: str, load_frac: float, speed: float, seed: int,
+            fw: dict | None = None) -> dict:
+    """One run; ``fw``: configuration fields over the variant's."""
     r = run_scenario(MOTOR, speed_ref=speed, speed_unit="mps",
                      load=[(0.0, 0.0), (T_STEP, load_frac * RATED_N)], load_unit="N",
-                     t_end=T_END, fw=VARIANTS[variant], seed=seed, x0_m="random",
+                     t_end=T_END, fw={**VARIANTS[variant], **(fw or {})}, seed=seed,
+                     x0_m="random",
                      channels=["t_s", "theta_e_rad", "theta_hat_rad", "fault_code"])
     t, e = r.t_s, r.position_error_rad
     fc = r.data["fault_code"].astype(int)

@@ -4,11 +4,13 @@ against the information the injection carries (sim_fallback.bound) and the drive
 Usage: python tools/estimator_bound.py [--seeds 10] [--check]
 
 For each scenario of benchmarks/bench_estimator.py (the paper's load step; a 20 % load
-step on iron_core_linear at 0.1 and 0.3 m/s) and each of its targets: the bound (the
-posterior RMS of a Kalman filter that knows the exact model and the step's time, from
-the injection's Fisher rate), the ideal filter's maximum (a reference), the drive's
-medians over seeds with both observer laws (obs_mode 1, the default; 2, adaptive), and
-whether the target lies below the bound. --check: recompute and compare with the
+step on iron_core_linear at 0.1 and 0.3 m/s) and of benchmarks/bench_realistic.py
+(realistic_linear, the rated 600 N step at 0.1 m/s, the compensations on) and each
+target: the bound (the posterior RMS of a Kalman filter that knows the exact model and
+the step's time, from the injection's Fisher rate), the ideal filter's maximum (a
+reference), the drive's medians over seeds with both observer laws (obs_mode 1, the
+default; 2, adaptive), and whether the target lies below the bound. --check: recompute
+and compare with the
 committed JSON (exit 1 on a difference beyond the tolerance).
 """
 
@@ -32,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import bench_estimator as be  # noqa: E402
+import bench_realistic as br  # noqa: E402
 
 from sim_fallback import bound as B  # noqa: E402
 from sim_fallback import fw_config, load_motor  # noqa: E402
@@ -52,6 +55,24 @@ def _iron_accel_e() -> float:
     return be.iron_load_N() / m.plant["mass_kg"] * math.pi / m.tau_m
 
 
+def _realistic_accel_e() -> float:
+    m = load_motor(br.MOTOR)
+    return br.RATED_N / m.plant["mass_kg"] * math.pi / m.tau_m
+
+
+def _realistic_metrics(seed: int, fw: dict) -> dict[str, float]:
+    r = br.run_one("both", 1.0, REALISTIC_SPEED_MPS, seed, fw)
+    if r["fault"]:
+        return {"pos_rms": math.nan, "pos_max": math.nan}
+    return {"pos_rms": r["rms_rad"], "pos_max": r["max_rad"]}
+
+
+#: realistic_linear's rated-thrust case: the speed of the issue's figures (injection)
+REALISTIC_SPEED_MPS = 0.1
+#: its targets (issue 33: with the compensations, RMS and max over the window)
+REALISTIC_TARGETS = {"pos_rms": 0.02, "pos_max": 0.08}
+
+
 def scenarios() -> list[dict]:
     """The bench_estimator scenarios with their windows, the bound's setting and the
     drive's metric function."""
@@ -70,6 +91,12 @@ def scenarios() -> list[dict]:
                     "bounds": be.IRON_TARGETS,
                     "metrics": (lambda seed, fw, v=v: be.iron_metrics(seed, v, be.iron_load_N(),
                                                                        fw))})
+    win = (br.T_FROM, br.T_END)
+    out.append({"name": f"realistic_linear {REALISTIC_SPEED_MPS:g} m/s, rated 600 N step",
+                "motor": br.MOTOR, "t_end": br.T_END, "step_s": br.T_STEP,
+                "accel": _realistic_accel_e(),
+                "targets": {"pos_rms": ("rms", win), "pos_max": ("max", win)},
+                "bounds": REALISTIC_TARGETS, "metrics": _realistic_metrics})
     return out
 
 
@@ -164,8 +191,8 @@ def render(res: dict) -> str:
             "## The targets",
             "",
             "| scenario | metric | target | bound | kind | obs_mode 1 (default) "
-            "| obs_mode 2 | verdict |",
-            "|---|---|---|---|---|---|---|---|"]
+            "| obs_mode 2 | target met (median) | verdict |",
+            "|---|---|---|---|---|---|---|---|---|"]
     for r in res["rows"]:
         extra = ""
         if "bound_unknown_friction" in r:
@@ -180,9 +207,11 @@ def render(res: dict) -> str:
             if r[f"mode{mode}_invalid"]:
                 c += f" ({r[f'mode{mode}_invalid']} invalid)"
             cells.append(c)
+        met = " / ".join(f"mode {mode} " + ("yes" if r[f"mode{mode}_median"] <= r["target"]
+                                            else "no") for mode in MODES)
         out.append(f"| {r['scenario']} | {r['metric']} | ≤ {r['target']:g} | "
                    f"{_v(r['bound'])}{extra} | {r['kind']} | {cells[0]} | {cells[1]} | "
-                   f"{_verdict(r)} |")
+                   f"{met} | {_verdict(r)} |")
     out += ["",
             "Units: angles in rad el., speed in r/min (the paper's rotary-equivalent). "
             "*lower bound (mean-square)*: no",
@@ -193,7 +222,10 @@ def render(res: dict) -> str:
             "mean-square error for a smaller maximum). *two-point lower bound*: with "
             "probability at least 5 %, some",
             "estimator error reaches this value before the step can be told from no step "
-            "(Bretagnolle-Huber).",
+            "(Bretagnolle-Huber). On realistic_linear the drive sits about ten times above "
+            "the bound: there the error is",
+            "the model's (the residual of the compensations: harmonics, saturation, dead "
+            "time), not the noise.",
             ""]
     return "\n".join(out)
 
