@@ -886,6 +886,35 @@ def rip_fields(coef: np.ndarray | list[float]) -> dict[str, float]:
     return {k: float(np.clip(v, -RIP_MAX, RIP_MAX)) for k, v in zip(names, coef, strict=True)}
 
 
+def _harmonic_passes(probe: Probe, tau_m: float, dist_m: float, v: float
+                     ) -> list[tuple[float, np.ndarray, np.ndarray]]:
+    """Constant-speed passes at ``v`` there and back (steps 8 and 9): per direction the
+    sign and the (cos, sin) coefficients of n theta_hat, n = :data:`RIP_ORDERS` then
+    :data:`RIP_EXTRA`, in k_e x_hat (el. rad) and in i_q (A), fitted by least squares
+    over the constant-speed window as poly3(t) + sum (cos, sin)(n theta_hat), with
+    theta_hat = k_e x_hat (the estimate's position, congruent with its angle)."""
+    k_e = electrical_rad_per_m(tau_m)
+    hold = max(dist_m / v - RIP_RAMP_S, RIP_SKIP_S + 0.5)
+    out = []
+    for sgn in (1.0, -1.0):
+        t_pts = np.array([0.0, RIP_RAMP_S, RIP_RAMP_S + hold, 2 * RIP_RAMP_S + hold])
+        r = probe.follow_speed(t_pts, sgn * v * np.array([0.0, 1.0, 1.0, 0.0]))
+        probe.run(0.1)
+        n = len(r["pos_hat_m"])
+        t = np.arange(n) * 0.001
+        k = (t >= RIP_RAMP_S + RIP_SKIP_S) & (t <= RIP_RAMP_S + hold)
+        th = k_e * np.asarray(r["pos_hat_m"], dtype=float)[k]
+        tt = t[k] - float(np.mean(t[k]))
+        cols = [np.ones_like(tt), tt, tt ** 2, tt ** 3]
+        for o in (*RIP_ORDERS, *RIP_EXTRA):
+            cols += [np.cos(o * th), np.sin(o * th)]
+        A = np.vstack(cols).T
+        cx = np.linalg.lstsq(A, th, rcond=None)[0][4:]
+        ci = np.linalg.lstsq(A, np.asarray(r["i_q_A"], dtype=float)[k], rcond=None)[0][4:]
+        out.append((sgn, cx, ci))
+    return out
+
+
 def _ripple_pass(probe: Probe, tau_m: float, dist_m: float, K_F: float, mass: float
                  ) -> np.ndarray:
     """One pass there and back at :data:`RIP_SPEED_MPS`: the HF axis's ripple the
@@ -903,27 +932,10 @@ def _ripple_pass(probe: Probe, tau_m: float, dist_m: float, K_F: float, mass: fl
     mover's (the current term) and the sum does not depend on how."""
     k_e = electrical_rad_per_m(tau_m)
     v = RIP_SPEED_MPS
-    hold = max(dist_m / v - RIP_RAMP_S, RIP_SKIP_S + 0.5)
-    out = []
-    for sgn in (1.0, -1.0):
-        t_pts = np.array([0.0, RIP_RAMP_S, RIP_RAMP_S + hold, 2 * RIP_RAMP_S + hold])
-        v_pts = sgn * v * np.array([0.0, 1.0, 1.0, 0.0])
-        r = probe.follow_speed(t_pts, v_pts)
-        probe.run(0.1)
-        n = len(r["pos_hat_m"])
-        t = np.arange(n) * 0.001
-        k = (t >= RIP_RAMP_S + RIP_SKIP_S) & (t <= RIP_RAMP_S + hold)
-        th = k_e * np.asarray(r["pos_hat_m"], dtype=float)[k]
-        tt = t[k] - float(np.mean(t[k]))
-        cols = [np.ones_like(tt), tt, tt ** 2, tt ** 3]
-        for o in (*RIP_ORDERS, *RIP_EXTRA):
-            cols += [np.cos(o * th), np.sin(o * th)]
-        A = np.vstack(cols).T
-        m = 4 + 2 * len(RIP_ORDERS)
-        cx = np.linalg.lstsq(A, th, rcond=None)[0][4:m]
-        ci = np.linalg.lstsq(A, np.asarray(r["i_q_A"], dtype=float)[k], rcond=None)[0][4:m]
-        w2 = np.repeat([(o * k_e * v) ** 2 for o in RIP_ORDERS], 2)
-        out.append(cx + k_e * K_F * ci / (mass * w2))
+    m = 2 * len(RIP_ORDERS)
+    w2 = np.repeat([(o * k_e * v) ** 2 for o in RIP_ORDERS], 2)
+    out = [cx[:m] + k_e * K_F * ci[:m] / (mass * w2)
+           for _sgn, cx, ci in _harmonic_passes(probe, tau_m, dist_m, v)]
     return 0.5 * (out[0] + out[1])
 
 
@@ -1006,27 +1018,12 @@ def _thrust_ripple_pass(probe: Probe, tau_m: float, dist_m: float, K_F: float, m
     corrects for that)."""
     k_e = electrical_rad_per_m(tau_m)
     v = RIP6_SPEED_MPS
-    hold = max(dist_m / v - RIP_RAMP_S, RIP_SKIP_S + 0.5)
+    j6 = 2 * (len(RIP_ORDERS) + RIP_EXTRA.index(6))  # the 6 theta columns
     out = []
-    for sgn in (1.0, -1.0):
-        t_pts = np.array([0.0, RIP_RAMP_S, RIP_RAMP_S + hold, 2 * RIP_RAMP_S + hold])
-        r = probe.follow_speed(t_pts, sgn * v * np.array([0.0, 1.0, 1.0, 0.0]))
-        probe.run(0.1)
-        n = len(r["pos_hat_m"])
-        t = np.arange(n) * 0.001
-        k = (t >= RIP_RAMP_S + RIP_SKIP_S) & (t <= RIP_RAMP_S + hold)
-        th = k_e * np.asarray(r["pos_hat_m"], dtype=float)[k]
-        tt = t[k] - float(np.mean(t[k]))
-        cols = [np.ones_like(tt), tt, tt ** 2, tt ** 3]
-        for o in (*RIP_ORDERS, 6):
-            cols += [np.cos(o * th), np.sin(o * th)]
-        A = np.vstack(cols).T
-        m6 = 4 + 2 * len(RIP_ORDERS)
-        cx = np.linalg.lstsq(A, th, rcond=None)[0][m6:m6 + 2]
-        ci = np.linalg.lstsq(A, np.asarray(r["i_q_A"], dtype=float)[k], rcond=None)[0][m6:m6 + 2]
+    for sgn, cx, ci in _harmonic_passes(probe, tau_m, dist_m, v):
         w = 6.0 * k_e * sgn * v
-        X = complex(cx[0], -cx[1]) / k_e
-        current = complex(ci[0], -ci[1])
+        X = complex(cx[j6], -cx[j6 + 1]) / k_e
+        current = complex(ci[j6], -ci[j6 + 1])
         out.append(-K_F * current + (-mass * w * w + 1j * w * visc) * X)
     return 0.5 * (out[0] + out[1])
 
