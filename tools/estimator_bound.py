@@ -174,8 +174,9 @@ def render(res: dict) -> str:
            "that the mover starts at rest, and uses every ADC sample of the three phases "
            "optimally. Only the ADC noise",
            "limits it. The drive's figures are medians over seeds "
-           f"0..{res['seeds'] - 1} (the benchmark's scenarios,",
-           "`benchmarks/bench_estimator.py`).",
+           f"0..{res['seeds'] - 1} (the benchmarks' scenarios,",
+           "`benchmarks/bench_estimator.py`, `benchmarks/bench_realistic.py`; *invalid*: "
+           "runs that ended in a fault).",
            "",
            "## What the samples carry",
            "",
