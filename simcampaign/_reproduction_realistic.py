@@ -305,8 +305,12 @@ def verdict_text(rl: Realistic, v: dict[str, Any]) -> str:
                          f"{d['shrinks']}, not significantly changed in "
                          f"{d['cases'] - d['grows'] - d['shrinks']} of {d['cases']} tracked "
                          "(load, observer) cases")
+    # mixed (larger in some cases, smaller in others) is not a "no"
+    some_grow = any(g[e]["grows"] > 0 for g in v["growth"].values()
+                    for e in ("sogi", "sogi_adaptive"))
     txt += ("Does the SOGI's advantage grow with harmonics and dead time? "
-            + ("**Yes, measurably**" if v["sogi_advantage_grows"] else "**No**")
+            + ("**Yes, measurably**" if v["sogi_advantage_grows"] else
+               "**Not consistently**" if some_grow else "**No**")
             + " (the seed-by-seed change of the paired difference from the ideal plant; "
             + "; ".join(parts) + "). ")
     n_runs = len(rl.seeds) * len(rl.obs_modes)

@@ -79,7 +79,7 @@ void fw_config_derive(fw_config_t *cfg) {
    * kd = w^3). Bounded below by the paper's observer (about 30 rad/s) and above by
    * the injection: the HF demodulation is one sample per injection period. */
   const float a_d = k_e * FW_PLL_DESIGN_LOAD * K_F * cfg->loops.i_max_A / cfg->machine.mass_kg;
-  const float w_max = FW_TWO_PI_F32 * cfg->estimator.f_inj_Hz / 40.0f;
+  const float w_max = fw_units_obs_w_max(cfg);
   float w = sqrtf((a_d > 0.0f ? a_d : 0.0f) / (3.0f * FW_PLL_DESIGN_ERR_RAD));
   w = fw_clampf(w, FW_PLL_W_MIN, (w_max > FW_PLL_W_MIN ? w_max : FW_PLL_W_MIN));
   cfg->estimator.pll_kp = 3.0f * w;

@@ -6,6 +6,7 @@
 #include <math.h>
 
 #include "pmlsm/fw_obs.h"
+#include "pmlsm/fw_units.h"
 
 /* Corner of the |PLL error| filter used for adaptation and supervision. */
 #define FW_ERR_FILTER_HZ 5.0f
@@ -74,7 +75,17 @@ void fw_obs_init(fw_obs_t *o, const fw_config_t *cfg, float dt_s) {
     o->bw_span = 0.0f;
   }
   o->lam_n = cfg->estimator.obs_bw_narrow;
-  o->lam_span = cfg->estimator.obs_bw_wide - cfg->estimator.obs_bw_narrow;
+  /* obs_mode 2's widening, capped where the widened poles (sum kp: for three equal
+   * poles at -w, kp = 3 w) would pass the HF error's own limit (fw_units_obs_w_max):
+   * beyond it the wide loop rang and lost the angle (realistic_linear, 2 kHz
+   * injection, w = 229 rad/s: obs_bw_wide 2 asked for 458 rad/s against 314) */
+  float lam_w = cfg->estimator.obs_bw_wide;
+  const float kp_max = 3.0f * fw_units_obs_w_max(cfg);
+  if (lam_w * cfg->estimator.pll_kp > kp_max) { /* pll_kp > 0 here (0: false) */
+    lam_w = kp_max / cfg->estimator.pll_kp;
+    lam_w = lam_w > o->lam_n ? lam_w : o->lam_n;
+  }
+  o->lam_span = lam_w - cfg->estimator.obs_bw_narrow;
   o->det2 = cfg->estimator.obs_detect_sigma * cfg->estimator.obs_detect_sigma;
   o->inn_alpha = lp_alpha(FW_OBS_INN_HZ, dt_s);
   o->var_alpha = dt_s / FW_OBS_VAR_S;

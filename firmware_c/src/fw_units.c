@@ -25,3 +25,7 @@ float fw_units_radps_e_to_rpm(const fw_config_t *cfg, float w) {
 float fw_units_force_per_A(const fw_config_t *cfg) {
   return 1.5f * (FW_PI_F32 / cfg->machine.pole_pitch_m) * cfg->machine.psi_f_Wb;
 }
+
+float fw_units_obs_w_max(const fw_config_t *cfg) {
+  return FW_TWO_PI_F32 * cfg->estimator.f_inj_Hz / 40.0f;
+}

@@ -17,7 +17,7 @@ from enum import IntEnum
 from typing import Any, NamedTuple
 
 #: the firmware's version (device.firmware_version; 0x100A, 0x2040 packed)
-FW_VERSION_STRING = '0.10.0'
+FW_VERSION_STRING = '0.10.1'
 
 FAULTS: dict[int, tuple[str, str]] = {
     0x2310: ('OVERCURRENT', '|phase current| above i_trip_A'),

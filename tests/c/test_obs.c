@@ -364,6 +364,32 @@ static void test_mode_adaptive_law(void) {
 
 /* obs_mode 2: the friction model, against its closed form. No error, no thrust,
  * coasting above the Coulomb term's sign band: w' = -(b / m) w - k_e F_c / m. */
+/* obs_mode 2's widening stays under the HF error's limit: with 2 kHz injection
+ * (2 pi 2000 / 40 = 314.16 rad/s) and the derived three poles at 228.8 rad/s (kp 686.5,
+ * realistic_linear's) obs_bw_wide 2 is capped at 3 x 314.16 / 686.5 = 1.3729; the
+ * default configuration (3 kHz, kp 86.6: 2 x 86.6 < 3 x 471.2) keeps its 2; the cap
+ * never goes under the narrow scale, and pll_kp = 0 leaves the configured one. */
+static void test_mode_adaptive_wide_cap(void) {
+  fw_config_t cfg;
+  fw_obs_t o;
+  setup(&o, &cfg);
+  cfg.estimator.obs_mode = (uint32_t)FW_OBS_ADAPTIVE;
+  fw_obs_init(&o, &cfg, o.dt_s);
+  TT_CHECK_NEAR(o.lam_n + o.lam_span, cfg.estimator.obs_bw_wide, 1e-6);
+  cfg.estimator.f_inj_Hz = 2000.0f;
+  cfg.estimator.pll_kp = 686.5f;
+  fw_obs_init(&o, &cfg, o.dt_s);
+  const double w_max = 2.0 * 3.14159265358979 * 2000.0 / 40.0;
+  TT_CHECK_NEAR(o.lam_n + o.lam_span, 3.0 * w_max / 686.5, 1e-5);
+  TT_CHECK_NEAR(o.lam_n, cfg.estimator.obs_bw_narrow, 1e-7);
+  cfg.estimator.pll_kp = 50000.0f; /* the cap under the narrow scale: narrow it is */
+  fw_obs_init(&o, &cfg, o.dt_s);
+  TT_CHECK_NEAR(o.lam_span, 0.0, 1e-7);
+  cfg.estimator.pll_kp = 0.0f;
+  fw_obs_init(&o, &cfg, o.dt_s);
+  TT_CHECK_NEAR(o.lam_n + o.lam_span, cfg.estimator.obs_bw_wide, 1e-6);
+}
+
 static void test_mode_adaptive_friction(void) {
   fw_config_t cfg;
   fw_obs_t o;
@@ -402,6 +428,7 @@ int main(void) {
   TT_RUN(test_supervise);
   TT_RUN(test_mode_fixed);
   TT_RUN(test_mode_adaptive_law);
+  TT_RUN(test_mode_adaptive_wide_cap);
   TT_RUN(test_mode_adaptive_friction);
   return TT_SUMMARY();
 }

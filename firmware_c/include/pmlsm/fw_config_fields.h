@@ -78,7 +78,7 @@ typedef struct {
   float pll_kd;               /**< disturbance (load/friction) integrator gain, 1/s^3; 0 = none. Stable for pll_kd < pll_kp * pll_ki. Default: poles at -28 +/- 50j and -30 rad/s with the paper's kp, ki [1/s^3] */
   uint32_t obs_mode;          /**< fw_obs_mode_t: 0 fixed gains pll_kp, pll_ki, pll_kd (the paper's PLL; pll_accel_per_A = pll_kd = 0 for its pure PI loop), 1 bandwidth scheduled by pll_bw_min on |filtered PLL error|, 2 innovation-adaptive observer with a friction model (obs_bw_narrow .. obs_bw_wide; docs/method.md section 5) */
   float obs_bw_narrow;        /**< obs_mode 2: observer poles (pll_kp, pll_ki, pll_kd) scaled by this in steady state, where the HF error's noise sets the bandwidth */
-  float obs_bw_wide;          /**< obs_mode 2: observer poles scaled by this while the innovation test fires (a load change the model does not know) */
+  float obs_bw_wide;          /**< obs_mode 2: observer poles scaled by this while the innovation test fires (a load change the model does not know); the drive caps it where the widened poles would pass the HF error's limit, at 3 (2 pi f_inj_Hz / 40) / pll_kp (never under obs_bw_narrow) */
   float obs_detect_sigma;     /**< obs_mode 2: the innovation's short-window mean beyond this many of its own measured standard deviations widens the observer */
   float obs_release_s;        /**< obs_mode 2: time constant of the return from the wide to the narrow bandwidth once the test is quiet [s] */
   float align_time_s;         /**< angle-mod-pi convergence time with injection only [s] */

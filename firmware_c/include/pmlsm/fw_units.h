@@ -29,6 +29,11 @@ float fw_units_radps_e_to_rpm(const fw_config_t *cfg, float w_radps_e);
 /** Nominal thrust constant K_F = 1.5 (pi/tau) psi_f (N per A of i_q); the one
  *  definition used by the gain derivation, force mode and the snapshot. */
 float fw_units_force_per_A(const fw_config_t *cfg);
+/** The fastest observer pole (rad/s) the HF error supports: 2 pi f_inj / 40 (the HF
+ *  demodulation gives one error per injection period). fw_config_derive caps the derived
+ *  observer bandwidth at it; fw_obs_init caps obs_mode 2's widening (obs_bw_wide) so
+ *  that the widened poles stay under it. */
+float fw_units_obs_w_max(const fw_config_t *cfg);
 
 #ifdef __cplusplus
 }
