@@ -18,7 +18,9 @@ board in QEMU, ``bench emu``), :mod:`sim_fallback.standin` (``FakeDrive402``: a 
 stand-in node without a plant, for protocol tests).
 
 Metrics (one definition for the simulator, the bench and the reports):
-``sim_fallback.metrics`` (public, numpy only). See docs/simulator.md.
+``sim_fallback.metrics`` (public, numpy only). See docs/simulator.md. What any estimator
+of the injection could reach, from a motor file: ``sim_fallback.bound`` (numpy only;
+docs/method.md section 5.1, docs/estimator_bound.md).
 """
 
 from ._emu_blob import EMU_BLOB_ADDR, emu_boot_blob, write_emu_boot_blob
