@@ -342,6 +342,23 @@ def peak_thrust_N(cfg0: Any) -> float:
                                                                    float(cfg0.pole_pitch_m))
 
 
+def _run_identified(drive: Any, cfg0: Any, backup: dict[str, Any], res: Identified,
+                    step: str) -> None:
+    """Before an optional step, the drive off: a fault latched in steps 1-6 (step 6 keeps
+    what it measured before one, see its note) reset and noted, the identified
+    configuration (gains derived from it, the user's extractor) written, the probe's
+    telemetry on again."""
+    code = drive.fault_code()
+    if code:
+        from bench._drive import fault_text
+
+        drive.reset_faults()
+        res.log.append(f"{step}: the drive's fault {fault_text(code)} from steps 1-6 reset "
+                       "before it")
+    drive.restore(identified_config(backup, res))
+    _telemetry_on(drive, cfg0.f_pwm_Hz)
+
+
 def _cross_saturation(conn: Any, probe: WireProbe, cfg0: Any, backup: dict[str, Any],
                       res: Identified, hold: Callable[[], bool] | None) -> None:
     """Step 7 over the wire, after steps 1-6 (the drive off in between): ``hold`` (the
@@ -355,15 +372,7 @@ def _cross_saturation(conn: Any, probe: WireProbe, cfg0: Any, backup: dict[str, 
     if hold is not None and not hold():
         res.log.append("step 7 (cross-saturation map) skipped: the mover was not clamped")
         return
-    code = drive.fault_code()
-    if code:  # latched in step 6, which keeps what it measured before (see its note)
-        from bench._drive import fault_text
-
-        drive.reset_faults()
-        res.log.append(f"step 7: the drive's fault {fault_text(code)} from steps 1-6 reset "
-                       "before it")
-    drive.restore(identified_config(backup, res))
-    _telemetry_on(drive, cfg0.f_pwm_Hz)
+    _run_identified(drive, cfg0, backup, res, "step 7")
     watched = probe.watch_speed()
     try:
         probe.run(0.02)  # telemetry flowing again
@@ -380,33 +389,25 @@ def _cross_saturation(conn: Any, probe: WireProbe, cfg0: Any, backup: dict[str, 
 
 def _ripple(conn: Any, probe: WireProbe, cfg0: Any, backup: dict[str, Any],
             res: Identified, travel_m: float) -> None:
-    """Step 8 over the wire, after steps 1-6 (the drive off in between): the drive runs the
-    identified configuration (gains derived from it, the user's extractor) and
-    :func:`identification.run_ripple` measures the ripple with the identified K_F and mass;
-    the result joins ``res``. A fault leaves ``res`` as steps 1-6 made it (noted)."""
+    """Steps 8 and 9 over the wire, after steps 1-6 (the drive off in between): the drive
+    runs the identified configuration and :func:`identification.run_ripple`, then
+    :func:`identification.run_thrust_ripple`, measure with the identified psi_f (K_F),
+    mass and viscous friction; the results join ``res``. A fault leaves ``res`` as the
+    steps before made it (noted)."""
     drive = conn.drive
     drive.disable()
-    code = drive.fault_code()
-    if code:
-        from bench._drive import fault_text
-
-        drive.reset_faults()
-        res.log.append(f"step 8: the drive's fault {fault_text(code)} from steps 1-6 reset "
-                       "before it")
-    drive.restore(identified_config(backup, res))
-    _telemetry_on(drive, cfg0.f_pwm_Hz)
+    _run_identified(drive, cfg0, backup, res, "step 8")
     probe.run(0.02)  # telemetry flowing again
     v = res.values
-    tau = float(cfg0.pole_pitch_m)
-    K_F = force_constant_N_per_A(float(v.get("psi_f_Wb", cfg0.psi_f_Wb)), tau)
-    mass = float(v["mass_kg"]) if v.get("mass_kg", 0.0) > 0.0 else None
-    cfg = SimpleNamespace(**{**vars(cfg0), "mass_kg": mass or float(cfg0.mass_kg),
-                             "visc_Ns_per_m": max(float(v.get("b_visc_Ns_per_m",
-                                                              cfg0.visc_Ns_per_m)), 0.0)})
+    # cfg0 with the identified values the steps take their defaults from
+    cfg = SimpleNamespace(**{
+        **vars(cfg0), "psi_f_Wb": float(v.get("psi_f_Wb", cfg0.psi_f_Wb)),
+        "mass_kg": float(v["mass_kg"]) if v.get("mass_kg", 0.0) > 0.0 else float(cfg0.mass_kg),
+        "visc_Ns_per_m": max(float(v.get("b_visc_Ns_per_m", cfg0.visc_Ns_per_m)), 0.0)})
     for step, what, fn in ((8, "position ripple", run_ripple),
                            (9, "cogging thrust", run_thrust_ripple)):
         try:
-            rp = fn(probe, cfg, tau, travel_m, K_F=K_F, mass=mass)
+            rp = fn(probe, cfg, float(cfg0.pole_pitch_m), travel_m)
         except RuntimeError as e:  # a fault: what was measured before stands
             res.log.append(f"step {step} ({what}) stopped: {' '.join(str(e).split())}; "
                            f"steps before it kept")

@@ -6,6 +6,7 @@ and tools (randomized motors, the truth in the identified names).
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -172,14 +173,23 @@ def identify_cross_saturation(motor: Motor, seed: int = 0, plant: dict[str, Any]
     simulated drive: the plant's mover locked (``locked`` = 1, the rig's clamp) at
     ``x0_m``; the drive runs the motor file's configuration (``fw`` over it) with its
     compensation map replaced by the one being measured."""
-    pl = dict(plant or {})
-    pl["locked"] = 1
+    pl = {**(plant or {}), "locked": 1}
+    return _optional_step(motor, seed, pl, fw, x0_m, 98, lambda probe, cfg0:
+                          run_cross_saturation(probe, cfg0, motor.tau_m, passes))
+
+
+def _optional_step(motor: Motor, seed: int, plant: dict[str, Any] | None,
+                   fw: dict[str, float] | None, x0_m: float, salt: int,
+                   step: Callable[[SimProbe, Any], Identified]) -> Identified:
+    """An optional step (7, 8, 9) on the simulated drive: the motor file's configuration
+    (``fw`` over it), a started probe whose simulator starts at ``x0_m`` with the noise
+    seed ``seed * 100 + salt`` (one per step), ``step(probe, cfg0)``."""
     fw = dict(fw or {})
     cfg0 = fw_config(motor, "sogi_adaptive", **fw)
-    with SimProbe(motor, fw, pl, seed) as probe:
-        probe.sim = Sim(motor, seed=seed * 100 + 98, plant=pl, fw=fw, x0_m=x0_m)
+    with SimProbe(motor, fw, plant, seed) as probe:
+        probe.sim = Sim(motor, seed=seed * 100 + salt, plant=plant, fw=fw, x0_m=x0_m)
         probe._start()
-        return run_cross_saturation(probe, cfg0, motor.tau_m, passes)
+        return step(probe, cfg0)
 
 
 def identify_ripple(motor: Motor, seed: int = 0, plant: dict[str, Any] | None = None,
@@ -188,12 +198,8 @@ def identify_ripple(motor: Motor, seed: int = 0, plant: dict[str, Any] | None = 
     """Step 8 of the identification (:func:`identification.run_ripple`) on the simulated
     drive: a free mover from ``x0_m``, the motor file's configuration (``fw`` over it)
     with its ripple correction replaced by the one being measured."""
-    fw = dict(fw or {})
-    cfg0 = fw_config(motor, "sogi_adaptive", **fw)
-    with SimProbe(motor, fw, plant, seed) as probe:
-        probe.sim = Sim(motor, seed=seed * 100 + 97, plant=plant, fw=fw, x0_m=x0_m)
-        probe._start()
-        return run_ripple(probe, cfg0, motor.tau_m, travel_m, passes)
+    return _optional_step(motor, seed, plant, fw, x0_m, 97, lambda probe, cfg0:
+                          run_ripple(probe, cfg0, motor.tau_m, travel_m, passes))
 
 
 def identify_thrust_ripple(motor: Motor, seed: int = 0, plant: dict[str, Any] | None = None,
@@ -202,12 +208,8 @@ def identify_thrust_ripple(motor: Motor, seed: int = 0, plant: dict[str, Any] | 
     """The cogging thrust at 6 theta_e (:func:`identification.run_thrust_ripple`) on the
     simulated drive: a free mover from ``x0_m``, the motor file's configuration (``fw``
     over it) with its cogging coefficients replaced by the ones being measured."""
-    fw = dict(fw or {})
-    cfg0 = fw_config(motor, "sogi_adaptive", **fw)
-    with SimProbe(motor, fw, plant, seed) as probe:
-        probe.sim = Sim(motor, seed=seed * 100 + 96, plant=plant, fw=fw, x0_m=x0_m)
-        probe._start()
-        return run_thrust_ripple(probe, cfg0, motor.tau_m, travel_m)
+    return _optional_step(motor, seed, plant, fw, x0_m, 96, lambda probe, cfg0:
+                          run_thrust_ripple(probe, cfg0, motor.tau_m, travel_m))
 
 
 def hold_mover(drive: Any, held: bool = True) -> None:
