@@ -132,13 +132,18 @@ def kalman_bound(S0: float, t_end: float, window: tuple[float, float],
             "omega_rms_radps": math.sqrt(float(np.mean(var[inw, 1])))}
 
 
+def _transition(dt: float) -> np.ndarray:
+    """[angle, speed, acceleration] over dt: a double integrator of a held acceleration."""
+    return np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+
+
 def _kalman_gains(S0: float, t_end: float, step_s: float | None, known_disturbance: bool,
                   start_at_rest: bool, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The filter's gains and posterior variances (they do not depend on the data)."""
     if not (S0 > 0.0 and t_end > 0.0 and dt > 0.0):
         raise ValueError("the bound needs S0 > 0, t_end > 0 and dt > 0")
     big = 1e8  # diffuse: far beyond any angle, speed, acceleration of the scenario
-    F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    F = _transition(dt)
     P = np.diag([big, 0.0 if start_at_rest else big, 0.0 if known_disturbance else big])
     R = S0 / dt
     n = int(round(t_end / dt)) + 1
@@ -172,7 +177,7 @@ def kalman_error_max(S0: float, t_end: float, window: tuple[float, float],
     directly."""
     t, gains, _ = _kalman_gains(S0, t_end, step_s, known_disturbance, start_at_rest, dt)
     rng = np.random.default_rng(seed)
-    F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    F = _transition(dt)
     # err = x_hat - x. The diffuse priors: whatever the error before the first update
     # (the angle's gain is ~1 there) and at the step (the acceleration's), the update
     # leaves a remainder of order 1/prior variance; start from zero and step by 1.

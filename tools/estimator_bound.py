@@ -117,24 +117,21 @@ def compute(seeds: int) -> dict:
         for metric, (kind, win) in sc["targets"].items():
             row = {"scenario": sc["name"], "motor": mname, "metric": metric,
                    "target": sc["bounds"][metric], "window": list(win)}
-            if kind in ("rms", "max", "spd_max"):
+            if kind == "rms":
                 kb = B.kalman_bound(info.S0, sc["t_end"], win, sc["step_s"])
                 kb_u = B.kalman_bound(info.S0, sc["t_end"], win, sc["step_s"],
                                       known_disturbance=False)
+                row.update(bound=kb["theta_rms_rad"],
+                           bound_unknown_friction=kb_u["theta_rms_rad"],
+                           kind="lower bound (mean-square)")
+            elif kind in ("max", "spd_max"):
                 mc = B.kalman_error_max(info.S0, sc["t_end"], win, sc["step_s"], trials=400)
-                if kind == "rms":
-                    row.update(bound=kb["theta_rms_rad"],
-                               bound_unknown_friction=kb_u["theta_rms_rad"],
-                               kind="lower bound (mean-square)")
-                elif kind == "max":
-                    row.update(bound=float(np.median(mc["theta_max_rad"])),
-                               bound_p90=float(np.percentile(mc["theta_max_rad"], 90)),
-                               kind="ideal filter's median (reference)")
-                else:
-                    rpm = m.rpm_to_radps_e(1.0)
-                    row.update(bound=float(np.median(mc["omega_max_radps"])) / rpm,
-                               bound_p90=float(np.percentile(mc["omega_max_radps"], 90)) / rpm,
-                               kind="ideal filter's median (reference)")
+                # the angle's maximum (el. rad), or the speed's (r/min)
+                x, scale = ((mc["theta_max_rad"], 1.0) if kind == "max" else
+                            (mc["omega_max_radps"], m.rpm_to_radps_e(1.0)))
+                row.update(bound=float(np.median(x)) / scale,
+                           bound_p90=float(np.percentile(x, 90)) / scale,
+                           kind="ideal filter's median (reference)")
             else:
                 tb = B.transient_bound(info.S0, sc["accel"], 0.05)
                 row.update(bound=tb["err_rad"], bound_tau_s=tb["tau_s"],

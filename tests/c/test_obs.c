@@ -362,8 +362,6 @@ static void test_mode_adaptive_law(void) {
   TT_CHECK_NEAR(o.lam, lw, 1e-6);
 }
 
-/* obs_mode 2: the friction model, against its closed form. No error, no thrust,
- * coasting above the Coulomb term's sign band: w' = -(b / m) w - k_e F_c / m. */
 /* obs_mode 2's widening stays under the HF error's limit: with 2 kHz injection
  * (2 pi 2000 / 40 = 314.16 rad/s) and the derived three poles at 228.8 rad/s (kp 686.5,
  * realistic_linear's) obs_bw_wide 2 is capped at 3 x 314.16 / 686.5 = 1.3729; the
@@ -390,6 +388,8 @@ static void test_mode_adaptive_wide_cap(void) {
   TT_CHECK_NEAR(o.lam_n + o.lam_span, cfg.estimator.obs_bw_wide, 1e-6);
 }
 
+/* obs_mode 2: the friction model, against its closed form. No error, no thrust,
+ * coasting above the Coulomb term's sign band: w' = -(b / m) w - k_e F_c / m. */
 static void test_mode_adaptive_friction(void) {
   fw_config_t cfg;
   fw_obs_t o;
