@@ -209,7 +209,9 @@ fw_status_t fw_init(fw_ctrl_t *ctrl, const fw_config_t *cfg) {
   }
   ctrl->mode = FW_MODE_SPEED;
   snap_slow_changed(ctrl);
-  fw_cia402_init_done(&ctrl->sm);
+  /* NOT READY TO SWITCH ON until the current zeros are measured (fw_cal.h;
+   * boot_calibrate passes to SWITCH ON DISABLED) */
+  fw_cal_start(&ctrl->cal, &ctrl->cfg.sensing, ctrl->dt_s);
   return st;
 }
 
@@ -281,7 +283,12 @@ uint16_t fw_controlword(fw_ctrl_t *ctrl, uint16_t cw) {
     } else if (!ctrl->saliency_ok) {
       latch_fault(ctrl, FW_FAULT_SALIENCY_TOO_LOW); /* injection refused */
     } else {
-      fw_fault_t f = fw_mon_enable(&ctrl->mon); /* current-sensor offsets at standstill */
+      /* the current zeros measured at boot, judged with the configuration in force;
+       * then the offsets learnt at standstill since (drift) */
+      fw_fault_t f = fw_cal_judge(&ctrl->cal, &ctrl->cfg);
+      if (f == FW_FAULT_NONE) {
+        f = fw_mon_enable(&ctrl->mon);
+      }
       if (f != FW_FAULT_NONE) {
         latch_fault(ctrl, f);
       } else {
@@ -614,6 +621,25 @@ static bool stage_power(fw_ctrl_t *c, fw_period_t *p) {
   return FW_LIKELY(on && c->phase != FW_START_IDLE);
 }
 
+/** Boot (NOT READY TO SWITCH ON): the current zeros measured on the raw samples
+ *  with the PWM off (fw_cal.h); when done, SWITCH ON DISABLED, or the fault of an
+ *  implausible calibration. Stepped in physical units (no raw samples, adc NULL)
+ *  there is nothing to calibrate: the nominal zero, SWITCH ON DISABLED at once. */
+static FW_NOINLINE void boot_calibrate(fw_ctrl_t *c, const fw_adc_inputs_t *adc) {
+  if (adc == NULL) {
+    fw_cal_none(&c->cal);
+  } else if (!fw_cal_sample(&c->cal, adc)) {
+    return; /* still settling or sampling */
+  }
+  snap_slow_changed(c);
+  const fw_fault_t f = fw_cal_judge(&c->cal, &c->cfg);
+  if (f != FW_FAULT_NONE) {
+    latch_fault(c, f); /* NOT READY -> FAULT REACTION ACTIVE -> FAULT (13, 14) */
+  } else {
+    fw_cia402_init_done(&c->sm); /* 1 */
+  }
+}
+
 /** Power stage off: current-sensor offsets and sum, i2t cools down. */
 static void stage_off(fw_ctrl_t *c, const fw_period_t *p, fw_snapshot_t *snap) {
   c->phase = FW_START_IDLE;
@@ -856,7 +882,7 @@ static void snapshot_loops(const fw_ctrl_t *c, fw_snapshot_t *snap) {
 static FW_ALWAYS_INLINE void inputs_from_adc(fw_ctrl_t *c, const fw_adc_inputs_t *adc, float *ia,
                                              float *ib, float *ic, float *u_dc) {
   fw_inputs_t x;
-  if (!fw_adc_convert(&c->cfg, adc, &x)) {
+  if (!fw_adc_convert(&c->cfg, c->cal.zero_counts, adc, &x)) {
     latch_fault(c, FW_FAULT_ADC_RANGE);
   }
   *ia = x.i_abc_A[0];
@@ -907,6 +933,9 @@ unsigned fw_step_into(fw_ctrl_t *c, const fw_inputs_t *in, const fw_adc_inputs_t
   stage_inputs(c, ia, ib, ic, u_dc, &p);
   snapshot_inputs(&p, snap);
   if (FW_UNLIKELY(!stage_power(c, &p))) {
+    if (FW_UNLIKELY(c->sm.state == FW_CIA402_NOT_READY_TO_SWITCH_ON)) {
+      boot_calibrate(c, adc);
+    }
     stage_off(c, &p, snap);
     end_off(c, out, snap);
     return FW_SNAP_W_COMMON | FW_SNAP_W_OUT;
@@ -1026,13 +1055,14 @@ void fw_step_adc(fw_ctrl_t *c, const fw_adc_inputs_t *in, fw_outputs_t *out) {
   }
 }
 
-bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_inputs_t *in) {
+bool fw_adc_convert(const fw_config_t *cfg, const float zero_counts[3],
+                    const fw_adc_inputs_t *adc, fw_inputs_t *in) {
   const uint32_t a = adc->i_abc_counts[0], b = adc->i_abc_counts[1], c = adc->i_abc_counts[2];
   const uint32_t u = adc->u_dc_counts;
-  const float off = cfg->sensing.adc_offset_counts, k = cfg->sensing.adc_A_per_count;
-  in->i_abc_A[0] = ((float)a - off) * k;
-  in->i_abc_A[1] = ((float)b - off) * k;
-  in->i_abc_A[2] = ((float)c - off) * k;
+  const float k = cfg->sensing.adc_A_per_count;
+  in->i_abc_A[0] = ((float)a - zero_counts[0]) * k;
+  in->i_abc_A[1] = ((float)b - zero_counts[1]) * k;
+  in->i_abc_A[2] = ((float)c - zero_counts[2]) * k;
   in->u_dc_V = (float)u * cfg->sensing.adc_V_per_count;
   /* one range test: the largest of the four counts (no branch per count) */
   uint32_t m = a > b ? a : b;
@@ -1041,3 +1071,10 @@ bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_input
   return m <= cfg->sensing.adc_max_count;
 }
 
+float fw_current_zero_counts(const fw_ctrl_t *ctrl, unsigned k) {
+  return (ctrl != NULL && k < 3u) ? fw_cal_zero(&ctrl->cal, k) : 0.0f;
+}
+
+fw_cal_state_t fw_current_zero_state(const fw_ctrl_t *ctrl) {
+  return ctrl != NULL ? fw_cal_state(&ctrl->cal) : FW_CAL_RUNNING;
+}

@@ -17,7 +17,7 @@ from enum import IntEnum
 from typing import Any, NamedTuple
 
 #: the firmware's version (device.firmware_version; 0x100A, 0x2040 packed)
-FW_VERSION_STRING = '0.10.1'
+FW_VERSION_STRING = '0.11.0'
 
 FAULTS: dict[int, tuple[str, str]] = {
     0x2310: ('OVERCURRENT', '|phase current| above i_trip_A'),
@@ -26,6 +26,7 @@ FAULTS: dict[int, tuple[str, str]] = {
     0x3210: ('DC_OVERVOLTAGE', 'DC link above u_dc_max_V'),
     0x3220: ('DC_UNDERVOLTAGE', 'DC link below u_dc_min_V while enabled'),
     0x5210: ('INPUT_INVALID', 'NaN or inf in a sampled input'),
+    0x5211: ('CURRENT_ZERO_CAL', "current-sensor zero calibration with the PWM off implausible: a phase's zero further than mon_i_zero_max_A from the nominal, or its samples spread over mon_i_zero_spread_A"),
     0x5220: ('ADC_RANGE', 'ADC count outside [0, adc_max_count]'),
     0x6320: ('CONFIG_INVALID', 'enable requested with a configuration the core refused'),
     0x6100: ('SUPERVISION_MISSED', "the supervision interrupt did not run between two control interrupts: the period's monitors and protections never judged it"),
@@ -55,6 +56,7 @@ FAULT_REACTIONS: dict[int, str] = {
     0x3210: 'PWM off at once',
     0x3220: 'PWM off at once',
     0x5210: 'PWM off at once',
+    0x5211: 'enable refused, PWM stays off (latched again at every enable until the core restarts)',
     0x5220: 'PWM off at once',
     0x6320: 'enable refused, PWM stays off',
     0x6100: 'PWM off at once',
@@ -271,6 +273,8 @@ FW_CONFIG_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ('mon_bemf_min_mps', 'protection', False),
     ('i_sum_max_A', 'protection', False),
     ('i_offset_max_A', 'protection', False),
+    ('mon_i_zero_max_A', 'protection', False),
+    ('mon_i_zero_spread_A', 'protection', False),
     ('start_speed_max_mps', 'protection', False),
     ('bemf_v_on_mps', 'estimator', False),
     ('bemf_v_off_mps', 'estimator', False),
@@ -592,6 +596,8 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2052, 8): 'Start speed limit',
     (0x2052, 9): 'Back-EMF minimum',
     (0x2052, 10): 'Back-EMF current tolerance',
+    (0x2052, 11): 'Current zero limit',
+    (0x2052, 12): 'Current zero spread limit',
     (0x2053, 0): 'Highest sub-index supported',
     (0x2053, 1): 'Handover up speed',
     (0x2053, 2): 'Handover down speed',
@@ -620,6 +626,9 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2056, 2): 'Current zero',
     (0x2056, 3): 'DC link volts per count',
     (0x2056, 4): 'Full-scale count',
+    (0x2056, 5): 'Measured current zero a',
+    (0x2056, 6): 'Measured current zero b',
+    (0x2056, 7): 'Measured current zero c',
     (0x2057, 0): 'Highest sub-index supported',
     (0x2057, 1): 'Dead time',
     (0x2057, 2): 'Dead-time sign band',
@@ -907,6 +916,8 @@ INTEGRITY_MONITOR__I_OFFSET_MAX_A = Entry(0x2052, 7, unit='A')
 INTEGRITY_MONITOR__START_SPEED_MAX_MPS = Entry(0x2052, 8, unit='m/s')
 INTEGRITY_MONITOR__MON_BEMF_MIN_V = Entry(0x2052, 9, unit='V')
 INTEGRITY_MONITOR__MON_BEMF_I_TOL = Entry(0x2052, 10)
+INTEGRITY_MONITOR__MON_I_ZERO_MAX_A = Entry(0x2052, 11, unit='A')
+INTEGRITY_MONITOR__MON_I_ZERO_SPREAD_A = Entry(0x2052, 12, unit='A')
 BACK_EMF_OBSERVER__BEMF_V_ON_MPS = Entry(0x2053, 1, unit='m/s')
 BACK_EMF_OBSERVER__BEMF_V_OFF_MPS = Entry(0x2053, 2, unit='m/s')
 BACK_EMF_OBSERVER__BEMF_INJ_SHARE = Entry(0x2053, 3)
@@ -931,6 +942,9 @@ BOARD_SENSING__ADC_A_PER_COUNT = Entry(0x2056, 1, unit='A')
 BOARD_SENSING__ADC_OFFSET_COUNTS = Entry(0x2056, 2)
 BOARD_SENSING__ADC_V_PER_COUNT = Entry(0x2056, 3, unit='V')
 BOARD_SENSING__ADC_MAX_COUNT = Entry(0x2056, 4)
+BOARD_SENSING__MEASURED_CURRENT_ZERO_A = Entry(0x2056, 5)
+BOARD_SENSING__MEASURED_CURRENT_ZERO_B = Entry(0x2056, 6)
+BOARD_SENSING__MEASURED_CURRENT_ZERO_C = Entry(0x2056, 7)
 COMPENSATION__DT_COMP_S = Entry(0x2057, 1, unit='s')
 COMPENSATION__DT_COMP_BAND_A = Entry(0x2057, 2, unit='A')
 COMPENSATION__DT_COMP_DROP_V = Entry(0x2057, 3, unit='V')

@@ -161,6 +161,26 @@ static void boot(void) {
   g_pb.can_room = CAN_BOX;
 }
 
+/* boot(), then the boot's current-zero calibration (NOT READY TO SWITCH ON,
+ * fw_cal.h) on the ADC samples at mid-scale: the zeros stay 2048 (the tests that
+ * enable; the others count the interrupts from the power-up) */
+static void boot_ready(void) {
+  boot();
+  for (int k = 0; k < 4000; k++) {
+    if (fw_state(fw_app_ctrl(&g_a)) != FW_CIA402_NOT_READY_TO_SWITCH_ON &&
+        fw_state(fw_app_ctrl(&g_b)) != FW_CIA402_NOT_READY_TO_SWITCH_ON) {
+      break;
+    }
+    board_isr(&g_ba);
+    board_isr(&g_bb);
+    fw_board_background(&g_ba);
+    fw_board_background(&g_bb);
+  }
+  TT_CHECK(fw_state(fw_app_ctrl(&g_a)) == FW_CIA402_SWITCH_ON_DISABLED);
+  TT_CHECK(fw_state(fw_app_ctrl(&g_b)) == FW_CIA402_SWITCH_ON_DISABLED);
+  TT_CHECK(fw_current_zero_counts(fw_app_ctrl(&g_a), 0u) == 2048.0f);
+}
+
 static void rx_both(uint16_t id, const uint8_t d[8]) {
   fw_can_frame_t f;
   memset(&f, 0, sizeof f);
@@ -226,7 +246,7 @@ static void test_refused_frames_and_bytes_arrive_later_in_order(void) {
 }
 
 static void test_background_changes_core_in_balanced_lock(void) {
-  boot();
+  boot_ready();
   uint8_t req[8] = {0x2B, 0x40, 0x60, 0x00, 0x06, 0, 0, 0}; /* controlword: shutdown */
   rx_both((uint16_t)(0x600 + NID), req);
   uint32_t e0 = g_pa.enters;
@@ -476,7 +496,7 @@ static void test_reference_sensor_published_with_its_period(void) {
  * enabled and running in closed loop, give the same duties bit for bit in
  * every period. A leak into the estimator or the control would break it. */
 static void test_reference_sensor_never_reaches_the_control(void) {
-  boot();
+  boot_ready();
   g_pa.can_room = g_pb.can_room = CAN_BOX;
   const uint16_t cws[3] = {0x06, 0x07, 0x0F};
   for (int i = 0; i < 3; i++) {
@@ -510,7 +530,7 @@ static void test_reference_sensor_never_reaches_the_control(void) {
  * control interrupt raises FW_FAULT_POWER_STAGE_BREAK in the core before its
  * step, the duties it writes are off, the EMCY names the fault. */
 static void test_hardware_break_raises_the_fault(void) {
-  boot();
+  boot_ready();
   g_pb.can_room = CAN_BOX;
   const uint16_t cws[3] = {0x06, 0x07, 0x0F};
   for (int i = 0; i < 3; i++) {

@@ -24,6 +24,7 @@ static void setup(void) {
   memset(&g_in, 0, sizeof g_in);
   g_in.u_dc_V = 300.0f;
   TT_CHECK(fw_app_init(&g_app, &cfg, NID) == FW_OK);
+  step_n(2); /* out of NOT READY TO SWITCH ON (physical inputs: no zero calibration) */
 }
 
 static void test_init_and_identity(void) {
@@ -177,6 +178,9 @@ static void test_telemetry_and_trace(void) {
   fw_serial_msg_t msg;
   uint8_t buf[512];
   fw_serial_decoder_init(&dec);
+  while (fw_app_uart_read(&g_app, buf, sizeof buf) > 0) {
+    /* the boot's periods (setup) */
+  }
   step_n(240); /* decimation 24 -> 10 frames */
   int telem = 0;
   size_t n;

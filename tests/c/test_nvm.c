@@ -97,7 +97,9 @@ static fw_app_nvm_state_t boot(const fw_app_nvm_t *nvm) {
   memset(&g_in, 0, sizeof g_in);
   g_in.u_dc_V = 300.0f;
   TT_CHECK(fw_app_init(&g_app, &cfg, NID) == FW_OK);
-  return fw_app_attach_nvm(&g_app, nvm);
+  const fw_app_nvm_state_t st = fw_app_attach_nvm(&g_app, nvm);
+  step_n(2); /* out of NOT READY TO SWITCH ON (physical inputs: no zero calibration) */
+  return st;
 }
 
 static float cfg_u_inj(void) { return fw_get_config(fw_app_ctrl(&g_app))->estimator.u_inj_V; }

@@ -318,6 +318,11 @@ void fw_app_update_od(fw_app_t *app, const fw_app_period_t *p) {
                    k < nh ? hist[k] : 0u);
   }
   CO_NODE_PUT(n, 2070_02, (uint32_t)app->trace.state);
+  /* the current zeros measured at boot (written once by the control interrupt,
+   * at the calibration's end; the nominal zero before) */
+  CO_NODE_PUT_F32(n, 2056_05, fw_current_zero_counts(&app->ctrl, 0u));
+  CO_NODE_PUT_F32(n, 2056_06, fw_current_zero_counts(&app->ctrl, 1u));
+  CO_NODE_PUT_F32(n, 2056_07, fw_current_zero_counts(&app->ctrl, 2u));
   CO_NODE_PUT_F32(n, 2080_02, s->L_small_meas_H);
   CO_NODE_PUT_F32(n, 2080_03, s->L_large_meas_H);
   if (s->cia402_state != (uint8_t)FW_CIA402_OPERATION_ENABLED &&

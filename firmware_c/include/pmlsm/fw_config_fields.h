@@ -10,7 +10,7 @@
  *   - sensing (fw_cfg_sensing_t, 5 fields): sampling rate and ADC scaling (fw_step_adc)
  *   - loops (fw_cfg_loops_t, 10 fields): current and speed loops: limits, PI gains, bandwidths for the derived gains
  *   - estimator (fw_cfg_estimator_t, 28 fields): injection, HF extraction, PLL observer, start-up (align, polarity), back-EMF observer and handover
- *   - protection (fw_cfg_protection_t, 29 fields): trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h)
+ *   - protection (fw_cfg_protection_t, 31 fields): trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h)
  *   - compensation (fw_cfg_compensation_t, 19 fields): inverter dead-time compensation (modulation), the cross-saturation angle map, the position-periodic ripple correction (fw_xsat.h) and the observer's position-harmonic thrust ripple (fw_obs.h); all 0 = off
  *
  * Field names are unique across the parts: the object dictionary, the field
@@ -121,7 +121,9 @@ typedef struct {
   float mon_bemf_max_rad;        /**< back-EMF residual angle limit [rad] */
   float mon_bemf_min_mps;        /**< back-EMF witness active above the back-EMF of this speed (default: 5.0 V on the paper's motor) [m/s] */
   float i_sum_max_A;             /**< limit on the filtered |i_a + i_b + i_c|, plus 3 % of |i_a| + |i_b| + |i_c| (fw_mon.c) [A] */
-  float i_offset_max_A;          /**< limit on each standstill offset [A] */
+  float i_offset_max_A;          /**< limit on each standstill offset learnt while idle on top of the calibrated zero (drift since the calibration) [A] */
+  float mon_i_zero_max_A;        /**< current-zero calibration (PWM off, at boot): limit on |measured zero - adc_offset_counts| x adc_A_per_count of each phase (fw_cal.h) [A] */
+  float mon_i_zero_spread_A;     /**< current-zero calibration: limit on the RMS of each phase's samples about their mean (default 20 counts at 12.2 mA per count) [A] */
   float start_speed_max_mps;     /**< refuse to enable above this mover speed [m/s] */
   float mon_bemf_min_V;          /**< back-EMF at mon_bemf_min_mps (derived by fw_config_derive: w psi_f at that speed; read-only in the object dictionary) [V] */
   float mon_bemf_i_tol;          /**< back-EMF witness: share of the model's current terms (R + |w| L_q) |i| the residual may be off by (resistance drift, dead time, saturation); it judges above mon_bemf_min_V plus that and allows it in the magnitude, and that share of L_q |i| / psi_f in the angle (docs/integrity.md; 0: off, the witness as before) */
@@ -232,6 +234,8 @@ typedef struct {
   F32(protection, mon_bemf_min_mps, "m/s", 0.001f, 1000.0f, 0.21f) \
   F32(protection, i_sum_max_A, "A", 0.001f, 500.0f, 0.2f) \
   F32(protection, i_offset_max_A, "A", 0.001f, 500.0f, 1.0f) \
+  F32(protection, mon_i_zero_max_A, "A", 0.001f, 500.0f, 1.0f) \
+  F32(protection, mon_i_zero_spread_A, "A", 0.001f, 500.0f, 0.25f) \
   F32(protection, start_speed_max_mps, "m/s", 0.001f, 100.0f, 0.05f) \
   F32(estimator, bemf_v_on_mps, "m/s", 0.0f, 100.0f, 0.42f) \
   F32(estimator, bemf_v_off_mps, "m/s", 0.0f, 100.0f, 0.29f) \
@@ -268,6 +272,6 @@ typedef struct {
   F32(compensation, rip6_b1_N_per_A, "N/A", -1000.0f, 1000.0f, 0.0f)
 /* clang-format on */
 
-#define FW_CONFIG_FIELD_COUNT 100u
+#define FW_CONFIG_FIELD_COUNT 102u
 
 #endif /* PMLSM_FW_CONFIG_FIELDS_H */

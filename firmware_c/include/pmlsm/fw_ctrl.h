@@ -37,6 +37,7 @@
 #include "fw_cia402.h"
 #include "fw_config.h"
 #include "fw_fault.h"
+#include "fw_cal.h"
 #include "fw_foc.h"
 #include "fw_inj.h"
 #include "fw_mon.h"
@@ -64,6 +65,7 @@ extern "C" {
  *   foc     fw_foc.h    speed and current PIs, voltage limit, modulation
  *   mon     fw_mon.h    integrity monitor;  bemf fw_bemf.h back-EMF observer, handover
  *   sm      fw_cia402.h CiA 402 state machine
+ *   cal     fw_cal.h    current-sensor zeros measured with the PWM off at boot
  * The core itself keeps only the drive state machine (start-up phase and its
  * time, quick stop), the references and the configuration.
  */
@@ -94,6 +96,9 @@ struct fw_ctrl {
   float theta_k;          /**< estimate at this step's sampling instant */
   float u_dc_V;           /**< DC link of the last step (statusword warning) */
   float e_start_max_V;    /**< back-EMF at start_speed_max_mps */
+  /** the per-phase current zeros (fw_cal.h): measured in NOT READY TO SWITCH ON,
+   *  read by the ADC conversion every period */
+  fw_cal_t cal;
   /* blocks */
   fw_fault_latch_t fault;
   fw_protect_t prot;
@@ -243,10 +248,20 @@ unsigned fw_step_into(fw_ctrl_t *ctrl, const fw_inputs_t *in, const fw_adc_input
 /** Same, from raw ADC counts scaled by the adc_* configuration. */
 void fw_step_adc(fw_ctrl_t *ctrl, const fw_adc_inputs_t *in, fw_outputs_t *out);
 
-/** The one ADC scaling: counts -> A and V with cfg->adc_* (also for callers that
- *  step through another layer, e.g. fw_app_step). Returns false when a count is
- *  above adc_max_count (the caller raises FW_FAULT_ADC_RANGE; fw_step_adc does). */
-bool fw_adc_convert(const fw_config_t *cfg, const fw_adc_inputs_t *adc, fw_inputs_t *in);
+/** The one ADC scaling: counts -> A and V with cfg->adc_* and the per-phase zero
+ *  counts zero_counts[3] (the core's: fw_current_zero_counts, measured with the
+ *  PWM off at boot; the nominal adc_offset_counts until then). Returns false when a
+ *  count is above adc_max_count (the caller raises FW_FAULT_ADC_RANGE; fw_step_adc
+ *  does). */
+bool fw_adc_convert(const fw_config_t *cfg, const float zero_counts[3],
+                    const fw_adc_inputs_t *adc, fw_inputs_t *in);
+
+/** Phase k's (0..2) current zero in ADC counts as the conversion uses it: measured
+ *  with the PWM off at boot (fw_cal.h), the nominal adc_offset_counts until then. */
+float fw_current_zero_counts(const fw_ctrl_t *ctrl, unsigned k);
+
+/** Where the boot's current-zero calibration stands (fw_cal_state_t). */
+fw_cal_state_t fw_current_zero_state(const fw_ctrl_t *ctrl);
 
 /** Changes (+1) whenever a field fw_snapshot_capture_slow copies may have changed
  *  (fw_snapshot.h: a caller that keeps snapshots copies the slow part when it

@@ -16,6 +16,7 @@ typedef enum {
   FW_FAULT_DC_OVERVOLTAGE = 0x3210, /**< DC link above u_dc_max_V */
   FW_FAULT_DC_UNDERVOLTAGE = 0x3220, /**< DC link below u_dc_min_V while enabled */
   FW_FAULT_INPUT_INVALID = 0x5210, /**< NaN or inf in a sampled input */
+  FW_FAULT_CURRENT_ZERO_CAL = 0x5211, /**< current-sensor zero calibration with the PWM off implausible: a phase's zero further than mon_i_zero_max_A from the nominal, or its samples spread over mon_i_zero_spread_A */
   FW_FAULT_ADC_RANGE = 0x5220, /**< ADC count outside [0, adc_max_count] */
   FW_FAULT_SUPERVISION_MISSED = 0x6100, /**< the supervision interrupt did not run between two control interrupts: the period's monitors and protections never judged it */
   FW_FAULT_CONFIG_INVALID = 0x6320, /**< enable requested with a configuration the core refused */
@@ -39,6 +40,6 @@ typedef enum {
 } fw_fault_t;
 
 /** Number of fault codes (without FW_FAULT_NONE). */
-#define FW_FAULT_COUNT 26u
+#define FW_FAULT_COUNT 27u
 
 #endif /* PMLSM_FW_FAULTS_H */
