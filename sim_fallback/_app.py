@@ -112,6 +112,7 @@ class DriveBridge:
             self._port = port
             self.sim._L.sim_set_controller(self.sim._h, C.byref(port))
             self._L.sim_app_background_now(self._drive)  # the boot-up message
+            self.sim.boot()  # the drive's current-zero calibration, before t = 0
         else:
             self._L = _lib.comm_lib()
             cfg = FwConfig()

@@ -193,6 +193,12 @@ class Firmware:
     def fault_code(self) -> int:
         return int(self._L.fw_fault_code(self.handle))
 
+    def current_zero_counts(self) -> list[float]:
+        """Per-phase current zero (ADC counts) the conversion uses: measured with
+        the PWM off at boot (fw_cal.h), the nominal ``adc_offset_counts`` until then
+        or when stepped in physical units."""
+        return [float(self._L.fw_current_zero_counts(self.handle, k)) for k in range(3)]
+
     def state(self) -> int:
         return int(self._L.fw_state(self.handle))
 

@@ -351,6 +351,7 @@ def _declare(lib: C.CDLL) -> None:
         "sim_step_count": (C.c_uint64, [V]),
         "sim_sched_value": (_d, [V, C.c_int]),
         "sim_run": (C.c_int64, [V, C.c_uint64, _u32, P(SimRecord)]),
+        "sim_boot": (C.c_int64, [V, C.c_uint64]),
         "sim_plant_advance": (None, [V, P(_d), C.c_int, _d, _u32]),
         "sim_sample": (None, [V, P(FwInputs), P(FwAdcInputs)]),
         "sim_force_N": (_d, [V]),
@@ -389,6 +390,7 @@ def _declare(lib: C.CDLL) -> None:
         "fw_raise_fault": (None, [V, C.c_int]),
         "fw_step": (None, [V, P(FwInputs), P(FwOutputs)]),
         "fw_step_adc": (None, [V, P(FwAdcInputs), P(FwOutputs)]),
+        "fw_current_zero_counts": (C.c_float, [V, C.c_uint]),
         "fw_get_snapshot": (None, [V, P(FwSnapshot)]),
         "fw_ctrl_sizeof": (C.c_size_t, []),
         # the whole drive application behind the simulator's port (sim_port.c)

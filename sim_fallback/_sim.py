@@ -172,6 +172,7 @@ class Sim:
         self._port = _lib.SimController()
         self._L.sim_fw_port(self.firmware.handle, C.byref(self._port))
         self._L.sim_set_controller(self._h, C.byref(self._port))
+        self.boot()
         self.set_state(x0_m=x0_m)
         self._keep: list[np.ndarray] = []
 
@@ -194,6 +195,19 @@ class Sim:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def boot(self) -> int:
+        """The drive's boot before t = 0 (the controller in place): the firmware
+        measures its current zeros on the plant's ADC samples with the PWM off
+        (CiA 402 NOT READY TO SWITCH ON, fw_cal.h) while neither the plant nor the
+        time advance. Returns the periods it took (``boot_steps``); a drive that
+        does not leave NOT READY TO SWITCH ON within 1 s raises RuntimeError."""
+        n = int(self._L.sim_boot(self._h, int(round(1.0 / self.dt_s))))
+        if n < 0:
+            raise RuntimeError("sim_boot: the drive did not leave NOT READY TO SWITCH ON "
+                               "within 1 s with the PWM off")
+        self.boot_steps = n
+        return n
 
     # ---- configuration ---------------------------------------------------
     def set_state(self, x0_m: float = 0.0, v0_mps: float = 0.0, i_d_A: float = 0.0,

@@ -96,6 +96,8 @@ static const layout_row_t k_rows[] = {
     ROW(fw_config_t, protection.mon_bemf_min_mps),
     ROW(fw_config_t, protection.i_sum_max_A),
     ROW(fw_config_t, protection.i_offset_max_A),
+    ROW(fw_config_t, protection.mon_i_zero_max_A),
+    ROW(fw_config_t, protection.mon_i_zero_spread_A),
     ROW(fw_config_t, protection.start_speed_max_mps),
     ROW(fw_config_t, protection.mon_bemf_min_V),
     ROW(fw_config_t, protection.mon_bemf_i_tol),

@@ -539,6 +539,41 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
   return (int64_t)n_rec;
 }
 
+int64_t sim_boot(sim_t *s, uint64_t max_steps) {
+  if (!s || (!s->ctrl.step && !s->ctrl.step_adc) || !s->ctrl.snapshot) return -1;
+  fw_inputs_t in;
+  fw_adc_inputs_t adc;
+  fw_outputs_t out;
+  fw_snapshot_t snap;
+  memset(&snap, 0, sizeof snap);
+  const int adc_mode = s->ctrl.step_adc && (s->use_adc || !s->ctrl.step);
+  const uint32_t bg_every = s->ctrl.background_every > 0u ? s->ctrl.background_every : 1u;
+  for (uint64_t n = 0; n < max_steps; ++n) {
+    s->ctrl.snapshot(s->ctrl.ctx, &snap);
+    if (snap.cia402_state != (uint8_t)FW_CIA402_NOT_READY_TO_SWITCH_ON) return (int64_t)n;
+    if (s->ctrl.background) {
+      if (s->bg_in == 0u) {
+        s->ctrl.background(s->ctrl.ctx);
+        s->bg_in = bg_every - 1u;
+      } else {
+        s->bg_in--;
+      }
+    }
+    if (adc_mode)
+      sample_adc(s, &adc);
+    else
+      sim_sample(s, &in, &adc);
+    memset(&out, 0, sizeof out);
+    if (adc_mode)
+      s->ctrl.step_adc(s->ctrl.ctx, &adc, &out);
+    else
+      s->ctrl.step(s->ctrl.ctx, &in, &out);
+    if (out.pwm_enable) return -1;
+  }
+  s->ctrl.snapshot(s->ctrl.ctx, &snap);
+  return snap.cia402_state != (uint8_t)FW_CIA402_NOT_READY_TO_SWITCH_ON ? (int64_t)max_steps : -1;
+}
+
 /* ---- fixed-duty controller (test equipment) --------------------------- */
 
 void sim_ctrl_const_step(void *ctx, const fw_inputs_t *in, fw_outputs_t *out) {
