@@ -238,11 +238,11 @@ CASES: list[FaultCase] = [
     FaultCase("sensor_offset_a_1.2A_learnt",
               "phase-a offset 1.2 A, present at power-up: the boot's zero calibration "
               "(PWM off) finds it beyond mon_i_zero_max_A (1 A)",
-              plant={"adc_offset_counts": [_counts(1.2), 0.0, 0.0]}, idle_s=0.15,
+              plant={"adc_offset_counts": [_counts(1.2), 0.0, 0.0]},
               expect="fault", fault=0x5211),
     FaultCase("sensor_offset_a_0.6A_learnt",
               "phase-a offset 0.6 A, present at power-up: measured at boot and compensated",
-              plant={"adc_offset_counts": [_counts(0.6), 0.0, 0.0]}, idle_s=0.15,
+              plant={"adc_offset_counts": [_counts(0.6), 0.0, 0.0]},
               expect="track"),
     FaultCase("sensor_zero_noisy",
               "current ADCs noisy (30 counts RMS, 0.37 A) from power-up: the boot's zero "
