@@ -62,7 +62,7 @@ def test_measured_zeros_over_canopen_equal_the_boards_offsets():
         zeros = [node.sdo[0x2056][s].raw for s in (5, 6, 7)]
         # the plant's noise (1 count RMS) and the quantisation (1/12 count^2) over N
         tol = 4.0 * math.sqrt(1.0 + 1.0 / 12.0) / math.sqrt(N_CAL)  # 0.13 counts
-        for z, o in zip(zeros, offs):
+        for z, o in zip(zeros, offs, strict=True):
             assert z - nominal == pytest.approx(o, abs=tol), zeros
         # and the drive enables on it
         node.nmt.state = "OPERATIONAL"
