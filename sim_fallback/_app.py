@@ -112,7 +112,9 @@ class DriveBridge:
             self._port = port
             self.sim._L.sim_set_controller(self.sim._h, C.byref(port))
             self._L.sim_app_background_now(self._drive)  # the boot-up message
-            self.sim.boot()  # the drive's current-zero calibration, before t = 0
+            # the drive's current-zero calibration; the simulator's time runs with the
+            # drive's clock (its period count is the time base of telemetry and EMCY)
+            self.sim.boot(advance_time=True)
         else:
             self._L = _lib.comm_lib()
             cfg = FwConfig()

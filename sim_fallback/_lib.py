@@ -351,7 +351,7 @@ def _declare(lib: C.CDLL) -> None:
         "sim_step_count": (C.c_uint64, [V]),
         "sim_sched_value": (_d, [V, C.c_int]),
         "sim_run": (C.c_int64, [V, C.c_uint64, _u32, P(SimRecord)]),
-        "sim_boot": (C.c_int64, [V, C.c_uint64]),
+        "sim_boot": (C.c_int64, [V, C.c_uint64, C.c_int]),
         "sim_plant_advance": (None, [V, P(_d), C.c_int, _d, _u32]),
         "sim_sample": (None, [V, P(FwInputs), P(FwAdcInputs)]),
         "sim_force_N": (_d, [V]),

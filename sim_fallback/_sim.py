@@ -196,13 +196,15 @@ class Sim:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def boot(self) -> int:
-        """The drive's boot before t = 0 (the controller in place): the firmware
-        measures its current zeros on the plant's ADC samples with the PWM off
-        (CiA 402 NOT READY TO SWITCH ON, fw_cal.h) while neither the plant nor the
-        time advance. Returns the periods it took (``boot_steps``); a drive that
-        does not leave NOT READY TO SWITCH ON within 1 s raises RuntimeError."""
-        n = int(self._L.sim_boot(self._h, int(round(1.0 / self.dt_s))))
+    def boot(self, advance_time: bool = False) -> int:
+        """The drive's boot (the controller in place): the firmware measures its
+        current zeros on the plant's ADC samples with the PWM off (CiA 402 NOT READY
+        TO SWITCH ON, fw_cal.h). ``advance_time`` False: before t = 0, neither the
+        plant nor the time advance (the core alone: scenarios start at the enable);
+        True: the simulator's time runs with the drive's clock (the drive
+        application). Returns the periods it took (``boot_steps``); a drive that does
+        not leave NOT READY TO SWITCH ON within 1 s raises RuntimeError."""
+        n = int(self._L.sim_boot(self._h, int(round(1.0 / self.dt_s)), int(advance_time)))
         if n < 0:
             raise RuntimeError("sim_boot: the drive did not leave NOT READY TO SWITCH ON "
                                "within 1 s with the PWM off")

@@ -272,15 +272,17 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation,
                 sim_record_t *rec);
 
 /**
- * The drive's boot before t = 0: the controller (and its background) runs on the
- * plant's samples, the power stage off and the plant at rest, until its snapshot
- * leaves CiA 402 NOT READY TO SWITCH ON (the firmware's current-zero calibration,
- * fw_cal.h) or max_steps. Neither the plant nor the time advance (nothing moves
- * with the PWM off and the mover at rest); the ADC noise does. Returns the periods
+ * The drive's boot: the controller (and its background) runs on the plant's
+ * samples, the power stage off, until its snapshot leaves CiA 402 NOT READY TO
+ * SWITCH ON (the firmware's current-zero calibration, fw_cal.h) or max_steps.
+ * advance_time 0: before t = 0, neither the plant nor the time advance (the core
+ * alone, whose scenarios start at the enable; the ADC noise draws do); 1: as
+ * sim_run, the plant and the time advance (a drive with its own clock, the drive
+ * application, whose period count must stay the simulator's). Returns the periods
  * it took, or -1 on bad arguments, a controller that switched the PWM on, or one
  * still not ready after max_steps.
  */
-int64_t sim_boot(sim_t *s, uint64_t max_steps);
+int64_t sim_boot(sim_t *s, uint64_t max_steps, int advance_time);
 
 /* ---- plant alone (for tests and bring-your-own-controller) ------------ */
 

@@ -539,7 +539,7 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
   return (int64_t)n_rec;
 }
 
-int64_t sim_boot(sim_t *s, uint64_t max_steps) {
+int64_t sim_boot(sim_t *s, uint64_t max_steps, int advance_time) {
   if (!s || (!s->ctrl.step && !s->ctrl.step_adc) || !s->ctrl.snapshot) return -1;
   fw_inputs_t in;
   fw_adc_inputs_t adc;
@@ -563,12 +563,20 @@ int64_t sim_boot(sim_t *s, uint64_t max_steps) {
       sample_adc(s, &adc);
     else
       sim_sample(s, &in, &adc);
+    if (advance_time) { /* the plant over the period, as sim_run (the PWM off) */
+      sim_noise_on_switch(s, s->pwm_on);
+      sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
+    }
     memset(&out, 0, sizeof out);
     if (adc_mode)
       s->ctrl.step_adc(s->ctrl.ctx, &adc, &out);
     else
       s->ctrl.step(s->ctrl.ctx, &in, &out);
     if (out.pwm_enable) return -1;
+    if (advance_time) {
+      s->k++;
+      s->t_s = (double)s->k * s->dt_s;
+    }
   }
   s->ctrl.snapshot(s->ctrl.ctx, &snap);
   return snap.cia402_state != (uint8_t)FW_CIA402_NOT_READY_TO_SWITCH_ON ? (int64_t)max_steps : -1;
