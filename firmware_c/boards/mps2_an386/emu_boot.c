@@ -22,24 +22,24 @@ _Static_assert(offsetof(sim_plant_params_t, ref_fault) == 280u, "sim_plant_param
 _Static_assert(offsetof(sim_plant_params_t, ref_fault) + 2u * sizeof(uint32_t) ==
                    sizeof(sim_plant_params_t),
                "sim_plant_params_t: ref_fault and one 32-bit field end it");
-_Static_assert(sizeof(fw_config_t) == 400u, "fw_config_t layout changed");
+_Static_assert(sizeof(fw_config_t) == 404u, "fw_config_t layout changed");
 _Static_assert(offsetof(fw_config_t, sensing.f_pwm_Hz) == 36u, "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, protection) == 208u, "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, protection.start_speed_max_mps) == 312u,
+_Static_assert(offsetof(fw_config_t, protection) == 212u, "fw_config_t layout changed");
+_Static_assert(offsetof(fw_config_t, protection.start_speed_max_mps) == 316u,
                "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, protection.mon_bemf_min_V) == 316u,
+_Static_assert(offsetof(fw_config_t, protection.mon_bemf_min_V) == 320u,
                "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, compensation) == 324u, "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, compensation.xsat_off6_rad) == 360u,
+_Static_assert(offsetof(fw_config_t, compensation) == 328u, "fw_config_t layout changed");
+_Static_assert(offsetof(fw_config_t, compensation.xsat_off6_rad) == 364u,
                "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, compensation.sogi_bumpless) == 364u,
+_Static_assert(offsetof(fw_config_t, compensation.sogi_bumpless) == 368u,
                "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, compensation.rip_b4_rad) == 380u,
+_Static_assert(offsetof(fw_config_t, compensation.rip_b4_rad) == 384u,
                "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, compensation.rip6_b1_N_per_A) == 396u,
+_Static_assert(offsetof(fw_config_t, compensation.rip6_b1_N_per_A) == 400u,
                "fw_config_t layout changed");
 _Static_assert(EMU_BOOT_HEADER % 8u == 0u, "the plant's doubles must stay 8-byte aligned");
-_Static_assert(EMU_BOOT_TOTAL == 864u, "boot block length");
+_Static_assert(EMU_BOOT_TOTAL == 868u, "boot block length");
 
 static uint32_t le32(const uint8_t *p) {
   return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);

@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 322u
-#define CO_OD_RAM_SIZE 1100u
+#define CO_OD_COUNT 323u
+#define CO_OD_RAM_SIZE 1104u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -230,108 +230,109 @@
 #define CO_OD_2053_04 217u /* Back-EMF observer: Handover up */
 #define CO_OD_2053_05 218u /* Back-EMF observer: Handover down */
 #define CO_OD_2053_06 219u /* Back-EMF observer: Saliency cross-coupling */
-#define CO_OD_2054_00 220u /* Machine and loop bandwidths: Highest sub-index supported */
-#define CO_OD_2054_01 221u /* Machine and loop bandwidths: Mover mass */
-#define CO_OD_2054_02 222u /* Machine and loop bandwidths: Viscous friction */
-#define CO_OD_2054_03 223u /* Machine and loop bandwidths: Coulomb friction */
-#define CO_OD_2054_04 224u /* Machine and loop bandwidths: Current loop bandwidth */
-#define CO_OD_2054_05 225u /* Machine and loop bandwidths: Speed loop bandwidth */
-#define CO_OD_2054_06 226u /* Machine and loop bandwidths: Gains automatic */
-#define CO_OD_2055_00 227u /* Start-up and estimate supervision: Highest sub-index supported */
-#define CO_OD_2055_01 228u /* Start-up and estimate supervision: Alignment time */
-#define CO_OD_2055_02 229u /* Start-up and estimate supervision: Polarity pulse voltage */
-#define CO_OD_2055_03 230u /* Start-up and estimate supervision: Polarity pulse samples */
-#define CO_OD_2055_04 231u /* Start-up and estimate supervision: Polarity pulse pairs */
-#define CO_OD_2055_05 232u /* Start-up and estimate supervision: Polarity margin */
-#define CO_OD_2055_06 233u /* Start-up and estimate supervision: HF amplitude minimum ratio */
-#define CO_OD_2055_07 234u /* Start-up and estimate supervision: PLL error limit */
-#define CO_OD_2055_08 235u /* Start-up and estimate supervision: PLL error time */
-#define CO_OD_2056_00 236u /* Board sensing: Highest sub-index supported */
-#define CO_OD_2056_01 237u /* Board sensing: Current per count */
-#define CO_OD_2056_02 238u /* Board sensing: Current zero */
-#define CO_OD_2056_03 239u /* Board sensing: DC link volts per count */
-#define CO_OD_2056_04 240u /* Board sensing: Full-scale count */
-#define CO_OD_2057_00 241u /* Compensation: Highest sub-index supported */
-#define CO_OD_2057_01 242u /* Compensation: Dead time */
-#define CO_OD_2057_02 243u /* Compensation: Dead-time sign band */
-#define CO_OD_2057_03 244u /* Compensation: Device drop */
-#define CO_OD_2057_04 245u /* Compensation: Cross-saturation map step */
-#define CO_OD_2057_05 246u /* Compensation: Cross-saturation offset 1 */
-#define CO_OD_2057_06 247u /* Compensation: Cross-saturation offset 2 */
-#define CO_OD_2057_07 248u /* Compensation: Cross-saturation offset 3 */
-#define CO_OD_2057_08 249u /* Compensation: Cross-saturation offset 4 */
-#define CO_OD_2057_09 250u /* Compensation: Cross-saturation offset 5 */
-#define CO_OD_2057_0A 251u /* Compensation: Cross-saturation offset 6 */
-#define CO_OD_2057_0B 252u /* Compensation: Bumpless SOGI gain */
-#define CO_OD_2057_0C 253u /* Compensation: Position ripple cos 2 */
-#define CO_OD_2057_0D 254u /* Compensation: Position ripple sin 2 */
-#define CO_OD_2057_0E 255u /* Compensation: Position ripple cos 4 */
-#define CO_OD_2057_0F 256u /* Compensation: Position ripple sin 4 */
-#define CO_OD_2057_10 257u /* Compensation: Thrust ripple cos 6 */
-#define CO_OD_2057_11 258u /* Compensation: Thrust ripple sin 6 */
-#define CO_OD_2057_12 259u /* Compensation: Thrust ripple cos 6 per A */
-#define CO_OD_2057_13 260u /* Compensation: Thrust ripple sin 6 per A */
-#define CO_OD_2060_00 261u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 262u /* Telemetry: Decimation */
-#define CO_OD_2060_02 263u /* Telemetry: Signal count */
-#define CO_OD_2060_03 264u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 265u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 266u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 267u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 268u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 269u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 270u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 271u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 272u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 273u /* Trace: Command */
-#define CO_OD_2070_02 274u /* Trace: State */
-#define CO_OD_2070_03 275u /* Trace: Trigger signal */
-#define CO_OD_2070_04 276u /* Trace: Trigger level */
-#define CO_OD_2070_05 277u /* Trace: Trigger edge */
-#define CO_OD_2070_06 278u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 279u /* Trace: Signal count */
-#define CO_OD_2070_08 280u /* Trace: Signal 1 */
-#define CO_OD_2070_09 281u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 282u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 283u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 284u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 285u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 286u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 287u /* Trace: Signal 8 */
-#define CO_OD_2080_00 288u /* Identification: Highest sub-index supported */
-#define CO_OD_2080_01 289u /* Identification: d-axis current reference */
-#define CO_OD_2080_02 290u /* Identification: Measured smaller inductance */
-#define CO_OD_2080_03 291u /* Identification: Measured larger inductance */
-#define CO_OD_2090_00 292u /* Board: Highest sub-index supported */
-#define CO_OD_2090_01 293u /* Board: Drive kind */
-#define CO_OD_2090_02 294u /* Board: Board name */
-#define CO_OD_2090_03 295u /* Board: Drive time */
-#define CO_OD_2091_00 296u /* Reference sensor: Highest sub-index supported */
-#define CO_OD_2091_01 297u /* Reference sensor: Status */
-#define CO_OD_2091_02 298u /* Reference sensor: Resolution */
-#define CO_OD_2091_03 299u /* Reference sensor: Electrical zero */
-#define CO_OD_2091_04 300u /* Reference sensor: Count */
-#define CO_OD_2091_05 301u /* Reference sensor: Position */
-#define CO_OD_2091_06 302u /* Reference sensor: Faults seen */
-#define CO_OD_603F_00 303u /* Error code: Error code */
-#define CO_OD_6040_00 304u /* Controlword: Controlword */
-#define CO_OD_6041_00 305u /* Statusword: Statusword */
-#define CO_OD_605A_00 306u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 307u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 308u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 309u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 310u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 311u /* Following error window: Following error window */
-#define CO_OD_6066_00 312u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 313u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 314u /* Target torque: Target torque */
-#define CO_OD_6077_00 315u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 316u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 317u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 318u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 319u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 320u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 321u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2053_07 220u /* Back-EMF observer: Observer bandwidth on back-EMF */
+#define CO_OD_2054_00 221u /* Machine and loop bandwidths: Highest sub-index supported */
+#define CO_OD_2054_01 222u /* Machine and loop bandwidths: Mover mass */
+#define CO_OD_2054_02 223u /* Machine and loop bandwidths: Viscous friction */
+#define CO_OD_2054_03 224u /* Machine and loop bandwidths: Coulomb friction */
+#define CO_OD_2054_04 225u /* Machine and loop bandwidths: Current loop bandwidth */
+#define CO_OD_2054_05 226u /* Machine and loop bandwidths: Speed loop bandwidth */
+#define CO_OD_2054_06 227u /* Machine and loop bandwidths: Gains automatic */
+#define CO_OD_2055_00 228u /* Start-up and estimate supervision: Highest sub-index supported */
+#define CO_OD_2055_01 229u /* Start-up and estimate supervision: Alignment time */
+#define CO_OD_2055_02 230u /* Start-up and estimate supervision: Polarity pulse voltage */
+#define CO_OD_2055_03 231u /* Start-up and estimate supervision: Polarity pulse samples */
+#define CO_OD_2055_04 232u /* Start-up and estimate supervision: Polarity pulse pairs */
+#define CO_OD_2055_05 233u /* Start-up and estimate supervision: Polarity margin */
+#define CO_OD_2055_06 234u /* Start-up and estimate supervision: HF amplitude minimum ratio */
+#define CO_OD_2055_07 235u /* Start-up and estimate supervision: PLL error limit */
+#define CO_OD_2055_08 236u /* Start-up and estimate supervision: PLL error time */
+#define CO_OD_2056_00 237u /* Board sensing: Highest sub-index supported */
+#define CO_OD_2056_01 238u /* Board sensing: Current per count */
+#define CO_OD_2056_02 239u /* Board sensing: Current zero */
+#define CO_OD_2056_03 240u /* Board sensing: DC link volts per count */
+#define CO_OD_2056_04 241u /* Board sensing: Full-scale count */
+#define CO_OD_2057_00 242u /* Compensation: Highest sub-index supported */
+#define CO_OD_2057_01 243u /* Compensation: Dead time */
+#define CO_OD_2057_02 244u /* Compensation: Dead-time sign band */
+#define CO_OD_2057_03 245u /* Compensation: Device drop */
+#define CO_OD_2057_04 246u /* Compensation: Cross-saturation map step */
+#define CO_OD_2057_05 247u /* Compensation: Cross-saturation offset 1 */
+#define CO_OD_2057_06 248u /* Compensation: Cross-saturation offset 2 */
+#define CO_OD_2057_07 249u /* Compensation: Cross-saturation offset 3 */
+#define CO_OD_2057_08 250u /* Compensation: Cross-saturation offset 4 */
+#define CO_OD_2057_09 251u /* Compensation: Cross-saturation offset 5 */
+#define CO_OD_2057_0A 252u /* Compensation: Cross-saturation offset 6 */
+#define CO_OD_2057_0B 253u /* Compensation: Bumpless SOGI gain */
+#define CO_OD_2057_0C 254u /* Compensation: Position ripple cos 2 */
+#define CO_OD_2057_0D 255u /* Compensation: Position ripple sin 2 */
+#define CO_OD_2057_0E 256u /* Compensation: Position ripple cos 4 */
+#define CO_OD_2057_0F 257u /* Compensation: Position ripple sin 4 */
+#define CO_OD_2057_10 258u /* Compensation: Thrust ripple cos 6 */
+#define CO_OD_2057_11 259u /* Compensation: Thrust ripple sin 6 */
+#define CO_OD_2057_12 260u /* Compensation: Thrust ripple cos 6 per A */
+#define CO_OD_2057_13 261u /* Compensation: Thrust ripple sin 6 per A */
+#define CO_OD_2060_00 262u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 263u /* Telemetry: Decimation */
+#define CO_OD_2060_02 264u /* Telemetry: Signal count */
+#define CO_OD_2060_03 265u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 266u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 267u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 268u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 269u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 270u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 271u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 272u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 273u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 274u /* Trace: Command */
+#define CO_OD_2070_02 275u /* Trace: State */
+#define CO_OD_2070_03 276u /* Trace: Trigger signal */
+#define CO_OD_2070_04 277u /* Trace: Trigger level */
+#define CO_OD_2070_05 278u /* Trace: Trigger edge */
+#define CO_OD_2070_06 279u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 280u /* Trace: Signal count */
+#define CO_OD_2070_08 281u /* Trace: Signal 1 */
+#define CO_OD_2070_09 282u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 283u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 284u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 285u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 286u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 287u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 288u /* Trace: Signal 8 */
+#define CO_OD_2080_00 289u /* Identification: Highest sub-index supported */
+#define CO_OD_2080_01 290u /* Identification: d-axis current reference */
+#define CO_OD_2080_02 291u /* Identification: Measured smaller inductance */
+#define CO_OD_2080_03 292u /* Identification: Measured larger inductance */
+#define CO_OD_2090_00 293u /* Board: Highest sub-index supported */
+#define CO_OD_2090_01 294u /* Board: Drive kind */
+#define CO_OD_2090_02 295u /* Board: Board name */
+#define CO_OD_2090_03 296u /* Board: Drive time */
+#define CO_OD_2091_00 297u /* Reference sensor: Highest sub-index supported */
+#define CO_OD_2091_01 298u /* Reference sensor: Status */
+#define CO_OD_2091_02 299u /* Reference sensor: Resolution */
+#define CO_OD_2091_03 300u /* Reference sensor: Electrical zero */
+#define CO_OD_2091_04 301u /* Reference sensor: Count */
+#define CO_OD_2091_05 302u /* Reference sensor: Position */
+#define CO_OD_2091_06 303u /* Reference sensor: Faults seen */
+#define CO_OD_603F_00 304u /* Error code: Error code */
+#define CO_OD_6040_00 305u /* Controlword: Controlword */
+#define CO_OD_6041_00 306u /* Statusword: Statusword */
+#define CO_OD_605A_00 307u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 308u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 309u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 310u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 311u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 312u /* Following error window: Following error window */
+#define CO_OD_6066_00 313u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 314u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 315u /* Target torque: Target torque */
+#define CO_OD_6077_00 316u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 317u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 318u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 319u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 320u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 321u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 322u /* Supported drive modes: Supported drive modes */
 
 /** Where each entry's value lives in the OD RAM (compile-time handles for the
  *  application's per-period access, co_node.h CO_NODE_PUT/CO_NODE_GET):
@@ -778,209 +779,211 @@
 #define CO_OD_LEN_2053_05 4u
 #define CO_OD_OFF_2053_06 795u
 #define CO_OD_LEN_2053_06 4u
-#define CO_OD_OFF_2054_00 799u
+#define CO_OD_OFF_2053_07 799u
+#define CO_OD_LEN_2053_07 4u
+#define CO_OD_OFF_2054_00 803u
 #define CO_OD_LEN_2054_00 1u
-#define CO_OD_OFF_2054_01 800u
+#define CO_OD_OFF_2054_01 804u
 #define CO_OD_LEN_2054_01 4u
-#define CO_OD_OFF_2054_02 804u
+#define CO_OD_OFF_2054_02 808u
 #define CO_OD_LEN_2054_02 4u
-#define CO_OD_OFF_2054_03 808u
+#define CO_OD_OFF_2054_03 812u
 #define CO_OD_LEN_2054_03 4u
-#define CO_OD_OFF_2054_04 812u
+#define CO_OD_OFF_2054_04 816u
 #define CO_OD_LEN_2054_04 4u
-#define CO_OD_OFF_2054_05 816u
+#define CO_OD_OFF_2054_05 820u
 #define CO_OD_LEN_2054_05 4u
-#define CO_OD_OFF_2054_06 820u
+#define CO_OD_OFF_2054_06 824u
 #define CO_OD_LEN_2054_06 4u
-#define CO_OD_OFF_2055_00 824u
+#define CO_OD_OFF_2055_00 828u
 #define CO_OD_LEN_2055_00 1u
-#define CO_OD_OFF_2055_01 825u
+#define CO_OD_OFF_2055_01 829u
 #define CO_OD_LEN_2055_01 4u
-#define CO_OD_OFF_2055_02 829u
+#define CO_OD_OFF_2055_02 833u
 #define CO_OD_LEN_2055_02 4u
-#define CO_OD_OFF_2055_03 833u
+#define CO_OD_OFF_2055_03 837u
 #define CO_OD_LEN_2055_03 4u
-#define CO_OD_OFF_2055_04 837u
+#define CO_OD_OFF_2055_04 841u
 #define CO_OD_LEN_2055_04 4u
-#define CO_OD_OFF_2055_05 841u
+#define CO_OD_OFF_2055_05 845u
 #define CO_OD_LEN_2055_05 4u
-#define CO_OD_OFF_2055_06 845u
+#define CO_OD_OFF_2055_06 849u
 #define CO_OD_LEN_2055_06 4u
-#define CO_OD_OFF_2055_07 849u
+#define CO_OD_OFF_2055_07 853u
 #define CO_OD_LEN_2055_07 4u
-#define CO_OD_OFF_2055_08 853u
+#define CO_OD_OFF_2055_08 857u
 #define CO_OD_LEN_2055_08 4u
-#define CO_OD_OFF_2056_00 857u
+#define CO_OD_OFF_2056_00 861u
 #define CO_OD_LEN_2056_00 1u
-#define CO_OD_OFF_2056_01 858u
+#define CO_OD_OFF_2056_01 862u
 #define CO_OD_LEN_2056_01 4u
-#define CO_OD_OFF_2056_02 862u
+#define CO_OD_OFF_2056_02 866u
 #define CO_OD_LEN_2056_02 4u
-#define CO_OD_OFF_2056_03 866u
+#define CO_OD_OFF_2056_03 870u
 #define CO_OD_LEN_2056_03 4u
-#define CO_OD_OFF_2056_04 870u
+#define CO_OD_OFF_2056_04 874u
 #define CO_OD_LEN_2056_04 4u
-#define CO_OD_OFF_2057_00 874u
+#define CO_OD_OFF_2057_00 878u
 #define CO_OD_LEN_2057_00 1u
-#define CO_OD_OFF_2057_01 875u
+#define CO_OD_OFF_2057_01 879u
 #define CO_OD_LEN_2057_01 4u
-#define CO_OD_OFF_2057_02 879u
+#define CO_OD_OFF_2057_02 883u
 #define CO_OD_LEN_2057_02 4u
-#define CO_OD_OFF_2057_03 883u
+#define CO_OD_OFF_2057_03 887u
 #define CO_OD_LEN_2057_03 4u
-#define CO_OD_OFF_2057_04 887u
+#define CO_OD_OFF_2057_04 891u
 #define CO_OD_LEN_2057_04 4u
-#define CO_OD_OFF_2057_05 891u
+#define CO_OD_OFF_2057_05 895u
 #define CO_OD_LEN_2057_05 4u
-#define CO_OD_OFF_2057_06 895u
+#define CO_OD_OFF_2057_06 899u
 #define CO_OD_LEN_2057_06 4u
-#define CO_OD_OFF_2057_07 899u
+#define CO_OD_OFF_2057_07 903u
 #define CO_OD_LEN_2057_07 4u
-#define CO_OD_OFF_2057_08 903u
+#define CO_OD_OFF_2057_08 907u
 #define CO_OD_LEN_2057_08 4u
-#define CO_OD_OFF_2057_09 907u
+#define CO_OD_OFF_2057_09 911u
 #define CO_OD_LEN_2057_09 4u
-#define CO_OD_OFF_2057_0A 911u
+#define CO_OD_OFF_2057_0A 915u
 #define CO_OD_LEN_2057_0A 4u
-#define CO_OD_OFF_2057_0B 915u
+#define CO_OD_OFF_2057_0B 919u
 #define CO_OD_LEN_2057_0B 4u
-#define CO_OD_OFF_2057_0C 919u
+#define CO_OD_OFF_2057_0C 923u
 #define CO_OD_LEN_2057_0C 4u
-#define CO_OD_OFF_2057_0D 923u
+#define CO_OD_OFF_2057_0D 927u
 #define CO_OD_LEN_2057_0D 4u
-#define CO_OD_OFF_2057_0E 927u
+#define CO_OD_OFF_2057_0E 931u
 #define CO_OD_LEN_2057_0E 4u
-#define CO_OD_OFF_2057_0F 931u
+#define CO_OD_OFF_2057_0F 935u
 #define CO_OD_LEN_2057_0F 4u
-#define CO_OD_OFF_2057_10 935u
+#define CO_OD_OFF_2057_10 939u
 #define CO_OD_LEN_2057_10 4u
-#define CO_OD_OFF_2057_11 939u
+#define CO_OD_OFF_2057_11 943u
 #define CO_OD_LEN_2057_11 4u
-#define CO_OD_OFF_2057_12 943u
+#define CO_OD_OFF_2057_12 947u
 #define CO_OD_LEN_2057_12 4u
-#define CO_OD_OFF_2057_13 947u
+#define CO_OD_OFF_2057_13 951u
 #define CO_OD_LEN_2057_13 4u
-#define CO_OD_OFF_2060_00 951u
+#define CO_OD_OFF_2060_00 955u
 #define CO_OD_LEN_2060_00 1u
-#define CO_OD_OFF_2060_01 952u
+#define CO_OD_OFF_2060_01 956u
 #define CO_OD_LEN_2060_01 2u
-#define CO_OD_OFF_2060_02 954u
+#define CO_OD_OFF_2060_02 958u
 #define CO_OD_LEN_2060_02 1u
-#define CO_OD_OFF_2060_03 955u
+#define CO_OD_OFF_2060_03 959u
 #define CO_OD_LEN_2060_03 1u
-#define CO_OD_OFF_2060_04 956u
+#define CO_OD_OFF_2060_04 960u
 #define CO_OD_LEN_2060_04 1u
-#define CO_OD_OFF_2060_05 957u
+#define CO_OD_OFF_2060_05 961u
 #define CO_OD_LEN_2060_05 1u
-#define CO_OD_OFF_2060_06 958u
+#define CO_OD_OFF_2060_06 962u
 #define CO_OD_LEN_2060_06 1u
-#define CO_OD_OFF_2060_07 959u
+#define CO_OD_OFF_2060_07 963u
 #define CO_OD_LEN_2060_07 1u
-#define CO_OD_OFF_2060_08 960u
+#define CO_OD_OFF_2060_08 964u
 #define CO_OD_LEN_2060_08 1u
-#define CO_OD_OFF_2060_09 961u
+#define CO_OD_OFF_2060_09 965u
 #define CO_OD_LEN_2060_09 1u
-#define CO_OD_OFF_2060_0A 962u
+#define CO_OD_OFF_2060_0A 966u
 #define CO_OD_LEN_2060_0A 1u
-#define CO_OD_OFF_2070_00 963u
+#define CO_OD_OFF_2070_00 967u
 #define CO_OD_LEN_2070_00 1u
-#define CO_OD_OFF_2070_01 964u
+#define CO_OD_OFF_2070_01 968u
 #define CO_OD_LEN_2070_01 1u
-#define CO_OD_OFF_2070_02 965u
+#define CO_OD_OFF_2070_02 969u
 #define CO_OD_LEN_2070_02 1u
-#define CO_OD_OFF_2070_03 966u
+#define CO_OD_OFF_2070_03 970u
 #define CO_OD_LEN_2070_03 1u
-#define CO_OD_OFF_2070_04 967u
+#define CO_OD_OFF_2070_04 971u
 #define CO_OD_LEN_2070_04 4u
-#define CO_OD_OFF_2070_05 971u
+#define CO_OD_OFF_2070_05 975u
 #define CO_OD_LEN_2070_05 1u
-#define CO_OD_OFF_2070_06 972u
+#define CO_OD_OFF_2070_06 976u
 #define CO_OD_LEN_2070_06 2u
-#define CO_OD_OFF_2070_07 974u
+#define CO_OD_OFF_2070_07 978u
 #define CO_OD_LEN_2070_07 1u
-#define CO_OD_OFF_2070_08 975u
+#define CO_OD_OFF_2070_08 979u
 #define CO_OD_LEN_2070_08 1u
-#define CO_OD_OFF_2070_09 976u
+#define CO_OD_OFF_2070_09 980u
 #define CO_OD_LEN_2070_09 1u
-#define CO_OD_OFF_2070_0A 977u
+#define CO_OD_OFF_2070_0A 981u
 #define CO_OD_LEN_2070_0A 1u
-#define CO_OD_OFF_2070_0B 978u
+#define CO_OD_OFF_2070_0B 982u
 #define CO_OD_LEN_2070_0B 1u
-#define CO_OD_OFF_2070_0C 979u
+#define CO_OD_OFF_2070_0C 983u
 #define CO_OD_LEN_2070_0C 1u
-#define CO_OD_OFF_2070_0D 980u
+#define CO_OD_OFF_2070_0D 984u
 #define CO_OD_LEN_2070_0D 1u
-#define CO_OD_OFF_2070_0E 981u
+#define CO_OD_OFF_2070_0E 985u
 #define CO_OD_LEN_2070_0E 1u
-#define CO_OD_OFF_2070_0F 982u
+#define CO_OD_OFF_2070_0F 986u
 #define CO_OD_LEN_2070_0F 1u
-#define CO_OD_OFF_2080_00 983u
+#define CO_OD_OFF_2080_00 987u
 #define CO_OD_LEN_2080_00 1u
-#define CO_OD_OFF_2080_01 984u
+#define CO_OD_OFF_2080_01 988u
 #define CO_OD_LEN_2080_01 4u
-#define CO_OD_OFF_2080_02 988u
+#define CO_OD_OFF_2080_02 992u
 #define CO_OD_LEN_2080_02 4u
-#define CO_OD_OFF_2080_03 992u
+#define CO_OD_OFF_2080_03 996u
 #define CO_OD_LEN_2080_03 4u
-#define CO_OD_OFF_2090_00 996u
+#define CO_OD_OFF_2090_00 1000u
 #define CO_OD_LEN_2090_00 1u
-#define CO_OD_OFF_2090_01 997u
+#define CO_OD_OFF_2090_01 1001u
 #define CO_OD_LEN_2090_01 1u
-#define CO_OD_OFF_2090_02 998u
+#define CO_OD_OFF_2090_02 1002u
 #define CO_OD_LEN_2090_02 24u
-#define CO_OD_OFF_2090_03 1023u
+#define CO_OD_OFF_2090_03 1027u
 #define CO_OD_LEN_2090_03 4u
-#define CO_OD_OFF_2091_00 1027u
+#define CO_OD_OFF_2091_00 1031u
 #define CO_OD_LEN_2091_00 1u
-#define CO_OD_OFF_2091_01 1028u
+#define CO_OD_OFF_2091_01 1032u
 #define CO_OD_LEN_2091_01 1u
-#define CO_OD_OFF_2091_02 1029u
+#define CO_OD_OFF_2091_02 1033u
 #define CO_OD_LEN_2091_02 4u
-#define CO_OD_OFF_2091_03 1033u
+#define CO_OD_OFF_2091_03 1037u
 #define CO_OD_LEN_2091_03 4u
-#define CO_OD_OFF_2091_04 1037u
+#define CO_OD_OFF_2091_04 1041u
 #define CO_OD_LEN_2091_04 4u
-#define CO_OD_OFF_2091_05 1041u
+#define CO_OD_OFF_2091_05 1045u
 #define CO_OD_LEN_2091_05 4u
-#define CO_OD_OFF_2091_06 1045u
+#define CO_OD_OFF_2091_06 1049u
 #define CO_OD_LEN_2091_06 4u
-#define CO_OD_OFF_603F_00 1049u
+#define CO_OD_OFF_603F_00 1053u
 #define CO_OD_LEN_603F_00 2u
-#define CO_OD_OFF_6040_00 1051u
+#define CO_OD_OFF_6040_00 1055u
 #define CO_OD_LEN_6040_00 2u
-#define CO_OD_OFF_6041_00 1053u
+#define CO_OD_OFF_6041_00 1057u
 #define CO_OD_LEN_6041_00 2u
-#define CO_OD_OFF_605A_00 1055u
+#define CO_OD_OFF_605A_00 1059u
 #define CO_OD_LEN_605A_00 2u
-#define CO_OD_OFF_605E_00 1057u
+#define CO_OD_OFF_605E_00 1061u
 #define CO_OD_LEN_605E_00 2u
-#define CO_OD_OFF_6060_00 1059u
+#define CO_OD_OFF_6060_00 1063u
 #define CO_OD_LEN_6060_00 1u
-#define CO_OD_OFF_6061_00 1060u
+#define CO_OD_OFF_6061_00 1064u
 #define CO_OD_LEN_6061_00 1u
-#define CO_OD_OFF_6064_00 1061u
+#define CO_OD_OFF_6064_00 1065u
 #define CO_OD_LEN_6064_00 4u
-#define CO_OD_OFF_6065_00 1065u
+#define CO_OD_OFF_6065_00 1069u
 #define CO_OD_LEN_6065_00 4u
-#define CO_OD_OFF_6066_00 1069u
+#define CO_OD_OFF_6066_00 1073u
 #define CO_OD_LEN_6066_00 2u
-#define CO_OD_OFF_606C_00 1071u
+#define CO_OD_OFF_606C_00 1075u
 #define CO_OD_LEN_606C_00 4u
-#define CO_OD_OFF_6071_00 1075u
+#define CO_OD_OFF_6071_00 1079u
 #define CO_OD_LEN_6071_00 2u
-#define CO_OD_OFF_6077_00 1077u
+#define CO_OD_OFF_6077_00 1081u
 #define CO_OD_LEN_6077_00 2u
-#define CO_OD_OFF_607D_00 1079u
+#define CO_OD_OFF_607D_00 1083u
 #define CO_OD_LEN_607D_00 1u
-#define CO_OD_OFF_607D_01 1080u
+#define CO_OD_OFF_607D_01 1084u
 #define CO_OD_LEN_607D_01 4u
-#define CO_OD_OFF_607D_02 1084u
+#define CO_OD_OFF_607D_02 1088u
 #define CO_OD_LEN_607D_02 4u
-#define CO_OD_OFF_6080_00 1088u
+#define CO_OD_OFF_6080_00 1092u
 #define CO_OD_LEN_6080_00 4u
-#define CO_OD_OFF_60FF_00 1092u
+#define CO_OD_OFF_60FF_00 1096u
 #define CO_OD_LEN_60FF_00 4u
-#define CO_OD_OFF_6502_00 1096u
+#define CO_OD_OFF_6502_00 1100u
 #define CO_OD_LEN_6502_00 4u
 
 /** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */
@@ -1205,6 +1208,7 @@
   X(2053_04) \
   X(2053_05) \
   X(2053_06) \
+  X(2053_07) \
   X(2054_00) \
   X(2054_01) \
   X(2054_02) \
@@ -1311,7 +1315,7 @@
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 107u
+#define CO_OD_CFG_COUNT 108u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 

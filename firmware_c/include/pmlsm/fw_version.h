@@ -10,11 +10,11 @@
 #include <stdint.h>
 
 #define FW_VERSION_MAJOR 0
-#define FW_VERSION_MINOR 10
-#define FW_VERSION_PATCH 1
+#define FW_VERSION_MINOR 11
+#define FW_VERSION_PATCH 0
 /** Firmware version packed as 0x00MMmmpp. */
 #define FW_VERSION_U32 \
   ((uint32_t)((FW_VERSION_MAJOR << 16) | (FW_VERSION_MINOR << 8) | FW_VERSION_PATCH))
-#define FW_VERSION_STRING "0.10.1"
+#define FW_VERSION_STRING "0.11.0"
 
 #endif /* PMLSM_FW_VERSION_H */
