@@ -77,7 +77,7 @@ _FW_NAMES = {"R_ohm", "L_d_H", "L_q_H", "psi_f_Wb", "pole_pitch_m", "pole_pairs"
              "dt_comp_drop_V", "xsat_di_A", *(f"xsat_off{k}_rad" for k in range(1, 7)),
              "sogi_bumpless", "rip_a2_rad", "rip_b2_rad", "rip_a4_rad", "rip_b4_rad",
              "rip6_a0_N", "rip6_b0_N", "rip6_a1_N_per_A", "rip6_b1_N_per_A",
-             "bemf_xc_comp", "mon_bemf_i_tol"}
+             "bemf_xc_comp", "mon_bemf_i_tol", "bemf_obs_bw"}
 
 
 def firmware_field_ranges() -> dict[str, tuple[float, float, str]]:
@@ -242,6 +242,7 @@ _SCHEMA: dict[tuple[str, str], tuple[bool, float | None, float | None, str, Any]
     **{("controller", f"rip6_{c}1_N_per_A"): (False, None, None, "N/A", None) for c in "ab"},
     ("controller", "bemf_xc_comp"): (False, None, None, "0/1", None),
     ("controller", "mon_bemf_i_tol"): (False, None, None, "", None),
+    ("controller", "bemf_obs_bw"): (False, None, None, "", None),
     # the rig's reference position sensor (a quadrature scale), modelled as the true
     # position quantised to its resolution; 0 = no sensor fitted
     ("reference_sensor", "resolution_m"): (False, 0.0, 0.01, "m (0: none)", 1e-6),
@@ -255,10 +256,11 @@ _CTRL_FW_FIELDS = ("i_max_A", "i_rated_A", "i_trip_A", "u_inj_V", "f_inj_Hz",
                    *(f"xsat_off{k}_rad" for k in range(1, 7)), "sogi_bumpless",
                    "rip_a2_rad", "rip_b2_rad", "rip_a4_rad", "rip_b4_rad",
                    "rip6_a0_N", "rip6_b0_N", "rip6_a1_N_per_A", "rip6_b1_N_per_A",
-                   "bemf_xc_comp", "mon_bemf_i_tol")
+                   "bemf_xc_comp", "mon_bemf_i_tol", "bemf_obs_bw")
 #: the compensation keys of ``[controller]`` (docs/method.md section 6); the back-EMF
-#: observer's saliency term and the witness's current tolerance are not compensations
-COMPENSATION_KEYS = _CTRL_FW_FIELDS[8:-2]
+#: observer's saliency term and bandwidth and the witness's current tolerance are not
+#: compensations
+COMPENSATION_KEYS = _CTRL_FW_FIELDS[8:-3]
 _TEXT_FIELDS = {("motor", "name"), ("motor", "description"), ("motor", "parameterization")}
 
 

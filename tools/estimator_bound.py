@@ -223,7 +223,12 @@ def render(res: dict) -> str:
             "(Bretagnolle-Huber). On realistic_linear the drive sits about ten times above "
             "the bound: there the error is",
             "the model's (the residual of the compensations: harmonics, saturation, dead "
-            "time), not the noise.",
+            "time), not the noise. At 0.3 m/s iron_core_linear runs on the back-EMF before "
+            "and after the step",
+            "(handover at 0.25 m/s; the step brakes it to about 0.02 m/s, through injection "
+            "and back): the bounds",
+            "use the injection alone, so they are a reference there, not a limit "
+            "(docs/bemf.md).",
             ""]
     return "\n".join(out)
 

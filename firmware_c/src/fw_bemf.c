@@ -8,7 +8,6 @@
 
 #include "pmlsm/fw_bemf.h"
 
-#define BEMF_TAU_S 0.001f      /* back-EMF low-pass (a DC signal in the estimated frame) */
 #define BEMF_HOLD_S 0.005f     /* the switching condition must hold this long */
 #define BEMF_RAMP_S 0.010f     /* injection ramp down once on the back-EMF, full -> share */
 #define BEMF_RAMP_BACK_S 0.002f /* injection back, share -> full: a load step brakes a light
@@ -25,7 +24,7 @@ void fw_bemf_init(fw_bemf_t *b, const fw_config_t *cfg, float dt_s) {
   /* bemf_xc_comp: the saliency's rate term (fw_bemf_update); 0 = off, as before */
   b->dL_H = cfg->estimator.bemf_xc_comp ? cfg->machine.L_q_H - cfg->machine.L_d_H : 0.0f;
   b->dt_s = dt_s;
-  b->a_f = 1.0f - expf(-dt_s / BEMF_TAU_S);
+  b->a_f = 1.0f - expf(-dt_s / FW_BEMF_TAU_S);
   b->inv_dt = 1.0f / dt_s;
   b->w_on = cfg->estimator.bemf_e_on_V / cfg->machine.psi_f_Wb;
   b->w_off = cfg->estimator.bemf_e_off_V / cfg->machine.psi_f_Wb;

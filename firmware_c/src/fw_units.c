@@ -4,6 +4,8 @@
  */
 #include "pmlsm/fw_units.h"
 
+#include "pmlsm/fw_bemf.h"
+
 float fw_units_mps_to_radps_e(const fw_config_t *cfg, float v) {
   return FW_PI_F32 * v / cfg->machine.pole_pitch_m;
 }
@@ -29,3 +31,4 @@ float fw_units_force_per_A(const fw_config_t *cfg) {
 float fw_units_obs_w_max(const fw_config_t *cfg) {
   return FW_TWO_PI_F32 * cfg->estimator.f_inj_Hz / 40.0f;
 }
+float fw_units_obs_w_max_bemf(void) { return 0.5f / FW_BEMF_TAU_S; }

@@ -289,6 +289,7 @@ FW_CONFIG_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ('bemf_e_off_V', 'estimator', False),
     ('mon_bemf_min_V', 'protection', False),
     ('bemf_xc_comp', 'estimator', True),
+    ('bemf_obs_bw', 'estimator', False),
     ('mon_bemf_i_tol', 'protection', False),
     ('dt_comp_s', 'compensation', False),
     ('dt_comp_band_A', 'compensation', False),
@@ -605,6 +606,7 @@ ENTRIES: dict[tuple[int, int], str] = {
     (0x2053, 4): 'Handover up',
     (0x2053, 5): 'Handover down',
     (0x2053, 6): 'Saliency cross-coupling',
+    (0x2053, 7): 'Observer bandwidth on back-EMF',
     (0x2054, 0): 'Highest sub-index supported',
     (0x2054, 1): 'Mover mass',
     (0x2054, 2): 'Viscous friction',
@@ -924,6 +926,7 @@ BACK_EMF_OBSERVER__BEMF_INJ_SHARE = Entry(0x2053, 3)
 BACK_EMF_OBSERVER__BEMF_E_ON_V = Entry(0x2053, 4, unit='V')
 BACK_EMF_OBSERVER__BEMF_E_OFF_V = Entry(0x2053, 5, unit='V')
 BACK_EMF_OBSERVER__BEMF_XC_COMP = Entry(0x2053, 6)
+BACK_EMF_OBSERVER__BEMF_OBS_BW = Entry(0x2053, 7)
 MACHINE_AND_LOOP_BANDWIDTHS__MASS_KG = Entry(0x2054, 1, unit='kg')
 MACHINE_AND_LOOP_BANDWIDTHS__VISC_NS_PER_M = Entry(0x2054, 2, unit='N s/m')
 MACHINE_AND_LOOP_BANDWIDTHS__COULOMB_N = Entry(0x2054, 3, unit='N')

@@ -69,6 +69,7 @@ static const layout_row_t k_rows[] = {
     ROW(fw_config_t, estimator.bemf_e_on_V),
     ROW(fw_config_t, estimator.bemf_e_off_V),
     ROW(fw_config_t, estimator.bemf_xc_comp),
+    ROW(fw_config_t, estimator.bemf_obs_bw),
     ROW(fw_config_t, protection),
     ROW(fw_config_t, protection.u_dc_min_V),
     ROW(fw_config_t, protection.u_dc_max_V),

@@ -419,6 +419,49 @@ static void test_mode_adaptive_friction(void) {
   TT_CHECK_NEAR(o.omega_f, w, 1e-3 * w0);
 }
 
+/* bemf_obs_bw: on the back-EMF error the scale goes to bemf_obs_bw x the schedule's as
+ * 1 - (1 - b) exp(-n dt / 10 ms) (the closed form of its first-order approach), capped
+ * where the poles (sum kp) reach 3 x 1 / (2 x 1 ms); back on the HF error the factor is
+ * 1 at once; obs_mode 2 and bemf_obs_bw 1 leave the scale as on injection. */
+static void test_bemf_bandwidth(void) {
+  fw_config_t cfg;
+  fw_obs_t o;
+  setup(&o, &cfg);
+  cfg.estimator.obs_mode = (uint32_t)FW_OBS_FIXED; /* the schedule's scale is 1 */
+  cfg.estimator.bemf_obs_bw = 2.0f;
+  fw_obs_init(&o, &cfg, o.dt_s);
+  fw_obs_reset(&o, &cfg);
+  fw_obs_in_t in = hf_in(0.05f, 0.0f);
+  in.bemf_active = 1u;
+  in.running = 1u;
+  float r;
+  const double dt = o.dt_s;
+  for (int n = 1; n <= 480; n++) { /* 20 ms */
+    (void)fw_obs_update(&o, &in, &r);
+    if (n == 24 || n == 240 || n == 480) {
+      const double want = 2.0 - exp(-n * dt / 0.01);
+      TT_CHECK_NEAR(o.lam, want, 1e-4);
+    }
+  }
+  in.bemf_active = 0u; /* back on the HF error: 1 at once */
+  (void)fw_obs_update(&o, &in, &r);
+  TT_CHECK(o.lam == 1.0f);
+  /* the cap: kp 686.5 (iron_core_linear's derived poles), b 4 -> 3 x 500 / 686.5 */
+  cfg.estimator.pll_kp = 686.5f;
+  cfg.estimator.bemf_obs_bw = 4.0f;
+  fw_obs_init(&o, &cfg, o.dt_s);
+  fw_obs_reset(&o, &cfg);
+  in.bemf_active = 1u;
+  for (int n = 0; n < 2400; n++) {
+    (void)fw_obs_update(&o, &in, &r);
+  }
+  TT_CHECK_NEAR(o.lam, 3.0 * 500.0 / 686.5, 1e-4);
+  /* obs_mode 2 sets its own bandwidth: the factor is not applied */
+  cfg.estimator.obs_mode = (uint32_t)FW_OBS_ADAPTIVE;
+  fw_obs_init(&o, &cfg, o.dt_s);
+  TT_CHECK(o.lam_bemf == 1.0f);
+}
+
 int main(void) {
   TT_RUN(test_error);
   TT_RUN(test_mechanical_extension);
@@ -430,5 +473,6 @@ int main(void) {
   TT_RUN(test_mode_adaptive_law);
   TT_RUN(test_mode_adaptive_wide_cap);
   TT_RUN(test_mode_adaptive_friction);
+  TT_RUN(test_bemf_bandwidth);
   return TT_SUMMARY();
 }

@@ -344,7 +344,7 @@ _FW_U32 = int.from_bytes(bytes(int(x) for x in FW_VERSION_STRING.split(".")), "b
 
 BAD_BLOCKS = {
     "sizeof_config": (lambda b: _patched(b, 20, struct.pack("<I", 292)),
-                      "emu boot block: sizeof(fw_config_t) 292, this image 408"),
+                      "emu boot block: sizeof(fw_config_t) 292, this image 412"),
     "sizeof_plant": (lambda b: _patched(b, 16, struct.pack("<I", 280)),
                      "emu boot block: sizeof(sim_plant_params_t) 280, this image 288"),
     "version": (lambda b: _patched(b, 24, struct.pack("<I", 0x000200)),

@@ -22,24 +22,24 @@ _Static_assert(offsetof(sim_plant_params_t, ref_fault) == 280u, "sim_plant_param
 _Static_assert(offsetof(sim_plant_params_t, ref_fault) + 2u * sizeof(uint32_t) ==
                    sizeof(sim_plant_params_t),
                "sim_plant_params_t: ref_fault and one 32-bit field end it");
-_Static_assert(sizeof(fw_config_t) == 408u, "fw_config_t layout changed");
+_Static_assert(sizeof(fw_config_t) == 412u, "fw_config_t layout changed");
 _Static_assert(offsetof(fw_config_t, sensing.f_pwm_Hz) == 36u, "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, protection) == 208u, "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, protection.start_speed_max_mps) == 320u,
+_Static_assert(offsetof(fw_config_t, protection) == 212u, "fw_config_t layout changed");
+_Static_assert(offsetof(fw_config_t, protection.start_speed_max_mps) == 324u,
                "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, protection.mon_bemf_min_V) == 324u,
+_Static_assert(offsetof(fw_config_t, protection.mon_bemf_min_V) == 328u,
                "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, compensation) == 332u, "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, compensation.xsat_off6_rad) == 368u,
+_Static_assert(offsetof(fw_config_t, compensation) == 336u, "fw_config_t layout changed");
+_Static_assert(offsetof(fw_config_t, compensation.xsat_off6_rad) == 372u,
                "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, compensation.sogi_bumpless) == 372u,
+_Static_assert(offsetof(fw_config_t, compensation.sogi_bumpless) == 376u,
                "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, compensation.rip_b4_rad) == 388u,
+_Static_assert(offsetof(fw_config_t, compensation.rip_b4_rad) == 392u,
                "fw_config_t layout changed");
-_Static_assert(offsetof(fw_config_t, compensation.rip6_b1_N_per_A) == 404u,
+_Static_assert(offsetof(fw_config_t, compensation.rip6_b1_N_per_A) == 408u,
                "fw_config_t layout changed");
 _Static_assert(EMU_BOOT_HEADER % 8u == 0u, "the plant's doubles must stay 8-byte aligned");
-_Static_assert(EMU_BOOT_TOTAL == 872u, "boot block length");
+_Static_assert(EMU_BOOT_TOTAL == 876u, "boot block length");
 
 static uint32_t le32(const uint8_t *p) {
   return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);

@@ -4,8 +4,8 @@
 
 #include "pmlsm/co_od.h"
 
-#define CO_OD_COUNT 327u
-#define CO_OD_RAM_SIZE 1120u
+#define CO_OD_COUNT 328u
+#define CO_OD_RAM_SIZE 1124u
 #define CO_OD_NR_RPDO 4u
 #define CO_OD_NR_TPDO 4u
 
@@ -232,111 +232,112 @@
 #define CO_OD_2053_04 219u /* Back-EMF observer: Handover up */
 #define CO_OD_2053_05 220u /* Back-EMF observer: Handover down */
 #define CO_OD_2053_06 221u /* Back-EMF observer: Saliency cross-coupling */
-#define CO_OD_2054_00 222u /* Machine and loop bandwidths: Highest sub-index supported */
-#define CO_OD_2054_01 223u /* Machine and loop bandwidths: Mover mass */
-#define CO_OD_2054_02 224u /* Machine and loop bandwidths: Viscous friction */
-#define CO_OD_2054_03 225u /* Machine and loop bandwidths: Coulomb friction */
-#define CO_OD_2054_04 226u /* Machine and loop bandwidths: Current loop bandwidth */
-#define CO_OD_2054_05 227u /* Machine and loop bandwidths: Speed loop bandwidth */
-#define CO_OD_2054_06 228u /* Machine and loop bandwidths: Gains automatic */
-#define CO_OD_2055_00 229u /* Start-up and estimate supervision: Highest sub-index supported */
-#define CO_OD_2055_01 230u /* Start-up and estimate supervision: Alignment time */
-#define CO_OD_2055_02 231u /* Start-up and estimate supervision: Polarity pulse voltage */
-#define CO_OD_2055_03 232u /* Start-up and estimate supervision: Polarity pulse samples */
-#define CO_OD_2055_04 233u /* Start-up and estimate supervision: Polarity pulse pairs */
-#define CO_OD_2055_05 234u /* Start-up and estimate supervision: Polarity margin */
-#define CO_OD_2055_06 235u /* Start-up and estimate supervision: HF amplitude minimum ratio */
-#define CO_OD_2055_07 236u /* Start-up and estimate supervision: PLL error limit */
-#define CO_OD_2055_08 237u /* Start-up and estimate supervision: PLL error time */
-#define CO_OD_2056_00 238u /* Board sensing: Highest sub-index supported */
-#define CO_OD_2056_01 239u /* Board sensing: Current per count */
-#define CO_OD_2056_02 240u /* Board sensing: Current zero */
-#define CO_OD_2056_03 241u /* Board sensing: DC link volts per count */
-#define CO_OD_2056_04 242u /* Board sensing: Full-scale count */
-#define CO_OD_2056_05 243u /* Board sensing: Measured current zero a */
-#define CO_OD_2056_06 244u /* Board sensing: Measured current zero b */
-#define CO_OD_2056_07 245u /* Board sensing: Measured current zero c */
-#define CO_OD_2057_00 246u /* Compensation: Highest sub-index supported */
-#define CO_OD_2057_01 247u /* Compensation: Dead time */
-#define CO_OD_2057_02 248u /* Compensation: Dead-time sign band */
-#define CO_OD_2057_03 249u /* Compensation: Device drop */
-#define CO_OD_2057_04 250u /* Compensation: Cross-saturation map step */
-#define CO_OD_2057_05 251u /* Compensation: Cross-saturation offset 1 */
-#define CO_OD_2057_06 252u /* Compensation: Cross-saturation offset 2 */
-#define CO_OD_2057_07 253u /* Compensation: Cross-saturation offset 3 */
-#define CO_OD_2057_08 254u /* Compensation: Cross-saturation offset 4 */
-#define CO_OD_2057_09 255u /* Compensation: Cross-saturation offset 5 */
-#define CO_OD_2057_0A 256u /* Compensation: Cross-saturation offset 6 */
-#define CO_OD_2057_0B 257u /* Compensation: Bumpless SOGI gain */
-#define CO_OD_2057_0C 258u /* Compensation: Position ripple cos 2 */
-#define CO_OD_2057_0D 259u /* Compensation: Position ripple sin 2 */
-#define CO_OD_2057_0E 260u /* Compensation: Position ripple cos 4 */
-#define CO_OD_2057_0F 261u /* Compensation: Position ripple sin 4 */
-#define CO_OD_2057_10 262u /* Compensation: Thrust ripple cos 6 */
-#define CO_OD_2057_11 263u /* Compensation: Thrust ripple sin 6 */
-#define CO_OD_2057_12 264u /* Compensation: Thrust ripple cos 6 per A */
-#define CO_OD_2057_13 265u /* Compensation: Thrust ripple sin 6 per A */
-#define CO_OD_2060_00 266u /* Telemetry: Highest sub-index supported */
-#define CO_OD_2060_01 267u /* Telemetry: Decimation */
-#define CO_OD_2060_02 268u /* Telemetry: Signal count */
-#define CO_OD_2060_03 269u /* Telemetry: Signal 1 */
-#define CO_OD_2060_04 270u /* Telemetry: Signal 2 */
-#define CO_OD_2060_05 271u /* Telemetry: Signal 3 */
-#define CO_OD_2060_06 272u /* Telemetry: Signal 4 */
-#define CO_OD_2060_07 273u /* Telemetry: Signal 5 */
-#define CO_OD_2060_08 274u /* Telemetry: Signal 6 */
-#define CO_OD_2060_09 275u /* Telemetry: Signal 7 */
-#define CO_OD_2060_0A 276u /* Telemetry: Signal 8 */
-#define CO_OD_2070_00 277u /* Trace: Highest sub-index supported */
-#define CO_OD_2070_01 278u /* Trace: Command */
-#define CO_OD_2070_02 279u /* Trace: State */
-#define CO_OD_2070_03 280u /* Trace: Trigger signal */
-#define CO_OD_2070_04 281u /* Trace: Trigger level */
-#define CO_OD_2070_05 282u /* Trace: Trigger edge */
-#define CO_OD_2070_06 283u /* Trace: Pre-trigger samples */
-#define CO_OD_2070_07 284u /* Trace: Signal count */
-#define CO_OD_2070_08 285u /* Trace: Signal 1 */
-#define CO_OD_2070_09 286u /* Trace: Signal 2 */
-#define CO_OD_2070_0A 287u /* Trace: Signal 3 */
-#define CO_OD_2070_0B 288u /* Trace: Signal 4 */
-#define CO_OD_2070_0C 289u /* Trace: Signal 5 */
-#define CO_OD_2070_0D 290u /* Trace: Signal 6 */
-#define CO_OD_2070_0E 291u /* Trace: Signal 7 */
-#define CO_OD_2070_0F 292u /* Trace: Signal 8 */
-#define CO_OD_2080_00 293u /* Identification: Highest sub-index supported */
-#define CO_OD_2080_01 294u /* Identification: d-axis current reference */
-#define CO_OD_2080_02 295u /* Identification: Measured smaller inductance */
-#define CO_OD_2080_03 296u /* Identification: Measured larger inductance */
-#define CO_OD_2090_00 297u /* Board: Highest sub-index supported */
-#define CO_OD_2090_01 298u /* Board: Drive kind */
-#define CO_OD_2090_02 299u /* Board: Board name */
-#define CO_OD_2090_03 300u /* Board: Drive time */
-#define CO_OD_2091_00 301u /* Reference sensor: Highest sub-index supported */
-#define CO_OD_2091_01 302u /* Reference sensor: Status */
-#define CO_OD_2091_02 303u /* Reference sensor: Resolution */
-#define CO_OD_2091_03 304u /* Reference sensor: Electrical zero */
-#define CO_OD_2091_04 305u /* Reference sensor: Count */
-#define CO_OD_2091_05 306u /* Reference sensor: Position */
-#define CO_OD_2091_06 307u /* Reference sensor: Faults seen */
-#define CO_OD_603F_00 308u /* Error code: Error code */
-#define CO_OD_6040_00 309u /* Controlword: Controlword */
-#define CO_OD_6041_00 310u /* Statusword: Statusword */
-#define CO_OD_605A_00 311u /* Quick stop option code: Quick stop option code */
-#define CO_OD_605E_00 312u /* Fault reaction option code: Fault reaction option code */
-#define CO_OD_6060_00 313u /* Modes of operation: Modes of operation */
-#define CO_OD_6061_00 314u /* Modes of operation display: Modes of operation display */
-#define CO_OD_6064_00 315u /* Position actual value: Position actual value */
-#define CO_OD_6065_00 316u /* Following error window: Following error window */
-#define CO_OD_6066_00 317u /* Following error time out: Following error time out */
-#define CO_OD_606C_00 318u /* Velocity actual value: Velocity actual value */
-#define CO_OD_6071_00 319u /* Target torque: Target torque */
-#define CO_OD_6077_00 320u /* Torque actual value: Torque actual value */
-#define CO_OD_607D_00 321u /* Software position limit: Highest sub-index supported */
-#define CO_OD_607D_01 322u /* Software position limit: Min position limit */
-#define CO_OD_607D_02 323u /* Software position limit: Max position limit */
-#define CO_OD_6080_00 324u /* Max motor speed: Max motor speed */
-#define CO_OD_60FF_00 325u /* Target velocity: Target velocity */
-#define CO_OD_6502_00 326u /* Supported drive modes: Supported drive modes */
+#define CO_OD_2053_07 222u /* Back-EMF observer: Observer bandwidth on back-EMF */
+#define CO_OD_2054_00 223u /* Machine and loop bandwidths: Highest sub-index supported */
+#define CO_OD_2054_01 224u /* Machine and loop bandwidths: Mover mass */
+#define CO_OD_2054_02 225u /* Machine and loop bandwidths: Viscous friction */
+#define CO_OD_2054_03 226u /* Machine and loop bandwidths: Coulomb friction */
+#define CO_OD_2054_04 227u /* Machine and loop bandwidths: Current loop bandwidth */
+#define CO_OD_2054_05 228u /* Machine and loop bandwidths: Speed loop bandwidth */
+#define CO_OD_2054_06 229u /* Machine and loop bandwidths: Gains automatic */
+#define CO_OD_2055_00 230u /* Start-up and estimate supervision: Highest sub-index supported */
+#define CO_OD_2055_01 231u /* Start-up and estimate supervision: Alignment time */
+#define CO_OD_2055_02 232u /* Start-up and estimate supervision: Polarity pulse voltage */
+#define CO_OD_2055_03 233u /* Start-up and estimate supervision: Polarity pulse samples */
+#define CO_OD_2055_04 234u /* Start-up and estimate supervision: Polarity pulse pairs */
+#define CO_OD_2055_05 235u /* Start-up and estimate supervision: Polarity margin */
+#define CO_OD_2055_06 236u /* Start-up and estimate supervision: HF amplitude minimum ratio */
+#define CO_OD_2055_07 237u /* Start-up and estimate supervision: PLL error limit */
+#define CO_OD_2055_08 238u /* Start-up and estimate supervision: PLL error time */
+#define CO_OD_2056_00 239u /* Board sensing: Highest sub-index supported */
+#define CO_OD_2056_01 240u /* Board sensing: Current per count */
+#define CO_OD_2056_02 241u /* Board sensing: Current zero */
+#define CO_OD_2056_03 242u /* Board sensing: DC link volts per count */
+#define CO_OD_2056_04 243u /* Board sensing: Full-scale count */
+#define CO_OD_2056_05 244u /* Board sensing: Measured current zero a */
+#define CO_OD_2056_06 245u /* Board sensing: Measured current zero b */
+#define CO_OD_2056_07 246u /* Board sensing: Measured current zero c */
+#define CO_OD_2057_00 247u /* Compensation: Highest sub-index supported */
+#define CO_OD_2057_01 248u /* Compensation: Dead time */
+#define CO_OD_2057_02 249u /* Compensation: Dead-time sign band */
+#define CO_OD_2057_03 250u /* Compensation: Device drop */
+#define CO_OD_2057_04 251u /* Compensation: Cross-saturation map step */
+#define CO_OD_2057_05 252u /* Compensation: Cross-saturation offset 1 */
+#define CO_OD_2057_06 253u /* Compensation: Cross-saturation offset 2 */
+#define CO_OD_2057_07 254u /* Compensation: Cross-saturation offset 3 */
+#define CO_OD_2057_08 255u /* Compensation: Cross-saturation offset 4 */
+#define CO_OD_2057_09 256u /* Compensation: Cross-saturation offset 5 */
+#define CO_OD_2057_0A 257u /* Compensation: Cross-saturation offset 6 */
+#define CO_OD_2057_0B 258u /* Compensation: Bumpless SOGI gain */
+#define CO_OD_2057_0C 259u /* Compensation: Position ripple cos 2 */
+#define CO_OD_2057_0D 260u /* Compensation: Position ripple sin 2 */
+#define CO_OD_2057_0E 261u /* Compensation: Position ripple cos 4 */
+#define CO_OD_2057_0F 262u /* Compensation: Position ripple sin 4 */
+#define CO_OD_2057_10 263u /* Compensation: Thrust ripple cos 6 */
+#define CO_OD_2057_11 264u /* Compensation: Thrust ripple sin 6 */
+#define CO_OD_2057_12 265u /* Compensation: Thrust ripple cos 6 per A */
+#define CO_OD_2057_13 266u /* Compensation: Thrust ripple sin 6 per A */
+#define CO_OD_2060_00 267u /* Telemetry: Highest sub-index supported */
+#define CO_OD_2060_01 268u /* Telemetry: Decimation */
+#define CO_OD_2060_02 269u /* Telemetry: Signal count */
+#define CO_OD_2060_03 270u /* Telemetry: Signal 1 */
+#define CO_OD_2060_04 271u /* Telemetry: Signal 2 */
+#define CO_OD_2060_05 272u /* Telemetry: Signal 3 */
+#define CO_OD_2060_06 273u /* Telemetry: Signal 4 */
+#define CO_OD_2060_07 274u /* Telemetry: Signal 5 */
+#define CO_OD_2060_08 275u /* Telemetry: Signal 6 */
+#define CO_OD_2060_09 276u /* Telemetry: Signal 7 */
+#define CO_OD_2060_0A 277u /* Telemetry: Signal 8 */
+#define CO_OD_2070_00 278u /* Trace: Highest sub-index supported */
+#define CO_OD_2070_01 279u /* Trace: Command */
+#define CO_OD_2070_02 280u /* Trace: State */
+#define CO_OD_2070_03 281u /* Trace: Trigger signal */
+#define CO_OD_2070_04 282u /* Trace: Trigger level */
+#define CO_OD_2070_05 283u /* Trace: Trigger edge */
+#define CO_OD_2070_06 284u /* Trace: Pre-trigger samples */
+#define CO_OD_2070_07 285u /* Trace: Signal count */
+#define CO_OD_2070_08 286u /* Trace: Signal 1 */
+#define CO_OD_2070_09 287u /* Trace: Signal 2 */
+#define CO_OD_2070_0A 288u /* Trace: Signal 3 */
+#define CO_OD_2070_0B 289u /* Trace: Signal 4 */
+#define CO_OD_2070_0C 290u /* Trace: Signal 5 */
+#define CO_OD_2070_0D 291u /* Trace: Signal 6 */
+#define CO_OD_2070_0E 292u /* Trace: Signal 7 */
+#define CO_OD_2070_0F 293u /* Trace: Signal 8 */
+#define CO_OD_2080_00 294u /* Identification: Highest sub-index supported */
+#define CO_OD_2080_01 295u /* Identification: d-axis current reference */
+#define CO_OD_2080_02 296u /* Identification: Measured smaller inductance */
+#define CO_OD_2080_03 297u /* Identification: Measured larger inductance */
+#define CO_OD_2090_00 298u /* Board: Highest sub-index supported */
+#define CO_OD_2090_01 299u /* Board: Drive kind */
+#define CO_OD_2090_02 300u /* Board: Board name */
+#define CO_OD_2090_03 301u /* Board: Drive time */
+#define CO_OD_2091_00 302u /* Reference sensor: Highest sub-index supported */
+#define CO_OD_2091_01 303u /* Reference sensor: Status */
+#define CO_OD_2091_02 304u /* Reference sensor: Resolution */
+#define CO_OD_2091_03 305u /* Reference sensor: Electrical zero */
+#define CO_OD_2091_04 306u /* Reference sensor: Count */
+#define CO_OD_2091_05 307u /* Reference sensor: Position */
+#define CO_OD_2091_06 308u /* Reference sensor: Faults seen */
+#define CO_OD_603F_00 309u /* Error code: Error code */
+#define CO_OD_6040_00 310u /* Controlword: Controlword */
+#define CO_OD_6041_00 311u /* Statusword: Statusword */
+#define CO_OD_605A_00 312u /* Quick stop option code: Quick stop option code */
+#define CO_OD_605E_00 313u /* Fault reaction option code: Fault reaction option code */
+#define CO_OD_6060_00 314u /* Modes of operation: Modes of operation */
+#define CO_OD_6061_00 315u /* Modes of operation display: Modes of operation display */
+#define CO_OD_6064_00 316u /* Position actual value: Position actual value */
+#define CO_OD_6065_00 317u /* Following error window: Following error window */
+#define CO_OD_6066_00 318u /* Following error time out: Following error time out */
+#define CO_OD_606C_00 319u /* Velocity actual value: Velocity actual value */
+#define CO_OD_6071_00 320u /* Target torque: Target torque */
+#define CO_OD_6077_00 321u /* Torque actual value: Torque actual value */
+#define CO_OD_607D_00 322u /* Software position limit: Highest sub-index supported */
+#define CO_OD_607D_01 323u /* Software position limit: Min position limit */
+#define CO_OD_607D_02 324u /* Software position limit: Max position limit */
+#define CO_OD_6080_00 325u /* Max motor speed: Max motor speed */
+#define CO_OD_60FF_00 326u /* Target velocity: Target velocity */
+#define CO_OD_6502_00 327u /* Supported drive modes: Supported drive modes */
 
 /** Where each entry's value lives in the OD RAM (compile-time handles for the
  *  application's per-period access, co_node.h CO_NODE_PUT/CO_NODE_GET):
@@ -787,215 +788,217 @@
 #define CO_OD_LEN_2053_05 4u
 #define CO_OD_OFF_2053_06 803u
 #define CO_OD_LEN_2053_06 4u
-#define CO_OD_OFF_2054_00 807u
+#define CO_OD_OFF_2053_07 807u
+#define CO_OD_LEN_2053_07 4u
+#define CO_OD_OFF_2054_00 811u
 #define CO_OD_LEN_2054_00 1u
-#define CO_OD_OFF_2054_01 808u
+#define CO_OD_OFF_2054_01 812u
 #define CO_OD_LEN_2054_01 4u
-#define CO_OD_OFF_2054_02 812u
+#define CO_OD_OFF_2054_02 816u
 #define CO_OD_LEN_2054_02 4u
-#define CO_OD_OFF_2054_03 816u
+#define CO_OD_OFF_2054_03 820u
 #define CO_OD_LEN_2054_03 4u
-#define CO_OD_OFF_2054_04 820u
+#define CO_OD_OFF_2054_04 824u
 #define CO_OD_LEN_2054_04 4u
-#define CO_OD_OFF_2054_05 824u
+#define CO_OD_OFF_2054_05 828u
 #define CO_OD_LEN_2054_05 4u
-#define CO_OD_OFF_2054_06 828u
+#define CO_OD_OFF_2054_06 832u
 #define CO_OD_LEN_2054_06 4u
-#define CO_OD_OFF_2055_00 832u
+#define CO_OD_OFF_2055_00 836u
 #define CO_OD_LEN_2055_00 1u
-#define CO_OD_OFF_2055_01 833u
+#define CO_OD_OFF_2055_01 837u
 #define CO_OD_LEN_2055_01 4u
-#define CO_OD_OFF_2055_02 837u
+#define CO_OD_OFF_2055_02 841u
 #define CO_OD_LEN_2055_02 4u
-#define CO_OD_OFF_2055_03 841u
+#define CO_OD_OFF_2055_03 845u
 #define CO_OD_LEN_2055_03 4u
-#define CO_OD_OFF_2055_04 845u
+#define CO_OD_OFF_2055_04 849u
 #define CO_OD_LEN_2055_04 4u
-#define CO_OD_OFF_2055_05 849u
+#define CO_OD_OFF_2055_05 853u
 #define CO_OD_LEN_2055_05 4u
-#define CO_OD_OFF_2055_06 853u
+#define CO_OD_OFF_2055_06 857u
 #define CO_OD_LEN_2055_06 4u
-#define CO_OD_OFF_2055_07 857u
+#define CO_OD_OFF_2055_07 861u
 #define CO_OD_LEN_2055_07 4u
-#define CO_OD_OFF_2055_08 861u
+#define CO_OD_OFF_2055_08 865u
 #define CO_OD_LEN_2055_08 4u
-#define CO_OD_OFF_2056_00 865u
+#define CO_OD_OFF_2056_00 869u
 #define CO_OD_LEN_2056_00 1u
-#define CO_OD_OFF_2056_01 866u
+#define CO_OD_OFF_2056_01 870u
 #define CO_OD_LEN_2056_01 4u
-#define CO_OD_OFF_2056_02 870u
+#define CO_OD_OFF_2056_02 874u
 #define CO_OD_LEN_2056_02 4u
-#define CO_OD_OFF_2056_03 874u
+#define CO_OD_OFF_2056_03 878u
 #define CO_OD_LEN_2056_03 4u
-#define CO_OD_OFF_2056_04 878u
+#define CO_OD_OFF_2056_04 882u
 #define CO_OD_LEN_2056_04 4u
-#define CO_OD_OFF_2056_05 882u
+#define CO_OD_OFF_2056_05 886u
 #define CO_OD_LEN_2056_05 4u
-#define CO_OD_OFF_2056_06 886u
+#define CO_OD_OFF_2056_06 890u
 #define CO_OD_LEN_2056_06 4u
-#define CO_OD_OFF_2056_07 890u
+#define CO_OD_OFF_2056_07 894u
 #define CO_OD_LEN_2056_07 4u
-#define CO_OD_OFF_2057_00 894u
+#define CO_OD_OFF_2057_00 898u
 #define CO_OD_LEN_2057_00 1u
-#define CO_OD_OFF_2057_01 895u
+#define CO_OD_OFF_2057_01 899u
 #define CO_OD_LEN_2057_01 4u
-#define CO_OD_OFF_2057_02 899u
+#define CO_OD_OFF_2057_02 903u
 #define CO_OD_LEN_2057_02 4u
-#define CO_OD_OFF_2057_03 903u
+#define CO_OD_OFF_2057_03 907u
 #define CO_OD_LEN_2057_03 4u
-#define CO_OD_OFF_2057_04 907u
+#define CO_OD_OFF_2057_04 911u
 #define CO_OD_LEN_2057_04 4u
-#define CO_OD_OFF_2057_05 911u
+#define CO_OD_OFF_2057_05 915u
 #define CO_OD_LEN_2057_05 4u
-#define CO_OD_OFF_2057_06 915u
+#define CO_OD_OFF_2057_06 919u
 #define CO_OD_LEN_2057_06 4u
-#define CO_OD_OFF_2057_07 919u
+#define CO_OD_OFF_2057_07 923u
 #define CO_OD_LEN_2057_07 4u
-#define CO_OD_OFF_2057_08 923u
+#define CO_OD_OFF_2057_08 927u
 #define CO_OD_LEN_2057_08 4u
-#define CO_OD_OFF_2057_09 927u
+#define CO_OD_OFF_2057_09 931u
 #define CO_OD_LEN_2057_09 4u
-#define CO_OD_OFF_2057_0A 931u
+#define CO_OD_OFF_2057_0A 935u
 #define CO_OD_LEN_2057_0A 4u
-#define CO_OD_OFF_2057_0B 935u
+#define CO_OD_OFF_2057_0B 939u
 #define CO_OD_LEN_2057_0B 4u
-#define CO_OD_OFF_2057_0C 939u
+#define CO_OD_OFF_2057_0C 943u
 #define CO_OD_LEN_2057_0C 4u
-#define CO_OD_OFF_2057_0D 943u
+#define CO_OD_OFF_2057_0D 947u
 #define CO_OD_LEN_2057_0D 4u
-#define CO_OD_OFF_2057_0E 947u
+#define CO_OD_OFF_2057_0E 951u
 #define CO_OD_LEN_2057_0E 4u
-#define CO_OD_OFF_2057_0F 951u
+#define CO_OD_OFF_2057_0F 955u
 #define CO_OD_LEN_2057_0F 4u
-#define CO_OD_OFF_2057_10 955u
+#define CO_OD_OFF_2057_10 959u
 #define CO_OD_LEN_2057_10 4u
-#define CO_OD_OFF_2057_11 959u
+#define CO_OD_OFF_2057_11 963u
 #define CO_OD_LEN_2057_11 4u
-#define CO_OD_OFF_2057_12 963u
+#define CO_OD_OFF_2057_12 967u
 #define CO_OD_LEN_2057_12 4u
-#define CO_OD_OFF_2057_13 967u
+#define CO_OD_OFF_2057_13 971u
 #define CO_OD_LEN_2057_13 4u
-#define CO_OD_OFF_2060_00 971u
+#define CO_OD_OFF_2060_00 975u
 #define CO_OD_LEN_2060_00 1u
-#define CO_OD_OFF_2060_01 972u
+#define CO_OD_OFF_2060_01 976u
 #define CO_OD_LEN_2060_01 2u
-#define CO_OD_OFF_2060_02 974u
+#define CO_OD_OFF_2060_02 978u
 #define CO_OD_LEN_2060_02 1u
-#define CO_OD_OFF_2060_03 975u
+#define CO_OD_OFF_2060_03 979u
 #define CO_OD_LEN_2060_03 1u
-#define CO_OD_OFF_2060_04 976u
+#define CO_OD_OFF_2060_04 980u
 #define CO_OD_LEN_2060_04 1u
-#define CO_OD_OFF_2060_05 977u
+#define CO_OD_OFF_2060_05 981u
 #define CO_OD_LEN_2060_05 1u
-#define CO_OD_OFF_2060_06 978u
+#define CO_OD_OFF_2060_06 982u
 #define CO_OD_LEN_2060_06 1u
-#define CO_OD_OFF_2060_07 979u
+#define CO_OD_OFF_2060_07 983u
 #define CO_OD_LEN_2060_07 1u
-#define CO_OD_OFF_2060_08 980u
+#define CO_OD_OFF_2060_08 984u
 #define CO_OD_LEN_2060_08 1u
-#define CO_OD_OFF_2060_09 981u
+#define CO_OD_OFF_2060_09 985u
 #define CO_OD_LEN_2060_09 1u
-#define CO_OD_OFF_2060_0A 982u
+#define CO_OD_OFF_2060_0A 986u
 #define CO_OD_LEN_2060_0A 1u
-#define CO_OD_OFF_2070_00 983u
+#define CO_OD_OFF_2070_00 987u
 #define CO_OD_LEN_2070_00 1u
-#define CO_OD_OFF_2070_01 984u
+#define CO_OD_OFF_2070_01 988u
 #define CO_OD_LEN_2070_01 1u
-#define CO_OD_OFF_2070_02 985u
+#define CO_OD_OFF_2070_02 989u
 #define CO_OD_LEN_2070_02 1u
-#define CO_OD_OFF_2070_03 986u
+#define CO_OD_OFF_2070_03 990u
 #define CO_OD_LEN_2070_03 1u
-#define CO_OD_OFF_2070_04 987u
+#define CO_OD_OFF_2070_04 991u
 #define CO_OD_LEN_2070_04 4u
-#define CO_OD_OFF_2070_05 991u
+#define CO_OD_OFF_2070_05 995u
 #define CO_OD_LEN_2070_05 1u
-#define CO_OD_OFF_2070_06 992u
+#define CO_OD_OFF_2070_06 996u
 #define CO_OD_LEN_2070_06 2u
-#define CO_OD_OFF_2070_07 994u
+#define CO_OD_OFF_2070_07 998u
 #define CO_OD_LEN_2070_07 1u
-#define CO_OD_OFF_2070_08 995u
+#define CO_OD_OFF_2070_08 999u
 #define CO_OD_LEN_2070_08 1u
-#define CO_OD_OFF_2070_09 996u
+#define CO_OD_OFF_2070_09 1000u
 #define CO_OD_LEN_2070_09 1u
-#define CO_OD_OFF_2070_0A 997u
+#define CO_OD_OFF_2070_0A 1001u
 #define CO_OD_LEN_2070_0A 1u
-#define CO_OD_OFF_2070_0B 998u
+#define CO_OD_OFF_2070_0B 1002u
 #define CO_OD_LEN_2070_0B 1u
-#define CO_OD_OFF_2070_0C 999u
+#define CO_OD_OFF_2070_0C 1003u
 #define CO_OD_LEN_2070_0C 1u
-#define CO_OD_OFF_2070_0D 1000u
+#define CO_OD_OFF_2070_0D 1004u
 #define CO_OD_LEN_2070_0D 1u
-#define CO_OD_OFF_2070_0E 1001u
+#define CO_OD_OFF_2070_0E 1005u
 #define CO_OD_LEN_2070_0E 1u
-#define CO_OD_OFF_2070_0F 1002u
+#define CO_OD_OFF_2070_0F 1006u
 #define CO_OD_LEN_2070_0F 1u
-#define CO_OD_OFF_2080_00 1003u
+#define CO_OD_OFF_2080_00 1007u
 #define CO_OD_LEN_2080_00 1u
-#define CO_OD_OFF_2080_01 1004u
+#define CO_OD_OFF_2080_01 1008u
 #define CO_OD_LEN_2080_01 4u
-#define CO_OD_OFF_2080_02 1008u
+#define CO_OD_OFF_2080_02 1012u
 #define CO_OD_LEN_2080_02 4u
-#define CO_OD_OFF_2080_03 1012u
+#define CO_OD_OFF_2080_03 1016u
 #define CO_OD_LEN_2080_03 4u
-#define CO_OD_OFF_2090_00 1016u
+#define CO_OD_OFF_2090_00 1020u
 #define CO_OD_LEN_2090_00 1u
-#define CO_OD_OFF_2090_01 1017u
+#define CO_OD_OFF_2090_01 1021u
 #define CO_OD_LEN_2090_01 1u
-#define CO_OD_OFF_2090_02 1018u
+#define CO_OD_OFF_2090_02 1022u
 #define CO_OD_LEN_2090_02 24u
-#define CO_OD_OFF_2090_03 1043u
+#define CO_OD_OFF_2090_03 1047u
 #define CO_OD_LEN_2090_03 4u
-#define CO_OD_OFF_2091_00 1047u
+#define CO_OD_OFF_2091_00 1051u
 #define CO_OD_LEN_2091_00 1u
-#define CO_OD_OFF_2091_01 1048u
+#define CO_OD_OFF_2091_01 1052u
 #define CO_OD_LEN_2091_01 1u
-#define CO_OD_OFF_2091_02 1049u
+#define CO_OD_OFF_2091_02 1053u
 #define CO_OD_LEN_2091_02 4u
-#define CO_OD_OFF_2091_03 1053u
+#define CO_OD_OFF_2091_03 1057u
 #define CO_OD_LEN_2091_03 4u
-#define CO_OD_OFF_2091_04 1057u
+#define CO_OD_OFF_2091_04 1061u
 #define CO_OD_LEN_2091_04 4u
-#define CO_OD_OFF_2091_05 1061u
+#define CO_OD_OFF_2091_05 1065u
 #define CO_OD_LEN_2091_05 4u
-#define CO_OD_OFF_2091_06 1065u
+#define CO_OD_OFF_2091_06 1069u
 #define CO_OD_LEN_2091_06 4u
-#define CO_OD_OFF_603F_00 1069u
+#define CO_OD_OFF_603F_00 1073u
 #define CO_OD_LEN_603F_00 2u
-#define CO_OD_OFF_6040_00 1071u
+#define CO_OD_OFF_6040_00 1075u
 #define CO_OD_LEN_6040_00 2u
-#define CO_OD_OFF_6041_00 1073u
+#define CO_OD_OFF_6041_00 1077u
 #define CO_OD_LEN_6041_00 2u
-#define CO_OD_OFF_605A_00 1075u
+#define CO_OD_OFF_605A_00 1079u
 #define CO_OD_LEN_605A_00 2u
-#define CO_OD_OFF_605E_00 1077u
+#define CO_OD_OFF_605E_00 1081u
 #define CO_OD_LEN_605E_00 2u
-#define CO_OD_OFF_6060_00 1079u
+#define CO_OD_OFF_6060_00 1083u
 #define CO_OD_LEN_6060_00 1u
-#define CO_OD_OFF_6061_00 1080u
+#define CO_OD_OFF_6061_00 1084u
 #define CO_OD_LEN_6061_00 1u
-#define CO_OD_OFF_6064_00 1081u
+#define CO_OD_OFF_6064_00 1085u
 #define CO_OD_LEN_6064_00 4u
-#define CO_OD_OFF_6065_00 1085u
+#define CO_OD_OFF_6065_00 1089u
 #define CO_OD_LEN_6065_00 4u
-#define CO_OD_OFF_6066_00 1089u
+#define CO_OD_OFF_6066_00 1093u
 #define CO_OD_LEN_6066_00 2u
-#define CO_OD_OFF_606C_00 1091u
+#define CO_OD_OFF_606C_00 1095u
 #define CO_OD_LEN_606C_00 4u
-#define CO_OD_OFF_6071_00 1095u
+#define CO_OD_OFF_6071_00 1099u
 #define CO_OD_LEN_6071_00 2u
-#define CO_OD_OFF_6077_00 1097u
+#define CO_OD_OFF_6077_00 1101u
 #define CO_OD_LEN_6077_00 2u
-#define CO_OD_OFF_607D_00 1099u
+#define CO_OD_OFF_607D_00 1103u
 #define CO_OD_LEN_607D_00 1u
-#define CO_OD_OFF_607D_01 1100u
+#define CO_OD_OFF_607D_01 1104u
 #define CO_OD_LEN_607D_01 4u
-#define CO_OD_OFF_607D_02 1104u
+#define CO_OD_OFF_607D_02 1108u
 #define CO_OD_LEN_607D_02 4u
-#define CO_OD_OFF_6080_00 1108u
+#define CO_OD_OFF_6080_00 1112u
 #define CO_OD_LEN_6080_00 4u
-#define CO_OD_OFF_60FF_00 1112u
+#define CO_OD_OFF_60FF_00 1116u
 #define CO_OD_LEN_60FF_00 4u
-#define CO_OD_OFF_6502_00 1116u
+#define CO_OD_OFF_6502_00 1120u
 #define CO_OD_LEN_6502_00 4u
 
 /** Every entry as <index>_<sub>, for checks over all handles: X(1000_00) ... */
@@ -1222,6 +1225,7 @@
   X(2053_04) \
   X(2053_05) \
   X(2053_06) \
+  X(2053_07) \
   X(2054_00) \
   X(2054_01) \
   X(2054_02) \
@@ -1331,7 +1335,7 @@
 
 extern const co_od_entry_t co_od_table[CO_OD_COUNT];
 
-#define CO_OD_CFG_COUNT 109u
+#define CO_OD_CFG_COUNT 110u
 /** Entries that mirror a fw_config_t field (see fw_config_field_find). */
 extern const co_od_cfg_link_t co_od_cfg_links[CO_OD_CFG_COUNT];
 

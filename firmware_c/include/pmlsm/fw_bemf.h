@@ -27,6 +27,11 @@
 
 #include "fw_types.h"
 
+/** Time constant (s) of the back-EMF low-pass (a DC signal in the estimated frame);
+ *  it bounds how fast an observer on the back-EMF error may be
+ *  (fw_units_obs_w_max_bemf). */
+#define FW_BEMF_TAU_S 0.001f
+
 #ifdef __cplusplus
 extern "C" {
 #endif

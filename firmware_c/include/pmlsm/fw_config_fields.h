@@ -9,7 +9,7 @@
  *   - machine (fw_cfg_machine_t, 9 fields): nominal machine parameters the controller uses (electrical and mechanical)
  *   - sensing (fw_cfg_sensing_t, 5 fields): sampling rate and ADC scaling (fw_step_adc)
  *   - loops (fw_cfg_loops_t, 10 fields): current and speed loops: limits, PI gains, bandwidths for the derived gains
- *   - estimator (fw_cfg_estimator_t, 28 fields): injection, HF extraction, PLL observer, start-up (align, polarity), back-EMF observer and handover
+ *   - estimator (fw_cfg_estimator_t, 29 fields): injection, HF extraction, PLL observer, start-up (align, polarity), back-EMF observer and handover
  *   - protection (fw_cfg_protection_t, 31 fields): trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h)
  *   - compensation (fw_cfg_compensation_t, 19 fields): inverter dead-time compensation (modulation), the cross-saturation angle map, the position-periodic ripple correction (fw_xsat.h) and the observer's position-harmonic thrust ripple (fw_obs.h); all 0 = off
  *
@@ -92,6 +92,7 @@ typedef struct {
   float bemf_e_on_V;          /**< back-EMF at bemf_v_on_mps (derived by fw_config_derive: w psi_f at that speed; read-only in the object dictionary) [V] */
   float bemf_e_off_V;         /**< back-EMF at bemf_v_off_mps (derived by fw_config_derive: w psi_f at that speed; read-only in the object dictionary) [V] */
   uint32_t bemf_xc_comp;      /**< 1: the back-EMF residual takes out the saliency's (L_q - L_d) i (w - w_frame) term, with w from the residual's own e_q / psi_f: with the frame's speed alone it feeds the angle error's rate back at a gain (L_q - L_d) i / (w psi_f) that destabilises the observer braking at rated current near the handover (docs/bemf.md; 0: off, the drive as before) */
+  float bemf_obs_bw;          /**< the observer's poles scaled by this while the back-EMF is the error source: it is clean and formed every PWM period, so the loop may be wider than the HF error (one error per injection period) allows; capped so that the poles stay under 1 / (2 x the back-EMF filter's 1 ms), 500 rad/s (fw_units_obs_w_max_bemf; docs/bemf.md; 1: the poles as on injection, the drive as before) */
 } fw_cfg_estimator_t;
 
 /** Configuration part protection: trips, limits, reactions and the integrity monitor (fw_mon.h, fw_fault.h). */
@@ -250,6 +251,7 @@ typedef struct {
   F32(estimator, bemf_e_off_V, "V", 0.0f, 1000000000.0f, 6.935458f) \
   F32(protection, mon_bemf_min_V, "V", 0.0f, 1000000000.0f, 5.022228f) \
   U32(estimator, bemf_xc_comp, "", 0.0f, 1.0f, 0u) \
+  F32(estimator, bemf_obs_bw, "", 1.0f, 4.0f, 1.0f) \
   F32(protection, mon_bemf_i_tol, "", 0.0f, 2.0f, 0.0f) \
   F32(compensation, dt_comp_s, "s", 0.0f, 5.0e-06f, 0.0f) \
   F32(compensation, dt_comp_band_A, "A", 0.0f, 100.0f, 0.3f) \
@@ -272,6 +274,6 @@ typedef struct {
   F32(compensation, rip6_b1_N_per_A, "N/A", -1000.0f, 1000.0f, 0.0f)
 /* clang-format on */
 
-#define FW_CONFIG_FIELD_COUNT 102u
+#define FW_CONFIG_FIELD_COUNT 103u
 
 #endif /* PMLSM_FW_CONFIG_FIELDS_H */

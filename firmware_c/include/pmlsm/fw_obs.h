@@ -78,6 +78,10 @@ typedef struct {
   /* obs_mode 2 (FW_OBS_ADAPTIVE, docs/method.md section 5): constants ... */
   uint32_t mode;          /**< fw_obs_mode_t */
   float lam_n, lam_span;  /**< obs_bw_narrow and obs_bw_wide - obs_bw_narrow */
+  float lam_bemf;         /**< bemf_obs_bw: the scale's factor on the back-EMF error */
+  float lam_bemf_max;     /**< ... and the scale's cap there (fw_units_obs_w_max_bemf) */
+  float lam_b_alpha;      /**< the factor's approach to lam_bemf on the back-EMF: coefficient */
+  float lam_b;            /**< the factor now: 1 on injection, towards lam_bemf on the back-EMF */
   float det2;             /**< obs_detect_sigma^2 */
   float inn_alpha;        /**< short-window mean of the innovation: coefficient */
   float var_alpha;        /**< its variance (slow, clipped): coefficient */

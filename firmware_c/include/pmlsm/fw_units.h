@@ -34,6 +34,10 @@ float fw_units_force_per_A(const fw_config_t *cfg);
  *  observer bandwidth at it; fw_obs_init caps obs_mode 2's widening (obs_bw_wide) so
  *  that the widened poles stay under it. */
 float fw_units_obs_w_max(const fw_config_t *cfg);
+/** The fastest observer pole (rad/s) on the back-EMF error: 1 / (2 FW_BEMF_TAU_S),
+ *  half the corner of the back-EMF's low-pass, whose lag a faster loop would ring on.
+ *  fw_obs_init caps the widening bemf_obs_bw under it. */
+float fw_units_obs_w_max_bemf(void);
 
 #ifdef __cplusplus
 }
