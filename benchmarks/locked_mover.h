@@ -18,6 +18,7 @@ static void locked_mover_warm_up(fw_ctrl_t *c, int speed_mode, fw_inputs_t *rec,
   fw_config_t cfg;
   fw_config_default(&cfg);
   fw_init(c, &cfg);
+  fw_current_zero_external(c); /* stepped in physical units: no raw samples */
   fw_set_mode(c, FW_MODE_FORCE);
   fw_set_iq_ref(c, 2.0f);
   if (speed_mode) {

@@ -131,6 +131,9 @@ def make_trace(name: str, t_end: float, path: Path, seed: int = 3) -> np.ndarray
             if change:
                 sim.set_plant(**change)
         rec = {c: np.concatenate([p_[c] for p_ in parts]) for c in ch}
+        # the samples as the drive converted them (its current zeros measured at boot)
+        rec["i_abc_meas_A"], rec["u_dc_meas_V"] = sim.drive_inputs(rec["i_abc_meas_A"],
+                                                                   rec["u_dc_meas_V"])
         cfg = bytes(sim.cfg)
     # the commands the drive got: the enable walk, then each speed breakpoint
     ev = [(0, EV_MODE, 0.0), (0, EV_CW, 0x06), (0, EV_CW, 0x07), (0, EV_CW, 0x0F)]

@@ -76,6 +76,12 @@ class Firmware:
         :class:`ConfigError` naming the field, its value and the allowed range.
         False: keep the refused drive (it stays in FAULT with the refusal's
         fault code, as a real drive would boot); ``init_status`` tells why.
+    calibrate : bool
+        False (default): stepped in physical units (:meth:`step`), the caller owns the
+        current zero (``fw_current_zero_external``): ready to enable at once. True: the
+        drive boots as on a board, measuring its current zeros on the first raw samples
+        (:meth:`step_adc`, or the simulator's port) with the PWM off, in NOT READY TO
+        SWITCH ON until they are measured (fw_cal.h).
     **overrides
         ``fw_config_t`` fields to set (an unknown name raises ``KeyError``).
 
@@ -87,7 +93,7 @@ class Firmware:
 
     def __init__(self, cfg: Any = None,
                  extractor: int | str = "sogi_adaptive", strict: bool = True,
-                 **overrides: float) -> None:
+                 calibrate: bool = False, **overrides: float) -> None:
         self._L = _lib.lib()
         if cfg is None:
             cfg = _lib.FwConfig()
@@ -108,6 +114,8 @@ class Firmware:
         if not self.handle:
             raise MemoryError("sim_fw_new failed")
         self.init_status = int(self._L.fw_init(self.handle, C.byref(cfg)))
+        if not calibrate:
+            self._L.fw_current_zero_external(self.handle)
         self._in = _lib.FwInputs()
         self._adc = _lib.FwAdcInputs()
         self._out = _lib.FwOutputs()

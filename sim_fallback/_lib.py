@@ -391,6 +391,8 @@ def _declare(lib: C.CDLL) -> None:
         "fw_step": (None, [V, P(FwInputs), P(FwOutputs)]),
         "fw_step_adc": (None, [V, P(FwAdcInputs), P(FwOutputs)]),
         "fw_current_zero_counts": (C.c_float, [V, C.c_uint]),
+        "fw_current_zero_external": (None, [V]),
+        "fw_adc_convert": (C.c_bool, [P(FwConfig), P(_f * 3), P(FwAdcInputs), P(FwInputs)]),
         "fw_get_snapshot": (None, [V, P(FwSnapshot)]),
         "fw_ctrl_sizeof": (C.c_size_t, []),
         # the whole drive application behind the simulator's port (sim_port.c)

@@ -168,7 +168,7 @@ class Sim:
             self._h = None
             raise ValueError(f"plant parameter '{bad.value.decode()}' invalid")
         self.dt_s = 1.0 / self.params.f_pwm_Hz
-        self.firmware = Firmware(self.cfg, strict=strict)
+        self.firmware = Firmware(self.cfg, strict=strict, calibrate=True)
         self._port = _lib.SimController()
         self._L.sim_fw_port(self.firmware.handle, C.byref(self._port))
         self._L.sim_set_controller(self._h, C.byref(self._port))
@@ -318,6 +318,32 @@ class Sim:
 
     def snapshot(self) -> dict[str, Any]:
         return self.firmware.snapshot()
+
+    def drive_inputs(self, i_abc_meas_A: np.ndarray, u_dc_meas_V: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """The physical inputs the drive computed from recorded samples (the channels
+        ``i_abc_meas_A`` (n, 3) and ``u_dc_meas_V`` (n,) of this simulator): the raw
+        counts back from the simulated ADC's scaling, then the firmware's own conversion
+        (``fw_adc_convert``) with the current zeros it measured at boot. What a replay
+        in physical units (``Firmware.step``, fw_step) must be fed to see what the
+        closed loop saw. -> (i_abc_A (n, 3), u_dc_V (n,)), float32."""
+        p = self.params
+        full = float(2 ** int(p.adc_bits))
+        lsb, mid, u_lsb = 2.0 * p.adc_i_fullscale_A / full, 0.5 * full, p.udc_fullscale_V / full
+        counts = np.rint(np.asarray(i_abc_meas_A, float) / lsb + mid).astype(np.uint16)
+        u_counts = np.rint(np.asarray(u_dc_meas_V, float) / u_lsb).astype(np.uint16)
+        zeros = (C.c_float * 3)(*self.firmware.current_zero_counts())
+        adc, x = _lib.FwAdcInputs(), _lib.FwInputs()
+        i_out = np.empty(counts.shape, np.float32)
+        u_out = np.empty(len(u_counts), np.float32)
+        for k in range(len(u_counts)):
+            adc.i_abc_counts[0], adc.i_abc_counts[1], adc.i_abc_counts[2] = (
+                int(counts[k, 0]), int(counts[k, 1]), int(counts[k, 2]))
+            adc.u_dc_counts = int(u_counts[k])
+            self._L.fw_adc_convert(self.cfg, zeros, adc, x)
+            i_out[k] = x.i_abc_A[:]
+            u_out[k] = x.u_dc_V
+        return i_out, u_out
 
     def set_controller_port(self, port: _lib.SimController, keep: Any = None) -> None:
         """Plug another controller with the fw_step signature (e.g. a CANopen

@@ -285,6 +285,7 @@ static int pil_replay(const char *trace, const char *outpath, const char *states
     return 1;
   }
   fw_init(&g_c, &cfg);
+  fw_current_zero_external(&g_c); /* the trace holds the inputs in A: no raw samples */
   uint32_t e = 0;
   int w = 0;
   for (uint32_t k = 0; k < g_hdr[1]; k++) {

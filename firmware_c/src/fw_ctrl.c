@@ -1075,6 +1075,13 @@ float fw_current_zero_counts(const fw_ctrl_t *ctrl, unsigned k) {
   return (ctrl != NULL && k < 3u) ? fw_cal_zero(&ctrl->cal, k) : 0.0f;
 }
 
+void fw_current_zero_external(fw_ctrl_t *ctrl) {
+  if (ctrl != NULL && ctrl->sm.state == FW_CIA402_NOT_READY_TO_SWITCH_ON &&
+      fw_cal_state(&ctrl->cal) == FW_CAL_RUNNING) {
+    boot_calibrate(ctrl, NULL);
+  }
+}
+
 fw_cal_state_t fw_current_zero_state(const fw_ctrl_t *ctrl) {
   return ctrl != NULL ? fw_cal_state(&ctrl->cal) : FW_CAL_RUNNING;
 }

@@ -276,9 +276,11 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation,
  * samples, the power stage off, until its snapshot leaves CiA 402 NOT READY TO
  * SWITCH ON (the firmware's current-zero calibration, fw_cal.h) or max_steps.
  * advance_time 0: before t = 0, neither the plant nor the time advance (the core
- * alone, whose scenarios start at the enable; the ADC noise draws do); 1: as
+ * alone, whose scenarios start at the enable); 1: as
  * sim_run, the plant and the time advance (a drive with its own clock, the drive
- * application, whose period count must stay the simulator's). Returns the periods
+ * application, whose period count must stay the simulator's). The boot's ADC noise
+ * comes from a stream of its own (from the seed); the run's noise generator is
+ * left where it was, so a run's noise is the same with and without it. Returns the periods
  * it took, or -1 on bad arguments, a controller that switched the PWM on, or one
  * still not ready after max_steps.
  */

@@ -539,15 +539,17 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
   return (int64_t)n_rec;
 }
 
-int64_t sim_boot(sim_t *s, uint64_t max_steps, int advance_time) {
-  if (!s || (!s->ctrl.step && !s->ctrl.step_adc) || !s->ctrl.snapshot) return -1;
+/* The boot's noise stream: the seed's, xor this (sim_boot). */
+#define SIM_BOOT_STREAM 0xB0075EED0C0FFEEull
+
+/** sim_boot's periods (the RNG already on the boot's stream). */
+static int64_t boot_periods(sim_t *s, uint64_t max_steps, int advance_time, int adc_mode,
+                            uint32_t bg_every) {
   fw_inputs_t in;
   fw_adc_inputs_t adc;
   fw_outputs_t out;
   fw_snapshot_t snap;
   memset(&snap, 0, sizeof snap);
-  const int adc_mode = s->ctrl.step_adc && (s->use_adc || !s->ctrl.step);
-  const uint32_t bg_every = s->ctrl.background_every > 0u ? s->ctrl.background_every : 1u;
   for (uint64_t n = 0; n < max_steps; ++n) {
     s->ctrl.snapshot(s->ctrl.ctx, &snap);
     if (snap.cia402_state != (uint8_t)FW_CIA402_NOT_READY_TO_SWITCH_ON) return (int64_t)n;
@@ -580,6 +582,20 @@ int64_t sim_boot(sim_t *s, uint64_t max_steps, int advance_time) {
   }
   s->ctrl.snapshot(s->ctrl.ctx, &snap);
   return snap.cia402_state != (uint8_t)FW_CIA402_NOT_READY_TO_SWITCH_ON ? (int64_t)max_steps : -1;
+}
+
+int64_t sim_boot(sim_t *s, uint64_t max_steps, int advance_time) {
+  if (!s || (!s->ctrl.step && !s->ctrl.step_adc) || !s->ctrl.snapshot) return -1;
+  const int adc_mode = s->ctrl.step_adc && (s->use_adc || !s->ctrl.step);
+  const uint32_t bg_every = s->ctrl.background_every > 0u ? s->ctrl.background_every : 1u;
+  /* the boot's ADC noise from a stream of its own (from the seed), the scenario's
+   * generator left where it was: a run's noise is the same with and without the boot */
+  uint64_t keep[4];
+  memcpy(keep, s->rng, sizeof keep);
+  sim_rng_restart(s, s->p.seed ^ SIM_BOOT_STREAM);
+  const int64_t n = boot_periods(s, max_steps, advance_time, adc_mode, bg_every);
+  memcpy(s->rng, keep, sizeof keep);
+  return n;
 }
 
 /* ---- fixed-duty controller (test equipment) --------------------------- */

@@ -97,7 +97,11 @@ def test_alignment_saddle_is_left_by_turning_the_estimate():
     angle error from the full HF admittance. It used to be the EST_HF_ANGLE fault at
     the check (the motor could not be identified); the drive now turns the estimate by
     the measured error, aligns and checks again (FW_SAL_RETRIES), and reaches closed
-    loop on the right axis, later than a start off the saddle."""
+    loop on the right axis. (With the current zeros unknown to the drive, as before the
+    boot's calibration, this start needed the second alignment, 0.178 s to closed loop
+    against 0.095; with them calibrated, as without the offsets before, the first
+    alignment leaves the saddle far enough: 0.095 s, entering the closed loop 0.38-0.45
+    rad off and pulling in.)"""
     from identification import IDENT_FW
     from sim_fallback import randomized_plant
     from sim_fallback._motors import load_motor
@@ -118,6 +122,11 @@ def test_alignment_saddle_is_left_by_turning_the_estimate():
         assert run.size, x0
         t_run[x0] = float(d["t_s"][run[0]])
         err = np.abs(wrap_pi(d["theta_e_rad"] - d["theta_hat_rad"]))[run[0]:]
-        assert err.max() < 0.2, (x0, err.max())  # the right axis and polarity
-    # the saddle start aligned twice (two alignments + checks), the other once
-    assert t_run[0.13] < 0.13 and t_run[0.5] > t_run[0.13] + 0.07, t_run
+        # the right axis and polarity (a wrong one is pi/2 or pi off): the closed loop
+        # starts within 0.5 rad (the saddle start measured 0.38 with the current zeros
+        # calibrated at boot, 0.2 before) and has pulled in 0.1 s later (the
+        # identification's slow observer: 0.075 rad at 50 ms)
+        assert err.max() < 0.5, (x0, err.max())
+        assert err[100:].max() < 0.05, (x0, err[100:].max())  # 1 ms per record
+    # both reach the closed loop within the alignment, the check and (at most) one retry
+    assert t_run[0.13] < 0.13 and t_run[0.5] < 0.2, t_run

@@ -260,6 +260,13 @@ bool fw_adc_convert(const fw_config_t *cfg, const float zero_counts[3],
  *  with the PWM off at boot (fw_cal.h), the nominal adc_offset_counts until then. */
 float fw_current_zero_counts(const fw_ctrl_t *ctrl, unsigned k);
 
+/** The caller converts the ADC samples and owns the current zero (the core stepped in
+ *  physical units, fw_step: a replay, a benchmark, a host model): no calibration, the
+ *  nominal zero, and NOT READY TO SWITCH ON -> SWITCH ON DISABLED at once, so that the
+ *  enable walk works before the first period. Call it after fw_init; it does nothing
+ *  once the calibration has ended or the drive has left NOT READY TO SWITCH ON. */
+void fw_current_zero_external(fw_ctrl_t *ctrl);
+
 /** Where the boot's current-zero calibration stands (fw_cal_state_t). */
 fw_cal_state_t fw_current_zero_state(const fw_ctrl_t *ctrl);
 
