@@ -114,8 +114,9 @@ class DriveBridge:
             self._L.sim_app_background_now(self._drive)  # the boot-up message
             # the drive's current-zero calibration; the simulator's time runs with the
             # drive's clock (its period count is the time base of telemetry and EMCY)
-            self.sim.boot(advance_time=True)
+            boot_steps = self.sim.boot(advance_time=True)
         else:
+            boot_steps = 0
             self._L = _lib.comm_lib()
             cfg = FwConfig()
             self._L.fw_config_default(C.byref(cfg))
@@ -127,7 +128,9 @@ class DriveBridge:
         self._in = FwInputs()
         self._in.u_dc_V = 300.0
         self._out = FwOutputs()
-        self.steps = 0
+        # the drive's period count (the time base of its telemetry and EMCY) counts its
+        # boot's periods too
+        self.steps = boot_steps
         self.uart = bytearray()
         self.sent: list[can.Message] = []
         self._lock = threading.Lock()
