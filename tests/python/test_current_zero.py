@@ -110,10 +110,12 @@ def _pre_step_rms(plant: dict | None, seed: int) -> float:
 def test_offsets_no_longer_raise_the_error_in_back_emf_mode():
     """iron_core_linear at 0.3 m/s (back-EMF mode), 0.3-0.5 s before the load step: with
     the board's default offsets (1, -1, 0.5 counts) the error was 0.0022 rad RMS before
-    the calibration, 0.0005 without offsets; now the offsets cost nothing."""
+    the calibration, 0.0005 without offsets (0.0023 and 0.0010 with the file's wider
+    observer on the back-EMF, bemf_obs_bw 2, which passes more of the noise); now the
+    offsets cost nothing (seeds 0-3: 0.0009-0.0010 with and without)."""
     with_offs = _pre_step_rms(None, 0)
     without = _pre_step_rms({"adc_offset_counts": [0.0, 0.0, 0.0]}, 0)
-    assert with_offs < 0.001, with_offs
+    assert with_offs < 0.0015, with_offs
     assert with_offs == pytest.approx(without, rel=0.25), (with_offs, without)
 
 

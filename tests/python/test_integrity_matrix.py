@@ -28,7 +28,7 @@ def test_expected_faults_are_the_named_ones() -> None:
     by_name = {c.name: c for c in CASES}
     for name, code in [("saliency_absent", 0xFF07), ("enable_moving_0.12mps", 0xFF08),
                        ("enable_moving_0.94mps_no_bemf", 0xFF08),
-                       ("sensor_offset_a_1.2A_learnt", 0xFF06), ("dc_sag_120V", 0x3220),
+                       ("sensor_offset_a_1.2A_learnt", 0x5211), ("dc_sag_120V", 0x3220),
                        ("position_limit", 0x8612)]:
         r = run_case(by_name[name], 0)
         assert r["fault"] == code, (name, r)
