@@ -26,6 +26,7 @@ _OD = od
 
 # statusword values per state (CiA 402, bits 0-3, 5, 6; bit 9 remote)
 _SW = {
+    "NOT READY TO SWITCH ON": 0x0200,
     "SWITCH ON DISABLED": 0x0240,
     "READY TO SWITCH ON": 0x0221,
     "SWITCHED ON": 0x0223,
@@ -101,6 +102,8 @@ class FakeDrive402:
     def _controlword(self, cw: int) -> None:
         with self.lock:
             s = self.state
+            if s == "NOT READY TO SWITCH ON":
+                return  # the drive's self-test: it leaves by itself, commands wait
             if s == "FAULT":
                 if cw & 0x80:
                     self._set(od.ERROR_CODE, 0)

@@ -21,7 +21,7 @@ from sim_libs import stand_in_drive
 from test_bench_runner import HEAD, UNITS
 
 from bench import Drive, Runner, validate_sequence
-from bench._drive import DriveFault, DriveLeftState, DriveLost
+from bench._drive import DriveError, DriveFault, DriveLeftState, DriveLost
 from protocols.generated import od_names as od
 from sim_fallback import FakeDrive402
 
@@ -149,3 +149,31 @@ def test_simulated_drive_switched_off_by_a_second_master_mid_run(tmp_path) -> No
     assert not r.passed and r.aborted
     assert "left OPERATION ENABLED without a fault" in (r.error or "")
     assert r.duration_s < 0.6, r.duration_s
+
+
+def test_enable_waits_out_the_drives_boot(rig) -> None:
+    """After a power-up or an NMT reset the drive measures its current zeros in NOT READY
+    TO SWITCH ON (about 50 ms, fw_cal.h) and ignores controlwords: the bench's enable
+    (canopen's transition table: controlword 0 there, then the wait for SWITCH ON
+    DISABLED) waits for it to leave by itself, then walks on; a drive that never leaves
+    is named."""
+    drive, fake = rig
+    with fake.lock:
+        fake._enter("NOT READY TO SWITCH ON")
+    timer = threading.Timer(0.08, lambda: fake._enter("SWITCH ON DISABLED"))
+    t0 = time.monotonic()
+    timer.start()
+    try:
+        drive.enable("speed")
+    finally:
+        timer.cancel()
+    assert fake.state == "OPERATION ENABLED"
+    assert time.monotonic() - t0 >= 0.08
+    i = fake.history.index("NOT READY TO SWITCH ON")
+    assert fake.history[i + 1] == "SWITCH ON DISABLED"  # nothing it was told jumped ahead
+    drive.disable()
+    with fake.lock:
+        fake._enter("NOT READY TO SWITCH ON")
+    with pytest.raises(DriveError, match=r"did not reach OPERATION ENABLED within 0.2 s "
+                       r"\(now NOT READY TO SWITCH ON\)"):
+        drive.enable("speed", timeout_s=0.2)
