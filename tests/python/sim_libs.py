@@ -1,14 +1,18 @@
 """Shared by the bench tests: skip when the simulator libraries are not built; the
-bench's Drive against canopen's LocalNode standing in for the drive."""
+bench's Drive against canopen's LocalNode standing in for the drive; a canopen master
+and the drive application on one virtual bus."""
 
 from __future__ import annotations
 
 import contextlib
 import uuid
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
+
+EDS = Path(__file__).resolve().parents[2] / "protocols" / "generated" / "pmlsm_drive.eds"
 
 
 def sim_available() -> bool:
@@ -80,3 +84,50 @@ def rig_maker(rig_class: Any) -> Iterator[Any]:
     finally:
         for r in rigs:
             r.close()
+
+
+@contextlib.contextmanager
+def drive_on_bus(node_id: int, plant: str = "sim", sim_kwargs: dict | None = None,
+                 node_class: Any = None,
+                 before: Any = None) -> Iterator[tuple[Any, Any, Any]]:
+    """``(net, node, bridge)``: a canopen master (``node_class``, default
+    ``canopen.RemoteNode``, on the generated EDS) and the drive application
+    (:class:`sim_fallback.DriveBridge` with ``plant`` and ``sim_kwargs``) on a fresh
+    python-can ``virtual`` channel, the bridge's real-time thread started; all closed
+    afterwards. ``before(net)`` runs before the drive is made (a subscription that must
+    see its boot-up message). Skips when the drive application cannot be built, or the
+    simulator library is missing for a simulated plant."""
+    import subprocess
+    import time
+
+    import can
+    import canopen
+
+    from protocols import clib
+    from sim_fallback import DriveBridge
+
+    try:
+        clib.load_app()
+    except (OSError, subprocess.CalledProcessError) as e:  # pragma: no cover - no compiler
+        pytest.skip(f"drive application cannot be built: {e}")
+    ch = f"pmlsm-{uuid.uuid4().hex[:8]}"
+    net = canopen.Network()
+    net.connect(interface="virtual", channel=ch)
+    bus = can.Bus(interface="virtual", channel=ch)
+    bridge = None
+    try:
+        if before is not None:
+            before(net)
+        bridge = DriveBridge(bus, node_id=node_id, plant=plant, sim_kwargs=sim_kwargs)
+        if plant == "sim" and bridge.sim is None:  # pragma: no cover
+            pytest.skip("sim_fallback library not available")
+        node = (node_class or canopen.RemoteNode)(node_id, str(EDS))
+        net.add_node(node)
+        bridge.start()
+        time.sleep(0.05)
+        yield net, node, bridge
+    finally:
+        if bridge is not None:
+            bridge.close()
+        net.disconnect()
+        bus.shutdown()

@@ -6,56 +6,29 @@ and the drive never enables; the 1 theta error the offsets used to cause is gone
 from __future__ import annotations
 
 import math
-import subprocess
 import time
-import uuid
-from pathlib import Path
 
-import can
-import canopen
 import numpy as np
 import pytest
 from canopen.profiles.p402 import BaseNode402
+from sim_libs import drive_on_bus
 
-from protocols import clib
-from sim_fallback import DriveBridge, Sim, run_scenario
+from sim_fallback import Sim, run_scenario
 
-ROOT = Path(__file__).resolve().parents[2]
-EDS = ROOT / "protocols" / "generated" / "pmlsm_drive.eds"
 NID = 5
 N_CAL = 1024  # FW_CAL_SAMPLES
 
 
 def _rig(plant: dict):
-    ch = f"pmlsm-{uuid.uuid4().hex[:8]}"
-    net = canopen.Network()
-    net.connect(interface="virtual", channel=ch)
-    drive_bus = can.Bus(interface="virtual", channel=ch)
-    try:
-        clib.load_app()
-    except (OSError, subprocess.CalledProcessError) as e:  # pragma: no cover - no compiler
-        net.disconnect()
-        drive_bus.shutdown()
-        pytest.skip(f"drive application cannot be built: {e}")
-    bridge = DriveBridge(drive_bus, node_id=NID, plant="sim",
-                         sim_kwargs={"motor": "iron_core_linear", "plant": plant})
-    node = BaseNode402(NID, str(EDS))
-    net.add_node(node)
-    bridge.start()
-    time.sleep(0.05)
-    return net, drive_bus, bridge, node
-
-
-def _close(net, drive_bus, bridge) -> None:
-    bridge.close()
-    net.disconnect()
-    drive_bus.shutdown()
+    """A canopen master (BaseNode402) and the drive on ``iron_core_linear`` with the
+    plant's ``plant`` overrides: ``(net, node, bridge)``."""
+    return drive_on_bus(NID, "sim", {"motor": "iron_core_linear", "plant": plant},
+                        BaseNode402)
 
 
 def test_measured_zeros_over_canopen_equal_the_boards_offsets():
     offs = [6.0, -4.0, 2.5]  # counts, hidden from the drive; noise 1 count RMS
-    net, bus, bridge, node = _rig({"adc_offset_counts": offs})
-    try:
+    with _rig({"adc_offset_counts": offs}) as (_, node, _bridge):
         nominal = node.sdo[0x2056][2].raw
         k_A = node.sdo[0x2056][1].raw
         assert nominal == pytest.approx(2048.0)
@@ -72,14 +45,11 @@ def test_measured_zeros_over_canopen_equal_the_boards_offsets():
         assert node.state == "OPERATION ENABLED"
         assert node.sdo[0x603F].raw == 0
         assert k_A > 0.0
-    finally:
-        _close(net, bus, bridge)
 
 
 def test_offset_beyond_the_limit_faults_and_never_enables():
     k_A = 50.0 / 4096.0  # iron_core_linear's 25 A full scale, 12 bits
-    net, bus, bridge, node = _rig({"adc_offset_counts": [0.0, 1.2 / k_A, 0.0]})
-    try:
+    with _rig({"adc_offset_counts": [0.0, 1.2 / k_A, 0.0]}) as (_, node, bridge):
         assert node.sdo[0x603F].raw == 0x5211
         assert node.sdo[0x2056][6].raw - 2048.0 == pytest.approx(1.2 / k_A, abs=0.2)
         assert node.sdo[0x6041].raw & 0x4F == 0x08  # FAULT
@@ -94,8 +64,6 @@ def test_offset_beyond_the_limit_faults_and_never_enables():
             assert node.sdo[0x603F].raw == 0x5211
             assert node.sdo[0x6041].raw & 0x4F == 0x08
         assert bridge.state()["v_mps"] == 0.0
-    finally:
-        _close(net, bus, bridge)
 
 
 def _pre_step_rms(plant: dict | None, seed: int) -> float:

@@ -34,21 +34,17 @@ import configparser
 import ctypes as C
 import math
 import struct
-import subprocess
-import time
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import can
 import canopen
 import numpy as np
 import pytest
 from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 from canopen.sdo.exceptions import SdoAbortedError
+from sim_libs import drive_on_bus
 
-from protocols import clib
 from protocols._od import load
 from sim_fallback import DriveBridge
 from sim_fallback._lib import FwConfigField, FwConfigIssue
@@ -72,29 +68,9 @@ VSTRING = 0x0009
 def drive(request: pytest.FixtureRequest) -> Iterator[tuple[canopen.RemoteNode, DriveBridge]]:
     """The drive on the factory configuration (null plant), and the simulated drive in
     closed loop with its motor (paper_salient, configured as the simulator's)."""
-    try:
-        clib.load_app()
-    except (OSError, subprocess.CalledProcessError) as e:  # pragma: no cover - no compiler
-        pytest.skip(f"drive application cannot be built: {e}")
-    ch = f"pmlsm-eds-{uuid.uuid4().hex[:8]}"
-    net = canopen.Network()
-    net.connect(interface="virtual", channel=ch)
-    bus = can.Bus(interface="virtual", channel=ch)
     kw = {"motor": "paper_salient", "seed": 3} if request.param == "sim" else None
-    bridge = DriveBridge(bus, node_id=NID, plant=request.param, sim_kwargs=kw)
-    if request.param == "sim" and bridge.sim is None:  # pragma: no cover
-        bridge.close()
-        pytest.skip("sim_fallback library not available")
-    node = canopen.RemoteNode(NID, str(EDS))
-    net.add_node(node)
-    bridge.start()
-    time.sleep(0.05)
-    try:
+    with drive_on_bus(NID, request.param, kw) as (_, node, bridge):
         yield node, bridge
-    finally:
-        bridge.close()
-        net.disconnect()
-        bus.shutdown()
 
 
 def _variables(cod: canopen.ObjectDictionary) -> list[ODVariable]:

@@ -6,49 +6,29 @@ plant (sim_fallback.DriveBridge, paced to real time)."""
 from __future__ import annotations
 
 import math
-import subprocess
 import time
-import uuid
-from pathlib import Path
 
 import can
 import canopen
 import pytest
 from canopen.profiles.p402 import BaseNode402
 from canopen.sdo.exceptions import SdoAbortedError
+from sim_libs import drive_on_bus
 
-from protocols import clib
-from sim_fallback import DriveBridge
-
-ROOT = Path(__file__).resolve().parents[2]
-EDS = ROOT / "protocols" / "generated" / "pmlsm_drive.eds"
 NID = 5
 MASTER = 0x7E
 
 
 @pytest.fixture(scope="module")
 def rig():
-    ch = f"pmlsm-{uuid.uuid4().hex[:8]}"
-    net = canopen.Network()
-    net.connect(interface="virtual", channel=ch)
-    drive_bus = can.Bus(interface="virtual", channel=ch)
     seen: list[can.Message] = []
-    net.subscribe(0x700 + NID, lambda cob, data, ts: seen.append(bytes(data)))
-    try:
-        clib.load_app()
-    except (OSError, subprocess.CalledProcessError) as e:  # pragma: no cover - no compiler
-        net.disconnect()
-        drive_bus.shutdown()
-        pytest.skip(f"drive application cannot be built: {e}")
-    bridge = DriveBridge(drive_bus, node_id=NID, plant="auto")
-    node = BaseNode402(NID, str(EDS))
-    net.add_node(node)
-    bridge.start()
-    time.sleep(0.05)
-    yield net, node, bridge, seen
-    bridge.close()
-    net.disconnect()
-    drive_bus.shutdown()
+
+    def boot_up_seen(net: canopen.Network) -> None:
+        net.subscribe(0x700 + NID, lambda cob, data, ts: seen.append(bytes(data)))
+
+    with drive_on_bus(NID, "auto", node_class=BaseNode402, before=boot_up_seen) as (
+            net, node, bridge):
+        yield net, node, bridge, seen
 
 
 def test_boot_up_and_heartbeat(rig):
