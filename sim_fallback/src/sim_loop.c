@@ -417,14 +417,70 @@ static inline double sanitize_duty(float d) {
   return x < 0.0 ? 0.0 : 1.0;
 }
 
+/* ---- the pieces of a period (sim_plant_step, sim_run, sim_boot) ----------- */
+
+/** Whether the controller is stepped on raw ADC counts (it converts them itself). */
+static inline int ctrl_adc_mode(const sim_t *s) {
+  return s->ctrl.step_adc && (s->use_adc || !s->ctrl.step);
+}
+
+/** Control periods per run of the drive's background loop (at least 1). */
+static inline uint32_t ctrl_bg_every(const sim_t *s) {
+  return s->ctrl.background_every > 0u ? s->ctrl.background_every : 1u;
+}
+
+/** The drive's background loop, at its own rate between control interrupts: in the
+ *  slot before this period's interrupt, so a command that arrived before the period
+ *  takes effect in it. */
+static inline void background_slot(sim_t *s, uint32_t bg_every) {
+  if (s->ctrl.background) {
+    if (s->bg_in == 0u) {
+      s->ctrl.background(s->ctrl.ctx);
+      s->bg_in = bg_every - 1u;
+    } else {
+      s->bg_in--;
+    }
+  }
+}
+
+/** The samples at t_k: raw counts, or (the controller stepped in physical units) the
+ *  converted inputs too. */
+static inline void sample_period(sim_t *s, int adc_mode, fw_inputs_t *in,
+                                 fw_adc_inputs_t *adc) {
+  if (adc_mode)
+    sample_adc(s, adc); /* the drive converts counts itself */
+  else
+    sim_sample(s, in, adc);
+}
+
+/** The controller (the control interrupt) on the samples of t_k: out cleared first. */
+static inline void ctrl_period(sim_t *s, int adc_mode, const fw_inputs_t *in,
+                               const fw_adc_inputs_t *adc, fw_outputs_t *out) {
+  memset(out, 0, sizeof *out);
+  if (adc_mode)
+    s->ctrl.step_adc(s->ctrl.ctx, adc, out);
+  else
+    s->ctrl.step(s->ctrl.ctx, in, out);
+}
+
+/** The plant over [t_k, t_k+1) with the latched duties. */
+static inline void plant_period(sim_t *s) {
+  sim_noise_on_switch(s, s->pwm_on);
+  sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
+}
+
+/** The next period's time (from its count: no accumulated rounding). */
+static inline void next_period(sim_t *s) {
+  s->k++;
+  s->t_s = (double)s->k * s->dt_s;
+}
+
 void sim_plant_step(sim_t *s, const float duty_abc[3], int pwm_on) {
   if (!s || !duty_abc) return;
   for (int j = 0; j < 3; ++j) s->duty[j] = sanitize_duty(duty_abc[j]);
   s->pwm_on = pwm_on ? 1 : 0;
-  sim_noise_on_switch(s, s->pwm_on);
-  sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
-  s->k++;
-  s->t_s = (double)s->k * s->dt_s;
+  plant_period(s);
+  next_period(s);
 }
 
 int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *rec) {
@@ -443,28 +499,16 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
   fw_outputs_t out;
   fw_snapshot_t snap;
   memset(&snap, 0, sizeof snap);
-  const int adc_mode = s->ctrl.step_adc && (s->use_adc || !s->ctrl.step);
-  const uint32_t bg_every = s->ctrl.background_every > 0u ? s->ctrl.background_every : 1u;
+  const int adc_mode = ctrl_adc_mode(s);
+  const uint32_t bg_every = ctrl_bg_every(s);
 
   for (uint64_t n = 0; n < n_steps; ++n) {
     /* 1. references for this period (only when a schedule may have moved) */
     if (s->t_s >= s->sched_next_t) s->sched_next_t = sched_apply(s, s->t_s);
-    /* 2. the drive's background loop, at its own rate between control
-     * interrupts: in the slot before this period's interrupt, so a command
-     * that arrived before the period takes effect in it */
-    if (s->ctrl.background) {
-      if (s->bg_in == 0u) {
-        s->ctrl.background(s->ctrl.ctx);
-        s->bg_in = bg_every - 1u;
-      } else {
-        s->bg_in--;
-      }
-    }
+    /* 2. the drive's background loop (background_slot) */
+    background_slot(s, bg_every);
     /* 3. sample: the ADC at t_k */
-    if (adc_mode)
-      sample_adc(s, &adc); /* the drive converts counts itself */
-    else
-      sim_sample(s, &in, &adc);
+    sample_period(s, adc_mode, &in, &adc);
 
     /* 4. record the truth at t_k and the samples */
     const int rec_now = (rec_in == 0u) && n_rec < cap;
@@ -493,8 +537,7 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
     /* 5. plant over [t_k, t_k+1) with the duties from step k-1 (independent of
      * step k below, which sees only the samples taken above) */
     const double x_k = s->st.x_m;
-    sim_noise_on_switch(s, s->pwm_on);
-    sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
+    plant_period(s);
 
     /* 6. controller (the control interrupt) on the samples of t_k; the reference
      * scale read at the same instant, beside them (s->st is x(t_k + T) by now: the
@@ -504,11 +547,7 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
       const uint8_t st = ref_sample_at(s, x_k, &cnt);
       s->ctrl.sample_ref(s->ctrl.ctx, st, cnt);
     }
-    memset(&out, 0, sizeof out);
-    if (adc_mode)
-      s->ctrl.step_adc(s->ctrl.ctx, &adc, &out);
-    else
-      s->ctrl.step(s->ctrl.ctx, &in, &out);
+    ctrl_period(s, adc_mode, &in, &adc, &out);
     if (rec_now) {
       n_rec++;
       if (want_snap && s->ctrl.snapshot) s->ctrl.snapshot(s->ctrl.ctx, &snap);
@@ -533,8 +572,7 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
     /* 7. latch the new duties for the next period */
     s->pwm_on = out.pwm_enable ? 1 : 0;
     for (int j = 0; j < 3; ++j) s->duty[j] = sanitize_duty(out.duty_abc[j]);
-    s->k++;
-    s->t_s = (double)s->k * s->dt_s;
+    next_period(s);
   }
   return (int64_t)n_rec;
 }
@@ -543,8 +581,9 @@ int64_t sim_run(sim_t *s, uint64_t n_steps, uint32_t decimation, sim_record_t *r
 #define SIM_BOOT_STREAM 0xB0075EED0C0FFEEull
 
 /** sim_boot's periods (the RNG already on the boot's stream). */
-static int64_t boot_periods(sim_t *s, uint64_t max_steps, int advance_time, int adc_mode,
-                            uint32_t bg_every) {
+static int64_t boot_periods(sim_t *s, uint64_t max_steps, int advance_time) {
+  const int adc_mode = ctrl_adc_mode(s);
+  const uint32_t bg_every = ctrl_bg_every(s);
   fw_inputs_t in;
   fw_adc_inputs_t adc;
   fw_outputs_t out;
@@ -553,32 +592,12 @@ static int64_t boot_periods(sim_t *s, uint64_t max_steps, int advance_time, int 
   for (uint64_t n = 0; n < max_steps; ++n) {
     s->ctrl.snapshot(s->ctrl.ctx, &snap);
     if (snap.cia402_state != (uint8_t)FW_CIA402_NOT_READY_TO_SWITCH_ON) return (int64_t)n;
-    if (s->ctrl.background) {
-      if (s->bg_in == 0u) {
-        s->ctrl.background(s->ctrl.ctx);
-        s->bg_in = bg_every - 1u;
-      } else {
-        s->bg_in--;
-      }
-    }
-    if (adc_mode)
-      sample_adc(s, &adc);
-    else
-      sim_sample(s, &in, &adc);
-    if (advance_time) { /* the plant over the period, as sim_run (the PWM off) */
-      sim_noise_on_switch(s, s->pwm_on);
-      sim_plant_period(s, s->duty, s->pwm_on, s->dt_s, s->p.n_sub);
-    }
-    memset(&out, 0, sizeof out);
-    if (adc_mode)
-      s->ctrl.step_adc(s->ctrl.ctx, &adc, &out);
-    else
-      s->ctrl.step(s->ctrl.ctx, &in, &out);
+    background_slot(s, bg_every);
+    sample_period(s, adc_mode, &in, &adc);
+    if (advance_time) plant_period(s); /* as sim_run (the PWM off) */
+    ctrl_period(s, adc_mode, &in, &adc, &out);
     if (out.pwm_enable) return -1;
-    if (advance_time) {
-      s->k++;
-      s->t_s = (double)s->k * s->dt_s;
-    }
+    if (advance_time) next_period(s);
   }
   s->ctrl.snapshot(s->ctrl.ctx, &snap);
   return snap.cia402_state != (uint8_t)FW_CIA402_NOT_READY_TO_SWITCH_ON ? (int64_t)max_steps : -1;
@@ -586,14 +605,12 @@ static int64_t boot_periods(sim_t *s, uint64_t max_steps, int advance_time, int 
 
 int64_t sim_boot(sim_t *s, uint64_t max_steps, int advance_time) {
   if (!s || (!s->ctrl.step && !s->ctrl.step_adc) || !s->ctrl.snapshot) return -1;
-  const int adc_mode = s->ctrl.step_adc && (s->use_adc || !s->ctrl.step);
-  const uint32_t bg_every = s->ctrl.background_every > 0u ? s->ctrl.background_every : 1u;
   /* the boot's ADC noise from a stream of its own (from the seed), the scenario's
    * generator left where it was: a run's noise is the same with and without the boot */
   uint64_t keep[4];
   memcpy(keep, s->rng, sizeof keep);
   sim_rng_restart(s, s->p.seed ^ SIM_BOOT_STREAM);
-  const int64_t n = boot_periods(s, max_steps, advance_time, adc_mode, bg_every);
+  const int64_t n = boot_periods(s, max_steps, advance_time);
   memcpy(s->rng, keep, sizeof keep);
   return n;
 }
